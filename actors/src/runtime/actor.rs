@@ -1,0 +1,112 @@
+//! The actor trait and the events it handles.
+
+use std::fmt;
+
+use super::context::Context;
+use super::topic::Received;
+
+/// Names one of an actor's timers. Actors pick their own ids (`const TICK: TimerId = TimerId(0);`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct TimerId(pub u32);
+
+/// One thing for an actor to handle.
+#[derive(Debug)]
+pub enum Event {
+    /// A message on one of the actor's subscriptions; read it with [`Received::get`].
+    Message(Received),
+    /// A timer set with [`Context::set_timer`] fired. Ticks that fire while the actor
+    /// is still busy coalesce into one (counted as a drop).
+    Timer(TimerId),
+}
+
+/// A failure an actor reports from a hook. The runtime logs and counts it; the
+/// actor keeps running. (A *panic* is different: the runtime restarts the actor.)
+#[derive(Debug)]
+pub struct ActorError {
+    message: String,
+    source: Option<Box<dyn std::error::Error + Send + Sync>>,
+}
+
+impl ActorError {
+    /// An error with a message.
+    #[must_use]
+    pub fn msg(message: impl Into<String>) -> Self {
+        ActorError {
+            message: message.into(),
+            source: None,
+        }
+    }
+
+    /// An error with a message and the error that caused it.
+    #[must_use]
+    pub fn with_source(
+        message: impl Into<String>,
+        source: impl std::error::Error + Send + Sync + 'static,
+    ) -> Self {
+        ActorError {
+            message: message.into(),
+            source: Some(Box::new(source)),
+        }
+    }
+}
+
+impl fmt::Display for ActorError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)?;
+        if let Some(source) = &self.source {
+            write!(f, ": {source}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ActorError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.source
+            .as_deref()
+            .map(|e| e as &(dyn std::error::Error + 'static))
+    }
+}
+
+/// Result of an actor hook.
+pub type ActorResult = Result<(), ActorError>;
+
+/// A unit of behaviour inside a robot: it owns its state, receives [`Event`]s one at
+/// a time, and talks to other actors only by publishing messages.
+///
+/// The same actor runs unchanged under the deterministic sim-time executor and the
+/// real-time executor. The runtime calls the hooks in this order:
+///
+/// 1. [`Actor::start`] once when the robot starts, and again on a fresh instance after
+///    every restart. Declare subscriptions and timers here (re-declaring after a
+///    restart keeps the existing queues and their contents).
+/// 2. [`Actor::handle`] for each event, never concurrently with another hook of the
+///    same actor.
+/// 3. [`Actor::stop`] once when the run ends.
+///
+/// Hooks must not block on I/O or sleep: under the sim-time executor, time only
+/// moves between events, and the modelled compute latency (configured per actor,
+/// see [`ActorOptions`](super::ActorOptions)) stands for the time a handler takes.
+/// Heavy but finite compute is fine, including `rayon` inside a handler, as long as
+/// results do not depend on thread timing (use ordered collects, not racy reductions).
+/// Messages published inside a hook are delivered when it returns (in sim time:
+/// after the modelled latency).
+///
+/// A panic inside a hook is contained: it is logged, counted, and the actor is
+/// rebuilt from its factory according to its
+/// [`RestartPolicy`](super::RestartPolicy); the rest of the robot keeps running.
+pub trait Actor: Send + 'static {
+    /// Declares subscriptions and timers; may publish initial messages.
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let _ = ctx;
+        Ok(())
+    }
+
+    /// Handles one event.
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult;
+
+    /// Called once at the end of a run.
+    fn stop(&mut self, ctx: &mut Context<'_>) {
+        let _ = ctx;
+    }
+}

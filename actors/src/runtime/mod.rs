@@ -1,0 +1,41 @@
+//! The actor runtime: actors, topics, queues, supervision and the two executors.
+//!
+//! - [`Actor`] is the one trait a behaviour implements; [`Context`] is what a hook
+//!   may do (publish, subscribe, set timers, read the time).
+//! - [`Topic`] names a typed, robot-local stream of shared ([`Arc`](std::sync::Arc))
+//!   messages; each subscription has a bounded queue with a [`QueuePolicy`] and drop
+//!   counters.
+//! - [`ActorSpec`] and [`RobotSpec`] describe a robot; [`SimExecutor`] runs a team in
+//!   deterministic simulated time, [`RealtimeExecutor`] on tokio against the wall clock.
+//! - Panics are contained and supervised per [`RestartPolicy`].
+
+mod actor;
+mod context;
+mod inputs;
+mod network;
+mod queue;
+mod realtime;
+mod registry;
+mod sim;
+mod slot;
+mod spec;
+mod stats;
+mod tap;
+mod time;
+
+pub use actor::{Actor, ActorError, ActorResult, Event, TimerId};
+pub use context::{Context, RobotId};
+pub use network::{Destination, IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, SimNetwork};
+pub use queue::QueuePolicy;
+pub use realtime::{RealtimeExecutor, RealtimeHandle};
+pub use sim::SimExecutor;
+pub use spec::{ActorOptions, ActorSpec, LatencyModel, RestartPolicy, RobotSpec};
+pub use stats::{ActorReport, ActorStats, LatencyHistogram, LatencySummary, RobotReport, TopicStats};
+pub use tap::{Publication, Tap};
+pub use time::Time;
+pub use topic::{Message, Payload, Received, Topic};
+
+mod topic;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,477 @@
+//! The real-time executor: one tokio task per actor, against the wall clock.
+//!
+//! Publishers push into the subscriber's bounded queues (behind a mutex) and wake its
+//! task; timers are tokio timers. Actors marked [`blocking`](super::ActorOptions::blocking)
+//! run their handlers under `block_in_place`, so heavy compute does not stall the
+//! async workers (this needs the multi-threaded runtime; on a current-thread runtime
+//! they run inline and a warning says so). Packets on [`LINK_TX`] are delivered to
+//! the peers' [`LINK_RX`] at once, inside the process.
+
+use std::any::TypeId;
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, RwLock};
+
+use tokio::runtime::RuntimeFlavor;
+use tokio::sync::{Notify, watch};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use super::context::{Command, Outgoing, RobotId};
+use super::inputs::Inputs;
+use super::network::{Destination, LINK_RX, LINK_TX, LinkRx, LinkTx};
+use super::slot::{Hook, HookOutcome, Slot};
+use super::spec::RobotSpec;
+use super::stats::{RobotReport, TopicStats};
+use super::tap::{Publication, Tap};
+use super::time::Time;
+use super::topic::{Message, Received};
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panic while holding an input lock cannot leave the queues inconsistent
+    // (handlers never run under it), so a poisoned lock is still usable.
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+struct RtTopic {
+    name: Arc<str>,
+    type_id: TypeId,
+    type_name: &'static str,
+    subscribers: Vec<(usize, usize)>,
+    messages: AtomicU64,
+    bytes: AtomicU64,
+    type_mismatches: AtomicU64,
+}
+
+struct Inbox {
+    inputs: Mutex<Inputs>,
+    notify: Notify,
+}
+
+struct RtRobot {
+    id: RobotId,
+    name: Arc<str>,
+    topics: RwLock<HashMap<Arc<str>, Arc<RtTopic>>>,
+    inboxes: Vec<Arc<Inbox>>,
+}
+
+struct Shared {
+    robots: Vec<RtRobot>,
+    epoch: Instant,
+    arrival: AtomicU64,
+    taps: Mutex<Vec<Box<dyn Tap>>>,
+    has_taps: bool,
+}
+
+impl Shared {
+    fn now(&self) -> Time {
+        Time::from_nanos(u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(u64::MAX))
+    }
+
+    fn topic(&self, robot: usize, name: &str, type_id: TypeId, type_name: &'static str) -> Arc<RtTopic> {
+        let r = &self.robots[robot];
+        if let Some(t) = r.topics.read().unwrap_or_else(std::sync::PoisonError::into_inner).get(name) {
+            return t.clone();
+        }
+        let mut topics = r.topics.write().unwrap_or_else(std::sync::PoisonError::into_inner);
+        topics
+            .entry(Arc::from(name))
+            .or_insert_with(|| {
+                Arc::new(RtTopic {
+                    name: Arc::from(name),
+                    type_id,
+                    type_name,
+                    subscribers: Vec::new(),
+                    messages: AtomicU64::new(0),
+                    bytes: AtomicU64::new(0),
+                    type_mismatches: AtomicU64::new(0),
+                })
+            })
+            .clone()
+    }
+
+    fn route(&self, robot: usize, outputs: &mut Vec<Outgoing>) {
+        for out in outputs.drain(..) {
+            let topic = self.topic(robot, &out.topic, out.type_id, out.type_name);
+            if topic.type_id != out.type_id {
+                topic.type_mismatches.fetch_add(1, Ordering::Relaxed);
+                tracing::error!(robot = %self.robots[robot].name, topic = %topic.name,
+                    "dropped a publication of type {}: the topic carries {}", out.type_name, topic.type_name);
+                continue;
+            }
+            topic.messages.fetch_add(1, Ordering::Relaxed);
+            topic.bytes.fetch_add(out.bytes as u64, Ordering::Relaxed);
+            let now = self.now();
+            if self.has_taps {
+                for tap in lock(&self.taps).iter_mut() {
+                    tap.on_publish(&Publication {
+                        time: now,
+                        robot: self.robots[robot].id,
+                        topic: &topic.name,
+                        payload: &out.payload,
+                        bytes: out.bytes,
+                    });
+                }
+            }
+            for &(slot, sub) in &topic.subscribers {
+                let inbox = &self.robots[robot].inboxes[slot];
+                let arrival = self.arrival.fetch_add(1, Ordering::Relaxed);
+                let message = Received {
+                    topic: topic.name.clone(),
+                    payload: out.payload.clone(),
+                    published_at: now,
+                };
+                if lock(&inbox.inputs).offer(sub, arrival, message) {
+                    inbox.notify.notify_one();
+                }
+            }
+            if out.type_id == TypeId::of::<LinkTx>()
+                && *out.topic == *LINK_TX.name()
+                && let Some(packet) = out.payload.downcast_ref::<LinkTx>()
+            {
+                self.transmit(robot, packet);
+            }
+        }
+    }
+
+    fn transmit(&self, from: usize, packet: &LinkTx) {
+        let from_id = self.robots[from].id;
+        for (to, robot) in self.robots.iter().enumerate() {
+            let wanted = match packet.to {
+                Destination::Broadcast => to != from,
+                Destination::Robot(r) => r == robot.id && to != from,
+            };
+            if wanted {
+                let message = Arc::new(LinkRx {
+                    from: from_id,
+                    bytes: packet.bytes.clone(),
+                });
+                let mut outputs = vec![Outgoing {
+                    topic: LINK_RX.name_cow(),
+                    type_id: TypeId::of::<LinkRx>(),
+                    type_name: std::any::type_name::<LinkRx>(),
+                    bytes: message.payload_bytes(),
+                    payload: message,
+                }];
+                self.route(to, &mut outputs);
+            }
+        }
+    }
+}
+
+/// Runs a team of robots on tokio against the wall clock. See the [module docs](self).
+pub struct RealtimeExecutor {
+    team: Vec<RobotSpec>,
+    seed: u64,
+    taps: Vec<Box<dyn Tap>>,
+}
+
+/// A running team; [`RealtimeHandle::shutdown`] stops it and returns the reports.
+pub struct RealtimeHandle {
+    shared: Arc<Shared>,
+    stop: watch::Sender<bool>,
+    tasks: Vec<(usize, JoinHandle<Slot>)>,
+    names: Vec<Vec<Arc<str>>>,
+}
+
+impl RealtimeExecutor {
+    /// A team of robots; `seed` seeds every actor's generator.
+    #[must_use]
+    pub fn new(team: Vec<RobotSpec>, seed: u64) -> Self {
+        RealtimeExecutor {
+            team,
+            seed,
+            taps: Vec::new(),
+        }
+    }
+
+    /// Adds an observer of every publication (called from the actor tasks, under a lock).
+    pub fn add_tap(&mut self, tap: impl Tap + 'static) {
+        self.taps.push(Box::new(tap));
+    }
+
+    /// Starts every actor and spawns one task per actor on the current tokio runtime.
+    ///
+    /// All `start` hooks run before any task is spawned, so every subscription exists
+    /// before the first message flows. Must be called from inside a tokio runtime.
+    #[must_use]
+    pub fn spawn(self) -> RealtimeHandle {
+        let epoch = Instant::now();
+        let mut robots = Vec::new();
+        let mut slots_per_robot = Vec::new();
+        let mut pending_outputs = Vec::new();
+        let mut names = Vec::new();
+        for (r, spec) in self.team.into_iter().enumerate() {
+            let id = RobotId(r as u32);
+            let mut topics: HashMap<Arc<str>, RtTopic> = HashMap::new();
+            let mut slots = Vec::new();
+            let mut inboxes = Vec::new();
+            for (s, actor) in spec.actors.into_iter().enumerate() {
+                let mut slot = Slot::new(actor, self.seed, id);
+                let mut inputs = Inputs::default();
+                if !slot.instantiate(Time::ZERO)
+                    || slot.run_hook(Hook::Start, Time::ZERO, id, &spec.name) == HookOutcome::Stopped
+                {
+                    inputs.stop();
+                }
+                for command in std::mem::take(&mut slot.commands) {
+                    match command {
+                        Command::Subscribe { topic, type_id, type_name, policy } => {
+                            let sub = inputs.subscribe(&topic, type_id, policy);
+                            let entry = topics.entry(topic.clone()).or_insert_with(|| RtTopic {
+                                name: topic.clone(),
+                                type_id,
+                                type_name,
+                                subscribers: Vec::new(),
+                                messages: AtomicU64::new(0),
+                                bytes: AtomicU64::new(0),
+                                type_mismatches: AtomicU64::new(0),
+                            });
+                            if entry.type_id != type_id {
+                                tracing::error!(robot = %spec.name, actor = %slot.name, topic = %topic,
+                                    "cannot subscribe with type {type_name}: the topic carries {}", entry.type_name);
+                            } else if !entry.subscribers.contains(&(s, sub)) {
+                                entry.subscribers.push((s, sub));
+                            }
+                        }
+                        Command::SetTimer { id, period } if !period.is_zero() => {
+                            inputs.set_timer(id, period);
+                        }
+                        Command::SetTimer { id, .. } => {
+                            tracing::warn!(robot = %spec.name, actor = %slot.name, ?id, "ignoring a timer with zero period");
+                        }
+                        Command::CancelTimer { id } => inputs.cancel_timer(id),
+                    }
+                }
+                let outputs = std::mem::take(&mut slot.outbox);
+                if !outputs.is_empty() {
+                    pending_outputs.push((r, outputs));
+                }
+                inboxes.push(Arc::new(Inbox {
+                    inputs: Mutex::new(inputs),
+                    notify: Notify::new(),
+                }));
+                slots.push(slot);
+            }
+            names.push(slots.iter().map(|s: &Slot| s.name.clone()).collect());
+            robots.push(RtRobot {
+                id,
+                name: spec.name,
+                topics: RwLock::new(topics.into_iter().map(|(k, v)| (k, Arc::new(v))).collect()),
+                inboxes,
+            });
+            slots_per_robot.push(slots);
+        }
+        let has_taps = !self.taps.is_empty();
+        let shared = Arc::new(Shared {
+            robots,
+            epoch,
+            arrival: AtomicU64::new(0),
+            taps: Mutex::new(self.taps),
+            has_taps,
+        });
+        for (r, mut outputs) in pending_outputs {
+            shared.route(r, &mut outputs);
+        }
+        let (stop, stop_rx) = watch::channel(false);
+        let can_block = tokio::runtime::Handle::current().runtime_flavor() == RuntimeFlavor::MultiThread;
+        let mut tasks = Vec::new();
+        for (r, slots) in slots_per_robot.into_iter().enumerate() {
+            for (s, slot) in slots.into_iter().enumerate() {
+                if slot.options.blocking && !can_block {
+                    tracing::warn!(actor = %slot.name, "blocking actor runs inline: the tokio runtime is not multi-threaded");
+                }
+                let task = ActorTask {
+                    shared: shared.clone(),
+                    robot: r,
+                    index: s,
+                    slot,
+                    block: can_block,
+                };
+                tasks.push((r, tokio::spawn(task.run(stop_rx.clone()))));
+            }
+        }
+        RealtimeHandle {
+            shared,
+            stop,
+            tasks,
+            names,
+        }
+    }
+}
+
+struct ActorTask {
+    shared: Arc<Shared>,
+    robot: usize,
+    index: usize,
+    slot: Slot,
+    block: bool,
+}
+
+impl ActorTask {
+    fn inbox(&self) -> &Inbox {
+        &self.shared.robots[self.robot].inboxes[self.index]
+    }
+
+    /// Marks due timers as pending; returns the next deadline.
+    fn fire_timers(&self, deadlines: &mut Vec<Option<Instant>>) -> Option<Instant> {
+        let now = Instant::now();
+        let mut inputs = lock(&self.inbox().inputs);
+        deadlines.resize(inputs.timers.len(), None);
+        let mut next: Option<Instant> = None;
+        for i in 0..inputs.timers.len() {
+            let (active, period) = (inputs.timers[i].active, inputs.timers[i].period);
+            if !active {
+                deadlines[i] = None;
+                continue;
+            }
+            let deadline = deadlines[i].get_or_insert(now + period);
+            if *deadline <= now {
+                let arrival = self.shared.arrival.fetch_add(1, Ordering::Relaxed);
+                inputs.tick(i, arrival);
+                while *deadline <= now {
+                    *deadline += period;
+                }
+            }
+            next = Some(next.map_or(*deadline, |n: Instant| n.min(*deadline)));
+        }
+        next
+    }
+
+    fn apply_commands(&mut self, deadlines: &mut [Option<Instant>]) {
+        let commands = std::mem::take(&mut self.slot.commands);
+        if commands.is_empty() {
+            return;
+        }
+        let robot = &self.shared.robots[self.robot];
+        let mut inputs = lock(&robot.inboxes[self.index].inputs);
+        for command in commands {
+            match command {
+                Command::Subscribe { topic, type_id, policy, .. } => {
+                    let known = inputs.subscriptions.iter().any(|s| s.topic == topic && s.type_id == type_id);
+                    if known {
+                        inputs.subscribe(&topic, type_id, policy);
+                    } else {
+                        tracing::warn!(robot = %robot.name, actor = %self.slot.name, %topic,
+                            "ignoring a subscription made after the robot started (subscribe in `start`)");
+                    }
+                }
+                Command::SetTimer { id, period } if !period.is_zero() => {
+                    let (i, _) = inputs.set_timer(id, period);
+                    if let Some(d) = deadlines.get_mut(i) {
+                        *d = None;
+                    }
+                }
+                Command::SetTimer { .. } => {}
+                Command::CancelTimer { id } => inputs.cancel_timer(id),
+            }
+        }
+    }
+
+    async fn run(mut self, mut stop: watch::Receiver<bool>) -> Slot {
+        let robot_id = self.shared.robots[self.robot].id;
+        let robot_name = self.shared.robots[self.robot].name.clone();
+        let mut deadlines = Vec::new();
+        let mut outputs = Vec::new();
+        loop {
+            if *stop.borrow() {
+                break;
+            }
+            let next_deadline = self.fire_timers(&mut deadlines);
+            let event = lock(&self.inbox().inputs).next_event();
+            if let Some(event) = event {
+                let now = self.shared.now();
+                let outcome = if self.slot.options.blocking && self.block {
+                    tokio::task::block_in_place(|| self.slot.run_hook(Hook::Handle(&event), now, robot_id, &robot_name))
+                } else {
+                    self.slot.run_hook(Hook::Handle(&event), now, robot_id, &robot_name)
+                };
+                drop(event);
+                if outcome == HookOutcome::Stopped {
+                    lock(&self.inbox().inputs).stop();
+                }
+                self.apply_commands(&mut deadlines);
+                std::mem::swap(&mut outputs, &mut self.slot.outbox);
+                self.shared.route(self.robot, &mut outputs);
+                continue;
+            }
+            let inbox = &self.shared.robots[self.robot].inboxes[self.index];
+            tokio::select! {
+                _ = inbox.notify.notified() => {}
+                _ = sleep_until_opt(next_deadline) => {}
+                _ = stop.changed() => {}
+            }
+        }
+        if self.slot.is_running() {
+            let now = self.shared.now();
+            self.slot.run_hook(Hook::Stop, now, robot_id, &robot_name);
+        }
+        self.slot
+    }
+}
+
+async fn sleep_until_opt(deadline: Option<Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(d).await,
+        None => std::future::pending().await,
+    }
+}
+
+impl RealtimeHandle {
+    /// Elapsed wall time since the team started.
+    #[must_use]
+    pub fn now(&self) -> Time {
+        self.shared.now()
+    }
+
+    /// Stops every actor (each finishes its current handler, then runs its stop hook)
+    /// and returns the per-robot reports.
+    pub async fn shutdown(self) -> Vec<RobotReport> {
+        let _ = self.stop.send(true);
+        let mut slots: Vec<Vec<Option<Slot>>> = self.names.iter().map(|n| n.iter().map(|_| None).collect()).collect();
+        let mut index = vec![0usize; self.names.len()];
+        for (r, task) in self.tasks {
+            let s = index[r];
+            index[r] += 1;
+            match task.await {
+                Ok(slot) => slots[r][s] = Some(slot),
+                Err(e) => tracing::error!(robot = r, actor = %self.names[r][s], "actor task failed: {e}"),
+            }
+        }
+        self.shared
+            .robots
+            .iter()
+            .zip(slots)
+            .map(|(robot, slots)| {
+                let topics: BTreeMap<String, TopicStats> = robot
+                    .topics
+                    .read()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .values()
+                    .map(|t| {
+                        (
+                            t.name.to_string(),
+                            TopicStats {
+                                messages: t.messages.load(Ordering::Relaxed),
+                                bytes: t.bytes.load(Ordering::Relaxed),
+                                type_mismatches: t.type_mismatches.load(Ordering::Relaxed),
+                            },
+                        )
+                    })
+                    .collect();
+                let actors = slots
+                    .iter()
+                    .zip(&robot.inboxes)
+                    .filter_map(|(slot, inbox)| slot.as_ref().map(|s| s.report(&lock(&inbox.inputs))))
+                    .collect();
+                RobotReport {
+                    name: robot.name.to_string(),
+                    actors,
+                    topics,
+                }
+            })
+            .collect()
+    }
+}
+

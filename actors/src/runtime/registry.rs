@@ -1,0 +1,87 @@
+//! The topics of one robot and who subscribes to them.
+
+use std::any::TypeId;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+use super::stats::TopicStats;
+
+/// A subscriber: (actor slot index, subscription index inside that slot).
+pub(crate) type SubscriberRef = (usize, usize);
+
+pub(crate) struct TopicEntry {
+    pub(crate) name: Arc<str>,
+    pub(crate) type_id: TypeId,
+    pub(crate) type_name: &'static str,
+    pub(crate) subscribers: Vec<SubscriberRef>,
+    pub(crate) stats: TopicStats,
+}
+
+/// Topic name → type and subscribers, for one robot.
+#[derive(Default)]
+pub(crate) struct TopicRegistry {
+    topics: HashMap<Arc<str>, TopicEntry>,
+}
+
+/// A topic was used with two different message types.
+#[derive(Debug)]
+pub(crate) struct TypeMismatch {
+    pub(crate) topic: Arc<str>,
+    pub(crate) declared: &'static str,
+    pub(crate) used: &'static str,
+}
+
+impl TopicRegistry {
+    /// The entry for `name`, created with this type if new; an error if the topic
+    /// already carries another type.
+    pub(crate) fn entry(
+        &mut self,
+        name: &str,
+        type_id: TypeId,
+        type_name: &'static str,
+    ) -> Result<&mut TopicEntry, TypeMismatch> {
+        if !self.topics.contains_key(name) {
+            let name: Arc<str> = Arc::from(name);
+            self.topics.insert(
+                name.clone(),
+                TopicEntry {
+                    name,
+                    type_id,
+                    type_name,
+                    subscribers: Vec::new(),
+                    stats: TopicStats::default(),
+                },
+            );
+        }
+        let entry = self
+            .topics
+            .get_mut(name)
+            .expect("entry was inserted just above");
+        if entry.type_id != type_id {
+            entry.stats.type_mismatches += 1;
+            return Err(TypeMismatch {
+                topic: entry.name.clone(),
+                declared: entry.type_name,
+                used: type_name,
+            });
+        }
+        Ok(entry)
+    }
+
+    /// Registers a subscriber (idempotent).
+    pub(crate) fn add_subscriber(&mut self, name: &str, type_id: TypeId, type_name: &'static str, who: SubscriberRef) -> Result<(), TypeMismatch> {
+        let entry = self.entry(name, type_id, type_name)?;
+        if !entry.subscribers.contains(&who) {
+            entry.subscribers.push(who);
+        }
+        Ok(())
+    }
+
+    /// Per-topic counters sorted by name.
+    pub(crate) fn stats(&self) -> BTreeMap<String, TopicStats> {
+        self.topics
+            .values()
+            .map(|e| (e.name.to_string(), e.stats))
+            .collect()
+    }
+}

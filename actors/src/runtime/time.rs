@@ -1,0 +1,97 @@
+//! Simulation and wall-clock time as one type.
+
+use std::fmt;
+use std::ops::{Add, Sub};
+use std::time::Duration;
+
+/// A point in time since the start of a run, in nanoseconds.
+///
+/// Both executors use it: the sim-time executor advances it event by event, the
+/// real-time executor reads it from a monotonic clock. Integer nanoseconds keep
+/// event ordering exact and runs bit-reproducible.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Time(u64);
+
+impl Time {
+    /// The start of a run.
+    pub const ZERO: Time = Time(0);
+    /// The latest representable time (used as "never").
+    pub const MAX: Time = Time(u64::MAX);
+
+    /// From whole nanoseconds since the start of the run.
+    #[must_use]
+    pub const fn from_nanos(nanos: u64) -> Self {
+        Time(nanos)
+    }
+
+    /// From seconds; negative or NaN inputs clamp to zero, huge ones to [`Time::MAX`].
+    #[must_use]
+    pub fn from_secs_f64(secs: f64) -> Self {
+        if secs.is_nan() || secs <= 0.0 {
+            Time(0)
+        } else {
+            let nanos = secs * 1e9;
+            if nanos >= u64::MAX as f64 {
+                Time::MAX
+            } else {
+                Time(nanos.round() as u64)
+            }
+        }
+    }
+
+    /// Nanoseconds since the start of the run.
+    #[must_use]
+    pub const fn as_nanos(self) -> u64 {
+        self.0
+    }
+
+    /// Seconds since the start of the run.
+    #[must_use]
+    pub fn as_secs_f64(self) -> f64 {
+        self.0 as f64 * 1e-9
+    }
+
+    /// The time elapsed since `earlier` (zero if `earlier` is later).
+    #[must_use]
+    pub fn saturating_since(self, earlier: Time) -> Duration {
+        Duration::from_nanos(self.0.saturating_sub(earlier.0))
+    }
+}
+
+impl Add<Duration> for Time {
+    type Output = Time;
+    fn add(self, rhs: Duration) -> Time {
+        let nanos = u64::try_from(rhs.as_nanos()).unwrap_or(u64::MAX);
+        Time(self.0.saturating_add(nanos))
+    }
+}
+
+impl Sub<Time> for Time {
+    type Output = Duration;
+    fn sub(self, rhs: Time) -> Duration {
+        self.saturating_since(rhs)
+    }
+}
+
+impl fmt::Display for Time {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:.3}s", self.as_secs_f64())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seconds_round_trip_and_clamp() {
+        assert_eq!(Time::from_secs_f64(1.5).as_nanos(), 1_500_000_000);
+        assert_eq!(Time::from_secs_f64(-3.0), Time::ZERO);
+        assert_eq!(Time::from_secs_f64(f64::NAN), Time::ZERO);
+        assert_eq!(Time::from_secs_f64(1e30), Time::MAX);
+        let t = Time::from_secs_f64(2.0) + Duration::from_millis(250);
+        assert_eq!(t.as_secs_f64(), 2.25);
+        assert_eq!(t - Time::from_secs_f64(3.0), Duration::ZERO);
+        assert_eq!(Time::MAX + Duration::from_secs(1), Time::MAX);
+    }
+}

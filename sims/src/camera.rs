@@ -1,0 +1,1 @@
+//! Camera (helper in progress).

@@ -1,0 +1,1 @@
+//! Coverage (helper in progress).
