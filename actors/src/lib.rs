@@ -1,9 +1,17 @@
 //! troupe-actors: the actor runtime and the standard actors of a troupe robot.
 //!
-//! The [`runtime`] module is the message-passing core every robot runs on: write an
-//! [`Actor`](runtime::Actor), describe a robot as a [`RobotSpec`](runtime::RobotSpec),
-//! and run a team under the deterministic [`SimExecutor`](runtime::SimExecutor) or the
-//! real-time [`RealtimeExecutor`](runtime::RealtimeExecutor).
+//! - [`runtime`]: the message-passing core every robot runs on. Write an
+//!   [`Actor`](runtime::Actor), describe a robot as a [`RobotSpec`](runtime::RobotSpec),
+//!   and run a team under the deterministic [`SimExecutor`](runtime::SimExecutor) or
+//!   the real-time [`RealtimeExecutor`](runtime::RealtimeExecutor).
+//! - [`msgs`]: the standard topics and message types.
+//! - Standard actors: [`sensor`], [`explorer`], [`link`].
+//! - [`trajectory`]: sampled trajectories that plans carry.
 #![deny(missing_docs)]
 
+pub mod explorer;
+pub mod link;
+pub mod msgs;
 pub mod runtime;
+pub mod sensor;
+pub mod trajectory;

@@ -1,1 +1,19 @@
-//! placeholder
+//! troupe-comms: what crosses between robots, and how.
+//!
+//! - [`wire`]: the versioned envelope and its payloads, encoded with postcard.
+//!   Postcard is positional: the order of fields and enum variants *is* the
+//!   protocol. Changing it means bumping [`wire::FORMAT_VERSION`].
+//!
+//! ```
+//! use troupe_comms::wire::{self, Envelope, Odometry, Payload};
+//! let envelope = Envelope::new(1, 0, 42, 1_000_000_000, Payload::Odometry(Odometry {
+//!     position_m: [1.0, 2.0, 0.5],
+//!     orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+//!     velocity_mps: [0.5, 0.0, 0.0],
+//! }));
+//! let bytes = wire::encode(&envelope).unwrap();
+//! assert_eq!(wire::decode(&bytes).unwrap(), envelope);
+//! ```
+#![deny(missing_docs)]
+
+pub mod wire;

@@ -1,1 +1,57 @@
-//! placeholder
+//! troupe-policies: pluggable decisions, chosen by name in a robot's configuration.
+//!
+//! - [`route::WaypointRoute`] — a scripted exploration behaviour that needs no map:
+//!   it follows waypoints handed to it (for instance a cave's tunnel centre lines).
+//!
+//! [`behaviour_by_name`] is how the robot assembly turns a config string into a
+//! behaviour.
+#![deny(missing_docs)]
+
+pub mod route;
+
+use nalgebra::Point3;
+use troupe_actors::explorer::ExplorationBehaviour;
+
+/// Inputs a behaviour may need besides its own parameters.
+#[derive(Clone, Debug, Default)]
+pub struct BehaviourInputs {
+    /// Waypoints in the world frame (required by `waypoint_route`).
+    pub route: Vec<Point3<f64>>,
+    /// Cruise speed, m/s.
+    pub speed_mps: f64,
+    /// Turn rate for turning in place, rad/s.
+    pub yaw_rate_rad_s: f64,
+}
+
+/// Names accepted by [`behaviour_by_name`].
+pub const BEHAVIOURS: &[&str] = &["waypoint_route"];
+
+/// Why a behaviour could not be built.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum PolicyError {
+    /// Unknown name.
+    #[error("unknown exploration behaviour `{0}` (known: {known})", known = BEHAVIOURS.join(", "))]
+    UnknownBehaviour(String),
+    /// Missing or bad input.
+    #[error("behaviour `{behaviour}`: {reason}")]
+    BadInput {
+        /// Behaviour name.
+        behaviour: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Builds fresh instances of a validated behaviour (one per actor start or restart).
+pub type BehaviourFactory = Box<dyn Fn() -> Box<dyn ExplorationBehaviour> + Send>;
+
+/// Checks the inputs of the named behaviour and returns a factory for it.
+pub fn behaviour_by_name(name: &str, inputs: &BehaviourInputs) -> Result<BehaviourFactory, PolicyError> {
+    match name {
+        "waypoint_route" => {
+            let prototype = route::WaypointRoute::new(inputs.route.clone(), inputs.speed_mps, inputs.yaw_rate_rad_s)?;
+            Ok(Box::new(move || Box::new(prototype.clone())))
+        }
+        other => Err(PolicyError::UnknownBehaviour(other.to_string())),
+    }
+}

@@ -1,1 +1,91 @@
-//! placeholder
+//! troupe-robot: assembles one robot's actors from configuration.
+//!
+//! [`assemble`] wires the standard actors — sensor, explorer (with the behaviour
+//! named in the config), link — around a vehicle and a frame source that the caller
+//! provides (a simulator provides simulated ones; hardware provides drivers).
+#![deny(missing_docs)]
+
+mod config;
+
+use nalgebra::Point3;
+use troupe_actors::explorer::ExplorerActor;
+use troupe_actors::link::LinkActor;
+use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
+use troupe_actors::sensor::{FrameSource, SensorActor};
+use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name};
+
+pub use config::{ActorLatencies, ConfigError, RobotConfig};
+
+/// Builds a frame source (called at start and on every sensor restart).
+pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
+
+/// What the caller provides: the hardware (or its simulation) and mission inputs.
+pub struct RobotParts {
+    /// The sensor's frame source.
+    pub frame_source: FrameSourceFactory,
+    /// The vehicle actor (publishes odometry, follows plans).
+    pub vehicle: ActorSpec,
+    /// Waypoints for route-following behaviours.
+    pub route: Vec<Point3<f64>>,
+}
+
+/// Why a robot could not be assembled.
+#[derive(Debug, thiserror::Error)]
+pub enum AssembleError {
+    /// The configuration is invalid.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The behaviour could not be built.
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+}
+
+struct BoxedSource(Box<dyn FrameSource>);
+
+impl FrameSource for BoxedSource {
+    fn capture(
+        &mut self,
+        now: troupe_actors::runtime::Time,
+        odometry: Option<&troupe_actors::msgs::Odometry>,
+    ) -> Result<Option<troupe_actors::msgs::DepthFrame>, troupe_actors::runtime::ActorError> {
+        self.0.capture(now, odometry)
+    }
+}
+
+/// Assembles a robot: vehicle, sensor, explorer and link, in that order.
+pub fn assemble(name: &str, config: &RobotConfig, parts: RobotParts) -> Result<RobotSpec, AssembleError> {
+    config.validate()?;
+    let behaviour = behaviour_by_name(
+        &config.behaviour,
+        &BehaviourInputs {
+            route: parts.route,
+            speed_mps: config.speed_mps,
+            yaw_rate_rad_s: config.yaw_rate_rad_s,
+        },
+    )?;
+    let options = |latency_s: f64| ActorOptions {
+        latency: LatencyModel::fixed(latency_s),
+        restart: config.restart,
+        blocking: false,
+    };
+    let mut frame_source = parts.frame_source;
+    let sensor_rate_hz = config.sensor_rate_hz;
+    let replan_rate_hz = config.replan_rate_hz;
+    let link = config.link;
+    let mut robot = RobotSpec::new(name);
+    robot
+        .add(parts.vehicle)
+        .add(
+            ActorSpec::new("sensor", move || SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz))
+                .with_options(ActorOptions {
+                    blocking: true,
+                    ..options(config.latency_s.sensor)
+                }),
+        )
+        .add(
+            ActorSpec::new("explorer", move || ExplorerActor::new(behaviour(), replan_rate_hz))
+                .with_options(options(config.latency_s.explorer)),
+        )
+        .add(ActorSpec::new("link", move || LinkActor::new(link)).with_options(options(config.latency_s.link)));
+    Ok(robot)
+}

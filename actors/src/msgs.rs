@@ -1,0 +1,112 @@
+//! The standard topics of a robot and their message types.
+//!
+//! | topic | type | from → to |
+//! |---|---|---|
+//! | `odometry` | [`Odometry`] | vehicle → sensor, explorer, link |
+//! | `sensor/frame` | [`DepthFrame`] | sensor → mapper |
+//! | `plan/committed` | [`Plan`] | explorer/planner → vehicle, link |
+//! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
+//! | `link/tx`, `link/rx` | [`LinkTx`](crate::runtime::LinkTx), [`LinkRx`](crate::runtime::LinkRx) | link ↔ network |
+
+use nalgebra::{Isometry3, Vector3};
+
+use crate::runtime::{Message, RobotId, Time, Topic};
+use crate::trajectory::Trajectory;
+
+/// The robot's pose (body frame: x forward, y left, z up) and velocity in its world frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Odometry {
+    /// When the pose was valid.
+    pub stamp: Time,
+    /// Body pose in the world frame.
+    pub pose: Isometry3<f64>,
+    /// Linear velocity in the world frame, m/s.
+    pub velocity_mps: Vector3<f64>,
+}
+impl Message for Odometry {}
+
+/// Pinhole intrinsics of a depth camera (pixel centres at integer + 0.5).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PinholeIntrinsics {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Focal length in x, pixels.
+    pub fx: f64,
+    /// Focal length in y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// Largest valid depth, metres.
+    pub max_depth_m: f64,
+}
+
+/// A registered depth + intensity image and the sensor pose it was taken from
+/// (assumption A3 of the thesis: poses are given).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthFrame {
+    /// Capture time.
+    pub stamp: Time,
+    /// Camera body pose in the world frame (camera looks along body +x; image x is
+    /// body −y, image y is body −z).
+    pub pose: Isometry3<f64>,
+    /// Intrinsics.
+    pub intrinsics: PinholeIntrinsics,
+    /// Row-major z-depth in metres; 0 means no return.
+    pub depth_m: Vec<f32>,
+    /// Row-major intensity in [0, 1]; 0 where there is no return.
+    pub intensity: Vec<f32>,
+}
+
+impl Message for DepthFrame {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + 4 * (self.depth_m.len() + self.intensity.len())
+    }
+}
+
+impl DepthFrame {
+    /// Number of pixels with a depth return.
+    #[must_use]
+    pub fn valid_pixels(&self) -> usize {
+        self.depth_m.iter().filter(|d| **d > 0.0).count()
+    }
+}
+
+/// A committed trajectory for the vehicle to follow.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// When it was committed.
+    pub stamp: Time,
+    /// The trajectory.
+    pub trajectory: Trajectory,
+}
+
+impl Message for Plan {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.trajectory.payload_bytes()
+    }
+}
+
+/// Another robot's odometry, as received over the link.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerOdometry {
+    /// The peer.
+    pub robot: RobotId,
+    /// Its odometry (stamp on the peer's clock).
+    pub odometry: Odometry,
+    /// When it arrived here.
+    pub received_at: Time,
+}
+impl Message for PeerOdometry {}
+
+/// Body pose and velocity from the vehicle.
+pub const ODOMETRY: Topic<Odometry> = Topic::new("odometry");
+/// Depth + intensity frames from the sensor.
+pub const DEPTH_FRAME: Topic<DepthFrame> = Topic::new("sensor/frame");
+/// The committed plan.
+pub const PLAN: Topic<Plan> = Topic::new("plan/committed");
+/// Peers' odometry from the link.
+pub const PEER_ODOMETRY: Topic<PeerOdometry> = Topic::new("peer/odometry");

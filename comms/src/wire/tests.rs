@@ -1,0 +1,81 @@
+use proptest::prelude::*;
+
+use super::*;
+
+fn odometry() -> Envelope {
+    Envelope::new(
+        7,
+        1,
+        42,
+        123_456_789,
+        Payload::Odometry(Odometry {
+            position_m: [1.0, -2.0, 0.5],
+            orientation_xyzw: [0.0, 0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2],
+            velocity_mps: [0.5, 0.0, 0.0],
+        }),
+    )
+}
+
+#[test]
+fn odometry_round_trips_and_has_a_fixed_size() {
+    let e = odometry();
+    let bytes = encode(&e).unwrap();
+    assert_eq!(decode(&bytes).unwrap(), e);
+    // 1 (version) + 1 (team) + 1 (sender) + 1 (seq) + 1 (class) + 4 (stamp varint)
+    // + 1 (variant) + 10 × 8 (f64s).
+    assert_eq!(bytes.len(), 90);
+}
+
+#[test]
+fn golden_header_bytes() {
+    let bytes = encode(&odometry()).unwrap();
+    assert_eq!(&bytes[..5], &[FORMAT_VERSION as u8, 7, 1, 42, 0]);
+}
+
+#[test]
+fn rejects_bad_input_with_reasons() {
+    let good = encode(&odometry()).unwrap();
+    assert_eq!(decode(&[]), Err(DecodeError::Empty));
+    assert!(matches!(decode(&good[..good.len() - 3]), Err(DecodeError::Malformed(_))));
+    let mut trailing = good.clone();
+    trailing.push(0);
+    assert_eq!(decode(&trailing), Err(DecodeError::TrailingBytes(1)));
+    let mut version = good.clone();
+    version[0] = 9;
+    assert_eq!(decode(&version), Err(DecodeError::UnsupportedVersion(9)));
+    let mut class = good.clone();
+    class[4] = 2;
+    assert!(matches!(decode(&class), Err(DecodeError::ClassMismatch { .. })));
+    let mut nan = odometry();
+    if let Payload::Odometry(o) = &mut nan.payload {
+        o.position_m[0] = f64::NAN;
+    }
+    assert!(matches!(decode(&encode(&nan).unwrap()), Err(DecodeError::Invalid(_))));
+    let mut skew = odometry();
+    if let Payload::Odometry(o) = &mut skew.payload {
+        o.orientation_xyzw = [0.0, 0.0, 0.0, 2.0];
+    }
+    assert!(matches!(decode(&encode(&skew).unwrap()), Err(DecodeError::Invalid(_))));
+    assert!(matches!(decode(&vec![1u8; MAX_MESSAGE_BYTES + 1]), Err(DecodeError::TooLarge(_))));
+}
+
+proptest! {
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
+        let _ = decode(&bytes);
+    }
+
+    #[test]
+    fn mutated_messages_never_panic(index in 0usize..90, value in any::<u8>()) {
+        let mut bytes = encode(&odometry()).unwrap();
+        let i = index % bytes.len();
+        bytes[i] = value;
+        let _ = decode(&bytes);
+    }
+
+    #[test]
+    fn heartbeats_round_trip(team in any::<u32>(), sender in any::<u32>(), seq in any::<u64>(), stamp in any::<u64>(), uptime in 0.0f64..1e9) {
+        let e = Envelope::new(team, sender, seq, stamp, Payload::Heartbeat(Heartbeat { uptime_s: uptime }));
+        prop_assert_eq!(decode(&encode(&e).unwrap()).unwrap(), e);
+    }
+}

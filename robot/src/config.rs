@@ -1,0 +1,154 @@
+//! A robot's configuration (the `[robot]` table of a scenario, or a robot file).
+
+use serde::{Deserialize, Serialize};
+use troupe_actors::link::LinkConfig;
+use troupe_actors::runtime::RestartPolicy;
+
+/// Modelled compute latency per standard actor, seconds (sim-time executor).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ActorLatencies {
+    /// Vehicle.
+    pub vehicle: f64,
+    /// Sensor (capture + rendering).
+    pub sensor: f64,
+    /// Explorer / planner.
+    pub explorer: f64,
+    /// Link.
+    pub link: f64,
+}
+
+impl Default for ActorLatencies {
+    fn default() -> Self {
+        ActorLatencies {
+            vehicle: 0.0,
+            sensor: 0.01,
+            explorer: 0.01,
+            link: 0.0,
+        }
+    }
+}
+
+/// Everything that shapes one robot.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RobotConfig {
+    /// Exploration behaviour by name (see `troupe_policies::BEHAVIOURS`).
+    pub behaviour: String,
+    /// Cruise speed, m/s.
+    pub speed_mps: f64,
+    /// Turn-in-place rate, rad/s.
+    pub yaw_rate_rad_s: f64,
+    /// How often the explorer replans, Hz.
+    pub replan_rate_hz: f64,
+    /// Camera frame rate, Hz.
+    pub sensor_rate_hz: f64,
+    /// Body radius used for collision checks against the world, metres.
+    pub radius_m: f64,
+    /// Link settings.
+    pub link: LinkConfig,
+    /// Modelled compute latencies.
+    pub latency_s: ActorLatencies,
+    /// What happens when an actor panics.
+    pub restart: RestartPolicy,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        RobotConfig {
+            behaviour: "waypoint_route".into(),
+            speed_mps: 1.0,
+            yaw_rate_rad_s: 1.0,
+            replan_rate_hz: 1.0,
+            sensor_rate_hz: 5.0,
+            radius_m: 0.3,
+            link: LinkConfig::default(),
+            latency_s: ActorLatencies::default(),
+            restart: RestartPolicy::default(),
+        }
+    }
+}
+
+/// A configuration value that is not acceptable.
+#[derive(Debug, thiserror::Error, PartialEq)]
+#[error("`{key}` {rule}, got {value}")]
+pub struct ConfigError {
+    /// Dotted key relative to the robot table.
+    pub key: String,
+    /// What it must be.
+    pub rule: &'static str,
+    /// What it was.
+    pub value: String,
+}
+
+fn positive(key: &str, value: f64) -> Result<(), ConfigError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError {
+            key: key.into(),
+            rule: "must be a finite number > 0",
+            value: value.to_string(),
+        })
+    }
+}
+
+fn non_negative(key: &str, value: f64) -> Result<(), ConfigError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError {
+            key: key.into(),
+            rule: "must be a finite number ≥ 0",
+            value: value.to_string(),
+        })
+    }
+}
+
+impl RobotConfig {
+    /// Checks every number; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("speed_mps", self.speed_mps)?;
+        positive("yaw_rate_rad_s", self.yaw_rate_rad_s)?;
+        positive("replan_rate_hz", self.replan_rate_hz)?;
+        positive("sensor_rate_hz", self.sensor_rate_hz)?;
+        positive("radius_m", self.radius_m)?;
+        non_negative("link.odometry_rate_hz", self.link.odometry_rate_hz)?;
+        non_negative("latency_s.vehicle", self.latency_s.vehicle)?;
+        non_negative("latency_s.sensor", self.latency_s.sensor)?;
+        non_negative("latency_s.explorer", self.latency_s.explorer)?;
+        non_negative("latency_s.link", self.latency_s.link)?;
+        non_negative("restart.window_s", self.restart.window_s)?;
+        if !troupe_policies::BEHAVIOURS.contains(&self.behaviour.as_str()) {
+            return Err(ConfigError {
+                key: "behaviour".into(),
+                rule: "must name a known behaviour (waypoint_route)",
+                value: format!("{:?}", self.behaviour),
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_bad_values_name_their_key() {
+        RobotConfig::default().validate().unwrap();
+        let c = RobotConfig {
+            speed_mps: f64::NAN,
+            ..RobotConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().key, "speed_mps");
+        let mut c = RobotConfig::default();
+        c.latency_s.sensor = -1.0;
+        assert_eq!(c.validate().unwrap_err().key, "latency_s.sensor");
+        let c = RobotConfig {
+            behaviour: "x".into(),
+            ..RobotConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().key, "behaviour");
+    }
+}
