@@ -11,6 +11,7 @@ pub mod route;
 
 use nalgebra::Point3;
 use troupe_actors::explorer::ExplorationBehaviour;
+use troupe_actors::runtime::Time;
 
 /// Inputs a behaviour may need besides its own parameters.
 #[derive(Clone, Debug, Default)]
@@ -21,6 +22,9 @@ pub struct BehaviourInputs {
     pub speed_mps: f64,
     /// Turn rate for turning in place, rad/s.
     pub yaw_rate_rad_s: f64,
+    /// Earliest departure, seconds of run time (staggered launches keep robots that
+    /// share a first tunnel apart).
+    pub depart_at_s: f64,
 }
 
 /// Names accepted by [`behaviour_by_name`].
@@ -49,7 +53,8 @@ pub type BehaviourFactory = Box<dyn Fn() -> Box<dyn ExplorationBehaviour> + Send
 pub fn behaviour_by_name(name: &str, inputs: &BehaviourInputs) -> Result<BehaviourFactory, PolicyError> {
     match name {
         "waypoint_route" => {
-            let prototype = route::WaypointRoute::new(inputs.route.clone(), inputs.speed_mps, inputs.yaw_rate_rad_s)?;
+            let prototype = route::WaypointRoute::new(inputs.route.clone(), inputs.speed_mps, inputs.yaw_rate_rad_s)?
+                .departing_at(Time::from_secs_f64(inputs.depart_at_s));
             Ok(Box::new(move || Box::new(prototype.clone())))
         }
         other => Err(PolicyError::UnknownBehaviour(other.to_string())),

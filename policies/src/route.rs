@@ -22,6 +22,7 @@ pub struct WaypointRoute {
     waypoints: Vec<Point3<f64>>,
     speed_mps: f64,
     yaw_rate_rad_s: f64,
+    depart_at: Time,
     committed: bool,
 }
 
@@ -48,8 +49,16 @@ impl WaypointRoute {
             waypoints,
             speed_mps,
             yaw_rate_rad_s,
+            depart_at: Time::ZERO,
             committed: false,
         })
+    }
+
+    /// Holds position until `depart_at` (run time), then flies the route.
+    #[must_use]
+    pub fn departing_at(mut self, depart_at: Time) -> Self {
+        self.depart_at = depart_at;
+        self
     }
 
     /// The whole route as a trajectory starting at `start` from `position` with `yaw`.
@@ -96,7 +105,7 @@ impl WaypointRoute {
 
 impl ExplorationBehaviour for WaypointRoute {
     fn replan(&mut self, now: Time, odometry: &Odometry) -> Option<Trajectory> {
-        if self.committed {
+        if self.committed || now < self.depart_at {
             return None;
         }
         self.committed = true;

@@ -27,6 +27,8 @@ pub struct RobotParts {
     pub vehicle: ActorSpec,
     /// Waypoints for route-following behaviours.
     pub route: Vec<Point3<f64>>,
+    /// Earliest departure on the route, seconds of run time.
+    pub depart_at_s: f64,
 }
 
 /// Why a robot could not be assembled.
@@ -61,6 +63,7 @@ pub fn assemble(name: &str, config: &RobotConfig, parts: RobotParts) -> Result<R
             route: parts.route,
             speed_mps: config.speed_mps,
             yaw_rate_rad_s: config.yaw_rate_rad_s,
+            depart_at_s: parts.depart_at_s,
         },
     )?;
     let options = |latency_s: f64| ActorOptions {

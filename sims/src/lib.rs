@@ -1,4 +1,21 @@
-//! troupe-sims: worlds, the simulated camera and vehicle, ground-truth metrics.
+//! troupe-sims: worlds, the simulated camera and vehicle, in-process teams,
+//! ground-truth metrics and reports; home of the `troupe` command.
+//!
+//! - [`world`]: procedural worlds with a signed distance function as ground truth.
+//! - [`camera`]: the pinhole depth + intensity camera, rendered on the CPU.
+//! - [`coverage`]: explored-volume coverage.
+//! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
+//!   assembled with.
+//! - [`scenario`], [`team`], [`monitor`], [`report`]: `troupe run`.
+#![deny(missing_docs)]
+
 pub mod camera;
 pub mod coverage;
+pub mod faults;
+pub mod monitor;
+pub mod report;
+pub mod scenario;
+pub mod sim_sensor;
+pub mod team;
+pub mod vehicle;
 pub mod world;

@@ -110,3 +110,15 @@ pub trait Actor: Send + 'static {
         let _ = ctx;
     }
 }
+
+impl Actor for Box<dyn Actor> {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        (**self).start(ctx)
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        (**self).handle(event, ctx)
+    }
+    fn stop(&mut self, ctx: &mut Context<'_>) {
+        (**self).stop(ctx);
+    }
+}

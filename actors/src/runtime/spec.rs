@@ -165,6 +165,18 @@ impl ActorSpec {
     pub fn name(&self) -> &str {
         &self.name
     }
+
+    /// Wraps every instance the factory builds (for instrumentation or fault
+    /// injection) without knowing the actor's type.
+    #[must_use]
+    pub fn wrap<F>(mut self, mut wrapper: F) -> Self
+    where
+        F: FnMut(Box<dyn Actor>) -> Box<dyn Actor> + Send + 'static,
+    {
+        let mut inner = self.factory;
+        self.factory = Box::new(move || wrapper(inner()));
+        self
+    }
 }
 
 /// One robot: a name and its actors. Both executors take a team of these.
@@ -200,6 +212,12 @@ impl RobotSpec {
     #[must_use]
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// Takes the actors out (to rebuild the robot with some of them changed).
+    #[must_use]
+    pub fn into_actors(self) -> Vec<ActorSpec> {
+        self.actors
     }
 
     /// Names of the actors added so far.

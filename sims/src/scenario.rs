@@ -1,0 +1,347 @@
+//! Scenario files: what `troupe run` simulates.
+//!
+//! A scenario is a TOML file; every table and key is optional and defaults to the
+//! built-in default scenario (two robots exploring a procedural cave for 120 s).
+//! Unknown keys are errors, and every error names the file and the key.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use troupe_robot::RobotConfig;
+
+use crate::camera::CameraParams;
+use crate::world::CaveParams;
+
+/// The world to explore.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldConfig {
+    /// World generator; only `"cave"` for now.
+    pub kind: String,
+    /// Seed of the world generator (separate from the run seed, so that one cave can
+    /// be explored under many run seeds).
+    pub seed: u64,
+    /// Cave generator parameters.
+    pub cave: CaveParams,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        WorldConfig {
+            kind: "cave".into(),
+            seed: 7,
+            cave: CaveParams::default(),
+        }
+    }
+}
+
+/// The in-process network between robots.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NetworkConfig {
+    /// One-way latency, seconds.
+    pub latency_s: f64,
+}
+
+impl Default for NetworkConfig {
+    fn default() -> Self {
+        NetworkConfig { latency_s: 0.02 }
+    }
+}
+
+/// Ground-truth metrics.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Edge of a coverage cell, metres.
+    pub coverage_cell_m: f64,
+    /// Every n-th pixel (in u and v) is traced for coverage.
+    pub coverage_pixel_stride: usize,
+    /// Period of the time series, seconds.
+    pub sample_period_s: f64,
+}
+
+impl Default for MetricsConfig {
+    fn default() -> Self {
+        MetricsConfig {
+            coverage_cell_m: 0.4,
+            coverage_pixel_stride: 4,
+            sample_period_s: 1.0,
+        }
+    }
+}
+
+/// A fault injected at a scheduled time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "snake_case")]
+pub enum Fault {
+    /// The named actor's handler panics once at `at_s` (tests supervision).
+    ActorPanic {
+        /// Robot index.
+        robot: usize,
+        /// Actor name (`vehicle`, `sensor`, `explorer`, `link`).
+        actor: String,
+        /// Time of the panic, seconds.
+        at_s: f64,
+    },
+}
+
+/// A whole scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scenario {
+    /// Name; outputs go to `runs/<name>/`.
+    pub name: String,
+    /// Run seed: seeds every actor's generator and the camera noise.
+    pub seed: u64,
+    /// Simulated duration, seconds.
+    pub duration_s: f64,
+    /// Number of robots.
+    pub robots: u32,
+    /// World.
+    pub world: WorldConfig,
+    /// Camera of every robot.
+    pub camera: CameraParams,
+    /// Every robot's configuration.
+    pub robot: RobotConfig,
+    /// Network between robots.
+    pub network: NetworkConfig,
+    /// Metrics.
+    pub metrics: MetricsConfig,
+    /// Scheduled faults.
+    pub faults: Vec<Fault>,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Scenario {
+            name: "default".into(),
+            seed: 1,
+            duration_s: 120.0,
+            robots: 2,
+            world: WorldConfig::default(),
+            camera: CameraParams::default(),
+            robot: RobotConfig::default(),
+            network: NetworkConfig::default(),
+            metrics: MetricsConfig::default(),
+            faults: Vec::new(),
+        }
+    }
+}
+
+/// Why a scenario was not accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The file could not be read.
+    #[error("cannot read scenario file `{path}`: {source}")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not valid TOML, or a key/type problem.
+    #[error("scenario file `{path}`: {message}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// What and where.
+        message: String,
+    },
+    /// Parsed, but a value breaks a rule.
+    #[error("scenario file `{path}`: key `{key}` {reason}")]
+    Invalid {
+        /// File (`<built-in>` for the default).
+        path: PathBuf,
+        /// Dotted key.
+        key: String,
+        /// The rule and the value.
+        reason: String,
+    },
+}
+
+impl Scenario {
+    /// Reads and validates a scenario file.
+    pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Scenario::from_toml(&text, path)
+    }
+
+    /// Parses and validates scenario text; `path` is only used in messages.
+    pub fn from_toml(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
+        let parse_error = |message: String| ScenarioError::Parse {
+            path: path.to_owned(),
+            message,
+        };
+        let deserializer =
+            toml::Deserializer::parse(text).map_err(|e| parse_error(one_line(&e.to_string())))?;
+        let scenario: Scenario = serde_path_to_error::deserialize(deserializer).map_err(|e| {
+            let key = e.path().to_string();
+            let inner = one_line(&e.into_inner().to_string());
+            if key == "." || key.is_empty() {
+                parse_error(inner)
+            } else {
+                parse_error(format!("key `{key}`: {inner}"))
+            }
+        })?;
+        scenario.validate(path)?;
+        Ok(scenario)
+    }
+
+    /// Checks every value; the error names the key.
+    pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
+        let invalid = |key: &str, reason: String| ScenarioError::Invalid {
+            path: path.to_owned(),
+            key: key.to_string(),
+            reason,
+        };
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.')
+            || self.name.starts_with('.')
+        {
+            return Err(invalid(
+                "name",
+                format!(
+                    "must be non-empty and use only letters, digits, `-`, `_`, `.`; got {:?}",
+                    self.name
+                ),
+            ));
+        }
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 1e6) {
+            return Err(invalid(
+                "duration_s",
+                format!("must be in (0, 1e6] seconds, got {}", self.duration_s),
+            ));
+        }
+        if !(1..=64).contains(&self.robots) {
+            return Err(invalid(
+                "robots",
+                format!("must be between 1 and 64, got {}", self.robots),
+            ));
+        }
+        if self.world.kind != "cave" {
+            return Err(invalid(
+                "world.kind",
+                format!("must be \"cave\", got {:?}", self.world.kind),
+            ));
+        }
+        self.world
+            .cave
+            .validate()
+            .map_err(|reason| invalid("world.cave", reason))?;
+        self.camera
+            .validate()
+            .map_err(|reason| invalid("camera", reason))?;
+        self.robot.validate().map_err(|e| {
+            invalid(
+                &format!("robot.{}", e.key),
+                format!("{}, got {}", e.rule, e.value),
+            )
+        })?;
+        if !(self.network.latency_s.is_finite() && self.network.latency_s >= 0.0) {
+            return Err(invalid(
+                "network.latency_s",
+                format!("must be ≥ 0, got {}", self.network.latency_s),
+            ));
+        }
+        let m = &self.metrics;
+        if !(m.coverage_cell_m.is_finite() && m.coverage_cell_m >= 0.05) {
+            return Err(invalid(
+                "metrics.coverage_cell_m",
+                format!("must be ≥ 0.05 m, got {}", m.coverage_cell_m),
+            ));
+        }
+        if m.coverage_pixel_stride == 0 {
+            return Err(invalid(
+                "metrics.coverage_pixel_stride",
+                "must be ≥ 1, got 0".into(),
+            ));
+        }
+        if !(m.sample_period_s.is_finite() && m.sample_period_s >= 0.01) {
+            return Err(invalid(
+                "metrics.sample_period_s",
+                format!("must be ≥ 0.01 s, got {}", m.sample_period_s),
+            ));
+        }
+        for (i, fault) in self.faults.iter().enumerate() {
+            match fault {
+                Fault::ActorPanic { robot, actor, at_s } => {
+                    if *robot >= self.robots as usize {
+                        return Err(invalid(
+                            &format!("faults[{i}].robot"),
+                            format!("must be < robots ({}), got {robot}", self.robots),
+                        ));
+                    }
+                    if !["vehicle", "sensor", "explorer", "link"].contains(&actor.as_str()) {
+                        return Err(invalid(
+                            &format!("faults[{i}].actor"),
+                            format!(
+                                "must be one of vehicle, sensor, explorer, link; got {actor:?}"
+                            ),
+                        ));
+                    }
+                    if !(at_s.is_finite() && *at_s >= 0.0) {
+                        return Err(invalid(
+                            &format!("faults[{i}].at_s"),
+                            format!("must be ≥ 0, got {at_s}"),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split('\n')
+        .map(str::trim_end)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Scenario, ScenarioError> {
+        Scenario::from_toml(text, Path::new("s.toml"))
+    }
+
+    #[test]
+    fn empty_file_is_the_default() {
+        assert_eq!(parse("").unwrap(), Scenario::default());
+    }
+
+    #[test]
+    fn errors_name_file_and_key() {
+        let e = parse("robotz = 3").unwrap_err().to_string();
+        assert!(e.contains("s.toml") && e.contains("robotz"), "{e}");
+        let e = parse("robots = -1").unwrap_err().to_string();
+        assert!(e.contains("s.toml") && e.contains("`robots`"), "{e}");
+        let e = parse("robots = \"two\"").unwrap_err().to_string();
+        assert!(e.contains("`robots`"), "{e}");
+        let e = parse("[robot]\nspeed_mps = -1.0").unwrap_err().to_string();
+        assert!(e.contains("`robot.speed_mps`"), "{e}");
+        let e = parse("[camera]\nwidth = 0").unwrap_err().to_string();
+        assert!(e.contains("camera"), "{e}");
+        let e = parse("robots = 0").unwrap_err().to_string();
+        assert!(e.contains("`robots`"), "{e}");
+        let e =
+            parse("[[faults]]\nkind = \"actor_panic\"\nrobot = 5\nactor = \"sensor\"\nat_s = 1.0")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("faults[0].robot"), "{e}");
+        let e = parse("name = \"../x\"").unwrap_err().to_string();
+        assert!(e.contains("`name`"), "{e}");
+        let e = parse("duration_s = nan").unwrap_err().to_string();
+        assert!(e.contains("`duration_s`"), "{e}");
+    }
+}

@@ -1,0 +1,452 @@
+//! A team of simulated robots in one process, under the sim-time executor.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+use troupe_actors::runtime::{
+    ActorOptions, ActorSpec, IdealNetwork, LatencyModel, LatencySummary, RobotReport, SimExecutor,
+    Time, TopicStats,
+};
+use troupe_robot::{AssembleError, RobotParts, assemble};
+
+use crate::faults::PanicOnce;
+use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
+use crate::scenario::{Fault, Scenario};
+use crate::sim_sensor::SimCameraSource;
+use crate::vehicle::{SimVehicle, new_body};
+use crate::world::{CaveWorld, World};
+
+/// Odometry rate of the simulated vehicle, Hz.
+pub const VEHICLE_RATE_HZ: f64 = 10.0;
+
+/// Seconds between the departures of consecutive robots.
+pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
+
+/// A team ready to run.
+pub struct Team {
+    scenario: Scenario,
+    world: Arc<CaveWorld>,
+    executor: SimExecutor,
+    truth: Arc<Mutex<Truth>>,
+}
+
+/// Everything a run produced.
+pub struct RunOutput {
+    /// Deterministic results (`summary.json`).
+    pub summary: Summary,
+    /// Wall-clock figures (`timing.json`).
+    pub timing: Timing,
+    /// One row per robot per sample period (`timeseries.csv`).
+    pub timeseries: Vec<SeriesRow>,
+}
+
+/// One row of the time series.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct SeriesRow {
+    /// Sim time, seconds.
+    pub time_s: f64,
+    /// Robot index.
+    pub robot: usize,
+    /// Position x, metres.
+    pub x_m: f64,
+    /// Position y, metres.
+    pub y_m: f64,
+    /// Position z, metres.
+    pub z_m: f64,
+    /// Heading, radians.
+    pub yaw_rad: f64,
+    /// Speed, m/s.
+    pub speed_mps: f64,
+    /// Path length so far, metres.
+    pub distance_m: f64,
+    /// Frames so far.
+    pub frames: u64,
+    /// Team coverage of the free volume, fraction.
+    pub team_coverage: f64,
+    /// Team explored volume, m³.
+    pub team_explored_m3: f64,
+}
+
+/// Counters of one actor.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ActorSummary {
+    /// Actor name.
+    pub name: String,
+    /// Events handled.
+    pub handled: u64,
+    /// Hooks that returned an error.
+    pub errors: u64,
+    /// Handler panics.
+    pub panics: u64,
+    /// Restarts after panics.
+    pub restarts: u64,
+    /// Stopped for good.
+    pub stopped: bool,
+    /// Timer ticks coalesced while busy.
+    pub timer_overruns: u64,
+    /// Messages dropped by queue policy, by topic.
+    pub dropped: BTreeMap<String, u64>,
+}
+
+/// Per-robot results.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RobotSummary {
+    /// Robot name.
+    pub name: String,
+    /// Ground truth.
+    #[serde(flatten)]
+    pub truth: RobotTruthSummary,
+    /// Actors.
+    pub actors: Vec<ActorSummary>,
+    /// Messages and bytes per topic.
+    pub topics: BTreeMap<String, TopicStats>,
+}
+
+/// Ground truth of one robot, as reported.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RobotTruthSummary {
+    /// Path length, metres.
+    pub distance_m: f64,
+    /// Collision episodes with the world.
+    pub collisions: u64,
+    /// Smallest clearance between body and world, metres.
+    pub min_clearance_m: f64,
+    /// Highest speed, m/s.
+    pub max_speed_mps: f64,
+    /// Frames rendered.
+    pub frames: u64,
+    /// Frames with no return at all.
+    pub empty_frames: u64,
+}
+
+impl From<&RobotTruth> for RobotTruthSummary {
+    fn from(t: &RobotTruth) -> Self {
+        RobotTruthSummary {
+            distance_m: t.distance_m,
+            collisions: t.collisions,
+            min_clearance_m: t.min_clearance_m,
+            max_speed_mps: t.max_speed_mps,
+            frames: t.frames,
+            empty_frames: t.empty_frames,
+        }
+    }
+}
+
+/// The deterministic results of a run (`summary.json`).
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Run seed.
+    pub seed: u64,
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// Number of robots.
+    pub robots: usize,
+    /// The world.
+    pub world: WorldSummary,
+    /// Coverage of the free volume by the team's cameras.
+    pub coverage: CoverageSummary,
+    /// Collisions with the world over all robots.
+    pub collisions: u64,
+    /// Episodes of two robot bodies overlapping (ground truth).
+    pub robot_contacts: u64,
+    /// Smallest distance between two robot centres, metres (null with one robot).
+    pub min_inter_robot_distance_m: Option<f64>,
+    /// Events processed by the executor.
+    pub events: u64,
+    /// Per robot.
+    pub per_robot: Vec<RobotSummary>,
+    /// Messages and bytes per topic, summed over robots.
+    pub topics: BTreeMap<String, TopicStats>,
+}
+
+/// The world, as reported.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct WorldSummary {
+    /// Generator.
+    pub kind: String,
+    /// Generator seed.
+    pub seed: u64,
+    /// Free volume (coverage denominator), m³.
+    pub free_volume_m3: f64,
+    /// Length of the tunnel centre lines, metres.
+    pub tunnel_length_m: f64,
+    /// Coverage cell edge, metres.
+    pub coverage_cell_m: f64,
+}
+
+/// Coverage results.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct CoverageSummary {
+    /// Final explored fraction.
+    pub final_fraction: f64,
+    /// Final explored volume, m³.
+    pub explored_volume_m3: f64,
+    /// `[time_s, fraction]` at every sample period.
+    pub over_time: Vec<[f64; 2]>,
+}
+
+/// Wall-clock figures (`timing.json`): they vary from machine to machine and run to run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Timing {
+    /// Wall seconds the run took.
+    pub wall_s: f64,
+    /// Simulated seconds.
+    pub sim_s: f64,
+    /// Simulated seconds per wall second.
+    pub sim_seconds_per_wall_second: f64,
+    /// Executor events per wall second.
+    pub events_per_wall_second: f64,
+    /// Handler wall time per robot and actor.
+    pub handler_latency: BTreeMap<String, BTreeMap<String, LatencySummary>>,
+}
+
+impl Team {
+    /// Builds the world, the robots and the monitor of a scenario.
+    pub fn new(scenario: &Scenario) -> Result<Team, AssembleError> {
+        let world = Arc::new(CaveWorld::generate(
+            &scenario.world.cave,
+            scenario.world.seed,
+        ));
+        let shared_world: Arc<dyn World> = world.clone();
+        let count = scenario.robots as usize;
+        let mut team = Vec::with_capacity(count);
+        for i in 0..count {
+            let start = world.start_position(i, count);
+            let route = world.centreline_route(i, count);
+            let heading = route
+                .iter()
+                .find(|p| (p.xy() - start.xy()).norm() > 0.1)
+                .map_or(0.0, |p| (p.y - start.y).atan2(p.x - start.x));
+            let pose = Isometry3::from_parts(
+                Translation3::from(start.coords),
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading),
+            );
+            let body = new_body(pose);
+            let camera_world = shared_world.clone();
+            let camera = scenario.camera.clone();
+            let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
+            let vehicle = ActorSpec::new("vehicle", move || {
+                SimVehicle::new(body.clone(), VEHICLE_RATE_HZ)
+            })
+            .with_options(ActorOptions {
+                latency: LatencyModel::fixed(scenario.robot.latency_s.vehicle),
+                restart: scenario.robot.restart,
+                blocking: false,
+            });
+            let parts = RobotParts {
+                frame_source: Box::new(move || {
+                    Box::new(SimCameraSource::new(
+                        camera_world.clone(),
+                        camera.clone(),
+                        noise_seed,
+                    ))
+                }),
+                vehicle,
+                route,
+                // The robot furthest into the tunnel leaves first; the others follow
+                // at intervals so that robots sharing the first tunnel stay apart.
+                depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
+            };
+            let mut robot = assemble(&format!("robot{i}"), &scenario.robot, parts)?;
+            for fault in &scenario.faults {
+                let Fault::ActorPanic {
+                    robot: r,
+                    actor,
+                    at_s,
+                } = fault;
+                if *r == i {
+                    robot = inject_panic(robot, actor, Time::from_secs_f64(*at_s));
+                }
+            }
+            team.push(robot);
+        }
+        let monitor = GroundTruthMonitor::new(
+            shared_world,
+            scenario.camera.clone(),
+            scenario.metrics.coverage_cell_m,
+            scenario.metrics.coverage_pixel_stride,
+            count,
+            scenario.robot.radius_m,
+        );
+        let truth = monitor.truth();
+        let mut executor = SimExecutor::new(team, scenario.seed).with_network(IdealNetwork {
+            latency: Duration::from_secs_f64(scenario.network.latency_s),
+        });
+        executor.add_tap(monitor);
+        Ok(Team {
+            scenario: scenario.clone(),
+            world,
+            executor,
+            truth,
+        })
+    }
+
+    /// Runs the scenario to its end; `progress` is called after every sample period
+    /// with the simulated seconds done.
+    pub fn run(mut self, mut progress: impl FnMut(f64)) -> RunOutput {
+        let started = Instant::now();
+        let period = self.scenario.metrics.sample_period_s;
+        let end = self.scenario.duration_s;
+        let mut sample_times: Vec<f64> = (1..=(end / period).floor() as usize)
+            .map(|k| k as f64 * period)
+            .collect();
+        if sample_times.last().is_none_or(|&t| t < end - 1e-9) {
+            sample_times.push(end);
+        }
+        let mut timeseries = Vec::new();
+        let mut over_time = Vec::new();
+        for t in sample_times {
+            self.executor.run_until(Time::from_secs_f64(t));
+            let truth = lock_truth(&self.truth);
+            let coverage = truth.coverage.coverage();
+            over_time.push([t, coverage]);
+            for (i, r) in truth.robots.iter().enumerate() {
+                let p = r.position.unwrap_or_else(Point3::origin);
+                timeseries.push(SeriesRow {
+                    time_s: t,
+                    robot: i,
+                    x_m: p.x,
+                    y_m: p.y,
+                    z_m: p.z,
+                    yaw_rad: r.yaw_rad,
+                    speed_mps: r.speed_mps,
+                    distance_m: r.distance_m,
+                    frames: r.frames,
+                    team_coverage: coverage,
+                    team_explored_m3: truth.coverage.explored_volume_m3(),
+                });
+            }
+            drop(truth);
+            progress(t);
+        }
+        let events = self.executor.events_processed();
+        let reports = self.executor.finish();
+        let wall_s = started.elapsed().as_secs_f64();
+        let truth = lock_truth(&self.truth);
+        let summary = summarise(
+            &self.scenario,
+            &self.world,
+            &truth,
+            &reports,
+            over_time,
+            events,
+        );
+        let timing = Timing {
+            wall_s,
+            sim_s: end,
+            sim_seconds_per_wall_second: end / wall_s.max(1e-9),
+            events_per_wall_second: events as f64 / wall_s.max(1e-9),
+            handler_latency: reports
+                .iter()
+                .map(|r| {
+                    (
+                        r.name.clone(),
+                        r.actors
+                            .iter()
+                            .map(|a| (a.name.clone(), a.stats.handler_wall.summary()))
+                            .collect(),
+                    )
+                })
+                .collect(),
+        };
+        RunOutput {
+            summary,
+            timing,
+            timeseries,
+        }
+    }
+}
+
+fn inject_panic(
+    robot: troupe_actors::runtime::RobotSpec,
+    actor: &str,
+    at: Time,
+) -> troupe_actors::runtime::RobotSpec {
+    let name = robot.name().to_string();
+    let actors = robot.into_actors();
+    let mut rebuilt = troupe_actors::runtime::RobotSpec::new(name);
+    for spec in actors {
+        if spec.name() == actor {
+            let fired = Arc::new(AtomicBool::new(false));
+            rebuilt.add(spec.wrap(move |inner| Box::new(PanicOnce::new(inner, at, fired.clone()))));
+        } else {
+            rebuilt.add(spec);
+        }
+    }
+    rebuilt
+}
+
+fn summarise(
+    scenario: &Scenario,
+    world: &CaveWorld,
+    truth: &Truth,
+    reports: &[RobotReport],
+    over_time: Vec<[f64; 2]>,
+    events: u64,
+) -> Summary {
+    let mut topics: BTreeMap<String, TopicStats> = BTreeMap::new();
+    for r in reports {
+        for (name, s) in &r.topics {
+            let t = topics.entry(name.clone()).or_default();
+            t.messages += s.messages;
+            t.bytes += s.bytes;
+            t.type_mismatches += s.type_mismatches;
+        }
+    }
+    let per_robot = reports
+        .iter()
+        .zip(&truth.robots)
+        .map(|(r, t)| RobotSummary {
+            name: r.name.clone(),
+            truth: t.into(),
+            actors: r
+                .actors
+                .iter()
+                .map(|a| ActorSummary {
+                    name: a.name.clone(),
+                    handled: a.stats.handled,
+                    errors: a.stats.errors,
+                    panics: a.stats.panics,
+                    restarts: a.stats.restarts,
+                    stopped: a.stats.stopped,
+                    timer_overruns: a.stats.timer_overruns,
+                    dropped: a.dropped_by_topic.clone(),
+                })
+                .collect(),
+            topics: r.topics.clone(),
+        })
+        .collect();
+    Summary {
+        scenario: scenario.name.clone(),
+        seed: scenario.seed,
+        duration_s: scenario.duration_s,
+        robots: reports.len(),
+        world: WorldSummary {
+            kind: scenario.world.kind.clone(),
+            seed: scenario.world.seed,
+            free_volume_m3: truth.coverage.free_volume_m3(),
+            tunnel_length_m: world.graph().total_length_m(),
+            coverage_cell_m: scenario.metrics.coverage_cell_m,
+        },
+        coverage: CoverageSummary {
+            final_fraction: truth.coverage.coverage(),
+            explored_volume_m3: truth.coverage.explored_volume_m3(),
+            over_time,
+        },
+        collisions: truth.robots.iter().map(|r| r.collisions).sum(),
+        robot_contacts: truth.robot_contacts,
+        min_inter_robot_distance_m: truth
+            .min_inter_robot_distance_m
+            .is_finite()
+            .then_some(truth.min_inter_robot_distance_m),
+        events,
+        per_robot,
+        topics,
+    }
+}
