@@ -1,1 +1,165 @@
-//! Camera (helper in progress).
+//! Simulated depth + intensity camera (pinhole, D435-like defaults).
+//!
+//! The camera sits at the body origin and looks along body `+x`; image `x` (columns, `u`)
+//! runs to the right (body `-y`) and image `y` (rows, `v`) runs down (body `-z`). Pixel
+//! `(col, row)` has its centre at `(u, v) = (col + 0.5, row + 0.5)`. Depth is the z-depth
+//! along the optical axis, as a depth camera reports it, not the ray length.
+//!
+//! [`CameraParams::render`] sphere-traces a [`World`]; see `render` for the exact rules.
+
+mod image;
+mod render;
+
+pub use image::DepthImage;
+pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::world::World;
+
+/// Camera configuration; angles in degrees, lengths in metres.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraParams {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Horizontal field of view.
+    pub hfov_deg: f64,
+    /// Vertical field of view.
+    pub vfov_deg: f64,
+    /// Largest z-depth that gives a return.
+    pub range_m: f64,
+    /// Standard deviation of the Gaussian noise added to each depth.
+    pub depth_noise_std_m: f64,
+    /// Probability that a pixel returns nothing, independently per pixel.
+    pub dropout_prob: f64,
+}
+
+impl Default for CameraParams {
+    fn default() -> Self {
+        Self {
+            width: 160,
+            height: 120,
+            hfov_deg: 89.57,
+            vfov_deg: 59.24,
+            range_m: 5.0,
+            depth_noise_std_m: 0.0,
+            dropout_prob: 0.0,
+        }
+    }
+}
+
+/// Pinhole intrinsics in pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    /// Horizontal focal length: `(width / 2) / tan(hfov / 2)`.
+    pub fx: f64,
+    /// Vertical focal length: `(height / 2) / tan(vfov / 2)`.
+    pub fy: f64,
+    /// Principal point column: `width / 2`.
+    pub cx: f64,
+    /// Principal point row: `height / 2`.
+    pub cy: f64,
+}
+
+impl CameraParams {
+    /// Check every field; the error names the field, the rule and the value.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "camera.width and camera.height must be at least 1, got {}x{}",
+                self.width, self.height
+            ));
+        }
+        for (name, v) in [("hfov_deg", self.hfov_deg), ("vfov_deg", self.vfov_deg)] {
+            if !(v.is_finite() && v > 0.0 && v < 180.0) {
+                return Err(format!("camera.{name} must be in (0, 180), got {v}"));
+            }
+        }
+        if !(self.range_m.is_finite() && self.range_m > 0.0) {
+            return Err(format!(
+                "camera.range_m must be a finite number > 0, got {}",
+                self.range_m
+            ));
+        }
+        if !(self.depth_noise_std_m.is_finite() && self.depth_noise_std_m >= 0.0) {
+            return Err(format!(
+                "camera.depth_noise_std_m must be a finite number >= 0, got {}",
+                self.depth_noise_std_m
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.dropout_prob) {
+            return Err(format!(
+                "camera.dropout_prob must be in [0, 1], got {}",
+                self.dropout_prob
+            ));
+        }
+        Ok(())
+    }
+
+    /// The pinhole intrinsics derived from size and field of view.
+    #[must_use]
+    pub fn intrinsics(&self) -> Intrinsics {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        Intrinsics {
+            fx: (w / 2.0) / (self.hfov_deg.to_radians() / 2.0).tan(),
+            fy: (h / 2.0) / (self.vfov_deg.to_radians() / 2.0).tan(),
+            cx: w / 2.0,
+            cy: h / 2.0,
+        }
+    }
+
+    /// Image coordinates `(u, v)` of the centre of pixel `(col, row)`.
+    #[must_use]
+    pub fn pixel_centre(col: u32, row: u32) -> (f64, f64) {
+        (f64::from(col) + 0.5, f64::from(row) + 0.5)
+    }
+
+    /// Body-frame direction of image point `(u, v)` scaled to unit z-depth (its body `x`
+    /// component is 1).
+    #[must_use]
+    pub fn pixel_ray_body_unit_depth(&self, u: f64, v: f64) -> Vector3<f64> {
+        let k = self.intrinsics();
+        Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy)
+    }
+
+    /// Unit body-frame direction of the ray through image point `(u, v)`.
+    #[must_use]
+    pub fn pixel_ray_body(&self, u: f64, v: f64) -> Vector3<f64> {
+        self.pixel_ray_body_unit_depth(u, v).normalize()
+    }
+
+    /// World point seen at image point `(u, v)` with z-depth `depth_m`, for a camera at
+    /// `body_pose` (body to world).
+    #[must_use]
+    pub fn back_project(
+        &self,
+        body_pose: &Isometry3<f64>,
+        u: f64,
+        v: f64,
+        depth_m: f64,
+    ) -> Point3<f64> {
+        body_pose * Point3::from(self.pixel_ray_body_unit_depth(u, v) * depth_m)
+    }
+
+    /// Render a depth + intensity image of `world` from `body_pose` (body to world).
+    ///
+    /// Noise and dropouts derive from `(noise_seed, pixel index)` only, so the image is
+    /// bit-identical for any thread count; pass a different `noise_seed` per frame (for
+    /// example a hash of robot and frame number) to get fresh noise.
+    #[must_use]
+    pub fn render(
+        &self,
+        world: &dyn World,
+        body_pose: &Isometry3<f64>,
+        noise_seed: u64,
+    ) -> DepthImage {
+        render::render(self, world, body_pose, noise_seed)
+    }
+}
+
+#[cfg(test)]
+mod tests;

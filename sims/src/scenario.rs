@@ -120,7 +120,11 @@ impl Default for Scenario {
             duration_s: 120.0,
             robots: 2,
             world: WorldConfig::default(),
-            camera: CameraParams::default(),
+            camera: CameraParams {
+                depth_noise_std_m: 0.01,
+                dropout_prob: 0.01,
+                ..CameraParams::default()
+            },
             robot: RobotConfig::default(),
             network: NetworkConfig::default(),
             metrics: MetricsConfig::default(),
@@ -313,6 +317,17 @@ mod tests {
 
     fn parse(text: &str) -> Result<Scenario, ScenarioError> {
         Scenario::from_toml(text, Path::new("s.toml"))
+    }
+
+    #[test]
+    fn shipped_scenarios_parse() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        }
+        let default = Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/default.toml")).unwrap();
+        assert_eq!(default, Scenario::default(), "scenarios/default.toml must spell out the built-in default");
     }
 
     #[test]

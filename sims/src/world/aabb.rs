@@ -16,7 +16,10 @@ impl Aabb {
     /// The box spanned by two corners given in any order.
     #[must_use]
     pub fn new(a: Point3<f64>, b: Point3<f64>) -> Self {
-        Self { min: a.inf(&b), max: a.sup(&b) }
+        Self {
+            min: a.inf(&b),
+            max: a.sup(&b),
+        }
     }
 
     /// The box of a single point.
@@ -53,14 +56,20 @@ impl Aabb {
     /// The smallest box holding both `self` and `other`.
     #[must_use]
     pub fn union(&self, other: &Aabb) -> Aabb {
-        Aabb { min: self.min.inf(&other.min), max: self.max.sup(&other.max) }
+        Aabb {
+            min: self.min.inf(&other.min),
+            max: self.max.sup(&other.max),
+        }
     }
 
     /// The box grown by `margin_m` on every side.
     #[must_use]
     pub fn expanded(&self, margin_m: f64) -> Aabb {
         let m = Vector3::repeat(margin_m);
-        Aabb { min: self.min - m, max: self.max + m }
+        Aabb {
+            min: self.min - m,
+            max: self.max + m,
+        }
     }
 
     /// Euclidean distance from `p` to the box (0 inside).
@@ -90,7 +99,10 @@ impl Aabb {
                 continue;
             }
             let inv = 1.0 / dir[i];
-            let (a, b) = ((self.min[i] - origin[i]) * inv, (self.max[i] - origin[i]) * inv);
+            let (a, b) = (
+                (self.min[i] - origin[i]) * inv,
+                (self.max[i] - origin[i]) * inv,
+            );
             t0 = t0.max(a.min(b));
             t1 = t1.min(a.max(b));
         }

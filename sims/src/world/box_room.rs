@@ -42,11 +42,7 @@ impl World for BoxRoom {
             .map(|i| (p[i] / BOX_ROOM_CHECKER_M).floor() as i64)
             .sum::<i64>()
             .rem_euclid(2);
-        if parity == 0 {
-            0.3
-        } else {
-            0.8
-        }
+        if parity == 0 { 0.3 } else { 0.8 }
     }
 
     fn bounds(&self) -> Aabb {
@@ -61,8 +57,10 @@ mod tests {
 
     #[test]
     fn sdf_sign_and_normal() {
-        let room =
-            BoxRoom::new(Aabb::new(Point3::new(-3.0, -2.0, 0.0), Point3::new(3.0, 2.0, 3.0)));
+        let room = BoxRoom::new(Aabb::new(
+            Point3::new(-3.0, -2.0, 0.0),
+            Point3::new(3.0, 2.0, 3.0),
+        ));
         assert_eq!(room.sdf_m(&Point3::new(0.0, 0.0, 1.0)), 1.0);
         assert_eq!(room.sdf_m(&Point3::new(4.0, 0.0, 1.0)), -1.0);
         let n = room.normal(&Point3::new(2.9, 0.0, 1.5));

@@ -1,9 +1,12 @@
 //! Deterministic lattice value noise, for rough walls and surface texture.
 //!
-//! Values at integer lattice points come from a hash of the point and a seed, so the noise
-//! needs no tables and is identical on every machine and thread.
+//! Lattice values come from tables built from a seed with `ChaCha8Rng`, so the noise is
+//! identical on every machine and thread. Also holds the small hash helpers used for
+//! per-pixel randomness.
 
 use nalgebra::Point3;
+use rand::{Rng, SeedableRng, seq::SliceRandom};
+use rand_chacha::ChaCha8Rng;
 
 /// Upper bound of `|∇ value(p)|` per lattice unit for [`ValueNoise`].
 ///
@@ -28,27 +31,31 @@ pub fn unit_f64(h: u64) -> f64 {
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
+/// Lattice period of [`ValueNoise`] along each axis, in lattice units.
+pub const PERIOD: usize = 256;
+
 /// Value noise in `[-1, 1]` on the integer lattice, smoothstep-interpolated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+///
+/// Lattice values come from a seeded permutation table (Perlin's scheme), so the noise
+/// repeats every [`PERIOD`] lattice units.
+#[derive(Debug, Clone, PartialEq)]
 pub struct ValueNoise {
-    seed: u64,
+    /// A permutation of `0..PERIOD`, stored twice so sums of two entries index it.
+    perm: Vec<u8>,
+    /// Lattice values in `[-1, 1]`.
+    values: Vec<f64>,
 }
 
 impl ValueNoise {
-    /// Noise whose lattice values derive from `seed`.
+    /// Noise whose tables derive from `seed`.
     #[must_use]
     pub fn new(seed: u64) -> Self {
-        Self { seed: mix64(seed ^ 0x5EED_CAFE_F00D_D00D) }
-    }
-
-    fn lattice(&self, x: i64, y: i64, z: i64) -> f64 {
-        let h = mix64(
-            self.seed
-                ^ (x as u64).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)
-                ^ (y as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93)
-                ^ (z as u64).wrapping_mul(0xA076_1D64_78BD_642F),
-        );
-        2.0 * unit_f64(h) - 1.0
+        let mut rng = ChaCha8Rng::seed_from_u64(mix64(seed ^ 0x5EED_CAFE_F00D_D00D));
+        let mut perm: Vec<u8> = (0..PERIOD).map(|i| i as u8).collect();
+        perm.shuffle(&mut rng);
+        perm.extend_from_within(..);
+        let values = (0..PERIOD).map(|_| rng.random_range(-1.0..=1.0)).collect();
+        Self { perm, values }
     }
 
     /// Noise value at `p` (lattice units), in `[-1, 1]`; continuous with gradient norm at
@@ -56,15 +63,21 @@ impl ValueNoise {
     #[must_use]
     pub fn value(&self, p: &Point3<f64>) -> f64 {
         let (fx, fy, fz) = (p.x.floor(), p.y.floor(), p.z.floor());
-        let (x, y, z) = (fx as i64, fy as i64, fz as i64);
+        let wrap = |f: f64| (f as i64).rem_euclid(PERIOD as i64) as usize;
+        let (x, y, z) = (wrap(fx), wrap(fy), wrap(fz));
         let fade = |t: f64| t * t * (3.0 - 2.0 * t);
         let (u, v, w) = (fade(p.x - fx), fade(p.y - fy), fade(p.z - fz));
         let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
-        let c = |dx: i64, dy: i64, dz: i64| self.lattice(x + dx, y + dy, z + dz);
-        let x00 = lerp(c(0, 0, 0), c(1, 0, 0), u);
-        let x10 = lerp(c(0, 1, 0), c(1, 1, 0), u);
-        let x01 = lerp(c(0, 0, 1), c(1, 0, 1), u);
-        let x11 = lerp(c(0, 1, 1), c(1, 1, 1), u);
+        let (pm, val) = (&self.perm, &self.values);
+        let at = |i: usize| val[usize::from(pm[i])];
+        let a = usize::from(pm[x]) + y;
+        let b = usize::from(pm[x + 1]) + y;
+        let (aa, ab) = (usize::from(pm[a]) + z, usize::from(pm[a + 1]) + z);
+        let (ba, bb) = (usize::from(pm[b]) + z, usize::from(pm[b + 1]) + z);
+        let x00 = lerp(at(aa), at(ba), u);
+        let x10 = lerp(at(ab), at(bb), u);
+        let x01 = lerp(at(aa + 1), at(ba + 1), u);
+        let x11 = lerp(at(ab + 1), at(bb + 1), u);
         lerp(lerp(x00, x10, v), lerp(x01, x11, v), w)
     }
 
@@ -79,11 +92,7 @@ impl ValueNoise {
             amp *= 0.5;
             q = Point3::from(q.coords * 2.0 + nalgebra::Vector3::new(17.3, -9.1, 4.7));
         }
-        if norm > 0.0 {
-            sum / norm
-        } else {
-            0.0
-        }
+        if norm > 0.0 { sum / norm } else { 0.0 }
     }
 }
 
@@ -107,9 +116,14 @@ mod tests {
             assert!((-1.0..=1.0).contains(&v));
             assert_eq!(v.to_bits(), b.value(&p).to_bits());
         }
-        assert_ne!(ValueNoise::new(1).value(&Point3::new(0.3, 0.2, 0.1)), {
-            ValueNoise::new(2).value(&Point3::new(0.3, 0.2, 0.1))
-        });
+        let q = Point3::new(0.3, 0.2, 0.1);
+        assert_ne!(ValueNoise::new(1).value(&q), ValueNoise::new(2).value(&q));
+        // Periodic, and continuous across the wrap.
+        let r = Point3::new(-0.5, 3.25, 255.999_999);
+        let wrapped = Point3::new(r.x + PERIOD as f64, r.y - PERIOD as f64, r.z);
+        assert!((a.value(&r) - a.value(&wrapped)).abs() < 1e-12);
+        let s = Point3::new(-0.5, 3.25, 256.0);
+        assert!((a.value(&r) - a.value(&s)).abs() < 1e-4);
     }
 
     #[test]
@@ -124,7 +138,9 @@ mod tests {
                 rng.random_range(-20.0..20.0),
                 rng.random_range(-20.0..20.0),
             );
-            let d = |e: nalgebra::Vector3<f64>| (n.value(&(p + e * h)) - n.value(&(p - e * h))) / (2.0 * h);
+            let d = |e: nalgebra::Vector3<f64>| {
+                (n.value(&(p + e * h)) - n.value(&(p - e * h))) / (2.0 * h)
+            };
             let g = nalgebra::Vector3::new(
                 d(nalgebra::Vector3::x()),
                 d(nalgebra::Vector3::y()),

@@ -21,9 +21,18 @@ const INDEX_CELL_M: f64 = 2.0;
 #[derive(Debug, Clone, PartialEq)]
 pub(super) enum Primitive {
     /// Points within `radius` of the segment `a`–`a + ab`.
-    Capsule { a: Point3<f64>, ab: Vector3<f64>, inv_len2: f64, radius: f64 },
+    Capsule {
+        a: Point3<f64>,
+        ab: Vector3<f64>,
+        inv_len2: f64,
+        radius: f64,
+    },
     /// A ball cut by a horizontal floor at `floor_z`.
-    Chamber { centre: Point3<f64>, radius: f64, floor_z: f64 },
+    Chamber {
+        centre: Point3<f64>,
+        radius: f64,
+        floor_z: f64,
+    },
 }
 
 impl Primitive {
@@ -32,30 +41,40 @@ impl Primitive {
         let ab = b - a;
         let len2 = ab.norm_squared();
         let inv_len2 = if len2 > 0.0 { 1.0 / len2 } else { 0.0 };
-        Primitive::Capsule { a, ab, inv_len2, radius }
+        Primitive::Capsule {
+            a,
+            ab,
+            inv_len2,
+            radius,
+        }
     }
 
     /// Signed distance into the primitive (positive inside), 1-Lipschitz.
     #[inline]
     pub(super) fn free_m(&self, p: &Point3<f64>) -> f64 {
         match self {
-            Primitive::Capsule { a, ab, inv_len2, radius } => {
+            Primitive::Capsule {
+                a,
+                ab,
+                inv_len2,
+                radius,
+            } => {
                 let ap = p - a;
                 let t = (ap.dot(ab) * inv_len2).clamp(0.0, 1.0);
                 radius - (ap - ab * t).norm()
             }
-            Primitive::Chamber { centre, radius, floor_z } => {
-                (radius - (p - centre).norm()).min(p.z - floor_z)
-            }
+            Primitive::Chamber {
+                centre,
+                radius,
+                floor_z,
+            } => (radius - (p - centre).norm()).min(p.z - floor_z),
         }
     }
 
     /// A box holding the primitive's free region.
     pub(super) fn aabb(&self) -> Aabb {
         match self {
-            Primitive::Capsule { a, ab, radius, .. } => {
-                Aabb::new(*a, a + ab).expanded(*radius)
-            }
+            Primitive::Capsule { a, ab, radius, .. } => Aabb::new(*a, a + ab).expanded(*radius),
             Primitive::Chamber { centre, radius, .. } => {
                 Aabb::from_point(*centre).expanded(*radius)
             }
@@ -80,7 +99,10 @@ impl Field {
         let reach = ROCK_CLAMP_M + 1e-6;
         let boxes: Vec<Aabb> = prims.iter().map(|p| p.aabb().expanded(reach)).collect();
         let all = boxes.iter().skip(1).fold(
-            boxes.first().copied().unwrap_or(Aabb::from_point(Point3::origin())),
+            boxes
+                .first()
+                .copied()
+                .unwrap_or(Aabb::from_point(Point3::origin())),
             |acc, b| acc.union(b),
         );
         let origin = all.min;
@@ -91,9 +113,11 @@ impl Field {
         // Cells of prim `i`: those overlapping its grown box whose centre is near enough.
         let cells_of = |i: usize, visit: &mut dyn FnMut(usize)| {
             let b = &boxes[i];
-            let lo = [0, 1, 2].map(|k| (((b.min[k] - origin[k]) / INDEX_CELL_M).floor().max(0.0)) as usize);
+            let lo = [0, 1, 2]
+                .map(|k| (((b.min[k] - origin[k]) / INDEX_CELL_M).floor().max(0.0)) as usize);
             let hi = [0, 1, 2].map(|k| {
-                ((((b.max[k] - origin[k]) / INDEX_CELL_M).floor().max(0.0)) as usize).min(dims[k] - 1)
+                ((((b.max[k] - origin[k]) / INDEX_CELL_M).floor().max(0.0)) as usize)
+                    .min(dims[k] - 1)
             });
             for z in lo[2]..=hi[2] {
                 for y in lo[1]..=hi[1] {
@@ -123,7 +147,13 @@ impl Field {
                 fill[c] += 1;
             });
         }
-        Self { prims, origin, dims, cell_start: counts, cell_items: items }
+        Self {
+            prims,
+            origin,
+            dims,
+            cell_start: counts,
+            cell_items: items,
+        }
     }
 
     /// The indexed base field (see the module doc).
@@ -141,7 +171,10 @@ impl Field {
             cell += f as usize * stride;
             stride *= self.dims[k];
         }
-        let (s, e) = (self.cell_start[cell] as usize, self.cell_start[cell + 1] as usize);
+        let (s, e) = (
+            self.cell_start[cell] as usize,
+            self.cell_start[cell + 1] as usize,
+        );
         for &i in &self.cell_items[s..e] {
             best = best.max(self.prims[i as usize].free_m(p));
         }
@@ -151,7 +184,10 @@ impl Field {
     /// The same field without the index (slow reference for tests).
     #[cfg(test)]
     pub(super) fn base_brute_m(&self, p: &Point3<f64>) -> f64 {
-        self.prims.iter().map(|q| q.free_m(p)).fold(-ROCK_CLAMP_M, f64::max)
+        self.prims
+            .iter()
+            .map(|q| q.free_m(p))
+            .fold(-ROCK_CLAMP_M, f64::max)
     }
 
     /// A box holding every primitive's free region.

@@ -30,14 +30,22 @@ pub(super) fn grow(params: &CaveParams, rng: &mut ChaCha8Rng) -> CaveGraph {
     };
     let trunk_grade = rng.random_range(-0.5..=0.5) * params.max_grade;
     let r = radius(rng);
-    let trunk = polyline(params, rng, Point3::origin(), 0.0, params.entrance_tunnel_length_m, trunk_grade);
+    let trunk = polyline(
+        params,
+        rng,
+        Point3::origin(),
+        0.0,
+        params.entrance_tunnel_length_m,
+        trunk_grade,
+    );
     add_edge(&mut g, 0, trunk, r);
 
     let mut tries = 0;
     while g.edges.len() < params.tunnel_count && tries < TRIES_PER_TUNNEL * params.tunnel_count {
         tries += 1;
-        let candidates: Vec<usize> =
-            (1..g.nodes.len()).filter(|&n| g.nodes[n].child_edges.len() < 2).collect();
+        let candidates: Vec<usize> = (1..g.nodes.len())
+            .filter(|&n| g.nodes[n].child_edges.len() < 2)
+            .collect();
         let Some(&node) = candidates.get(rng.random_range(0..candidates.len().max(1))) else {
             break;
         };
@@ -133,7 +141,12 @@ fn add_edge(g: &mut CaveGraph, from: usize, points: Vec<Point3<f64>>, radius_m: 
         chamber_radius_m: None,
     });
     g.nodes[from].child_edges.push(e);
-    g.edges.push(CaveEdge { from, to, radius_m, points });
+    g.edges.push(CaveEdge {
+        from,
+        to,
+        radius_m,
+        points,
+    });
 }
 
 /// Distance from `p` to a polyline.
@@ -150,7 +163,10 @@ pub(super) fn polyline_distance_m(p: &Point3<f64>, pts: &[Point3<f64>]) -> f64 {
 /// Whether a new tunnel from `node` along `pts` keeps its distance from the others and
 /// stays within reach of the entrance.
 fn fits(g: &CaveGraph, params: &CaveParams, node: usize, pts: &[Point3<f64>], r: f64) -> bool {
-    if pts.iter().any(|p| p.xy().coords.norm() > params.max_reach_m) {
+    if pts
+        .iter()
+        .any(|p| p.xy().coords.norm() > params.max_reach_m)
+    {
         return false;
     }
     let mut arc = 0.0;
@@ -175,10 +191,12 @@ fn fits(g: &CaveGraph, params: &CaveParams, node: usize, pts: &[Point3<f64>], r:
 
 /// Put chambers on leaves first, then junctions, where they keep clear of other tunnels.
 fn place_chambers(g: &mut CaveGraph, params: &CaveParams, rng: &mut ChaCha8Rng) {
-    let mut leaves: Vec<usize> =
-        (1..g.nodes.len()).filter(|&n| g.nodes[n].child_edges.is_empty()).collect();
-    let mut inner: Vec<usize> =
-        (1..g.nodes.len()).filter(|&n| !g.nodes[n].child_edges.is_empty()).collect();
+    let mut leaves: Vec<usize> = (1..g.nodes.len())
+        .filter(|&n| g.nodes[n].child_edges.is_empty())
+        .collect();
+    let mut inner: Vec<usize> = (1..g.nodes.len())
+        .filter(|&n| !g.nodes[n].child_edges.is_empty())
+        .collect();
     leaves.shuffle(rng);
     inner.shuffle(rng);
     let mut placed = 0;
@@ -196,15 +214,16 @@ fn place_chambers(g: &mut CaveGraph, params: &CaveParams, rng: &mut ChaCha8Rng) 
                         >= radius + e.radius_m + params.min_wall_gap_m
             });
             let clear_of_chambers = g.nodes.iter().all(|m| {
-                m.chamber_radius_m.is_none_or(|rm| {
-                    (m.position - c).norm() >= radius + rm + params.min_wall_gap_m
-                })
+                m.chamber_radius_m
+                    .is_none_or(|rm| (m.position - c).norm() >= radius + rm + params.min_wall_gap_m)
             });
             let clear_of_entrance = (g.nodes[g.entrance].position - c).norm()
                 >= radius + params.tunnel_radius_max_m + params.min_wall_gap_m;
             clear_of_tunnels && clear_of_chambers && clear_of_entrance
         };
-        let radius = [wanted, params.chamber_radius_min_m].into_iter().find(|&r| fits_with(r));
+        let radius = [wanted, params.chamber_radius_min_m]
+            .into_iter()
+            .find(|&r| fits_with(r));
         if let Some(radius) = radius {
             g.nodes[n].chamber_radius_m = Some(radius);
             placed += 1;

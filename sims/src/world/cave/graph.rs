@@ -83,8 +83,10 @@ impl CaveGraph {
 
     /// Closed depth-first tour from the entrance back to it.
     fn tour(&self, robot_index: usize) -> Vec<TourPoint> {
-        let mut out =
-            vec![TourPoint { point: self.nodes[self.entrance].position, forward: None }];
+        let mut out = vec![TourPoint {
+            point: self.nodes[self.entrance].position,
+            forward: None,
+        }];
         self.tour_from(self.entrance, robot_index, &mut out);
         out
     }
@@ -93,11 +95,17 @@ impl CaveGraph {
         for e in self.child_order(node, robot_index) {
             let pts = &self.edges[e].points;
             for (j, p) in pts.iter().enumerate().skip(1) {
-                out.push(TourPoint { point: *p, forward: Some((e, j)) });
+                out.push(TourPoint {
+                    point: *p,
+                    forward: Some((e, j)),
+                });
             }
             self.tour_from(self.edges[e].to, robot_index, out);
             for p in pts.iter().rev().skip(1) {
-                out.push(TourPoint { point: *p, forward: None });
+                out.push(TourPoint {
+                    point: *p,
+                    forward: None,
+                });
             }
         }
     }
@@ -119,13 +127,21 @@ impl CaveGraph {
         let entrance = self.nodes[self.entrance].position;
         let chain = self.main_chain();
         let Some(&(e0, _)) = chain.first() else {
-            return Location { point: entrance, edge: usize::MAX, segment: 0 };
+            return Location {
+                point: entrance,
+                edge: usize::MAX,
+                segment: 0,
+            };
         };
         let step_m = 0.01;
         let mut placed = 0usize;
         let mut last: Option<Point3<f64>> = None;
         let mut travelled = 0.0;
-        let mut fallback = Location { point: entrance, edge: e0, segment: 0 };
+        let mut fallback = Location {
+            point: entrance,
+            edge: e0,
+            segment: 0,
+        };
         for &(e, j) in &chain {
             let (a, b) = (self.edges[e].points[j], self.edges[e].points[j + 1]);
             let len = (b - a).norm();
@@ -133,7 +149,11 @@ impl CaveGraph {
             for i in 0..n {
                 let p = a + (b - a) * (i as f64 / n as f64);
                 let s = travelled + len * i as f64 / n as f64;
-                let here = Location { point: p, edge: e, segment: j };
+                let here = Location {
+                    point: p,
+                    edge: e,
+                    segment: j,
+                };
                 fallback = here;
                 let ok = match last {
                     None => s >= FIRST_START_OFFSET_M,

@@ -17,11 +17,11 @@ mod graph;
 mod params;
 
 pub use graph::{
-    polyline_length, CaveEdge, CaveGraph, CaveNode, FIRST_START_OFFSET_M, START_SPACING_M,
+    CaveEdge, CaveGraph, CaveNode, FIRST_START_OFFSET_M, START_SPACING_M, polyline_length,
 };
 pub use params::{CaveParams, ROUTE_CLEARANCE_M};
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -63,22 +63,25 @@ impl CaveWorld {
         for n in &graph.nodes {
             if let Some(radius) = n.chamber_radius_m {
                 let floor_z = n.position.z - CHAMBER_FLOOR_FRACTION * radius;
-                prims.push(Primitive::Chamber { centre: n.position, radius, floor_z });
+                prims.push(Primitive::Chamber {
+                    centre: n.position,
+                    radius,
+                    floor_z,
+                });
             }
         }
         let field = Field::new(prims);
         let amplitude = params.wall_noise_amplitude_m;
-        let lipschitz =
-            1.0 + amplitude * noise::GRADIENT_BOUND / params.wall_noise_wavelength_m;
+        let lipschitz = 1.0 + amplitude * noise::GRADIENT_BOUND / params.wall_noise_wavelength_m;
         let bounds = field.free_aabb().expanded(amplitude + 0.05);
         CaveWorld {
             params: params.clone(),
             seed,
             graph,
             field,
-            wall_noise: ValueNoise::new(seed ^ 0xA11_0F_CAFE),
-            texture: ValueNoise::new(seed ^ 0x7E47_0E),
-            strata: ValueNoise::new(seed ^ 0x57_2A7A),
+            wall_noise: ValueNoise::new(seed ^ 0x0A11_0FCA_FE00),
+            texture: ValueNoise::new(seed ^ 0x7E47_0E00),
+            strata: ValueNoise::new(seed ^ 0x5712_A7A0),
             lipschitz,
             bounds,
         }
@@ -172,6 +175,22 @@ impl World for CaveWorld {
 
     fn bounds(&self) -> Aabb {
         self.bounds
+    }
+
+    /// Finite differences on the four vertices of a tetrahedron (four evaluations instead
+    /// of six); same step as the default.
+    fn normal(&self, p: &Point3<f64>) -> Vector3<f64> {
+        let h = super::NORMAL_STEP_M;
+        let g = [
+            Vector3::new(1.0, -1.0, -1.0),
+            Vector3::new(-1.0, -1.0, 1.0),
+            Vector3::new(-1.0, 1.0, -1.0),
+            Vector3::new(1.0, 1.0, 1.0),
+        ]
+        .iter()
+        .map(|k| k * self.sdf_m(&(p + k * h)))
+        .sum::<Vector3<f64>>();
+        g.try_normalize(1e-12).unwrap_or_else(Vector3::z)
     }
 }
 

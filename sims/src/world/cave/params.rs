@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 /// Shape parameters of [`super::CaveWorld`]; lengths in metres, angles in degrees.
 ///
-/// The defaults give a tree of about ten tunnels spanning 60–100 m with three chambers.
+/// The defaults give a tree of about twelve tunnels spanning 60–100 m with three chambers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CaveParams {
@@ -45,10 +45,10 @@ pub struct CaveParams {
 impl Default for CaveParams {
     fn default() -> Self {
         Self {
-            tunnel_count: 10,
+            tunnel_count: 12,
             entrance_tunnel_length_m: 20.0,
-            tunnel_length_min_m: 10.0,
-            tunnel_length_max_m: 18.0,
+            tunnel_length_min_m: 12.0,
+            tunnel_length_max_m: 20.0,
             tunnel_radius_min_m: 1.6,
             tunnel_radius_max_m: 2.4,
             segment_length_m: 2.5,
@@ -100,20 +100,37 @@ impl CaveParams {
             }
         }
         let ordered = [
-            ("tunnel_length", self.tunnel_length_min_m, self.tunnel_length_max_m),
-            ("tunnel_radius", self.tunnel_radius_min_m, self.tunnel_radius_max_m),
-            ("chamber_radius", self.chamber_radius_min_m, self.chamber_radius_max_m),
+            (
+                "tunnel_length",
+                self.tunnel_length_min_m,
+                self.tunnel_length_max_m,
+            ),
+            (
+                "tunnel_radius",
+                self.tunnel_radius_min_m,
+                self.tunnel_radius_max_m,
+            ),
+            (
+                "chamber_radius",
+                self.chamber_radius_min_m,
+                self.chamber_radius_max_m,
+            ),
         ];
         for (name, lo, hi) in ordered {
             if lo > hi {
-                return Err(format!("cave.{name}_min_m ({lo}) must not exceed cave.{name}_max_m ({hi})"));
+                return Err(format!(
+                    "cave.{name}_min_m ({lo}) must not exceed cave.{name}_max_m ({hi})"
+                ));
             }
         }
         if self.tunnel_count == 0 {
             return Err("cave.tunnel_count must be at least 1, got 0".to_string());
         }
         if self.wiggle_deg >= 90.0 {
-            return Err(format!("cave.wiggle_deg must be < 90, got {}", self.wiggle_deg));
+            return Err(format!(
+                "cave.wiggle_deg must be < 90, got {}",
+                self.wiggle_deg
+            ));
         }
         let clearance = self.tunnel_radius_min_m - self.wall_noise_amplitude_m;
         if clearance < ROUTE_CLEARANCE_M + 0.1 {
@@ -140,11 +157,20 @@ mod tests {
     #[test]
     fn defaults_are_valid_and_errors_name_the_field() {
         assert_eq!(CaveParams::default().validate(), Ok(()));
-        let p = CaveParams { segment_length_m: f64::NAN, ..CaveParams::default() };
+        let p = CaveParams {
+            segment_length_m: f64::NAN,
+            ..CaveParams::default()
+        };
         assert!(p.validate().unwrap_err().contains("segment_length_m"));
-        let p = CaveParams { tunnel_radius_min_m: -1.0, ..CaveParams::default() };
+        let p = CaveParams {
+            tunnel_radius_min_m: -1.0,
+            ..CaveParams::default()
+        };
         assert!(p.validate().unwrap_err().contains("tunnel_radius_min_m"));
-        let p = CaveParams { chamber_radius_min_m: 7.0, ..CaveParams::default() };
+        let p = CaveParams {
+            chamber_radius_min_m: 7.0,
+            ..CaveParams::default()
+        };
         assert!(p.validate().unwrap_err().contains("chamber_radius"));
     }
 

@@ -24,12 +24,26 @@ fn shape_is_a_tree_of_the_expected_size() {
         let w = cave(seed);
         let g = w.graph();
         assert_eq!(g.nodes.len(), g.edges.len() + 1, "seed {seed}");
-        assert!(g.edges.len() >= 7, "seed {seed}: only {} tunnels", g.edges.len());
-        let chambers = g.nodes.iter().filter(|n| n.chamber_radius_m.is_some()).count();
-        assert!((2..=4).contains(&chambers), "seed {seed}: {chambers} chambers");
+        assert!(
+            g.edges.len() >= 7,
+            "seed {seed}: only {} tunnels",
+            g.edges.len()
+        );
+        let chambers = g
+            .nodes
+            .iter()
+            .filter(|n| n.chamber_radius_m.is_some())
+            .count();
+        assert!(
+            (2..=4).contains(&chambers),
+            "seed {seed}: {chambers} chambers"
+        );
         let size = w.bounds().size();
         let extent = size.x.max(size.y);
-        assert!((45.0..=120.0).contains(&extent), "seed {seed}: extent {extent}");
+        assert!(
+            (45.0..=120.0).contains(&extent),
+            "seed {seed}: extent {extent}"
+        );
         assert!(w.entrance().coords.norm() < 1e-12);
         for e in &g.edges {
             assert_eq!(e.points[0], g.nodes[e.from].position);
@@ -72,8 +86,15 @@ fn sdf_sign_inside_and_outside() {
         for _ in 0..2000 {
             let mut p = random_point(&mut rng, &b);
             let axis = rng.random_range(0..3);
-            p[axis] = if rng.random_bool(0.5) { b.min[axis] - 0.01 } else { b.max[axis] + 0.01 };
-            assert!(w.sdf_m(&p) < 0.0, "seed {seed}: free point {p} outside bounds");
+            p[axis] = if rng.random_bool(0.5) {
+                b.min[axis] - 0.01
+            } else {
+                b.max[axis] + 0.01
+            };
+            assert!(
+                w.sdf_m(&p) < 0.0,
+                "seed {seed}: free point {p} outside bounds"
+            );
         }
     }
 }
@@ -96,11 +117,18 @@ fn sdf_respects_lipschitz_bound() {
             ) * scale;
             let q = p + d;
             let lhs = (w.sdf_m(&p) - w.sdf_m(&q)).abs();
-            assert!(lhs <= l * d.norm() + 1e-12, "seed {seed}: {lhs} > {l} * {}", d.norm());
+            assert!(
+                lhs <= l * d.norm() + 1e-12,
+                "seed {seed}: {lhs} > {l} * {}",
+                d.norm()
+            );
             // A safe step from a free point never lands in rock.
             let s = w.safe_step_m(&p);
             if w.sdf_m(&p) > 0.0 && d.norm() <= s {
-                assert!(w.sdf_m(&q) >= -1e-12, "step {s} from {p} reached rock at {q}");
+                assert!(
+                    w.sdf_m(&q) >= -1e-12,
+                    "step {s} from {p} reached rock at {q}"
+                );
             }
         }
     }
@@ -121,7 +149,10 @@ fn same_seed_same_cave_other_seed_other_cave() {
             differ += 1;
         }
     }
-    assert!(differ > 2500, "seeds 9 and 10 differ at only {differ} points");
+    assert!(
+        differ > 2500,
+        "seeds 9 and 10 differ at only {differ} points"
+    );
     assert_ne!(a.graph(), c.graph());
 }
 
@@ -157,7 +188,10 @@ fn route_and_its_segments_keep_clearance() {
                     for i in 0..=n {
                         let p = a + (b - a) * (i as f64 / n as f64);
                         let s = w.sdf_m(&p);
-                        assert!(s >= ROUTE_CLEARANCE_M, "seed {seed} robot {robot}: {s} at {p}");
+                        assert!(
+                            s >= ROUTE_CLEARANCE_M,
+                            "seed {seed} robot {robot}: {s} at {p}"
+                        );
                     }
                 }
             }
@@ -186,7 +220,10 @@ fn route_visits_every_node_and_branches_differ() {
         }
         let junction = g.nodes.iter().any(|n| n.child_edges.len() > 1);
         if junction {
-            assert_ne!(routes[0], routes[1], "seed {seed}: robots 0 and 1 take the same order");
+            assert_ne!(
+                routes[0], routes[1],
+                "seed {seed}: robots 0 and 1 take the same order"
+            );
         }
     }
 }
@@ -199,7 +236,10 @@ fn start_positions_are_spaced_and_clear() {
         let starts: Vec<_> = (0..n).map(|i| w.start_position(i, n)).collect();
         for (i, p) in starts.iter().enumerate() {
             assert!(w.sdf_m(p) >= ROUTE_CLEARANCE_M, "seed {seed}: robot {i}");
-            assert!((p - w.entrance()).norm() < 20.0, "seed {seed}: robot {i} far in");
+            assert!(
+                (p - w.entrance()).norm() < 20.0,
+                "seed {seed}: robot {i} far in"
+            );
             for q in &starts[..i] {
                 assert!((p - q).norm() >= 1.5, "seed {seed}: robots too close");
             }
@@ -208,13 +248,43 @@ fn start_positions_are_spaced_and_clear() {
 }
 
 #[test]
-fn tmp_stats() {
-    for seed in 0..12u64 {
-        let w = cave(seed);
-        let g = w.graph();
-        let ch: Vec<_> = g.nodes.iter().filter_map(|n| n.chamber_radius_m).collect();
-        let s = w.bounds().size();
-        eprintln!("seed {seed}: edges {} chambers {:?} size {:.1} {:.1} {:.1} len {:.0} L {:.3} mean {:.1}",
-            g.edges.len(), ch, s.x, s.y, s.z, g.total_length_m(), w.lipschitz(), w.field.mean_items_per_busy_cell());
+fn tetrahedral_normal_matches_central_differences() {
+    let w = cave(1);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let b = w.bounds();
+    let central = |p: &Point3<f64>| {
+        let h = crate::world::NORMAL_STEP_M;
+        let d = |e: Vector3<f64>| w.sdf_m(&(p + e * h)) - w.sdf_m(&(p - e * h));
+        Vector3::new(d(Vector3::x()), d(Vector3::y()), d(Vector3::z())).normalize()
+    };
+    let mut checked = 0;
+    while checked < 2000 {
+        let p = random_point(&mut rng, &b);
+        if w.sdf_m(&p).abs() > 0.05 {
+            continue;
+        }
+        checked += 1;
+        let (a, c) = (w.normal(&p), central(&p));
+        assert!((a - c).norm() < 0.02, "{a} vs {c} at {p}");
     }
+}
+
+#[test]
+fn minimal_parameters_still_give_a_usable_cave() {
+    let params = CaveParams {
+        tunnel_count: 1,
+        chamber_count: 0,
+        max_grade: 0.0,
+        wiggle_deg: 0.0,
+        ..CaveParams::default()
+    };
+    assert_eq!(params.validate(), Ok(()));
+    let w = CaveWorld::generate(&params, 1);
+    assert_eq!(w.graph().edges.len(), 1);
+    let route = w.centreline_route(2, 3);
+    assert_eq!(route[0], w.start_position(2, 3));
+    assert!(route.iter().all(|p| w.sdf_m(p) >= ROUTE_CLEARANCE_M));
+    // Robots beyond the end of the chain share its last point rather than panicking.
+    let last = w.start_position(1000, 1001);
+    assert!(w.sdf_m(&last) >= ROUTE_CLEARANCE_M);
 }

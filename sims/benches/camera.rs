@@ -1,0 +1,44 @@
+//! Rendering and coverage costs of one 160x120 frame in the default cave.
+// criterion_group! and criterion_main! generate undocumented functions.
+#![allow(missing_docs)]
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use std::hint::black_box;
+use troupe_sims::camera::CameraParams;
+use troupe_sims::coverage::CoverageGrid;
+use troupe_sims::world::{CaveParams, CaveWorld};
+
+fn start_pose(cave: &CaveWorld) -> Isometry3<f64> {
+    let route = cave.centreline_route(0, 1);
+    let (a, b) = (route[0], route[1]);
+    let yaw = (b.y - a.y).atan2(b.x - a.x);
+    Isometry3::from_parts(
+        Translation3::from(a.coords),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+    )
+}
+
+fn bench_camera(c: &mut Criterion) {
+    let cave = CaveWorld::generate(&CaveParams::default(), 0);
+    let cam = CameraParams::default();
+    let pose = start_pose(&cave);
+    c.bench_function("render_160x120_cave", |b| {
+        b.iter(|| cam.render(black_box(&cave), black_box(&pose), 0));
+    });
+    let img = cam.render(&cave, &pose, 0);
+    let fresh = CoverageGrid::new(&cave, 0.25);
+    c.bench_function("coverage_observe_160x120_stride1_cell0.25", |b| {
+        b.iter_batched_ref(
+            || fresh.clone(),
+            |cov| cov.observe(&cam, &pose, black_box(&img), 1),
+            criterion::BatchSize::LargeInput,
+        );
+    });
+    c.bench_function("coverage_grid_new_cave_cell0.5", |b| {
+        b.iter(|| CoverageGrid::new(black_box(&cave), 0.5));
+    });
+}
+
+criterion_group!(benches, bench_camera);
+criterion_main!(benches);

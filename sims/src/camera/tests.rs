@@ -1,0 +1,243 @@
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::*;
+use crate::world::{Aabb, BoxRoom, CaveParams, CaveWorld};
+
+fn room() -> BoxRoom {
+    BoxRoom::new(Aabb::new(
+        Point3::new(-1.0, -2.0, -1.5),
+        Point3::new(4.0, 2.0, 1.5),
+    ))
+}
+
+fn pose(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+    )
+}
+
+/// Analytic z-depth of pixel `(u, v)` in `room` (the ray leaves the box), or 0 beyond range.
+fn box_depth(
+    cam: &CameraParams,
+    room: &BoxRoom,
+    body_pose: &Isometry3<f64>,
+    u: f64,
+    v: f64,
+) -> f64 {
+    let r = body_pose.rotation * cam.pixel_ray_body_unit_depth(u, v);
+    let o = Point3::from(body_pose.translation.vector);
+    let b = &room.interior;
+    let t = (0..3)
+        .filter(|&i| r[i] != 0.0)
+        .map(|i| {
+            let wall = if r[i] > 0.0 { b.max[i] } else { b.min[i] };
+            (wall - o[i]) / r[i]
+        })
+        .fold(f64::INFINITY, f64::min);
+    if t <= cam.range_m { t } else { 0.0 }
+}
+
+#[test]
+fn defaults_validate_and_give_expected_intrinsics() {
+    let cam = CameraParams::default();
+    assert_eq!(cam.validate(), Ok(()));
+    let k = cam.intrinsics();
+    assert!((k.fx - 80.0 / (89.57f64.to_radians() / 2.0).tan()).abs() < 1e-12);
+    assert!((k.fy - 60.0 / (59.24f64.to_radians() / 2.0).tan()).abs() < 1e-12);
+    assert_eq!((k.cx, k.cy), (80.0, 60.0));
+    let bad = CameraParams {
+        dropout_prob: 1.5,
+        ..CameraParams::default()
+    };
+    assert!(bad.validate().unwrap_err().contains("dropout_prob"));
+    let bad = CameraParams {
+        range_m: f64::NAN,
+        ..CameraParams::default()
+    };
+    assert!(bad.validate().unwrap_err().contains("range_m"));
+    let err = serde_json::from_str::<CameraParams>(r#"{"widht": 3}"#).unwrap_err();
+    assert!(err.to_string().contains("widht"));
+}
+
+#[test]
+fn pixel_rays_follow_body_axes() {
+    let cam = CameraParams::default();
+    let centre = cam.pixel_ray_body(80.0, 60.0);
+    assert!((centre - Vector3::x()).norm() < 1e-12);
+    // Right of centre looks to body -y, below centre looks to body -z.
+    assert!(cam.pixel_ray_body(150.0, 60.0).y < 0.0);
+    assert!(cam.pixel_ray_body(80.0, 110.0).z < 0.0);
+    // The image edge is at half the field of view.
+    let edge = cam.pixel_ray_body(160.0, 60.0);
+    let angle = (-edge.y).atan2(edge.x).to_degrees();
+    assert!((angle - 89.57 / 2.0).abs() < 1e-9);
+}
+
+#[test]
+fn facing_a_wall_gives_its_distance_at_the_centre() {
+    let cam = CameraParams::default();
+    let room = room();
+    let img = cam.render(&room, &Isometry3::identity(), 0);
+    for (col, row) in [(79, 59), (80, 60), (79, 60), (80, 59)] {
+        let d = f64::from(img.depth_at(col, row));
+        assert!((d - 4.0).abs() < 2e-3, "pixel ({col},{row}) depth {d}");
+        assert!(img.intensity_at(col, row) > 0.0);
+    }
+}
+
+#[test]
+fn depths_match_the_analytic_box_for_any_pose() {
+    let cam = CameraParams::default();
+    let room = room();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for _ in 0..6 {
+        let p = pose(
+            rng.random_range(-0.5..3.5),
+            rng.random_range(-1.5..1.5),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-3.1..3.1),
+        );
+        let img = cam.render(&room, &p, 0);
+        let mut worst: f64 = 0.0;
+        for row in 0..cam.height {
+            for col in 0..cam.width {
+                let (u, v) = CameraParams::pixel_centre(col, row);
+                let want = box_depth(&cam, &room, &p, u, v);
+                let got = f64::from(img.depth_at(col, row));
+                if want == 0.0 || got == 0.0 {
+                    // Only a ray ending within a hair of the range may disagree.
+                    let near_range = (want.max(got) - cam.range_m).abs() < 2e-3;
+                    assert!(
+                        want == got || near_range,
+                        "({col},{row}): want {want} got {got}"
+                    );
+                    continue;
+                }
+                worst = worst.max((got - want).abs());
+            }
+        }
+        assert!(worst < 2e-3, "worst depth error {worst} m at pose {p}");
+    }
+}
+
+#[test]
+fn range_limit_applies_to_z_depth_not_ray_length() {
+    let cam = CameraParams::default();
+    let near = BoxRoom::new(Aabb::new(
+        Point3::new(-1.0, -20.0, -20.0),
+        Point3::new(4.9, 20.0, 20.0),
+    ));
+    let img = cam.render(&near, &Isometry3::identity(), 0);
+    // Corner rays are ~1.4 times longer than the z-depth but still count.
+    assert!((f64::from(img.depth_at(0, 0)) - 4.9).abs() < 2e-3);
+    assert_eq!(img.valid_count(), 160 * 120);
+    let far = BoxRoom::new(Aabb::new(
+        Point3::new(-1.0, -20.0, -20.0),
+        Point3::new(5.1, 20.0, 20.0),
+    ));
+    let img = cam.render(&far, &Isometry3::identity(), 0);
+    assert_eq!(img.valid_count(), 0);
+}
+
+fn cave_and_pose() -> (CaveWorld, Isometry3<f64>) {
+    let cave = CaveWorld::generate(&CaveParams::default(), 1);
+    let route = cave.centreline_route(0, 1);
+    let (a, b) = (route[0], route[1]);
+    let yaw = (b.y - a.y).atan2(b.x - a.x);
+    (cave, pose(a.x, a.y, a.z, 0.0, 0.0, yaw))
+}
+
+#[test]
+fn back_projected_pixels_lie_on_the_cave_surface() {
+    let cam = CameraParams::default();
+    let (cave, p) = cave_and_pose();
+    let img = cam.render(&cave, &p, 0);
+    assert!(
+        img.valid_count() > 1000,
+        "only {} returns",
+        img.valid_count()
+    );
+    for row in 0..cam.height {
+        for col in 0..cam.width {
+            let d = img.depth_at(col, row);
+            if d > 0.0 {
+                let (u, v) = CameraParams::pixel_centre(col, row);
+                let q = cam.back_project(&p, u, v, f64::from(d));
+                let s = cave.sdf_m(&q);
+                assert!(s.abs() < 5e-3, "({col},{row}) sdf {s}");
+                assert!(f64::from(d) <= cam.range_m);
+            } else {
+                assert_eq!(img.intensity_at(col, row), 0.0);
+            }
+        }
+    }
+    let mut lit: Vec<f32> = img.intensity.iter().copied().filter(|i| *i > 0.0).collect();
+    lit.sort_by(f32::total_cmp);
+    let median = lit[lit.len() / 2];
+    assert!((0.1..=0.9).contains(&median), "median intensity {median}");
+    assert!(lit.iter().all(|i| *i <= 1.0));
+}
+
+#[test]
+fn noise_and_dropout_statistics() {
+    let cam = CameraParams {
+        depth_noise_std_m: 0.01,
+        dropout_prob: 0.2,
+        ..CameraParams::default()
+    };
+    let room = room();
+    let img = cam.render(&room, &Isometry3::identity(), 77);
+    let clean = CameraParams::default().render(&room, &Isometry3::identity(), 77);
+    let n = img.depth_m.len() as f64;
+    let dropped = img.depth_m.iter().filter(|d| **d == 0.0).count() as f64 / n;
+    assert!((dropped - 0.2).abs() < 0.015, "dropout fraction {dropped}");
+    let residuals: Vec<f64> = img
+        .depth_m
+        .iter()
+        .zip(&clean.depth_m)
+        .filter(|(a, _)| **a > 0.0)
+        .map(|(a, b)| f64::from(*a) - f64::from(*b))
+        .collect();
+    let m = residuals.len() as f64;
+    let mean = residuals.iter().sum::<f64>() / m;
+    let std = (residuals.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / m).sqrt();
+    assert!(mean.abs() < 5e-4, "mean residual {mean}");
+    assert!((std - 0.01).abs() < 5e-4, "residual std {std}");
+    let again = cam.render(&room, &Isometry3::identity(), 77);
+    assert_eq!(img, again);
+    let other = cam.render(&room, &Isometry3::identity(), 78);
+    assert_ne!(img.depth_m, other.depth_m);
+}
+
+#[test]
+fn image_is_identical_for_any_thread_count() {
+    let cam = CameraParams {
+        depth_noise_std_m: 0.005,
+        dropout_prob: 0.05,
+        ..CameraParams::default()
+    };
+    let (cave, p) = cave_and_pose();
+    let render_with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| cam.render(&cave, &p, 3))
+    };
+    let one = render_with(1);
+    for threads in [2, 3] {
+        let many = render_with(threads);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&one.depth_m), bits(&many.depth_m), "{threads} threads");
+        assert_eq!(
+            bits(&one.intensity),
+            bits(&many.intensity),
+            "{threads} threads"
+        );
+    }
+}

@@ -1,0 +1,184 @@
+use std::collections::BTreeSet;
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::*;
+use crate::world::{Aabb, BoxRoom, CaveParams, CaveWorld};
+
+fn room() -> BoxRoom {
+    BoxRoom::new(Aabb::new(
+        Point3::new(-1.0, -2.0, -1.5),
+        Point3::new(4.0, 2.0, 1.5),
+    ))
+}
+
+fn yawed(p: Point3<f64>, yaw: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(p.coords),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+    )
+}
+
+/// Cells hit by samples every `step` along the segment (the brute-force reference).
+fn sampled_cells(
+    g: &VoxelGrid,
+    o: &Point3<f64>,
+    d: &Vector3<f64>,
+    t_end: f64,
+    step: f64,
+) -> BTreeSet<[usize; 3]> {
+    let n = (t_end * d.norm() / step).ceil() as usize;
+    (0..n)
+        .filter_map(|i| g.cell_of(&(o + d * (t_end * i as f64 / n as f64))))
+        .collect()
+}
+
+#[test]
+fn dda_marks_exactly_the_cells_fine_sampling_visits() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let step = 1e-4;
+    for case in 0..400 {
+        let g = VoxelGrid {
+            origin: Point3::new(
+                rng.random_range(-2.0..2.0),
+                rng.random_range(-2.0..2.0),
+                0.0,
+            ),
+            cell_m: rng.random_range(0.1..0.7),
+            dims: [
+                rng.random_range(1..12),
+                rng.random_range(1..12),
+                rng.random_range(1..12),
+            ],
+        };
+        let b = g.aabb().expanded(1.0);
+        let mut pick = || {
+            Point3::new(
+                rng.random_range(b.min.x..b.max.x),
+                rng.random_range(b.min.y..b.max.y),
+                rng.random_range(b.min.z..b.max.z),
+            )
+        };
+        let (o, e) = (pick(), pick());
+        // Also axis-aligned segments, which exercise zero direction components.
+        let e = if case % 10 == 0 {
+            Point3::new(e.x, o.y, o.z)
+        } else {
+            e
+        };
+        let d = (e - o) * 0.5;
+        let t_end = 2.0;
+        let mut visited = Vec::new();
+        let mut last_exit = None;
+        g.traverse(&o, &d, t_end, |c, t0, t1| {
+            assert!(t1 > t0);
+            if let Some(prev) = last_exit {
+                assert!(
+                    t0 - prev >= -1e-12 && t0 - prev < 1e-9,
+                    "gap in case {case}"
+                );
+            }
+            last_exit = Some(t1);
+            visited.push((c, (t1 - t0) * d.norm()));
+        });
+        let dda: BTreeSet<[usize; 3]> = visited.iter().map(|(c, _)| *c).collect();
+        assert_eq!(
+            dda.len(),
+            visited.len(),
+            "case {case}: a cell visited twice"
+        );
+        let brute = sampled_cells(&g, &o, &d, t_end, step);
+        for c in &brute {
+            assert!(dda.contains(c), "case {case}: DDA missed {c:?}");
+        }
+        for (c, len) in &visited {
+            assert!(
+                brute.contains(c) || *len < 2.0 * step,
+                "case {case}: extra {c:?} ({len})"
+            );
+        }
+    }
+}
+
+#[test]
+fn box_room_cells_are_all_free_and_volume_matches() {
+    let cov = CoverageGrid::new(&room(), 0.25);
+    assert_eq!(cov.grid().dims, [20, 16, 12]);
+    assert_eq!(cov.free_cells(), 20 * 16 * 12);
+    assert!((cov.free_volume_m3() - 60.0).abs() < 1e-9);
+    assert_eq!(cov.coverage(), 0.0);
+}
+
+#[test]
+fn one_frame_explores_the_air_but_not_the_wall_cell() {
+    let room = room();
+    let cam = CameraParams::default();
+    let mut cov = CoverageGrid::new(&room, 0.25);
+    let pose = Isometry3::identity();
+    let img = cam.render(&room, &pose, 0);
+    cov.observe(&cam, &pose, &img, 1);
+    assert!(cov.coverage() > 0.0 && cov.coverage() <= 1.0);
+    let g = *cov.grid();
+    // The centre ray ends on the wall x = 4 (cells start at x = -1).
+    let wall_cell = g.cell_of(&Point3::new(3.9, 0.01, 0.01)).expect("in grid");
+    let air_cell = g.cell_of(&Point3::new(3.6, 0.01, 0.01)).expect("in grid");
+    assert!(!cov.is_explored(wall_cell));
+    assert!(cov.is_explored(air_cell));
+    // Nothing behind the camera is seen.
+    let behind = g.cell_of(&Point3::new(-0.6, 0.01, 0.01)).expect("in grid");
+    assert!(!cov.is_explored(behind));
+    assert!(
+        (cov.explored_volume_m3() - cov.explored_cells() as f64 * 0.25f64.powi(3)).abs() < 1e-9
+    );
+}
+
+#[test]
+fn coverage_grows_monotonically_and_stays_at_most_one() {
+    let room = room();
+    let cam = CameraParams::default();
+    let mut cov = CoverageGrid::new(&room, 0.25);
+    let mut last = 0.0;
+    for k in 0..16 {
+        let pose = yawed(
+            Point3::new(1.5, 0.0, 0.0),
+            k as f64 * std::f64::consts::TAU / 16.0,
+        );
+        let img = cam.render(&room, &pose, k);
+        cov.observe(&cam, &pose, &img, 2);
+        let c = cov.coverage();
+        assert!(c >= last && c <= 1.0, "frame {k}: {last} -> {c}");
+        last = c;
+    }
+    // A full turn in the middle of the room sees most of it.
+    assert!(last > 0.6, "coverage after a full turn {last}");
+}
+
+#[test]
+fn cave_coverage_is_deterministic_and_monotone_along_the_route() {
+    let cave = CaveWorld::generate(&CaveParams::default(), 2);
+    let cam = CameraParams::default();
+    let route = cave.centreline_route(0, 1);
+    let run = || {
+        let mut cov = CoverageGrid::new(&cave, 0.5);
+        let mut trace = Vec::new();
+        for w in route.windows(2).take(12) {
+            let yaw = (w[1].y - w[0].y).atan2(w[1].x - w[0].x);
+            let pose = yawed(w[0], yaw);
+            let img = cam.render(&cave, &pose, 0);
+            cov.observe(&cam, &pose, &img, 2);
+            trace.push(cov.explored_cells());
+        }
+        (cov, trace)
+    };
+    let (a, trace) = run();
+    let (b, _) = run();
+    assert_eq!(a, b);
+    assert!(trace[0] > 0);
+    assert!(trace.windows(2).all(|w| w[1] >= w[0]));
+    assert!(a.coverage() > 0.0 && a.coverage() < 1.0);
+    // The free volume is in the range of tunnels of ~2 m radius and ~190 m total length.
+    let v = a.free_volume_m3();
+    assert!((1000.0..8000.0).contains(&v), "free volume {v}");
+}
