@@ -106,7 +106,10 @@ impl Actor for RingHead {
             }
             Event::Message(m) => {
                 if let Some(stamp) = m.get(&hop_topic(5)) {
-                    let mut samples = self.samples.lock().map_err(|_| ActorError::msg("poisoned"))?;
+                    let mut samples = self
+                        .samples
+                        .lock()
+                        .map_err(|_| ActorError::msg("poisoned"))?;
                     samples.push(stamp.0.elapsed() / 6);
                     if samples.len() >= self.laps {
                         return Ok(());

@@ -170,7 +170,10 @@ mod tests {
             Trajectory::new(vec![knot(2.0, 0.0, 0.0), knot(1.0, 1.0, 0.0)]),
             Err(TrajectoryError::TimeNotMonotone(1))
         );
-        assert_eq!(Trajectory::new(vec![knot(0.0, f64::NAN, 0.0)]), Err(TrajectoryError::NotFinite(0)));
+        assert_eq!(
+            Trajectory::new(vec![knot(0.0, f64::NAN, 0.0)]),
+            Err(TrajectoryError::NotFinite(0))
+        );
     }
 
     #[test]
@@ -178,7 +181,10 @@ mod tests {
         for a in [-10.0, -3.2, 0.0, 3.2, 10.0, std::f64::consts::PI] {
             let w = wrap_angle(a);
             assert!(w > -std::f64::consts::PI - 1e-12 && w <= std::f64::consts::PI + 1e-12);
-            assert!(((a - w) / std::f64::consts::TAU).fract().abs() < 1e-9 || ((a - w) / std::f64::consts::TAU).fract().abs() > 1.0 - 1e-9);
+            assert!(
+                ((a - w) / std::f64::consts::TAU).fract().abs() < 1e-9
+                    || ((a - w) / std::f64::consts::TAU).fract().abs() > 1.0 - 1e-9
+            );
         }
     }
 }

@@ -50,11 +50,18 @@ pub enum PolicyError {
 pub type BehaviourFactory = Box<dyn Fn() -> Box<dyn ExplorationBehaviour> + Send>;
 
 /// Checks the inputs of the named behaviour and returns a factory for it.
-pub fn behaviour_by_name(name: &str, inputs: &BehaviourInputs) -> Result<BehaviourFactory, PolicyError> {
+pub fn behaviour_by_name(
+    name: &str,
+    inputs: &BehaviourInputs,
+) -> Result<BehaviourFactory, PolicyError> {
     match name {
         "waypoint_route" => {
-            let prototype = route::WaypointRoute::new(inputs.route.clone(), inputs.speed_mps, inputs.yaw_rate_rad_s)?
-                .departing_at(Time::from_secs_f64(inputs.depart_at_s));
+            let prototype = route::WaypointRoute::new(
+                inputs.route.clone(),
+                inputs.speed_mps,
+                inputs.yaw_rate_rad_s,
+            )?
+            .departing_at(Time::from_secs_f64(inputs.depart_at_s));
             Ok(Box::new(move || Box::new(prototype.clone())))
         }
         other => Err(PolicyError::UnknownBehaviour(other.to_string())),

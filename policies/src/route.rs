@@ -28,7 +28,11 @@ pub struct WaypointRoute {
 
 impl WaypointRoute {
     /// A route through `waypoints` at `speed_mps`, turning in place at `yaw_rate_rad_s`.
-    pub fn new(waypoints: Vec<Point3<f64>>, speed_mps: f64, yaw_rate_rad_s: f64) -> Result<Self, PolicyError> {
+    pub fn new(
+        waypoints: Vec<Point3<f64>>,
+        speed_mps: f64,
+        yaw_rate_rad_s: f64,
+    ) -> Result<Self, PolicyError> {
         let bad = |reason: String| PolicyError::BadInput {
             behaviour: "waypoint_route",
             reason,
@@ -36,14 +40,19 @@ impl WaypointRoute {
         if waypoints.is_empty() {
             return Err(bad("needs at least one waypoint".into()));
         }
-        if waypoints.iter().any(|p| !p.coords.iter().all(|v| v.is_finite())) {
+        if waypoints
+            .iter()
+            .any(|p| !p.coords.iter().all(|v| v.is_finite()))
+        {
             return Err(bad("waypoints must be finite".into()));
         }
         if !(speed_mps.is_finite() && speed_mps > 0.0) {
             return Err(bad(format!("speed must be > 0 m/s, got {speed_mps}")));
         }
         if !(yaw_rate_rad_s.is_finite() && yaw_rate_rad_s > 0.0) {
-            return Err(bad(format!("yaw rate must be > 0 rad/s, got {yaw_rate_rad_s}")));
+            return Err(bad(format!(
+                "yaw rate must be > 0 rad/s, got {yaw_rate_rad_s}"
+            )));
         }
         Ok(WaypointRoute {
             waypoints,
@@ -79,7 +88,11 @@ impl WaypointRoute {
                 continue;
             }
             let horizontal = step.xy().norm();
-            let new_heading = if horizontal > 1e-6 { step.y.atan2(step.x) } else { heading };
+            let new_heading = if horizontal > 1e-6 {
+                step.y.atan2(step.x)
+            } else {
+                heading
+            };
             let turn = wrap_angle(new_heading - heading).abs();
             if turn > TURN_IN_PLACE_RAD {
                 t += turn / self.yaw_rate_rad_s;
@@ -104,6 +117,10 @@ impl WaypointRoute {
 }
 
 impl ExplorationBehaviour for WaypointRoute {
+    /// Commits the route once, at the first call at or after the departure time. A
+    /// fresh instance (after a restart) resumes on the route segment nearest to the
+    /// robot, heading for that segment's end: the robot is on the segment, so the end
+    /// is reachable in a straight line along it.
     fn replan(&mut self, now: Time, odometry: &Odometry) -> Option<Trajectory> {
         if self.committed || now < self.depart_at {
             return None;
@@ -111,7 +128,40 @@ impl ExplorationBehaviour for WaypointRoute {
         self.committed = true;
         let position = Point3::from(odometry.pose.translation.vector);
         let (_, _, yaw) = odometry.pose.rotation.euler_angles();
-        Some(self.trajectory_from(now, position, yaw))
+        let resume = self
+            .waypoints
+            .windows(2)
+            .enumerate()
+            .min_by(|(_, a), (_, b)| {
+                segment_distance(&position, &a[0], &a[1])
+                    .total_cmp(&segment_distance(&position, &b[0], &b[1]))
+            })
+            .map_or(0, |(k, _)| k + 1);
+        Some(
+            self.remaining_from(resume)
+                .trajectory_from(now, position, yaw),
+        )
+    }
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+fn segment_distance(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f64 {
+    let ab = b - a;
+    let length2 = ab.norm_squared();
+    let s = if length2 > 0.0 {
+        ((p - a).dot(&ab) / length2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * s)).norm()
+}
+
+impl WaypointRoute {
+    fn remaining_from(&self, index: usize) -> WaypointRoute {
+        WaypointRoute {
+            waypoints: self.waypoints[index..].to_vec(),
+            ..self.clone()
+        }
     }
 }
 
@@ -135,9 +185,49 @@ mod tests {
         assert!((knots[2].time.as_secs_f64() - (3.0 + std::f64::consts::FRAC_PI_2)).abs() < 1e-9);
         assert!((traj.end_time().as_secs_f64() - (6.0 + std::f64::consts::FRAC_PI_2)).abs() < 1e-9);
         for i in 0..100 {
-            let s = traj.state_at(Time::from_secs_f64(1.0 + i as f64 * 0.07)).unwrap();
+            let s = traj
+                .state_at(Time::from_secs_f64(1.0 + i as f64 * 0.07))
+                .unwrap();
             assert!(s.velocity_mps.norm() <= 1.0 + 1e-9);
         }
+    }
+
+    #[test]
+    fn a_fresh_instance_resumes_from_the_nearest_waypoint() {
+        let waypoints: Vec<_> = (0..10)
+            .map(|i| Point3::new(f64::from(i), 0.0, 1.0))
+            .collect();
+        let mut route = WaypointRoute::new(waypoints, 1.0, 1.0).unwrap();
+        let odometry = |x: f64| Odometry {
+            stamp: Time::ZERO,
+            pose: nalgebra::Isometry3::translation(x, 0.0, 1.0),
+            velocity_mps: Vector3::zeros(),
+        };
+        let first = route.replan(Time::ZERO, &odometry(0.0)).unwrap();
+        assert_eq!(first.knots().len(), 10);
+        assert!(
+            route
+                .replan(Time::from_secs_f64(1.0), &odometry(1.0))
+                .is_none()
+        );
+        let mut restarted = WaypointRoute::new(route.waypoints.clone(), 1.0, 1.0).unwrap();
+        let resumed = restarted
+            .replan(Time::from_secs_f64(5.0), &odometry(6.2))
+            .unwrap();
+        // Starts where the robot is, on segment 6–7, and goes on to 7, 8, 9 (no
+        // backtracking to the start of the route).
+        assert_eq!(resumed.knots()[1].position_m.x, 7.0);
+        assert_eq!(resumed.knots().len(), 4);
+        let late = WaypointRoute::new(vec![Point3::new(1.0, 0.0, 1.0)], 1.0, 1.0).unwrap();
+        let mut late = late.departing_at(Time::from_secs_f64(4.0));
+        assert!(
+            late.replan(Time::from_secs_f64(3.0), &odometry(0.0))
+                .is_none()
+        );
+        assert!(
+            late.replan(Time::from_secs_f64(4.0), &odometry(0.0))
+                .is_some()
+        );
     }
 
     #[test]

@@ -55,7 +55,11 @@ impl FrameSource for BoxedSource {
 }
 
 /// Assembles a robot: vehicle, sensor, explorer and link, in that order.
-pub fn assemble(name: &str, config: &RobotConfig, parts: RobotParts) -> Result<RobotSpec, AssembleError> {
+pub fn assemble(
+    name: &str,
+    config: &RobotConfig,
+    parts: RobotParts,
+) -> Result<RobotSpec, AssembleError> {
     config.validate()?;
     let behaviour = behaviour_by_name(
         &config.behaviour,
@@ -79,16 +83,23 @@ pub fn assemble(name: &str, config: &RobotConfig, parts: RobotParts) -> Result<R
     robot
         .add(parts.vehicle)
         .add(
-            ActorSpec::new("sensor", move || SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz))
-                .with_options(ActorOptions {
-                    blocking: true,
-                    ..options(config.latency_s.sensor)
-                }),
+            ActorSpec::new("sensor", move || {
+                SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
+            })
+            .with_options(ActorOptions {
+                blocking: true,
+                ..options(config.latency_s.sensor)
+            }),
         )
         .add(
-            ActorSpec::new("explorer", move || ExplorerActor::new(behaviour(), replan_rate_hz))
-                .with_options(options(config.latency_s.explorer)),
+            ActorSpec::new("explorer", move || {
+                ExplorerActor::new(behaviour(), replan_rate_hz)
+            })
+            .with_options(options(config.latency_s.explorer)),
         )
-        .add(ActorSpec::new("link", move || LinkActor::new(link)).with_options(options(config.latency_s.link)));
+        .add(
+            ActorSpec::new("link", move || LinkActor::new(link))
+                .with_options(options(config.latency_s.link)),
+        );
     Ok(robot)
 }

@@ -71,7 +71,9 @@ impl CoverageGrid {
     /// the ray runs to the point at z-depth `d`, and every free cell it crosses is marked
     /// except the cell holding that end point (it holds the surface). For a pixel without a
     /// return the ray runs to z-depth `camera.range_m` and every free cell it crosses is
-    /// marked, the last one included. Rock cells are never marked; parts of rays outside
+    /// marked, the last one included. Every ray stops at the first rock cell (a cell
+    /// whose centre is inside the rock): coverage is ground truth, so a dropout or a
+    /// noisy depth past the wall never counts space behind it. Parts of rays outside
     /// the grid are ignored.
     pub fn observe(
         &mut self,
@@ -96,13 +98,14 @@ impl CoverageGrid {
                 let grid = self.grid;
                 grid.traverse(&origin, &dir, end, |c, _t_enter, t_exit| {
                     if hit && t_exit >= end {
-                        return;
+                        return false;
                     }
                     let s = &mut self.state[grid.linear_index(c)];
                     if *s == FREE {
                         *s = EXPLORED;
                         self.explored_cells += 1;
                     }
+                    *s != ROCK
                 });
             }
         }

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use troupe_robot::RobotConfig;
 
 use crate::camera::CameraParams;
+use crate::vehicle::VehicleConfig;
 use crate::world::CaveParams;
 
 /// The world to explore.
@@ -104,6 +105,8 @@ pub struct Scenario {
     pub camera: CameraParams,
     /// Every robot's configuration.
     pub robot: RobotConfig,
+    /// The simulated vehicle of every robot.
+    pub vehicle: VehicleConfig,
     /// Network between robots.
     pub network: NetworkConfig,
     /// Metrics.
@@ -126,6 +129,7 @@ impl Default for Scenario {
                 ..CameraParams::default()
             },
             robot: RobotConfig::default(),
+            vehicle: VehicleConfig::default(),
             network: NetworkConfig::default(),
             metrics: MetricsConfig::default(),
             faults: Vec::new(),
@@ -181,10 +185,10 @@ impl Scenario {
             message,
         };
         let deserializer =
-            toml::Deserializer::parse(text).map_err(|e| parse_error(one_line(&e.to_string())))?;
+            toml::Deserializer::parse(text).map_err(|e| parse_error(describe(&e, text)))?;
         let scenario: Scenario = serde_path_to_error::deserialize(deserializer).map_err(|e| {
             let key = e.path().to_string();
-            let inner = one_line(&e.into_inner().to_string());
+            let inner = describe(e.inner(), text);
             if key == "." || key.is_empty() {
                 parse_error(inner)
             } else {
@@ -248,6 +252,9 @@ impl Scenario {
                 format!("{}, got {}", e.rule, e.value),
             )
         })?;
+        self.vehicle
+            .validate()
+            .map_err(|reason| invalid("vehicle", reason))?;
         if !(self.network.latency_s.is_finite() && self.network.latency_s >= 0.0) {
             return Err(invalid(
                 "network.latency_s",
@@ -303,12 +310,18 @@ impl Scenario {
     }
 }
 
-fn one_line(s: &str) -> String {
-    s.split('\n')
-        .map(str::trim_end)
-        .filter(|l| !l.is_empty())
-        .collect::<Vec<_>>()
-        .join(" ")
+/// A TOML error as one line: "line L, column C: message".
+fn describe(error: &toml::de::Error, text: &str) -> String {
+    let message = error.message().trim_end();
+    match error.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {column}: {message}")
+        }
+        None => message.to_string(),
+    }
 }
 
 #[cfg(test)]
@@ -326,8 +339,14 @@ mod tests {
             let path = entry.unwrap().path();
             Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
         }
-        let default = Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/default.toml")).unwrap();
-        assert_eq!(default, Scenario::default(), "scenarios/default.toml must spell out the built-in default");
+        let default =
+            Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/default.toml"))
+                .unwrap();
+        assert_eq!(
+            default,
+            Scenario::default(),
+            "scenarios/default.toml must spell out the built-in default"
+        );
     }
 
     #[test]

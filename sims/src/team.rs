@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use troupe_actors::runtime::{
-    ActorOptions, ActorSpec, IdealNetwork, LatencyModel, LatencySummary, RobotReport, SimExecutor,
-    Time, TopicStats,
+    ActorOptions, ActorSpec, IdealNetwork, LatencyModel, LatencySummary, RobotReport, RobotSpec,
+    SimExecutor, Time, TopicStats,
 };
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
@@ -19,9 +19,6 @@ use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::SimCameraSource;
 use crate::vehicle::{SimVehicle, new_body};
 use crate::world::{CaveWorld, World};
-
-/// Odometry rate of the simulated vehicle, Hz.
-pub const VEHICLE_RATE_HZ: f64 = 10.0;
 
 /// Seconds between the departures of consecutive robots.
 pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
@@ -209,6 +206,26 @@ pub struct Timing {
 impl Team {
     /// Builds the world, the robots and the monitor of a scenario.
     pub fn new(scenario: &Scenario) -> Result<Team, AssembleError> {
+        Team::new_with(scenario, |_, _| {})
+    }
+
+    /// Like [`Team::new`], and lets `customize` change each assembled robot (by
+    /// index) before the run — this is how user-written actors join a simulated team:
+    ///
+    /// ```no_run
+    /// # use troupe_sims::{scenario::Scenario, team::Team};
+    /// # use troupe_actors::runtime::*;
+    /// # struct MyActor;
+    /// # impl Actor for MyActor { fn handle(&mut self, _: &Event, _: &mut Context<'_>) -> ActorResult { Ok(()) } }
+    /// let team = Team::new_with(&Scenario::default(), |_index, robot| {
+    ///     robot.add(ActorSpec::new("mine", || MyActor));
+    /// })?;
+    /// # Ok::<(), troupe_robot::AssembleError>(())
+    /// ```
+    pub fn new_with(
+        scenario: &Scenario,
+        mut customize: impl FnMut(usize, &mut RobotSpec),
+    ) -> Result<Team, AssembleError> {
         let world = Arc::new(CaveWorld::generate(
             &scenario.world.cave,
             scenario.world.seed,
@@ -231,8 +248,9 @@ impl Team {
             let camera_world = shared_world.clone();
             let camera = scenario.camera.clone();
             let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
+            let vehicle_config = scenario.vehicle.clone();
             let vehicle = ActorSpec::new("vehicle", move || {
-                SimVehicle::new(body.clone(), VEHICLE_RATE_HZ)
+                SimVehicle::new(body.clone(), vehicle_config.clone())
             })
             .with_options(ActorOptions {
                 latency: LatencyModel::fixed(scenario.robot.latency_s.vehicle),
@@ -264,6 +282,7 @@ impl Team {
                     robot = inject_panic(robot, actor, Time::from_secs_f64(*at_s));
                 }
             }
+            customize(i, &mut robot);
             team.push(robot);
         }
         let monitor = GroundTruthMonitor::new(

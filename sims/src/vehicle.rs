@@ -1,4 +1,5 @@
-//! The simulated vehicle: follows the committed plan exactly and reports odometry.
+//! The simulated vehicle: follows the committed plan, optionally with a tracking
+//! error, and reports odometry.
 //!
 //! The body's state lives outside the actor (in a [`SimBody`] shared with the
 //! factory), so that a restarted vehicle actor continues from where the physical
@@ -8,11 +9,63 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::{ODOMETRY, Odometry, PLAN, Plan};
 use troupe_actors::runtime::{
-    Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId,
+    Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId,
 };
+
+/// Settings of the simulated vehicle (the `[vehicle]` table of a scenario).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleConfig {
+    /// Odometry rate, Hz.
+    pub odometry_rate_hz: f64,
+    /// Standard deviation of the tracking error per axis, metres (0: perfect tracking).
+    /// The error is a first-order Gauss–Markov process, so it drifts smoothly.
+    pub tracking_error_std_m: f64,
+    /// Correlation time of the tracking error, seconds.
+    pub tracking_error_tau_s: f64,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        VehicleConfig {
+            odometry_rate_hz: 10.0,
+            tracking_error_std_m: 0.05,
+            tracking_error_tau_s: 2.0,
+        }
+    }
+}
+
+impl VehicleConfig {
+    /// Checks the numbers; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.odometry_rate_hz.is_finite() && self.odometry_rate_hz > 0.0) {
+            return Err(format!(
+                "odometry_rate_hz must be > 0, got {}",
+                self.odometry_rate_hz
+            ));
+        }
+        if !(self.tracking_error_std_m.is_finite()
+            && (0.0..=0.5).contains(&self.tracking_error_std_m))
+        {
+            return Err(format!(
+                "tracking_error_std_m must be in [0, 0.5] m, got {}",
+                self.tracking_error_std_m
+            ));
+        }
+        if !(self.tracking_error_tau_s.is_finite() && self.tracking_error_tau_s > 0.0) {
+            return Err(format!(
+                "tracking_error_tau_s must be > 0, got {}",
+                self.tracking_error_tau_s
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// The physical state of one simulated robot.
 #[derive(Debug)]
@@ -23,6 +76,10 @@ pub struct BodyState {
     pub velocity_mps: Vector3<f64>,
     /// The plan being followed.
     pub plan: Option<Arc<Plan>>,
+    /// Current tracking error (added to the planned position), metres.
+    pub tracking_error_m: Vector3<f64>,
+    /// When the tracking error was last advanced.
+    pub error_time: Time,
 }
 
 /// Shared handle on a body.
@@ -35,6 +92,8 @@ pub fn new_body(pose: Isometry3<f64>) -> SimBody {
         pose,
         velocity_mps: Vector3::zeros(),
         plan: None,
+        tracking_error_m: Vector3::zeros(),
+        error_time: Time::ZERO,
     }))
 }
 
@@ -43,17 +102,21 @@ const ODOMETRY_TICK: TimerId = TimerId(0);
 /// See the [module docs](self).
 pub struct SimVehicle {
     body: SimBody,
-    period: Duration,
+    config: VehicleConfig,
+}
+
+/// A standard normal sample (Box–Muller).
+fn standard_normal(rng: &mut impl Rng) -> f64 {
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 impl SimVehicle {
-    /// A vehicle publishing odometry at `rate_hz`.
+    /// A vehicle moving `body`.
     #[must_use]
-    pub fn new(body: SimBody, rate_hz: f64) -> Self {
-        SimVehicle {
-            body,
-            period: Duration::from_secs_f64(1.0 / rate_hz.max(1e-3)),
-        }
+    pub fn new(body: SimBody, config: VehicleConfig) -> Self {
+        SimVehicle { body, config }
     }
 
     fn body(&self) -> Result<std::sync::MutexGuard<'_, BodyState>, ActorError> {
@@ -63,17 +126,29 @@ impl SimVehicle {
     }
 
     fn publish(&self, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
         let mut body = self.body()?;
-        if let Some(state) = body
-            .plan
-            .as_ref()
-            .and_then(|p| p.trajectory.state_at(ctx.now()))
-        {
-            body.pose = state.pose();
+        if self.config.tracking_error_std_m > 0.0 && now > body.error_time {
+            let dt = (now - body.error_time).as_secs_f64();
+            let decay = (-dt / self.config.tracking_error_tau_s).exp();
+            let spread = self.config.tracking_error_std_m * (1.0 - decay * decay).sqrt();
+            let rng = ctx.rng();
+            let kick = Vector3::new(
+                standard_normal(rng),
+                standard_normal(rng),
+                standard_normal(rng),
+            );
+            body.tracking_error_m = body.tracking_error_m * decay + kick * spread;
+            body.error_time = now;
+        }
+        if let Some(state) = body.plan.as_ref().and_then(|p| p.trajectory.state_at(now)) {
+            let mut pose = state.pose();
+            pose.translation = Translation3::from(pose.translation.vector + body.tracking_error_m);
+            body.pose = pose;
             body.velocity_mps = state.velocity_mps;
         }
         let odometry = Odometry {
-            stamp: ctx.now(),
+            stamp: now,
             pose: body.pose,
             velocity_mps: body.velocity_mps,
         };
@@ -86,7 +161,10 @@ impl SimVehicle {
 impl Actor for SimVehicle {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&PLAN, QueuePolicy::LATEST);
-        ctx.set_timer(ODOMETRY_TICK, self.period);
+        ctx.set_timer(
+            ODOMETRY_TICK,
+            Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz.max(1e-3)),
+        );
         self.publish(ctx)
     }
 

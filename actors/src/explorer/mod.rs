@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::msgs::{ODOMETRY, Odometry, PLAN, Plan};
-use crate::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId, Time};
+use crate::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
 use crate::trajectory::Trajectory;
 
 /// Decides where the robot goes next.

@@ -14,8 +14,8 @@ use troupe_comms::wire::{self, Envelope, Payload};
 
 use crate::msgs::{ODOMETRY, Odometry, PEER_ODOMETRY, PeerOdometry};
 use crate::runtime::{
-    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, QueuePolicy, TimerId,
-    Time,
+    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx,
+    QueuePolicy, Time, TimerId,
 };
 
 /// Link settings.
@@ -79,7 +79,8 @@ impl LinkActor {
             odometry.stamp.as_nanos(),
             payload,
         );
-        let bytes = wire::encode(&envelope).map_err(|e| ActorError::with_source("encoding odometry", e))?;
+        let bytes =
+            wire::encode(&envelope).map_err(|e| ActorError::with_source("encoding odometry", e))?;
         self.sequence += 1;
         self.sent_stamp = Some(odometry.stamp);
         ctx.publish(
@@ -92,9 +93,14 @@ impl LinkActor {
         Ok(())
     }
 
-    fn receive(&mut self, from: crate::runtime::RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
-        let envelope =
-            wire::decode(bytes).map_err(|e| ActorError::with_source(format!("rejected a packet from {from}"), e))?;
+    fn receive(
+        &mut self,
+        from: crate::runtime::RobotId,
+        bytes: &[u8],
+        ctx: &mut Context<'_>,
+    ) -> ActorResult {
+        let envelope = wire::decode(bytes)
+            .map_err(|e| ActorError::with_source(format!("rejected a packet from {from}"), e))?;
         if envelope.team != self.config.team {
             return Err(ActorError::msg(format!(
                 "rejected a packet from {from}: team {} is not ours ({})",
@@ -138,7 +144,10 @@ impl Actor for LinkActor {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(1024));
         if self.config.odometry_rate_hz > 0.0 {
-            ctx.set_timer(SEND, Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz));
+            ctx.set_timer(
+                SEND,
+                Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz),
+            );
         }
         Ok(())
     }

@@ -13,7 +13,9 @@ use super::time::Time;
 use super::topic::{Message, Payload, Topic};
 
 /// Index of a robot in its team.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
 pub struct RobotId(pub u32);
 
 impl std::fmt::Display for RobotId {

@@ -30,7 +30,9 @@ pub use queue::QueuePolicy;
 pub use realtime::{RealtimeExecutor, RealtimeHandle};
 pub use sim::SimExecutor;
 pub use spec::{ActorOptions, ActorSpec, LatencyModel, RestartPolicy, RobotSpec};
-pub use stats::{ActorReport, ActorStats, LatencyHistogram, LatencySummary, RobotReport, TopicStats};
+pub use stats::{
+    ActorReport, ActorStats, LatencyHistogram, LatencySummary, RobotReport, TopicStats,
+};
 pub use tap::{Publication, Tap};
 pub use time::Time;
 pub use topic::{Message, Payload, Received, Topic};

@@ -69,12 +69,26 @@ impl Shared {
         Time::from_nanos(u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(u64::MAX))
     }
 
-    fn topic(&self, robot: usize, name: &str, type_id: TypeId, type_name: &'static str) -> Arc<RtTopic> {
+    fn topic(
+        &self,
+        robot: usize,
+        name: &str,
+        type_id: TypeId,
+        type_name: &'static str,
+    ) -> Arc<RtTopic> {
         let r = &self.robots[robot];
-        if let Some(t) = r.topics.read().unwrap_or_else(std::sync::PoisonError::into_inner).get(name) {
+        if let Some(t) = r
+            .topics
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .get(name)
+        {
             return t.clone();
         }
-        let mut topics = r.topics.write().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut topics = r
+            .topics
+            .write()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         topics
             .entry(Arc::from(name))
             .or_insert_with(|| {
@@ -211,13 +225,19 @@ impl RealtimeExecutor {
                 let mut slot = Slot::new(actor, self.seed, id);
                 let mut inputs = Inputs::default();
                 if !slot.instantiate(Time::ZERO)
-                    || slot.run_hook(Hook::Start, Time::ZERO, id, &spec.name) == HookOutcome::Stopped
+                    || slot.run_hook(Hook::Start, Time::ZERO, id, &spec.name)
+                        == HookOutcome::Stopped
                 {
                     inputs.stop();
                 }
                 for command in std::mem::take(&mut slot.commands) {
                     match command {
-                        Command::Subscribe { topic, type_id, type_name, policy } => {
+                        Command::Subscribe {
+                            topic,
+                            type_id,
+                            type_name,
+                            policy,
+                        } => {
                             let sub = inputs.subscribe(&topic, type_id, policy);
                             let entry = topics.entry(topic.clone()).or_insert_with(|| RtTopic {
                                 name: topic.clone(),
@@ -275,7 +295,8 @@ impl RealtimeExecutor {
             shared.route(r, &mut outputs);
         }
         let (stop, stop_rx) = watch::channel(false);
-        let can_block = tokio::runtime::Handle::current().runtime_flavor() == RuntimeFlavor::MultiThread;
+        let can_block =
+            tokio::runtime::Handle::current().runtime_flavor() == RuntimeFlavor::MultiThread;
         let mut tasks = Vec::new();
         for (r, slots) in slots_per_robot.into_iter().enumerate() {
             for (s, slot) in slots.into_iter().enumerate() {
@@ -348,8 +369,16 @@ impl ActorTask {
         let mut inputs = lock(&robot.inboxes[self.index].inputs);
         for command in commands {
             match command {
-                Command::Subscribe { topic, type_id, policy, .. } => {
-                    let known = inputs.subscriptions.iter().any(|s| s.topic == topic && s.type_id == type_id);
+                Command::Subscribe {
+                    topic,
+                    type_id,
+                    policy,
+                    ..
+                } => {
+                    let known = inputs
+                        .subscriptions
+                        .iter()
+                        .any(|s| s.topic == topic && s.type_id == type_id);
                     if known {
                         inputs.subscribe(&topic, type_id, policy);
                     } else {
@@ -383,9 +412,13 @@ impl ActorTask {
             if let Some(event) = event {
                 let now = self.shared.now();
                 let outcome = if self.slot.options.blocking && self.block {
-                    tokio::task::block_in_place(|| self.slot.run_hook(Hook::Handle(&event), now, robot_id, &robot_name))
+                    tokio::task::block_in_place(|| {
+                        self.slot
+                            .run_hook(Hook::Handle(&event), now, robot_id, &robot_name)
+                    })
                 } else {
-                    self.slot.run_hook(Hook::Handle(&event), now, robot_id, &robot_name)
+                    self.slot
+                        .run_hook(Hook::Handle(&event), now, robot_id, &robot_name)
                 };
                 drop(event);
                 if outcome == HookOutcome::Stopped {
@@ -429,14 +462,20 @@ impl RealtimeHandle {
     /// and returns the per-robot reports.
     pub async fn shutdown(self) -> Vec<RobotReport> {
         let _ = self.stop.send(true);
-        let mut slots: Vec<Vec<Option<Slot>>> = self.names.iter().map(|n| n.iter().map(|_| None).collect()).collect();
+        let mut slots: Vec<Vec<Option<Slot>>> = self
+            .names
+            .iter()
+            .map(|n| n.iter().map(|_| None).collect())
+            .collect();
         let mut index = vec![0usize; self.names.len()];
         for (r, task) in self.tasks {
             let s = index[r];
             index[r] += 1;
             match task.await {
                 Ok(slot) => slots[r][s] = Some(slot),
-                Err(e) => tracing::error!(robot = r, actor = %self.names[r][s], "actor task failed: {e}"),
+                Err(e) => {
+                    tracing::error!(robot = r, actor = %self.names[r][s], "actor task failed: {e}")
+                }
             }
         }
         self.shared
@@ -463,7 +502,9 @@ impl RealtimeHandle {
                 let actors = slots
                     .iter()
                     .zip(&robot.inboxes)
-                    .filter_map(|(slot, inbox)| slot.as_ref().map(|s| s.report(&lock(&inbox.inputs))))
+                    .filter_map(|(slot, inbox)| {
+                        slot.as_ref().map(|s| s.report(&lock(&inbox.inputs)))
+                    })
                     .collect();
                 RobotReport {
                     name: robot.name.to_string(),
@@ -474,4 +515,3 @@ impl RealtimeHandle {
             .collect()
     }
 }
-

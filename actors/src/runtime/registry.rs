@@ -69,7 +69,13 @@ impl TopicRegistry {
     }
 
     /// Registers a subscriber (idempotent).
-    pub(crate) fn add_subscriber(&mut self, name: &str, type_id: TypeId, type_name: &'static str, who: SubscriberRef) -> Result<(), TypeMismatch> {
+    pub(crate) fn add_subscriber(
+        &mut self,
+        name: &str,
+        type_id: TypeId,
+        type_name: &'static str,
+        who: SubscriberRef,
+    ) -> Result<(), TypeMismatch> {
         let entry = self.entry(name, type_id, type_name)?;
         if !entry.subscribers.contains(&who) {
             entry.subscribers.push(who);

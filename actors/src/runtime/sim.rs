@@ -25,10 +25,25 @@ use super::time::Time;
 use super::topic::{Message, Received};
 
 enum Kind {
-    Activate { robot: u32, slot: u32 },
-    Timer { robot: u32, slot: u32, timer: u32, generation: u64 },
-    Deliver { robot: u32, outputs: Vec<Outgoing> },
-    Network { to: u32, from: RobotId, bytes: Arc<[u8]> },
+    Activate {
+        robot: u32,
+        slot: u32,
+    },
+    Timer {
+        robot: u32,
+        slot: u32,
+        timer: u32,
+        generation: u64,
+    },
+    Deliver {
+        robot: u32,
+        outputs: Vec<Outgoing>,
+    },
+    Network {
+        to: u32,
+        from: RobotId,
+        bytes: Arc<[u8]>,
+    },
 }
 
 struct Scheduled {
@@ -118,7 +133,10 @@ impl SimRobot {
                     policy,
                 } => {
                     let sub = self.inputs[slot].subscribe(&topic, type_id, policy);
-                    if let Err(e) = self.registry.add_subscriber(&topic, type_id, type_name, (slot, sub)) {
+                    if let Err(e) =
+                        self.registry
+                            .add_subscriber(&topic, type_id, type_name, (slot, sub))
+                    {
                         tracing::error!(robot = %self.name, actor = %self.slots[slot].name, topic = %e.topic,
                             "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
                     }
@@ -269,7 +287,11 @@ impl SimExecutor {
             .enumerate()
             .map(|(i, spec)| {
                 let id = RobotId(i as u32);
-                let slots: Vec<Slot> = spec.actors.into_iter().map(|a| Slot::new(a, seed, id)).collect();
+                let slots: Vec<Slot> = spec
+                    .actors
+                    .into_iter()
+                    .map(|a| Slot::new(a, seed, id))
+                    .collect();
                 SimRobot {
                     id,
                     name: spec.name,
@@ -334,7 +356,8 @@ impl SimExecutor {
             for s in 0..robot.slots.len() {
                 let slot = &mut robot.slots[s];
                 if !slot.instantiate(now)
-                    || slot.run_hook(Hook::Start, now, robot.id, &robot.name) == HookOutcome::Stopped
+                    || slot.run_hook(Hook::Start, now, robot.id, &robot.name)
+                        == HookOutcome::Stopped
                 {
                     robot.inputs[s].stop();
                 }
@@ -346,7 +369,8 @@ impl SimExecutor {
             }
         }
         for (r, mut outputs) in initial {
-            self.world.route(&mut self.clock, &mut self.robots[r], &mut outputs);
+            self.world
+                .route(&mut self.clock, &mut self.robots[r], &mut outputs);
         }
     }
 
@@ -393,7 +417,11 @@ impl SimExecutor {
                 r.wake(&mut self.clock, slot as usize);
             }
             Kind::Deliver { robot, mut outputs } => {
-                self.world.route(&mut self.clock, &mut self.robots[robot as usize], &mut outputs);
+                self.world.route(
+                    &mut self.clock,
+                    &mut self.robots[robot as usize],
+                    &mut outputs,
+                );
             }
             Kind::Network { to, from, bytes } => {
                 let message = Arc::new(LinkRx { from, bytes });
@@ -404,7 +432,8 @@ impl SimExecutor {
                     bytes: message.payload_bytes(),
                     payload: message,
                 }];
-                self.world.route(&mut self.clock, &mut self.robots[to as usize], &mut outputs);
+                self.world
+                    .route(&mut self.clock, &mut self.robots[to as usize], &mut outputs);
             }
         }
     }
@@ -432,7 +461,13 @@ impl SimExecutor {
                 robot.slots[s].outbox = outputs;
             } else {
                 let outputs = std::mem::take(&mut robot.slots[s].outbox);
-                self.clock.schedule(done, Kind::Deliver { robot: r as u32, outputs });
+                self.clock.schedule(
+                    done,
+                    Kind::Deliver {
+                        robot: r as u32,
+                        outputs,
+                    },
+                );
             }
         }
         robot.schedule[s].busy_until = done;
@@ -446,7 +481,12 @@ impl SimExecutor {
             .iter()
             .map(|r| RobotReport {
                 name: r.name.to_string(),
-                actors: r.slots.iter().zip(&r.inputs).map(|(s, i)| s.report(i)).collect(),
+                actors: r
+                    .slots
+                    .iter()
+                    .zip(&r.inputs)
+                    .map(|(s, i)| s.report(i))
+                    .collect(),
                 topics: r.registry.stats(),
             })
             .collect()

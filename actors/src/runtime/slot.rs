@@ -96,7 +96,13 @@ impl Slot {
 
     /// Runs a hook with panic containment and supervision. Outputs and commands are
     /// left in `self.outbox` / `self.commands` for the executor (cleared on panic).
-    pub(crate) fn run_hook(&mut self, hook: Hook<'_>, now: Time, robot: RobotId, robot_name: &str) -> HookOutcome {
+    pub(crate) fn run_hook(
+        &mut self,
+        hook: Hook<'_>,
+        now: Time,
+        robot: RobotId,
+        robot_name: &str,
+    ) -> HookOutcome {
         let Some(actor) = self.actor.as_mut() else {
             return HookOutcome::Stopped;
         };

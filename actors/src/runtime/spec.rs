@@ -50,9 +50,9 @@ impl LatencyModel {
     pub fn validate(&self) -> Result<(), String> {
         let ok = |v: f64| v.is_finite() && v >= 0.0;
         match *self {
-            LatencyModel::Fixed { seconds } if !ok(seconds) => {
-                Err(format!("seconds must be a finite number ≥ 0, got {seconds}"))
-            }
+            LatencyModel::Fixed { seconds } if !ok(seconds) => Err(format!(
+                "seconds must be a finite number ≥ 0, got {seconds}"
+            )),
             LatencyModel::Uniform { min_s, max_s } if !ok(min_s) || !ok(max_s) || max_s < min_s => {
                 Err(format!(
                     "need 0 ≤ min_s ≤ max_s (finite), got min_s = {min_s}, max_s = {max_s}"
@@ -65,7 +65,9 @@ impl LatencyModel {
     pub(crate) fn sample(&self, rng: &mut impl Rng) -> Duration {
         let seconds = match *self {
             LatencyModel::Fixed { seconds } => seconds,
-            LatencyModel::Uniform { min_s, max_s } if max_s > min_s => rng.random_range(min_s..=max_s),
+            LatencyModel::Uniform { min_s, max_s } if max_s > min_s => {
+                rng.random_range(min_s..=max_s)
+            }
             LatencyModel::Uniform { min_s, .. } => min_s,
         };
         Duration::try_from_secs_f64(seconds.max(0.0)).unwrap_or(Duration::ZERO)

@@ -87,7 +87,11 @@ impl LatencyHistogram {
             seen += n;
             if seen >= rank {
                 let lo = Self::lower(i);
-                let hi = if i + 1 < Self::BUCKETS { Self::lower(i + 1) } else { lo };
+                let hi = if i + 1 < Self::BUCKETS {
+                    Self::lower(i + 1)
+                } else {
+                    lo
+                };
                 return ((lo + hi) / 2).min(self.max_ns);
             }
         }

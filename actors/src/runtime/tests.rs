@@ -227,8 +227,12 @@ fn parallel_run(seed: u64) -> Vec<u64> {
         .map(|i| {
             let o = out.clone();
             RobotSpec::new(format!("r{i}")).with(
-                ActorSpec::new("work", move || ParallelWork { out: o.clone() })
-                    .with_latency(LatencyModel::Uniform { min_s: 0.001, max_s: 0.02 }),
+                ActorSpec::new("work", move || ParallelWork { out: o.clone() }).with_latency(
+                    LatencyModel::Uniform {
+                        min_s: 0.001,
+                        max_s: 0.02,
+                    },
+                ),
             )
         })
         .collect();
@@ -264,7 +268,9 @@ impl Actor for Chatter {
                 },
             ),
             Event::Message(m) => {
-                let rx = m.get(&LINK_RX).ok_or_else(|| ActorError::msg("unexpected topic"))?;
+                let rx = m
+                    .get(&LINK_RX)
+                    .ok_or_else(|| ActorError::msg("unexpected topic"))?;
                 assert_ne!(rx.from, ctx.robot());
                 assert_eq!(rx.bytes[0] as u32, rx.from.0);
                 assert_eq!(ctx.now() - m.published_at(), Duration::ZERO);
@@ -342,7 +348,8 @@ fn timer_ticks_coalesce_while_busy() {
             Ok(())
         }
     }
-    let robot = RobotSpec::new("r").with(ActorSpec::new("slow", || Slow).with_latency(LatencyModel::fixed(0.35)));
+    let robot = RobotSpec::new("r")
+        .with(ActorSpec::new("slow", || Slow).with_latency(LatencyModel::fixed(0.35)));
     let mut sim = SimExecutor::new(vec![robot], 1);
     sim.run_until(Time::from_secs_f64(1.0));
     let reports = sim.finish();

@@ -7,14 +7,18 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry};
-use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId, Time};
+use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
 
 /// Where frames come from.
 pub trait FrameSource: Send + 'static {
     /// Captures one frame at time `now`. Simulated sources render from the latest
     /// body odometry (`None` before the first one arrives); recorded sources may
     /// ignore it. `Ok(None)` means "nothing this time" (end of a sequence, no pose yet).
-    fn capture(&mut self, now: Time, odometry: Option<&Odometry>) -> Result<Option<DepthFrame>, ActorError>;
+    fn capture(
+        &mut self,
+        now: Time,
+        odometry: Option<&Odometry>,
+    ) -> Result<Option<DepthFrame>, ActorError>;
 }
 
 /// Checks that a frame is usable: sizes agree with the intrinsics, depths are finite
@@ -34,8 +38,15 @@ pub fn validate_frame(frame: &DepthFrame) -> Result<(), ActorError> {
             frame.intrinsics.height
         )));
     }
-    if let Some(i) = frame.depth_m.iter().position(|d| !d.is_finite() || *d < 0.0) {
-        return Err(ActorError::msg(format!("depth pixel {i} is {}", frame.depth_m[i])));
+    if let Some(i) = frame
+        .depth_m
+        .iter()
+        .position(|d| !d.is_finite() || *d < 0.0)
+    {
+        return Err(ActorError::msg(format!(
+            "depth pixel {i} is {}",
+            frame.depth_m[i]
+        )));
     }
     let pose_ok = frame.pose.translation.vector.iter().all(|v| v.is_finite())
         && frame.pose.rotation.coords.iter().all(|v| v.is_finite());

@@ -57,9 +57,9 @@ impl Payload {
     fn validate(&self) -> Result<(), DecodeError> {
         match self {
             Payload::Odometry(o) => o.validate(),
-            Payload::Heartbeat(h) if !(h.uptime_s.is_finite() && h.uptime_s >= 0.0) => {
-                Err(DecodeError::Invalid("heartbeat uptime is not a finite number ≥ 0"))
-            }
+            Payload::Heartbeat(h) if !(h.uptime_s.is_finite() && h.uptime_s >= 0.0) => Err(
+                DecodeError::Invalid("heartbeat uptime is not a finite number ≥ 0"),
+            ),
             Payload::Heartbeat(_) => Ok(()),
         }
     }

@@ -28,7 +28,9 @@ impl Odometry {
         }
         let norm2: f64 = self.orientation_xyzw.iter().map(|v| v * v).sum();
         if (norm2 - 1.0).abs() > 1e-6 {
-            return Err(DecodeError::Invalid("odometry orientation is not a unit quaternion"));
+            return Err(DecodeError::Invalid(
+                "odometry orientation is not a unit quaternion",
+            ));
         }
         Ok(())
     }

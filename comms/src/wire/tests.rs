@@ -10,7 +10,12 @@ fn odometry() -> Envelope {
         123_456_789,
         Payload::Odometry(Odometry {
             position_m: [1.0, -2.0, 0.5],
-            orientation_xyzw: [0.0, 0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2],
+            orientation_xyzw: [
+                0.0,
+                0.0,
+                std::f64::consts::FRAC_1_SQRT_2,
+                std::f64::consts::FRAC_1_SQRT_2,
+            ],
             velocity_mps: [0.5, 0.0, 0.0],
         }),
     )
@@ -36,7 +41,10 @@ fn golden_header_bytes() {
 fn rejects_bad_input_with_reasons() {
     let good = encode(&odometry()).unwrap();
     assert_eq!(decode(&[]), Err(DecodeError::Empty));
-    assert!(matches!(decode(&good[..good.len() - 3]), Err(DecodeError::Malformed(_))));
+    assert!(matches!(
+        decode(&good[..good.len() - 3]),
+        Err(DecodeError::Malformed(_))
+    ));
     let mut trailing = good.clone();
     trailing.push(0);
     assert_eq!(decode(&trailing), Err(DecodeError::TrailingBytes(1)));
@@ -45,18 +53,30 @@ fn rejects_bad_input_with_reasons() {
     assert_eq!(decode(&version), Err(DecodeError::UnsupportedVersion(9)));
     let mut class = good.clone();
     class[4] = 2;
-    assert!(matches!(decode(&class), Err(DecodeError::ClassMismatch { .. })));
+    assert!(matches!(
+        decode(&class),
+        Err(DecodeError::ClassMismatch { .. })
+    ));
     let mut nan = odometry();
     if let Payload::Odometry(o) = &mut nan.payload {
         o.position_m[0] = f64::NAN;
     }
-    assert!(matches!(decode(&encode(&nan).unwrap()), Err(DecodeError::Invalid(_))));
+    assert!(matches!(
+        decode(&encode(&nan).unwrap()),
+        Err(DecodeError::Invalid(_))
+    ));
     let mut skew = odometry();
     if let Payload::Odometry(o) = &mut skew.payload {
         o.orientation_xyzw = [0.0, 0.0, 0.0, 2.0];
     }
-    assert!(matches!(decode(&encode(&skew).unwrap()), Err(DecodeError::Invalid(_))));
-    assert!(matches!(decode(&vec![1u8; MAX_MESSAGE_BYTES + 1]), Err(DecodeError::TooLarge(_))));
+    assert!(matches!(
+        decode(&encode(&skew).unwrap()),
+        Err(DecodeError::Invalid(_))
+    ));
+    assert!(matches!(
+        decode(&vec![1u8; MAX_MESSAGE_BYTES + 1]),
+        Err(DecodeError::TooLarge(_))
+    ));
 }
 
 proptest! {

@@ -78,13 +78,14 @@ impl VoxelGrid {
 
     /// Visit, in order, every cell that the segment `origin + t * dir`, `t ∈ [0, t_end]`,
     /// crosses for a positive length, with the parameter interval `(t_enter, t_exit)` it
-    /// spends there. Parts outside the grid are skipped; `dir` need not be a unit vector.
+    /// spends there; `visit` returns `false` to stop early. Parts outside the grid are
+    /// skipped; `dir` need not be a unit vector.
     pub fn traverse(
         &self,
         origin: &Point3<f64>,
         dir: &Vector3<f64>,
         t_end: f64,
-        mut visit: impl FnMut([usize; 3], f64, f64),
+        mut visit: impl FnMut([usize; 3], f64, f64) -> bool,
     ) {
         if t_end.is_nan() || t_end <= 0.0 || dir.norm_squared() == 0.0 {
             return;
@@ -133,8 +134,8 @@ impl VoxelGrid {
                 2
             };
             let exit = t_next[axis].min(t1);
-            if exit > t {
-                visit(cell, t, exit);
+            if exit > t && !visit(cell, t, exit) {
+                return;
             }
             if t_next[axis] >= t1 {
                 return;

@@ -82,6 +82,7 @@ fn dda_marks_exactly_the_cells_fine_sampling_visits() {
             }
             last_exit = Some(t1);
             visited.push((c, (t1 - t0) * d.norm()));
+            true
         });
         let dda: BTreeSet<[usize; 3]> = visited.iter().map(|(c, _)| *c).collect();
         assert_eq!(
@@ -181,4 +182,45 @@ fn cave_coverage_is_deterministic_and_monotone_along_the_route() {
     // The free volume is in the range of tunnels of ~2 m radius and ~190 m total length.
     let v = a.free_volume_m3();
     assert!((1000.0..8000.0).contains(&v), "free volume {v}");
+}
+
+/// Two rooms side by side, separated by a 1 m thick wall at 0.5 ≤ x ≤ 1.5.
+struct TwoRooms;
+
+impl crate::world::World for TwoRooms {
+    fn sdf_m(&self, p: &Point3<f64>) -> f64 {
+        let left = BoxRoom::new(Aabb::new(
+            Point3::new(-4.0, -2.0, -1.5),
+            Point3::new(0.5, 2.0, 1.5),
+        ));
+        let right = BoxRoom::new(Aabb::new(
+            Point3::new(1.5, -2.0, -1.5),
+            Point3::new(6.0, 2.0, 1.5),
+        ));
+        left.sdf_m(p).max(right.sdf_m(p))
+    }
+    fn albedo(&self, _: &Point3<f64>) -> f64 {
+        0.5
+    }
+    fn bounds(&self) -> Aabb {
+        Aabb::new(Point3::new(-4.0, -2.0, -1.5), Point3::new(6.0, 2.0, 1.5))
+    }
+}
+
+#[test]
+fn rays_without_a_return_stop_at_the_first_rock_cell() {
+    let world = TwoRooms;
+    let cam = CameraParams::default();
+    let mut cov = CoverageGrid::new(&world, 0.25);
+    // Every pixel dropped out: rays run to the 5 m range, which would cross the wall.
+    let img = DepthImage::empty(cam.width, cam.height);
+    let pose = Isometry3::translation(-2.0, 0.0, 0.0);
+    cov.observe(&cam, &pose, &img, 1);
+    let g = *cov.grid();
+    let near = g.cell_of(&Point3::new(0.1, 0.01, 0.01)).expect("in grid");
+    assert!(cov.is_explored(near));
+    for x in [1.6, 2.0, 2.9] {
+        let behind = g.cell_of(&Point3::new(x, 0.01, 0.01)).expect("in grid");
+        assert!(cov.is_free(behind) && !cov.is_explored(behind), "x = {x}");
+    }
 }

@@ -1,0 +1,149 @@
+//! The default team under the sim-time executor: determinism, coverage, safety,
+//! supervision.
+
+use troupe_sims::report::{timeseries_csv, write_run};
+use troupe_sims::scenario::{Fault, Scenario};
+use troupe_sims::team::{RunOutput, Team};
+
+fn run(scenario: &Scenario) -> RunOutput {
+    Team::new(scenario).expect("assemble").run(|_| {})
+}
+
+fn files(output: &RunOutput) -> (Vec<u8>, Vec<u8>) {
+    let dir = tempfile::tempdir().unwrap();
+    let run = write_run(dir.path(), "r", output).unwrap();
+    (
+        std::fs::read(run.join("summary.json")).unwrap(),
+        std::fs::read(run.join("timeseries.csv")).unwrap(),
+    )
+}
+
+#[test]
+fn default_run_is_deterministic_explores_and_never_collides() {
+    let scenario = Scenario::default();
+    let first = run(&scenario);
+    let second = run(&scenario);
+    let (summary_a, series_a) = files(&first);
+    let (summary_b, series_b) = files(&second);
+    assert!(
+        summary_a == summary_b,
+        "summary.json differs between identical runs"
+    );
+    assert!(
+        series_a == series_b,
+        "timeseries.csv differs between identical runs"
+    );
+
+    let s = &first.summary;
+    assert_eq!(s.robots, 2);
+    assert_eq!(s.collisions, 0, "collisions with the world");
+    assert_eq!(s.robot_contacts, 0, "robot bodies overlapped");
+    // Coverage rises: never decreases, and grows substantially over the run.
+    let over_time = &s.coverage.over_time;
+    assert_eq!(over_time.len(), 120);
+    assert!(over_time.windows(2).all(|w| w[1][1] >= w[0][1]));
+    assert!(
+        over_time[0][1] < 0.05 && s.coverage.final_fraction > 0.3,
+        "{over_time:?}"
+    );
+    assert!(over_time[60][1] > over_time[10][1] + 0.1);
+    for robot in &s.per_robot {
+        assert!(
+            robot.truth.distance_m > 80.0,
+            "{} flew {} m",
+            robot.name,
+            robot.truth.distance_m
+        );
+        assert!(robot.truth.min_clearance_m > 0.5);
+        assert_eq!(robot.truth.frames, 599);
+        assert!(robot.actors.iter().all(|a| a.panics == 0 && a.errors == 0));
+    }
+    // Odometry crossed the link both ways, and every topic is counted.
+    assert!(s.topics["peer/odometry"].messages > 2000);
+    assert_eq!(
+        s.topics["link/tx"].messages,
+        s.topics["link/rx"].messages + 2
+    );
+    assert!(s.topics["sensor/frame"].bytes > 100_000_000);
+    // The run says how fast it went.
+    assert!(first.timing.sim_seconds_per_wall_second > 0.0);
+    assert_eq!(
+        timeseries_csv(&first.timeseries).lines().count(),
+        1 + 2 * 120
+    );
+}
+
+#[test]
+fn a_different_seed_gives_a_different_run() {
+    let short = Scenario {
+        duration_s: 20.0,
+        ..Scenario::default()
+    };
+    let a = files(&run(&short));
+    let b = files(&run(&Scenario {
+        seed: 2,
+        ..short.clone()
+    }));
+    assert!(a.0 != b.0, "summary.json should depend on the seed");
+    assert!(a.1 != b.1, "timeseries.csv should depend on the seed");
+    let again = files(&run(&short));
+    assert!(a == again, "same seed, different files");
+}
+
+#[test]
+fn injected_panics_are_restarted_counted_and_the_run_completes() {
+    let scenario = Scenario {
+        duration_s: 40.0,
+        faults: vec![
+            Fault::ActorPanic {
+                robot: 0,
+                actor: "explorer".into(),
+                at_s: 10.0,
+            },
+            Fault::ActorPanic {
+                robot: 1,
+                actor: "sensor".into(),
+                at_s: 5.0,
+            },
+            Fault::ActorPanic {
+                robot: 1,
+                actor: "vehicle".into(),
+                at_s: 20.0,
+            },
+        ],
+        ..Scenario::default()
+    };
+    let output = run(&scenario);
+    let s = &output.summary;
+    let actor = |robot: usize, name: &str| {
+        s.per_robot[robot]
+            .actors
+            .iter()
+            .find(|a| a.name == name)
+            .unwrap_or_else(|| panic!("no actor {name}"))
+            .clone()
+    };
+    for (robot, name) in [(0, "explorer"), (1, "sensor"), (1, "vehicle")] {
+        let a = actor(robot, name);
+        assert_eq!(
+            (a.panics, a.restarts, a.stopped),
+            (1, 1, false),
+            "{name} of robot {robot}"
+        );
+    }
+    assert_eq!(actor(0, "sensor").panics, 0);
+    assert_eq!(s.coverage.over_time.len(), 40);
+    assert_eq!(s.collisions, 0);
+    // The restarted explorer resumed the route instead of stopping the robot.
+    assert!(
+        s.per_robot[0].truth.distance_m > 30.0,
+        "{}",
+        s.per_robot[0].truth.distance_m
+    );
+    // The restarted sensor kept producing frames.
+    assert!(
+        s.per_robot[1].truth.frames >= 195,
+        "{}",
+        s.per_robot[1].truth.frames
+    );
+}
