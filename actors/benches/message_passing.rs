@@ -8,6 +8,8 @@
 //!
 //! Run: `cargo bench -p troupe-actors --bench message_passing`
 
+#![allow(missing_docs)]
+
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 

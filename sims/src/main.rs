@@ -22,7 +22,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run a team of simulated robots in one process (sim time, deterministic) and
-    /// write a report to OUT/<scenario name>/.
+    /// write a report to `OUT/<scenario name>/`.
     Run(RunArgs),
 }
 

@@ -1,5 +1,7 @@
 //! The `troupe` binary as a user runs it.
 
+#![allow(clippy::unwrap_used)]
+
 use std::path::Path;
 use std::process::Command;
 

@@ -174,7 +174,14 @@ impl Shared {
     }
 }
 
-/// Runs a team of robots on tokio against the wall clock. See the [module docs](self).
+/// Runs a team of robots on tokio against the wall clock.
+///
+/// Publishers push into the subscriber's bounded queues (behind a mutex) and wake its
+/// task; timers are tokio timers. Actors marked [`blocking`](super::ActorOptions::blocking)
+/// run their handlers under `block_in_place`, so heavy compute does not stall the
+/// async workers (this needs the multi-threaded runtime; on a current-thread runtime
+/// they run inline and a warning says so). Packets on [`LINK_TX`] are delivered to
+/// the peers' [`LINK_RX`] at once, inside the process.
 pub struct RealtimeExecutor {
     team: Vec<RobotSpec>,
     seed: u64,
@@ -341,13 +348,13 @@ impl ActorTask {
         let mut inputs = lock(&self.inbox().inputs);
         deadlines.resize(inputs.timers.len(), None);
         let mut next: Option<Instant> = None;
-        for i in 0..inputs.timers.len() {
+        for (i, slot) in deadlines.iter_mut().enumerate() {
             let (active, period) = (inputs.timers[i].active, inputs.timers[i].period);
             if !active {
-                deadlines[i] = None;
+                *slot = None;
                 continue;
             }
-            let deadline = deadlines[i].get_or_insert(now + period);
+            let deadline = slot.get_or_insert(now + period);
             if *deadline <= now {
                 let arrival = self.shared.arrival.fetch_add(1, Ordering::Relaxed);
                 inputs.tick(i, arrival);

@@ -244,7 +244,13 @@ impl World {
     }
 }
 
-/// Runs a team of robots in simulated time. See the [module docs](self).
+/// Runs a team of robots in simulated time.
+///
+/// Events are ordered by `(time, sequence)`, where the sequence number is assigned
+/// when an event is scheduled; nothing depends on wall-clock time or thread timing,
+/// so the same team, seed and inputs give bit-identical results. Each handler call
+/// is charged the compute latency of its actor's [`LatencyModel`](super::LatencyModel):
+/// its outputs appear after that latency and the actor is busy until then.
 ///
 /// ```
 /// use std::time::Duration;

@@ -1,4 +1,6 @@
 //! End-to-end tests: whole teams, as `troupe run` runs them.
 
+#![allow(clippy::unwrap_used)]
+
 mod realtime_team;
 mod team_run;
