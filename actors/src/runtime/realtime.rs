@@ -21,6 +21,7 @@ use tokio::time::Instant;
 use super::context::{Command, Outgoing, RobotId};
 use super::inputs::Inputs;
 use super::network::{Destination, LINK_RX, LINK_TX, LinkRx, LinkTx};
+use super::registry::{TopicRegistry, apply_command};
 use super::slot::{Hook, HookOutcome, Slot};
 use super::spec::RobotSpec;
 use super::stats::{RobotReport, TopicStats};
@@ -42,6 +43,25 @@ struct RtTopic {
     messages: AtomicU64,
     bytes: AtomicU64,
     type_mismatches: AtomicU64,
+}
+
+impl RtTopic {
+    fn new(
+        name: Arc<str>,
+        type_id: TypeId,
+        type_name: &'static str,
+        subscribers: Vec<(usize, usize)>,
+    ) -> Self {
+        RtTopic {
+            name,
+            type_id,
+            type_name,
+            subscribers,
+            messages: AtomicU64::new(0),
+            bytes: AtomicU64::new(0),
+            type_mismatches: AtomicU64::new(0),
+        }
+    }
 }
 
 struct Inbox {
@@ -92,15 +112,12 @@ impl Shared {
         topics
             .entry(Arc::from(name))
             .or_insert_with(|| {
-                Arc::new(RtTopic {
-                    name: Arc::from(name),
+                Arc::new(RtTopic::new(
+                    Arc::from(name),
                     type_id,
                     type_name,
-                    subscribers: Vec::new(),
-                    messages: AtomicU64::new(0),
-                    bytes: AtomicU64::new(0),
-                    type_mismatches: AtomicU64::new(0),
-                })
+                    Vec::new(),
+                ))
             })
             .clone()
     }
@@ -215,7 +232,11 @@ impl RealtimeExecutor {
     /// Starts every actor and spawns one task per actor on the current tokio runtime.
     ///
     /// All `start` hooks run before any task is spawned, so every subscription exists
-    /// before the first message flows. Must be called from inside a tokio runtime.
+    /// before the first message flows.
+    ///
+    /// # Panics
+    ///
+    /// If called outside a tokio runtime.
     #[must_use]
     pub fn spawn(self) -> RealtimeHandle {
         let epoch = Instant::now();
@@ -225,7 +246,7 @@ impl RealtimeExecutor {
         let mut names = Vec::new();
         for (r, spec) in self.team.into_iter().enumerate() {
             let id = RobotId(r as u32);
-            let mut topics: HashMap<Arc<str>, RtTopic> = HashMap::new();
+            let mut registry = TopicRegistry::default();
             let mut slots = Vec::new();
             let mut inboxes = Vec::new();
             for (s, actor) in spec.actors.into_iter().enumerate() {
@@ -238,38 +259,15 @@ impl RealtimeExecutor {
                     inputs.stop();
                 }
                 for command in std::mem::take(&mut slot.commands) {
-                    match command {
-                        Command::Subscribe {
-                            topic,
-                            type_id,
-                            type_name,
-                            policy,
-                        } => {
-                            let sub = inputs.subscribe(&topic, type_id, policy);
-                            let entry = topics.entry(topic.clone()).or_insert_with(|| RtTopic {
-                                name: topic.clone(),
-                                type_id,
-                                type_name,
-                                subscribers: Vec::new(),
-                                messages: AtomicU64::new(0),
-                                bytes: AtomicU64::new(0),
-                                type_mismatches: AtomicU64::new(0),
-                            });
-                            if entry.type_id != type_id {
-                                tracing::error!(robot = %spec.name, actor = %slot.name, topic = %topic,
-                                    "cannot subscribe with type {type_name}: the topic carries {}", entry.type_name);
-                            } else if !entry.subscribers.contains(&(s, sub)) {
-                                entry.subscribers.push((s, sub));
-                            }
-                        }
-                        Command::SetTimer { id, period } if !period.is_zero() => {
-                            inputs.set_timer(id, period);
-                        }
-                        Command::SetTimer { id, .. } => {
-                            tracing::warn!(robot = %spec.name, actor = %slot.name, ?id, "ignoring a timer with zero period");
-                        }
-                        Command::CancelTimer { id } => inputs.cancel_timer(id),
-                    }
+                    // Timers need no scheduling here: each task arms its own.
+                    let _ = apply_command(
+                        command,
+                        s,
+                        &mut inputs,
+                        &mut registry,
+                        &spec.name,
+                        &slot.name,
+                    );
                 }
                 let outputs = std::mem::take(&mut slot.outbox);
                 if !outputs.is_empty() {
@@ -285,7 +283,16 @@ impl RealtimeExecutor {
             robots.push(RtRobot {
                 id,
                 name: spec.name,
-                topics: RwLock::new(topics.into_iter().map(|(k, v)| (k, Arc::new(v))).collect()),
+                topics: RwLock::new(
+                    registry
+                        .into_entries()
+                        .map(|e| {
+                            let topic =
+                                RtTopic::new(e.name.clone(), e.type_id, e.type_name, e.subscribers);
+                            (e.name, Arc::new(topic))
+                        })
+                        .collect(),
+                ),
                 inboxes,
             });
             slots_per_robot.push(slots);

@@ -3,7 +3,10 @@
 use std::any::TypeId;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
+use std::time::Duration;
 
+use super::context::Command;
+use super::inputs::Inputs;
 use super::stats::TopicStats;
 
 /// A subscriber: (actor slot index, subscription index inside that slot).
@@ -83,11 +86,67 @@ impl TopicRegistry {
         Ok(())
     }
 
+    /// The entries, consumed (the real-time executor freezes them after start).
+    pub(crate) fn into_entries(self) -> impl Iterator<Item = TopicEntry> {
+        self.topics.into_values()
+    }
+
     /// Per-topic counters sorted by name.
     pub(crate) fn stats(&self) -> BTreeMap<String, TopicStats> {
         self.topics
             .values()
             .map(|e| (e.name.to_string(), e.stats))
             .collect()
+    }
+}
+
+/// A timer that a command (re)started: its index in the actor's inputs, its new
+/// generation and its period. The executor schedules its first tick.
+pub(crate) struct TimerStarted {
+    pub(crate) index: usize,
+    pub(crate) generation: u64,
+    pub(crate) period: Duration,
+}
+
+/// Applies one command of actor `slot` to its inputs and the robot's registry —
+/// the same rules under both executors. Returns the timer to schedule, if any.
+pub(crate) fn apply_command(
+    command: Command,
+    slot: usize,
+    inputs: &mut Inputs,
+    registry: &mut TopicRegistry,
+    robot: &str,
+    actor: &str,
+) -> Option<TimerStarted> {
+    match command {
+        Command::Subscribe {
+            topic,
+            type_id,
+            type_name,
+            policy,
+        } => {
+            let sub = inputs.subscribe(&topic, type_id, policy);
+            if let Err(e) = registry.add_subscriber(&topic, type_id, type_name, (slot, sub)) {
+                tracing::error!(robot, actor, topic = %e.topic,
+                    "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
+            }
+            None
+        }
+        Command::SetTimer { id, period } if period.is_zero() => {
+            tracing::warn!(robot, actor, ?id, "ignoring a timer with zero period");
+            None
+        }
+        Command::SetTimer { id, period } => {
+            let (index, generation) = inputs.set_timer(id, period);
+            Some(TimerStarted {
+                index,
+                generation,
+                period,
+            })
+        }
+        Command::CancelTimer { id } => {
+            inputs.cancel_timer(id);
+            None
+        }
     }
 }

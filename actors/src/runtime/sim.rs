@@ -13,10 +13,10 @@ use std::collections::BinaryHeap;
 use std::sync::Arc;
 
 use super::actor::Event;
-use super::context::{Command, Outgoing, RobotId};
+use super::context::{Outgoing, RobotId};
 use super::inputs::Inputs;
 use super::network::{IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, SimNetwork};
-use super::registry::TopicRegistry;
+use super::registry::{TopicRegistry, apply_command};
 use super::slot::{Hook, HookOutcome, Slot};
 use super::spec::RobotSpec;
 use super::stats::RobotReport;
@@ -125,39 +125,24 @@ impl SimRobot {
     fn apply_commands(&mut self, clock: &mut Clock, slot: usize) {
         let commands = std::mem::take(&mut self.slots[slot].commands);
         for command in commands {
-            match command {
-                Command::Subscribe {
-                    topic,
-                    type_id,
-                    type_name,
-                    policy,
-                } => {
-                    let sub = self.inputs[slot].subscribe(&topic, type_id, policy);
-                    if let Err(e) =
-                        self.registry
-                            .add_subscriber(&topic, type_id, type_name, (slot, sub))
-                    {
-                        tracing::error!(robot = %self.name, actor = %self.slots[slot].name, topic = %e.topic,
-                            "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
-                    }
-                }
-                Command::SetTimer { id, period } => {
-                    if period.is_zero() {
-                        tracing::warn!(robot = %self.name, actor = %self.slots[slot].name, ?id, "ignoring a timer with zero period");
-                        continue;
-                    }
-                    let (timer, generation) = self.inputs[slot].set_timer(id, period);
-                    clock.schedule(
-                        clock.now + period,
-                        Kind::Timer {
-                            robot: self.id.0,
-                            slot: slot as u32,
-                            timer: timer as u32,
-                            generation,
-                        },
-                    );
-                }
-                Command::CancelTimer { id } => self.inputs[slot].cancel_timer(id),
+            let started = apply_command(
+                command,
+                slot,
+                &mut self.inputs[slot],
+                &mut self.registry,
+                &self.name,
+                &self.slots[slot].name,
+            );
+            if let Some(timer) = started {
+                clock.schedule(
+                    clock.now + timer.period,
+                    Kind::Timer {
+                        robot: self.id.0,
+                        slot: slot as u32,
+                        timer: timer.index as u32,
+                        generation: timer.generation,
+                    },
+                );
             }
         }
     }
