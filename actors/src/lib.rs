@@ -10,6 +10,7 @@
 #![deny(missing_docs)]
 
 pub mod explorer;
+pub mod geometry;
 pub mod link;
 pub mod msgs;
 pub mod runtime;

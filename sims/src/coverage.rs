@@ -6,9 +6,7 @@
 //! first surface (see [`CoverageGrid::observe`]). Results depend only on the inputs, never
 //! on thread scheduling.
 
-pub mod dda;
-
-pub use dda::VoxelGrid;
+pub use troupe_actors::geometry::VoxelGrid;
 
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;

@@ -9,14 +9,13 @@
 //! Implementations: [`CaveWorld`] (procedural tunnel network from a seed) and [`BoxRoom`]
 //! (one analytic box, for tests).
 
-mod aabb;
 mod box_room;
 pub mod cave;
 pub mod noise;
 
-pub use aabb::Aabb;
 pub use box_room::BoxRoom;
 pub use cave::{CaveParams, CaveWorld};
+pub use troupe_actors::geometry::Aabb;
 
 use nalgebra::{Point3, Vector3};
 

@@ -2,7 +2,7 @@
 
 use nalgebra::{Point3, Vector3};
 
-use crate::world::Aabb;
+use super::Aabb;
 
 /// Geometry of a uniform grid of cubic cells: cell `[i, j, k]` spans
 /// `origin + [i, j, k] * cell_m` to `origin + [i + 1, j + 1, k + 1] * cell_m`.
