@@ -11,6 +11,7 @@
 
 pub mod explorer;
 pub mod geometry;
+pub mod grid;
 pub mod link;
 pub mod msgs;
 pub mod runtime;

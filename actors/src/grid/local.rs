@@ -1,0 +1,368 @@
+//! Log-odds cells around the robot.
+
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::VoxelGrid;
+
+/// Log-odds update and classification rules (the standard inverse sensor model,
+/// paper IV-B; defaults follow OctoMap's: hit p = 0.7, miss p = 0.4, clamped to
+/// p ∈ [0.12, 0.97]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogOddsParams {
+    /// Added to the cell that holds a ray's end point.
+    pub hit: f32,
+    /// Added to every other cell a ray crosses (≤ 0).
+    pub miss: f32,
+    /// Lower clamp.
+    pub min: f32,
+    /// Upper clamp.
+    pub max: f32,
+    /// A cell above this log-odds is occupied.
+    pub occupied_above: f32,
+    /// A cell below this log-odds is free; in between it is unknown (never-seen cells
+    /// sit at 0, the prior p = 0.5).
+    pub free_below: f32,
+}
+
+impl Default for LogOddsParams {
+    fn default() -> Self {
+        LogOddsParams {
+            hit: 0.847_297_9,   // ln(0.7 / 0.3)
+            miss: -0.405_465_1, // ln(0.4 / 0.6)
+            min: -1.992_430_1,  // ln(0.12 / 0.88)
+            max: 3.476_099_6,   // ln(0.97 / 0.03)
+            occupied_above: 0.0,
+            free_below: 0.0,
+        }
+    }
+}
+
+impl LogOddsParams {
+    /// Checks the rules; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let finite = [
+            self.hit,
+            self.miss,
+            self.min,
+            self.max,
+            self.occupied_above,
+            self.free_below,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        if !finite {
+            return Err("log-odds parameters must be finite".into());
+        }
+        if self.hit <= 0.0 {
+            return Err(format!("hit must be > 0, got {}", self.hit));
+        }
+        if self.miss >= 0.0 {
+            return Err(format!("miss must be < 0, got {}", self.miss));
+        }
+        if !(self.min < 0.0 && self.max > 0.0) {
+            return Err(format!(
+                "need min < 0 < max, got min = {}, max = {}",
+                self.min, self.max
+            ));
+        }
+        if self.free_below > self.occupied_above {
+            return Err(format!(
+                "free_below ({}) must not exceed occupied_above ({})",
+                self.free_below, self.occupied_above
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What a cell is, for planning.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellState {
+    /// Never seen, or as likely free as occupied.
+    Unknown,
+    /// Seen free.
+    Free,
+    /// Seen occupied.
+    Occupied,
+}
+
+/// A box of cells in local indices: `min` inclusive, `max` exclusive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CellBox {
+    /// First cell.
+    pub min: [usize; 3],
+    /// One past the last cell.
+    pub max: [usize; 3],
+}
+
+impl CellBox {
+    /// Whether the box holds the cell.
+    #[must_use]
+    pub fn contains(&self, c: [usize; 3]) -> bool {
+        (0..3).all(|i| self.min[i] <= c[i] && c[i] < self.max[i])
+    }
+
+    /// Number of cells.
+    #[must_use]
+    pub fn cell_count(&self) -> usize {
+        (0..3)
+            .map(|i| self.max[i].saturating_sub(self.min[i]))
+            .product()
+    }
+}
+
+/// Half the extent of the world-fixed lattice, in cells: grids agree on cells as long
+/// as they stay within ±2²⁰ cells of the world origin (±210 km at 0.2 m).
+const LATTICE_HALF: usize = 1 << 20;
+
+/// A robot-centred log-odds occupancy grid (thesis §3.2.3). Cells are aligned to a
+/// world-fixed lattice of the grid's resolution.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocalGrid {
+    params: LogOddsParams,
+    lattice: VoxelGrid,
+    /// Lattice index of local cell `[0, 0, 0]`.
+    corner: [usize; 3],
+    dims: [usize; 3],
+    cells: Vec<f32>,
+}
+
+impl LocalGrid {
+    /// An all-unknown grid of about `size_m` (rounded to whole cells) centred on
+    /// `centre` (snapped to the lattice), with cells of `resolution_m`.
+    #[must_use]
+    pub fn centred(
+        centre: &Point3<f64>,
+        size_m: &Vector3<f64>,
+        resolution_m: f64,
+        params: LogOddsParams,
+    ) -> Self {
+        let lattice = VoxelGrid {
+            origin: Point3::from(Vector3::repeat(-(LATTICE_HALF as f64) * resolution_m)),
+            cell_m: resolution_m,
+            dims: [2 * LATTICE_HALF; 3],
+        };
+        let dims = [0, 1, 2].map(|i| ((size_m[i] / resolution_m).round() as usize).max(1));
+        let corner = Self::corner_for(&lattice, centre, dims);
+        LocalGrid {
+            params,
+            lattice,
+            corner,
+            dims,
+            cells: vec![0.0; dims[0] * dims[1] * dims[2]],
+        }
+    }
+
+    fn corner_for(lattice: &VoxelGrid, centre: &Point3<f64>, dims: [usize; 3]) -> [usize; 3] {
+        [0, 1, 2].map(|i| {
+            let c = ((centre[i] - lattice.origin[i]) / lattice.cell_m).round() as i64
+                - (dims[i] / 2) as i64;
+            c.clamp(0, (2 * LATTICE_HALF - dims[i]) as i64) as usize
+        })
+    }
+
+    /// The grid's cells as a [`VoxelGrid`] (local indices).
+    #[must_use]
+    pub fn geometry(&self) -> VoxelGrid {
+        VoxelGrid {
+            origin: self.lattice.origin
+                + Vector3::from(self.corner.map(|c| c as f64)) * self.lattice.cell_m,
+            cell_m: self.lattice.cell_m,
+            dims: self.dims,
+        }
+    }
+
+    /// Cells along x, y, z.
+    #[must_use]
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Cell edge, metres.
+    #[must_use]
+    pub fn resolution_m(&self) -> f64 {
+        self.lattice.cell_m
+    }
+
+    /// The update rules.
+    #[must_use]
+    pub fn params(&self) -> &LogOddsParams {
+        &self.params
+    }
+
+    /// Row-major index (x fastest) of a local cell.
+    #[must_use]
+    pub fn index(&self, c: [usize; 3]) -> usize {
+        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+    }
+
+    /// All log-odds values, row-major (x fastest).
+    #[must_use]
+    pub fn values(&self) -> &[f32] {
+        &self.cells
+    }
+
+    /// Log-odds of a local cell.
+    #[must_use]
+    pub fn value(&self, c: [usize; 3]) -> f32 {
+        self.cells[self.index(c)]
+    }
+
+    /// Occupancy probability of a local cell.
+    #[must_use]
+    pub fn probability(&self, c: [usize; 3]) -> f64 {
+        1.0 / (1.0 + (-f64::from(self.value(c))).exp())
+    }
+
+    /// Classification of a log-odds value.
+    #[must_use]
+    pub fn classify(&self, value: f32) -> CellState {
+        if value > self.params.occupied_above {
+            CellState::Occupied
+        } else if value < self.params.free_below {
+            CellState::Free
+        } else {
+            CellState::Unknown
+        }
+    }
+
+    /// Classification of a local cell.
+    #[must_use]
+    pub fn state(&self, c: [usize; 3]) -> CellState {
+        self.classify(self.value(c))
+    }
+
+    /// The local cell holding a world point, if inside.
+    #[must_use]
+    pub fn cell_of(&self, p: &Point3<f64>) -> Option<[usize; 3]> {
+        self.lattice.cell_of(p).and_then(|g| self.local(g))
+    }
+
+    fn local(&self, global: [usize; 3]) -> Option<[usize; 3]> {
+        let mut c = [0; 3];
+        for i in 0..3 {
+            c[i] = global[i].checked_sub(self.corner[i])?;
+            if c[i] >= self.dims[i] {
+                return None;
+            }
+        }
+        Some(c)
+    }
+
+    fn add(&mut self, c: [usize; 3], delta: f32) {
+        let i = self.index(c);
+        self.cells[i] = (self.cells[i] + delta).clamp(self.params.min, self.params.max);
+    }
+
+    /// Inserts a ray from `origin` to `end`: every cell it crosses before the end cell
+    /// gets a miss; the end cell gets a hit if `hit` (a surface point), or a miss too
+    /// if not (a free-space point, e.g. from the free-space GMM). Only cells inside
+    /// `region` (all cells if `None`) change. Non-finite input is ignored.
+    pub fn insert_ray(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        region: Option<&CellBox>,
+    ) {
+        if !(origin
+            .coords
+            .iter()
+            .chain(end.coords.iter())
+            .all(|v| v.is_finite()))
+        {
+            return;
+        }
+        let end_cell = self.lattice.cell_of(end);
+        let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
+        let lattice = self.lattice;
+        let inside = |this: &Self, g: [usize; 3]| {
+            this.local(g)
+                .filter(|c| region.is_none_or(|r| r.contains(*c)))
+        };
+        lattice.traverse(origin, &(end - origin), 1.0, |g, _, _| {
+            if Some(g) != end_cell
+                && let Some(c) = inside(self, g)
+            {
+                self.add(c, miss_delta);
+            }
+            true
+        });
+        if let Some(g) = end_cell
+            && let Some(c) = inside(self, g)
+        {
+            self.add(c, if hit { hit_delta } else { miss_delta });
+        }
+    }
+
+    /// Moves the window so that it is centred on `centre` (snapped to the lattice):
+    /// cells in the overlap keep their values, the rest become unknown. Returns the
+    /// novel boxes (at most three, disjoint) that must be rebuilt from the maps
+    /// (thesis Fig. 3.2).
+    pub fn shift_to(&mut self, centre: &Point3<f64>) -> Vec<CellBox> {
+        let corner = Self::corner_for(&self.lattice, centre, self.dims);
+        if corner == self.corner {
+            return Vec::new();
+        }
+        let shift = [0, 1, 2].map(|i| corner[i] as i64 - self.corner[i] as i64);
+        let mut cells = vec![0.0; self.cells.len()];
+        let d = self.dims;
+        for z in 0..d[2] {
+            for y in 0..d[1] {
+                for x in 0..d[0] {
+                    let old = [
+                        x as i64 + shift[0],
+                        y as i64 + shift[1],
+                        z as i64 + shift[2],
+                    ];
+                    if (0..3).all(|i| old[i] >= 0 && old[i] < d[i] as i64) {
+                        let old = old.map(|v| v as usize);
+                        cells[x + d[0] * (y + d[1] * z)] = self.cells[self.index(old)];
+                    }
+                }
+            }
+        }
+        self.cells = cells;
+        self.corner = corner;
+        novel_boxes(d, shift)
+    }
+}
+
+/// The part of a box of `dims` cells, moved by `shift` cells, that the old box did
+/// not cover, as at most three disjoint boxes: a slab across x, then one across y
+/// outside it, then one across z outside both.
+fn novel_boxes(dims: [usize; 3], shift: [i64; 3]) -> Vec<CellBox> {
+    let mut boxes = Vec::new();
+    // The range of the old box along each axis, in new local indices, clamped.
+    let kept = |i: usize| -> (usize, usize) {
+        let n = dims[i] as i64;
+        let lo = (-shift[i]).clamp(0, n) as usize;
+        let hi = (n - shift[i]).clamp(0, n) as usize;
+        (lo, hi)
+    };
+    let mut lo = [0usize; 3];
+    let mut hi = dims;
+    for axis in 0..3 {
+        let (k_lo, k_hi) = kept(axis);
+        if k_lo > lo[axis] {
+            let mut max = hi;
+            max[axis] = k_lo;
+            boxes.push(CellBox { min: lo, max });
+        }
+        if k_hi < hi[axis] {
+            let mut min = lo;
+            min[axis] = k_hi;
+            boxes.push(CellBox { min, max: hi });
+        }
+        lo[axis] = k_lo.max(lo[axis]);
+        hi[axis] = k_hi.min(hi[axis]);
+        if lo[axis] >= hi[axis] {
+            // No overlap at all: the whole box was covered by the boxes above.
+            break;
+        }
+    }
+    boxes.retain(|b| b.cell_count() > 0);
+    boxes
+}

@@ -1,0 +1,19 @@
+//! The robot-centred local occupancy grid and what the planner reads from it
+//! (thesis §3.2.3, paper IV-B).
+//!
+//! - [`LocalGrid`]: log-odds cells in a box that moves with the robot; rays are
+//!   inserted with an exact 3D DDA on a world-fixed lattice, so two grids at different
+//!   positions agree cell for cell on what they share.
+//! - [`LocalGrid::shift_to`]: the moving window — copy the overlap, return the (at
+//!   most three) novel boxes to rebuild (Fig. 3.2).
+//! - [`distance`]: exact Euclidean distance transform over unsafe space.
+//! - [`frontier`]: frontier cells and map entropy.
+
+pub mod distance;
+pub mod frontier;
+mod local;
+
+pub use local::{CellBox, CellState, LocalGrid, LogOddsParams};
+
+#[cfg(test)]
+mod tests;

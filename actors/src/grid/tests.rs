@@ -1,0 +1,235 @@
+//! Grid tests: the distance transform against brute force, rays, the moving window
+//! against a rebuild from scratch, frontiers and entropy.
+
+use nalgebra::{Point3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::distance::{distance_to, unsafe_distance};
+use super::frontier::{entropy_bits, frontier_mask};
+use super::*;
+
+fn brute_force(sources: &[bool], dims: [usize; 3], cell_m: f64) -> Vec<f64> {
+    let cells: Vec<[usize; 3]> = (0..dims[2])
+        .flat_map(|z| (0..dims[1]).flat_map(move |y| (0..dims[0]).map(move |x| [x, y, z])))
+        .collect();
+    cells
+        .iter()
+        .map(|c| {
+            cells
+                .iter()
+                .zip(sources)
+                .filter(|(_, s)| **s)
+                .map(|(o, _)| {
+                    let d2: f64 = (0..3).map(|i| (c[i] as f64 - o[i] as f64).powi(2)).sum();
+                    d2.sqrt() * cell_m
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
+#[test]
+fn distance_transform_equals_brute_force_on_random_grids() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for case in 0..60 {
+        let dims = [
+            rng.random_range(1..9),
+            rng.random_range(1..9),
+            rng.random_range(1..7),
+        ];
+        let density = rng.random_range(0.0..0.3);
+        let n = dims.iter().product();
+        let sources: Vec<bool> = (0..n).map(|_| rng.random_bool(density)).collect();
+        let fast = distance_to(&sources, dims, 0.2);
+        let slow = brute_force(&sources, dims, 0.2);
+        for (i, (a, b)) in fast.iter().zip(&slow).enumerate() {
+            assert!(
+                (a == b) || (a - b).abs() < 1e-9,
+                "case {case} {dims:?} cell {i}: {a} vs {b}"
+            );
+        }
+    }
+}
+
+fn grid_at(x: f64) -> LocalGrid {
+    LocalGrid::centred(
+        &Point3::new(x, 0.0, 0.0),
+        &Vector3::new(4.0, 3.0, 2.0),
+        0.2,
+        LogOddsParams::default(),
+    )
+}
+
+#[test]
+fn a_ray_frees_its_path_and_occupies_its_end() {
+    let mut grid = grid_at(0.0);
+    let origin = Point3::new(-1.5, 0.1, 0.1);
+    let end = Point3::new(1.1, 0.1, 0.1);
+    grid.insert_ray(&origin, &end, true, None);
+    let end_cell = grid.cell_of(&end).unwrap();
+    assert_eq!(grid.state(end_cell), CellState::Occupied);
+    for x in [-1.4, -0.5, 0.0, 0.9] {
+        let c = grid.cell_of(&Point3::new(x, 0.1, 0.1)).unwrap();
+        assert_eq!(grid.state(c), CellState::Free, "x = {x}");
+    }
+    let beyond = grid.cell_of(&Point3::new(1.5, 0.1, 0.1)).unwrap();
+    assert_eq!(grid.state(beyond), CellState::Unknown);
+    // Clamping: many hits saturate at max.
+    for _ in 0..50 {
+        grid.insert_ray(&origin, &end, true, None);
+    }
+    assert_eq!(grid.value(end_cell), grid.params().max);
+    // Non-finite rays are ignored.
+    let before = grid.clone();
+    grid.insert_ray(&Point3::new(f64::NAN, 0.0, 0.0), &end, true, None);
+    assert_eq!(grid, before);
+}
+
+fn random_rays(rng: &mut ChaCha8Rng, n: usize) -> Vec<(Point3<f64>, Point3<f64>, bool)> {
+    (0..n)
+        .map(|_| {
+            let origin = Point3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.5..0.5),
+            );
+            let dir = Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.5..0.5),
+            );
+            let end = origin + dir.normalize() * rng.random_range(0.5..3.0);
+            (origin, end, rng.random_bool(0.8))
+        })
+        .collect()
+}
+
+#[test]
+fn moving_the_window_equals_rebuilding_at_the_new_pose() {
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    for case in 0..20 {
+        let rays = random_rays(&mut rng, 300);
+        let from = Point3::new(
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.5..0.5),
+            0.0,
+        );
+        let to = from
+            + Vector3::new(
+                rng.random_range(-2.0..2.0),
+                rng.random_range(-2.0..2.0),
+                rng.random_range(-1.0..1.0),
+            );
+        let size = Vector3::new(3.0, 2.6, 1.8);
+        let mut moved = LocalGrid::centred(&from, &size, 0.2, LogOddsParams::default());
+        for (o, e, hit) in &rays {
+            moved.insert_ray(o, e, *hit, None);
+        }
+        let novel = moved.shift_to(&to);
+        assert!(novel.len() <= 3);
+        for (o, e, hit) in &rays {
+            for b in &novel {
+                moved.insert_ray(o, e, *hit, Some(b));
+            }
+        }
+        let mut rebuilt = LocalGrid::centred(&to, &size, 0.2, LogOddsParams::default());
+        for (o, e, hit) in &rays {
+            rebuilt.insert_ray(o, e, *hit, None);
+        }
+        assert_eq!(moved.geometry(), rebuilt.geometry(), "case {case}");
+        assert!(
+            moved.values() == rebuilt.values(),
+            "case {case}: cells differ"
+        );
+    }
+}
+
+#[test]
+fn novel_boxes_are_disjoint_and_cover_exactly_the_new_cells() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..50 {
+        let mut grid = grid_at(0.0);
+        // Mark every cell as seen so that kept cells are recognisable.
+        let dims = grid.dims();
+        let all = CellBox {
+            min: [0; 3],
+            max: dims,
+        };
+        assert_eq!(all.cell_count(), grid.values().len());
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                for x in 0..dims[0] {
+                    let p = grid.geometry().cell_centre([x, y, z]);
+                    grid.insert_ray(&p, &p, true, None);
+                }
+            }
+        }
+        let to = Point3::new(
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-4.0..4.0),
+            rng.random_range(-3.0..3.0),
+        );
+        let novel = grid.shift_to(&to);
+        let mut count = 0;
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                for x in 0..dims[0] {
+                    let c = [x, y, z];
+                    let inside = novel.iter().filter(|b| b.contains(c)).count();
+                    assert!(inside <= 1, "boxes overlap at {c:?}");
+                    let unknown = grid.value(c) == 0.0;
+                    assert_eq!(inside == 1, unknown, "cell {c:?}");
+                    count += inside;
+                }
+            }
+        }
+        assert_eq!(count, novel.iter().map(CellBox::cell_count).sum::<usize>());
+    }
+}
+
+#[test]
+fn unsafe_distance_frontiers_and_entropy() {
+    let mut grid = grid_at(0.0);
+    let cells = grid.values().len() as f64;
+    assert!(
+        (entropy_bits(&grid) - cells).abs() < 1e-6,
+        "all unknown: one bit per cell"
+    );
+    assert!(frontier_mask(&grid).iter().all(|f| !f));
+    assert!(unsafe_distance(&grid).iter().all(|d| *d == 0.0));
+    for y in [-0.3, -0.1, 0.1, 0.3] {
+        grid.insert_ray(
+            &Point3::new(-1.9, y, 0.1),
+            &Point3::new(1.0, y, 0.1),
+            true,
+            None,
+        );
+    }
+    // Each cell was updated once: a miss leaves p = 0.4, a hit p = 0.7.
+    let h = |p: f64| -(p * p.log2() + (1.0 - p) * (1.0 - p).log2());
+    let count = |s: CellState| {
+        grid.values()
+            .iter()
+            .filter(|v| grid.classify(**v) == s)
+            .count() as f64
+    };
+    let (free, occupied) = (count(CellState::Free), count(CellState::Occupied));
+    assert_eq!(occupied, 4.0);
+    assert!(free >= 4.0 * 14.0);
+    let expected = cells - free * (1.0 - h(0.4)) - occupied * (1.0 - h(0.7));
+    assert!(
+        (entropy_bits(&grid) - expected).abs() < 1e-3,
+        "{} vs {expected}",
+        entropy_bits(&grid)
+    );
+    let free = grid.cell_of(&Point3::new(0.0, -0.1, 0.1)).unwrap();
+    assert_eq!(grid.state(free), CellState::Free);
+    let frontiers = frontier_mask(&grid);
+    assert!(
+        frontiers[grid.index(free)],
+        "a free cell next to unknown is a frontier"
+    );
+    let distance = unsafe_distance(&grid);
+    assert!((distance[grid.index(free)] - 0.2).abs() < 1e-12);
+}
