@@ -260,6 +260,11 @@ impl LocalGrid {
     /// gets a miss; the end cell gets a hit if `hit` (a surface point), or a miss too
     /// if not (a free-space point, e.g. from the free-space GMM). Only cells inside
     /// `region` (all cells if `None`) change. Non-finite input is ignored.
+    ///
+    /// The walk is an exact 3D DDA (Amanatides & Woo) in world-lattice cell units,
+    /// started at the origin's cell whatever the window's position, so every grid
+    /// visits the same lattice cells for the same ray; cells outside the window are
+    /// stepped over.
     pub fn insert_ray(
         &mut self,
         origin: &Point3<f64>,
@@ -275,25 +280,65 @@ impl LocalGrid {
         {
             return;
         }
-        let end_cell = self.lattice.cell_of(end);
-        let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
-        let lattice = self.lattice;
-        let inside = |this: &Self, g: [usize; 3]| {
-            this.local(g)
-                .filter(|c| region.is_none_or(|r| r.contains(*c)))
-        };
-        lattice.traverse(origin, &(end - origin), 1.0, |g, _, _| {
-            if Some(g) != end_cell
-                && let Some(c) = inside(self, g)
-            {
-                self.add(c, miss_delta);
+        let lattice_origin = self.lattice.origin.coords;
+        let inv_cell = 1.0 / self.lattice.cell_m;
+        let g0 = (origin.coords - lattice_origin) * inv_cell;
+        let g1 = (end.coords - lattice_origin) * inv_cell;
+        let span = 2.0 * LATTICE_HALF as f64;
+        if (0..3).any(|i| !(0.0..span).contains(&g0[i]) || !(0.0..span).contains(&g1[i])) {
+            return;
+        }
+        let dir = g1 - g0;
+        let cell = [0, 1, 2].map(|i| g0[i].floor() as i64);
+        let end_cell = [0, 1, 2].map(|i| g1[i].floor() as i64);
+        let mut step = [0i64; 3];
+        let mut t_next = [f64::INFINITY; 3];
+        let mut t_delta = [f64::INFINITY; 3];
+        for i in 0..3 {
+            if dir[i] > 0.0 {
+                step[i] = 1;
+                t_next[i] = ((cell[i] + 1) as f64 - g0[i]) / dir[i];
+                t_delta[i] = 1.0 / dir[i];
+            } else if dir[i] < 0.0 {
+                step[i] = -1;
+                t_next[i] = (cell[i] as f64 - g0[i]) / dir[i];
+                t_delta[i] = -1.0 / dir[i];
             }
-            true
-        });
-        if let Some(g) = end_cell
-            && let Some(c) = inside(self, g)
-        {
-            self.add(c, if hit { hit_delta } else { miss_delta });
+        }
+        let dims = self.dims.map(|d| d as i64);
+        let stride = [1, dims[0], dims[0] * dims[1]];
+        // Local coordinates (possibly outside the window) and the matching linear index.
+        let mut lc = [0, 1, 2].map(|i| cell[i] - self.corner[i] as i64);
+        let end_local = [0, 1, 2].map(|i| end_cell[i] - self.corner[i] as i64);
+        let mut index = lc[0] + stride[1] * lc[1] + stride[2] * lc[2];
+        let (min, max, miss) = (self.params.min, self.params.max, self.params.miss);
+        let inside = |lc: &[i64; 3]| {
+            (lc[0] as u64) < dims[0] as u64
+                && (lc[1] as u64) < dims[1] as u64
+                && (lc[2] as u64) < dims[2] as u64
+        };
+        let in_region = |lc: &[i64; 3]| region.is_none_or(|r| r.contains(lc.map(|v| v as usize)));
+        // The segment crosses exactly this many cell faces on its way to the end cell;
+        // taking that many steps keeps the walk bounded even if rounding at a corner
+        // sends it past a neighbour of the end cell (the end cell is updated below
+        // either way).
+        let crossings: i64 = (0..3).map(|i| (end_cell[i] - cell[i]).abs()).sum();
+        for _ in 0..crossings {
+            if inside(&lc) && in_region(&lc) {
+                let cell = &mut self.cells[index as usize];
+                *cell = (*cell + miss).clamp(min, max);
+            }
+            // Branch-free choice of the axis whose face comes first.
+            let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
+            let y_not_z = t_next[1] <= t_next[2];
+            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+            lc[axis] += step[axis];
+            index += step[axis] * stride[axis];
+            t_next[axis] += t_delta[axis];
+        }
+        if inside(&end_local) && in_region(&end_local) {
+            let c = end_local.map(|v| v as usize);
+            self.add(c, if hit { self.params.hit } else { miss });
         }
     }
 
