@@ -14,6 +14,7 @@ pub mod geometry;
 pub mod grid;
 pub mod link;
 pub mod msgs;
+pub mod planner;
 pub mod runtime;
 pub mod sensor;
 pub mod trajectory;

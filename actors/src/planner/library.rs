@@ -1,0 +1,225 @@
+//! Motion primitive libraries (MPLs): thesis Eq. 4.3 and Table 4.2, paper Table I.
+
+use serde::{Deserialize, Serialize};
+
+use super::primitives::Action;
+
+/// Which way a library's primitives head, in the body frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Heading {
+    /// Turn in place.
+    Yaw,
+    /// Along +x_B (perpendicular to the sensor scans).
+    Forward,
+    /// Along −x_B.
+    Backward,
+    /// Along +y_B (parallel to the scans).
+    Left,
+    /// Along −y_B.
+    Right,
+    /// Along z only.
+    Vertical,
+}
+
+/// Which speed bound a library uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedBound {
+    /// No translation.
+    Zero,
+    /// V⊥,max from Eq. 4.2.
+    Perpendicular,
+    /// V_max.
+    Max,
+}
+
+/// One library: a heading, a speed bound and a discretisation (N_ω × N_z primitives).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LibrarySpec {
+    /// Heading.
+    pub heading: Heading,
+    /// Speed bound.
+    pub speed: SpeedBound,
+    /// Yaw-rate samples (N_ω).
+    pub n_omega: usize,
+    /// Vertical-speed samples (N_z).
+    pub n_z: usize,
+    /// Fixed duration as a multiple of the base duration (paper Table I); `None`:
+    /// minimum duration by line search (thesis §4.1.2).
+    pub duration_factor: Option<f64>,
+}
+
+/// The numbers a library needs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LibraryParams {
+    /// Speed bound in the x_B–y_B plane, V_max, m/s (Table 4.2: 4.0).
+    pub max_speed_mps: f64,
+    /// Speed bound towards a frontier, V⊥,max, m/s (Eq. 4.2; 1.77 for Table 4.1).
+    pub perpendicular_speed_mps: f64,
+    /// Vertical speed bound V_z, m/s (Table 4.2: 0.3).
+    pub vertical_speed_mps: f64,
+    /// Yaw-rate bound Ω_max, rad/s.
+    pub max_yaw_rate_rad_s: f64,
+    /// Base duration τ for fixed-duration libraries, seconds (paper Table I: 3 s).
+    pub base_duration_s: f64,
+}
+
+impl Default for LibraryParams {
+    fn default() -> Self {
+        LibraryParams {
+            max_speed_mps: 4.0,
+            perpendicular_speed_mps: 1.77,
+            vertical_speed_mps: 0.3,
+            max_yaw_rate_rad_s: 0.6,
+            base_duration_s: 3.0,
+        }
+    }
+}
+
+const fn spec(heading: Heading, speed: SpeedBound, n_omega: usize, n_z: usize) -> LibrarySpec {
+    LibrarySpec {
+        heading,
+        speed,
+        n_omega,
+        n_z,
+        duration_factor: None,
+    }
+}
+
+/// Thesis Table 4.2a, the large library (186 primitives).
+#[must_use]
+pub fn large() -> Vec<LibrarySpec> {
+    use Heading::*;
+    use SpeedBound::*;
+    vec![
+        spec(Yaw, Zero, 1, 1),
+        spec(Forward, Perpendicular, 9, 5),
+        spec(Forward, Max, 9, 5),
+        spec(Left, Max, 9, 5),
+        spec(Right, Max, 9, 5),
+        spec(Vertical, Zero, 1, 5),
+    ]
+}
+
+/// Thesis Table 4.2b, the minimal library (40 primitives).
+#[must_use]
+pub fn minimal() -> Vec<LibrarySpec> {
+    use Heading::*;
+    use SpeedBound::*;
+    vec![
+        spec(Yaw, Zero, 1, 1),
+        spec(Forward, Perpendicular, 3, 3),
+        spec(Forward, Max, 3, 3),
+        spec(Left, Max, 3, 3),
+        spec(Right, Max, 3, 3),
+        spec(Vertical, Zero, 1, 3),
+    ]
+}
+
+/// Paper Table I (65 primitives, durations τ and 2τ).
+#[must_use]
+pub fn paper() -> Vec<LibrarySpec> {
+    use Heading::*;
+    use SpeedBound::*;
+    let fixed = |heading, n_omega, n_z, factor| LibrarySpec {
+        duration_factor: Some(factor),
+        ..spec(heading, Max, n_omega, n_z)
+    };
+    vec![
+        fixed(Forward, 3, 5, 1.0),
+        fixed(Forward, 3, 5, 2.0),
+        fixed(Backward, 3, 5, 1.0),
+        fixed(Backward, 3, 5, 2.0),
+        LibrarySpec {
+            duration_factor: Some(1.0),
+            ..spec(Vertical, Zero, 1, 5)
+        },
+    ]
+}
+
+/// `n` evenly spaced values in [−bound, bound] (just 0 for n = 1).
+fn symmetric(n: usize, bound: f64) -> Vec<f64> {
+    match n {
+        0 => Vec::new(),
+        1 => vec![0.0],
+        _ => (0..n)
+            .map(|i| -bound + 2.0 * bound * i as f64 / (n - 1) as f64)
+            .collect(),
+    }
+}
+
+/// The actions of one library (Eq. 4.3), with their fixed duration if any.
+#[must_use]
+pub fn actions(spec: &LibrarySpec, params: &LibraryParams) -> Vec<(Action, Option<f64>)> {
+    let speed = match spec.speed {
+        SpeedBound::Zero => 0.0,
+        SpeedBound::Perpendicular => params.perpendicular_speed_mps.min(params.max_speed_mps),
+        SpeedBound::Max => params.max_speed_mps,
+    };
+    let (vx, vy) = match spec.heading {
+        Heading::Forward => (speed, 0.0),
+        Heading::Backward => (-speed, 0.0),
+        Heading::Left => (0.0, speed),
+        Heading::Right => (0.0, -speed),
+        Heading::Yaw | Heading::Vertical => (0.0, 0.0),
+    };
+    let omegas = if spec.heading == Heading::Yaw {
+        vec![params.max_yaw_rate_rad_s]
+    } else {
+        symmetric(spec.n_omega, params.max_yaw_rate_rad_s)
+    };
+    let vzs = symmetric(spec.n_z, params.vertical_speed_mps);
+    let duration = spec.duration_factor.map(|f| f * params.base_duration_s);
+    omegas
+        .iter()
+        .flat_map(|&w| {
+            vzs.iter().map(move |&vz| {
+                (
+                    Action {
+                        vx_mps: vx,
+                        vy_mps: vy,
+                        vz_mps: vz,
+                        yaw_rate_rad_s: w,
+                    },
+                    duration,
+                )
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn count(specs: &[LibrarySpec]) -> usize {
+        let params = LibraryParams::default();
+        specs.iter().map(|s| actions(s, &params).len()).sum()
+    }
+
+    #[test]
+    fn library_sizes_match_the_tables() {
+        assert_eq!(count(&large()), 1 + 4 * 45 + 5);
+        assert_eq!(count(&minimal()), 1 + 4 * 9 + 3);
+        assert_eq!(count(&paper()), 4 * 15 + 5);
+        for s in large() {
+            let n = actions(&s, &LibraryParams::default()).len();
+            assert_eq!(n, s.n_omega * s.n_z, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn actions_respect_the_bounds_of_eq_4_3() {
+        let params = LibraryParams::default();
+        for s in large().iter().chain(&paper()) {
+            for (a, _) in actions(s, &params) {
+                assert!(a.vx_mps.hypot(a.vy_mps) <= params.max_speed_mps + 1e-12);
+                assert!(a.vz_mps.abs() <= params.vertical_speed_mps + 1e-12);
+                assert!(a.yaw_rate_rad_s.abs() <= params.max_yaw_rate_rad_s + 1e-12);
+            }
+        }
+    }
+}
