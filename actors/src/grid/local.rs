@@ -251,34 +251,23 @@ impl LocalGrid {
         Some(c)
     }
 
-    fn add(&mut self, c: [usize; 3], delta: f32) {
-        let i = self.index(c);
-        self.cells[i] = (self.cells[i] + delta).clamp(self.params.min, self.params.max);
-    }
-
-    /// Inserts a ray from `origin` to `end`: every cell it crosses before the end cell
-    /// gets a miss; the end cell gets a hit if `hit` (a surface point), or a miss too
-    /// if not (a free-space point, e.g. from the free-space GMM). Only cells inside
-    /// `region` (all cells if `None`) change. Non-finite input is ignored.
+    /// The cells a segment crosses, in order from `origin` to the cell holding `end`
+    /// (which comes last, marked [`RayStep::is_end`]); `None` for non-finite input or
+    /// points outside the lattice.
     ///
     /// The walk is an exact 3D DDA (Amanatides & Woo) in world-lattice cell units,
     /// started at the origin's cell whatever the window's position, so every grid
-    /// visits the same lattice cells for the same ray; cells outside the window are
-    /// stepped over.
-    pub fn insert_ray(
-        &mut self,
-        origin: &Point3<f64>,
-        end: &Point3<f64>,
-        hit: bool,
-        region: Option<&CellBox>,
-    ) {
+    /// visits the same lattice cells for the same segment; cells outside the window
+    /// come with `index: None`.
+    #[must_use]
+    pub fn walk(&self, origin: &Point3<f64>, end: &Point3<f64>) -> Option<RayWalk> {
         if !(origin
             .coords
             .iter()
             .chain(end.coords.iter())
             .all(|v| v.is_finite()))
         {
-            return;
+            return None;
         }
         let lattice_origin = self.lattice.origin.coords;
         let inv_cell = 1.0 / self.lattice.cell_m;
@@ -286,7 +275,7 @@ impl LocalGrid {
         let g1 = (end.coords - lattice_origin) * inv_cell;
         let span = 2.0 * LATTICE_HALF as f64;
         if (0..3).any(|i| !(0.0..span).contains(&g0[i]) || !(0.0..span).contains(&g1[i])) {
-            return;
+            return None;
         }
         let dir = g1 - g0;
         let cell = [0, 1, 2].map(|i| g0[i].floor() as i64);
@@ -307,38 +296,53 @@ impl LocalGrid {
         }
         let dims = self.dims.map(|d| d as i64);
         let stride = [1, dims[0], dims[0] * dims[1]];
-        // Local coordinates (possibly outside the window) and the matching linear index.
-        let mut lc = [0, 1, 2].map(|i| cell[i] - self.corner[i] as i64);
-        let end_local = [0, 1, 2].map(|i| end_cell[i] - self.corner[i] as i64);
-        let mut index = lc[0] + stride[1] * lc[1] + stride[2] * lc[2];
-        let (min, max, miss) = (self.params.min, self.params.max, self.params.miss);
-        let inside = |lc: &[i64; 3]| {
-            (lc[0] as u64) < dims[0] as u64
-                && (lc[1] as u64) < dims[1] as u64
-                && (lc[2] as u64) < dims[2] as u64
+        let local = [0, 1, 2].map(|i| cell[i] - self.corner[i] as i64);
+        Some(RayWalk {
+            index: local[0] + stride[1] * local[1] + stride[2] * local[2],
+            local,
+            end_local: [0, 1, 2].map(|i| end_cell[i] - self.corner[i] as i64),
+            step,
+            stride,
+            dims,
+            t_next,
+            t_delta,
+            t_enter: 0.0,
+            // The segment crosses exactly this many faces on its way to the end cell;
+            // taking that many steps bounds the walk even if rounding at a corner sends
+            // it past a neighbour of the end cell (the end cell comes last either way).
+            remaining: (0..3).map(|i| (end_cell[i] - cell[i]).abs()).sum(),
+            finished: false,
+        })
+    }
+
+    /// Inserts a ray from `origin` to `end`: every cell it crosses before the end cell
+    /// gets a miss; the end cell gets a hit if `hit` (a surface point), or a miss too
+    /// if not (a free-space point, e.g. from the free-space GMM). Only cells inside
+    /// `region` (all cells if `None`) change. Non-finite input is ignored.
+    pub fn insert_ray(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        region: Option<&CellBox>,
+    ) {
+        let Some(walk) = self.walk(origin, end) else {
+            return;
         };
-        let in_region = |lc: &[i64; 3]| region.is_none_or(|r| r.contains(lc.map(|v| v as usize)));
-        // The segment crosses exactly this many cell faces on its way to the end cell;
-        // taking that many steps keeps the walk bounded even if rounding at a corner
-        // sends it past a neighbour of the end cell (the end cell is updated below
-        // either way).
-        let crossings: i64 = (0..3).map(|i| (end_cell[i] - cell[i]).abs()).sum();
-        for _ in 0..crossings {
-            if inside(&lc) && in_region(&lc) {
-                let cell = &mut self.cells[index as usize];
-                *cell = (*cell + miss).clamp(min, max);
+        let (min, max) = (self.params.min, self.params.max);
+        let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
+        for step in walk {
+            let Some(i) = step.index else { continue };
+            if region.is_some_and(|r| !r.contains(step.cell)) {
+                continue;
             }
-            // Branch-free choice of the axis whose face comes first.
-            let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
-            let y_not_z = t_next[1] <= t_next[2];
-            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
-            lc[axis] += step[axis];
-            index += step[axis] * stride[axis];
-            t_next[axis] += t_delta[axis];
-        }
-        if inside(&end_local) && in_region(&end_local) {
-            let c = end_local.map(|v| v as usize);
-            self.add(c, if hit { self.params.hit } else { miss });
+            let delta = if step.is_end && hit {
+                hit_delta
+            } else {
+                miss_delta
+            };
+            let cell = &mut self.cells[i];
+            *cell = (*cell + delta).clamp(min, max);
         }
     }
 
@@ -410,4 +414,81 @@ fn novel_boxes(dims: [usize; 3], shift: [i64; 3]) -> Vec<CellBox> {
     }
     boxes.retain(|b| b.cell_count() > 0);
     boxes
+}
+
+/// One cell on a [`RayWalk`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayStep {
+    /// Local cell coordinates (meaningful only when `index` is `Some`).
+    pub cell: [usize; 3],
+    /// Linear index into [`LocalGrid::values`], `None` outside the window.
+    pub index: Option<usize>,
+    /// Fraction of the segment at which the walk entered the cell (0 for the first).
+    pub t_enter: f64,
+    /// Whether this is the cell holding the segment's end point.
+    pub is_end: bool,
+}
+
+/// The cells along a segment; see [`LocalGrid::walk`].
+#[derive(Clone, Debug)]
+pub struct RayWalk {
+    local: [i64; 3],
+    index: i64,
+    end_local: [i64; 3],
+    step: [i64; 3],
+    stride: [i64; 3],
+    dims: [i64; 3],
+    t_next: [f64; 3],
+    t_delta: [f64; 3],
+    t_enter: f64,
+    remaining: i64,
+    finished: bool,
+}
+
+impl RayWalk {
+    fn inside(&self, c: &[i64; 3]) -> bool {
+        (c[0] as u64) < self.dims[0] as u64
+            && (c[1] as u64) < self.dims[1] as u64
+            && (c[2] as u64) < self.dims[2] as u64
+    }
+}
+
+impl Iterator for RayWalk {
+    type Item = RayStep;
+
+    #[inline]
+    fn next(&mut self) -> Option<RayStep> {
+        if self.remaining > 0 {
+            let c = self.local;
+            let step = RayStep {
+                cell: c.map(|v| v as usize),
+                index: self.inside(&c).then_some(self.index as usize),
+                t_enter: self.t_enter,
+                is_end: false,
+            };
+            // Branch-free choice of the axis whose face comes first.
+            let x_first = self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2];
+            let y_not_z = self.t_next[1] <= self.t_next[2];
+            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+            self.t_enter = self.t_next[axis];
+            self.local[axis] += self.step[axis];
+            self.index += self.step[axis] * self.stride[axis];
+            self.t_next[axis] += self.t_delta[axis];
+            self.remaining -= 1;
+            return Some(step);
+        }
+        if self.finished {
+            return None;
+        }
+        self.finished = true;
+        let c = self.end_local;
+        let inside = self.inside(&c);
+        let stride = self.stride;
+        Some(RayStep {
+            cell: c.map(|v| v as usize),
+            index: inside.then(|| (c[0] + stride[1] * c[1] + stride[2] * c[2]) as usize),
+            t_enter: self.t_enter.min(1.0),
+            is_end: true,
+        })
+    }
 }

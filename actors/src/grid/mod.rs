@@ -13,7 +13,7 @@ pub mod distance;
 pub mod frontier;
 mod local;
 
-pub use local::{CellBox, CellState, LocalGrid, LogOddsParams};
+pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 
 #[cfg(test)]
 mod tests;

@@ -7,5 +7,6 @@
 //! - [`library`]: the motion primitive libraries of thesis Table 4.2 and paper Table I.
 
 pub mod bounds;
+pub mod csqmi;
 pub mod library;
 pub mod primitives;
