@@ -1,8 +1,16 @@
 //! troupe-comms: what crosses between robots, and how.
 //!
-//! - [`wire`]: the versioned envelope and its payloads, encoded with postcard.
-//!   Postcard is positional: the order of fields and enum variants *is* the
-//!   protocol. Changing it means bumping [`wire::FORMAT_VERSION`].
+//! - [`wire`]: the versioned envelope and its payloads (odometry, plan, keyframe
+//!   GMM exact or compact, occupancy-grid change set), encoded with postcard and
+//!   validated on both ends. Postcard is positional: the order of fields and enum
+//!   variants *is* the protocol. Changing it means bumping
+//!   [`wire::FORMAT_VERSION`].
+//! - [`shaping`]: per-link token bucket, strict priority classes, fragmentation,
+//!   queue policies (keep-latest, drop-oldest, store-and-forward) and their
+//!   counters; the [`shaping::Reassembler`] on the receive side. Runtime-free,
+//!   driven by explicit time.
+//! - [`simnet`]: a deterministic simulated network (latency, jitter, random and
+//!   bursty loss, reordering, duplication, range, partitions) for sim-time teams.
 //!
 //! ```
 //! use troupe_comms::wire::{self, Envelope, Odometry, Payload};
@@ -16,4 +24,6 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod shaping;
+pub mod simnet;
 pub mod wire;

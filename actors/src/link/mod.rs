@@ -134,6 +134,8 @@ impl LinkActor {
                 );
             }
             Payload::Heartbeat(_) => {}
+            // Keyframes, plans and grid change sets: not consumed yet.
+            _ => {}
         }
         Ok(())
     }

@@ -1,14 +1,34 @@
 //! The wire format: a versioned [`Envelope`] around a [`Payload`], postcard-encoded.
 //!
 //! Decoding never panics: bad input is a [`DecodeError`] that says why, and the
-//! caller counts and drops it.
+//! caller counts and drops it. Encoding refuses content a receiver would refuse
+//! ([`EncodeError::Invalid`]), so garbage never costs link bandwidth.
+//!
+//! One module per message class: [`Odometry`] (10 Hz, §8.2.3), [`Plan`]
+//! (committed trajectory + priority, §8.2.3), [`Keyframe`] (GMM + sensor pose +
+//! support size, §8.2.2; exact or [compact](Mixture::compact)), and
+//! [`GridChangeSet`] (the occupancy-grid baseline of §8.2.5). Each module's docs
+//! give its exact encoded size.
+//!
+//! Postcard is positional: the order of fields and of [`Payload`] variants is the
+//! protocol. New variants go at the end; anything else bumps [`FORMAT_VERSION`].
 
+mod check;
+pub mod grid;
+pub mod keyframe;
 mod odometry;
+pub mod plan;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+pub use check::{QUATERNION_NORM_TOLERANCE, WEIGHT_SUM_TOLERANCE};
+pub use grid::{CellChange, GridChangeSet, GridDims};
+pub use keyframe::{
+    CompactComponent3, CompactComponent4, Component3, Component4, Keyframe, Mixture, SensorPose,
+};
 pub use odometry::Odometry;
+pub use plan::{Plan, PlanKnot};
 
 /// Version of the wire format. Receivers reject envelopes of any other version.
 pub const FORMAT_VERSION: u16 = 1;
@@ -29,6 +49,17 @@ pub enum Class {
     Bulk,
 }
 
+impl Class {
+    /// Every class, highest priority first.
+    pub const ALL: [Class; 4] = [Class::Odometry, Class::Plan, Class::Keyframe, Class::Bulk];
+
+    /// Position in [`Class::ALL`] (0 = highest priority).
+    #[must_use]
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+}
+
 /// A robot is alive (sent when it has nothing else to say).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Heartbeat {
@@ -43,6 +74,13 @@ pub enum Payload {
     Odometry(Odometry),
     /// Liveness.
     Heartbeat(Heartbeat),
+    /// A keyframe GMM (class [`Class::Keyframe`]).
+    Keyframe(Keyframe),
+    /// A committed plan (class [`Class::Plan`]).
+    Plan(Plan),
+    /// An occupancy-grid change set, the map-sharing baseline; it competes with
+    /// keyframes, so it travels in [`Class::Keyframe`] too.
+    GridChanges(GridChangeSet),
 }
 
 impl Payload {
@@ -51,16 +89,23 @@ impl Payload {
     pub fn class(&self) -> Class {
         match self {
             Payload::Odometry(_) | Payload::Heartbeat(_) => Class::Odometry,
+            Payload::Plan(_) => Class::Plan,
+            Payload::Keyframe(_) | Payload::GridChanges(_) => Class::Keyframe,
         }
     }
 
-    fn validate(&self) -> Result<(), DecodeError> {
+    /// Checks the values (what [`decode`] checks after parsing, and [`encode`]
+    /// before writing).
+    pub fn validate(&self) -> Result<(), ContentError> {
         match self {
             Payload::Odometry(o) => o.validate(),
             Payload::Heartbeat(h) if !(h.uptime_s.is_finite() && h.uptime_s >= 0.0) => Err(
-                DecodeError::Invalid("heartbeat uptime is not a finite number ≥ 0"),
+                ContentError::Message("heartbeat uptime is not a finite number ≥ 0"),
             ),
             Payload::Heartbeat(_) => Ok(()),
+            Payload::Keyframe(k) => k.validate(),
+            Payload::Plan(p) => p.validate(),
+            Payload::GridChanges(g) => g.validate(),
         }
     }
 }
@@ -128,17 +173,63 @@ pub enum DecodeError {
     },
     /// Decoded, but the values are not acceptable (NaN, not normalised, …).
     #[error("invalid content: {0}")]
-    Invalid(&'static str),
+    Invalid(#[from] ContentError),
+}
+
+/// Why a payload's values are not acceptable; shared by [`decode`] and [`encode`].
+#[derive(Clone, Copy, Debug, Error, PartialEq, Eq)]
+pub enum ContentError {
+    /// A property of the whole message.
+    #[error("{0}")]
+    Message(&'static str),
+    /// A property of one element of a list (component, knot, cell).
+    #[error("element {index}: {reason}")]
+    Element {
+        /// Position in its list.
+        index: usize,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
 }
 
 /// Why an envelope could not be encoded.
 #[derive(Debug, Error)]
-#[error("cannot encode message: {0}")]
-pub struct EncodeError(#[from] postcard::Error);
+pub enum EncodeError {
+    /// Postcard failed (should not happen for in-memory output).
+    #[error("cannot encode message: {0}")]
+    Postcard(#[from] postcard::Error),
+    /// The content would be rejected by a receiver.
+    #[error("refusing to encode invalid content: {0}")]
+    Invalid(#[from] ContentError),
+    /// The header's class does not match the payload (built without
+    /// [`Envelope::new`]).
+    #[error("class {header:?} in the header does not match the payload's {payload:?}")]
+    ClassMismatch {
+        /// From the header.
+        header: Class,
+        /// From the payload.
+        payload: Class,
+    },
+    /// Encoded, but larger than [`MAX_MESSAGE_BYTES`].
+    #[error("message of {0} bytes exceeds the {MAX_MESSAGE_BYTES}-byte limit")]
+    TooLarge(usize),
+}
 
-/// Encodes an envelope.
+/// Encodes an envelope, refusing content that [`decode`] would reject.
 pub fn encode(envelope: &Envelope) -> Result<Vec<u8>, EncodeError> {
-    Ok(postcard::to_allocvec(envelope)?)
+    let payload_class = envelope.payload.class();
+    if envelope.class != payload_class {
+        return Err(EncodeError::ClassMismatch {
+            header: envelope.class,
+            payload: payload_class,
+        });
+    }
+    envelope.payload.validate()?;
+    let bytes = postcard::to_allocvec(envelope)?;
+    if bytes.len() > MAX_MESSAGE_BYTES {
+        return Err(EncodeError::TooLarge(bytes.len()));
+    }
+    Ok(bytes)
 }
 
 /// Decodes and validates an envelope.
@@ -169,4 +260,8 @@ pub fn decode(bytes: &[u8]) -> Result<Envelope, DecodeError> {
 }
 
 #[cfg(test)]
+mod payload_tests;
+#[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod testutil;

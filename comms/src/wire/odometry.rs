@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::DecodeError;
+use super::ContentError;
 
 /// Pose and velocity, sent at 10 Hz for inter-robot avoidance (thesis §8.2.3).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -16,7 +16,7 @@ pub struct Odometry {
 }
 
 impl Odometry {
-    pub(super) fn validate(&self) -> Result<(), DecodeError> {
+    pub(super) fn validate(&self) -> Result<(), ContentError> {
         let finite = self
             .position_m
             .iter()
@@ -24,11 +24,11 @@ impl Odometry {
             .chain(&self.velocity_mps)
             .all(|v| v.is_finite());
         if !finite {
-            return Err(DecodeError::Invalid("odometry contains NaN or infinity"));
+            return Err(ContentError::Message("odometry contains NaN or infinity"));
         }
         let norm2: f64 = self.orientation_xyzw.iter().map(|v| v * v).sum();
         if (norm2 - 1.0).abs() > 1e-6 {
-            return Err(DecodeError::Invalid(
+            return Err(ContentError::Message(
                 "odometry orientation is not a unit quaternion",
             ));
         }

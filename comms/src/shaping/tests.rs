@@ -1,0 +1,553 @@
+//! Shaping conformance in sim time.
+
+use proptest::prelude::*;
+
+use super::*;
+
+const MS: u64 = 1_000_000;
+const S: u64 = 1_000_000_000;
+
+fn config(rate_bps: u64, burst_bytes: u64, mtu_bytes: usize) -> ShaperConfig {
+    ShaperConfig {
+        rate_bps: Some(rate_bps),
+        burst_bytes,
+        mtu_bytes,
+        ..ShaperConfig::default()
+    }
+}
+
+/// Transmission time of `bytes` at `rate_bps`, ns (rounded up).
+fn tx_ns(bytes: usize, rate_bps: u64) -> u64 {
+    (bytes as u64 * 8 * S).div_ceil(rate_bps)
+}
+
+/// Drives one shaper: offers at their times, polls whenever it may send, until
+/// `until_ns`. Returns each frame with its poll time.
+fn drive(
+    shaper: &mut LinkShaper,
+    offers: &[(u64, Class, usize)],
+    until_ns: u64,
+    mut on_frame: impl FnMut(u64, Frame),
+) {
+    let mut next_offer = 0;
+    let mut now = 0;
+    loop {
+        let offer_t = offers.get(next_offer).map(|o| o.0);
+        let send_t = shaper.next_send_time(now);
+        let Some(t) = [offer_t, send_t].into_iter().flatten().min() else {
+            break;
+        };
+        if t > until_ns {
+            break;
+        }
+        assert!(t >= now, "time went backwards");
+        now = t;
+        while let Some(&(ot, class, len)) = offers.get(next_offer) {
+            if ot > now {
+                break;
+            }
+            let _ = shaper.offer(now, class, vec![class.index() as u8; len]);
+            next_offer += 1;
+        }
+        let mut sent = false;
+        while let Some(f) = shaper.poll(now) {
+            sent = true;
+            on_frame(now, f);
+        }
+        if !sent && send_t == Some(now) && offer_t != Some(now) {
+            panic!("next_send_time promised a frame at {now} that poll did not give");
+        }
+    }
+}
+
+#[test]
+fn saturated_250kbps_link_delivers_rate_times_time_plus_burst() {
+    let (rate, burst) = (250_000u64, 4_000u64);
+    let mut c = config(rate, burst, 1_200);
+    c.keyframe.capacity_messages = 16;
+    let mut shaper = LinkShaper::new(c).unwrap();
+    // 6 kB keyframes at 10 Hz: 480 kbit/s offered, about twice the rate.
+    let offers: Vec<_> = (0..600)
+        .map(|i| (i * 100 * MS, Class::Keyframe, 6_039))
+        .collect();
+    let mut delivered = 0u64;
+    drive(&mut shaper, &offers, 60 * S, |_, f| {
+        delivered += f.bytes.len() as u64
+    });
+    let bound = rate * 60 / 8 + burst;
+    let ratio = delivered as f64 / bound as f64;
+    eprintln!("saturated 250 kbit/s for 60 s: {delivered} B of {bound} B ({ratio:.4})");
+    assert!((0.95..=1.0).contains(&ratio), "{ratio}");
+    assert_eq!(shaper.stats().total_sent_bytes(), delivered);
+    assert!(shaper.stats().class(Class::Keyframe).drops.overflow > 0);
+}
+
+/// Delays through shaper + a serialising link at the same rate (what a radio
+/// does with what the shaper releases). Returns per-class max end-to-end delay
+/// (offer → last byte of the message received), ns.
+fn priority_run(mtu: usize, burst: u64) -> ([u64; 4], ShaperStats) {
+    let rate = 250_000;
+    let mut shaper = LinkShaper::new(config(rate, burst, mtu)).unwrap();
+    let mut offers = Vec::new();
+    for i in 0..600u64 {
+        offers.push((i * 100 * MS, Class::Odometry, 90)); // 10 Hz odometry
+        offers.push((i * 100 * MS + 37 * MS, Class::Keyframe, 6_039)); // 10 Hz keyframes
+        if i % 10 == 3 {
+            offers.push((i * 100 * MS + 51 * MS, Class::Plan, 615)); // 1 Hz plans
+        }
+    }
+    offers.sort_by_key(|o| o.0);
+    // Message ids are assigned in offer order (every offer is accepted here).
+    let offered_at: std::collections::HashMap<u32, u64> = offers
+        .iter()
+        .enumerate()
+        .map(|(id, o)| (id as u32, o.0))
+        .collect();
+    let mut link_free = 0u64;
+    let mut worst = [0u64; 4];
+    drive(&mut shaper, &offers, 60 * S, |t, f| {
+        let arrival = t.max(link_free) + tx_ns(f.bytes.len(), rate);
+        link_free = arrival;
+        if let FrameKind::Data {
+            message_id,
+            index,
+            count,
+        } = f.kind
+            && index + 1 == count
+        {
+            let d = arrival - offered_at[&message_id];
+            let w = &mut worst[f.class.index()];
+            *w = (*w).max(d);
+        }
+    });
+    (worst, *shaper.stats())
+}
+
+/// While keyframes saturate the link, odometry and plans keep a bounded delay.
+///
+/// Bound: the bucket's credit is never negative and a lower class is never
+/// chosen while a higher one waits, so a message leaves the shaper within
+/// (its own frame bytes + higher-priority frame bytes offered meanwhile) · 8 /
+/// rate. The link behind it serialises at the same rate and never holds more
+/// than `burst_bytes` of earlier frames (token-bucket output into a server of
+/// the same rate), adding at most burst · 8 / rate. With one MTU of burst:
+/// odometry ≤ (101 + 1200) B, plans ≤ (626 + 101 + 1200) B at 250 kbit/s, i.e.
+/// 41.6 ms and 61.7 ms — against 193 ms for a whole 6 kB keyframe.
+#[test]
+fn odometry_and_plans_keep_a_bounded_delay_while_keyframes_saturate() {
+    let (mtu, rate) = (1_200usize, 250_000);
+    let (worst, stats) = priority_run(mtu, mtu as u64);
+    let odometry_bound = tx_ns(90 + DATA_HEADER_BYTES + mtu, rate);
+    let plan_bound = tx_ns(615 + DATA_HEADER_BYTES + 90 + DATA_HEADER_BYTES + mtu, rate);
+    eprintln!(
+        "fragmented (MTU {mtu}): worst odometry {:.1} ms (bound {:.1}), plan {:.1} ms (bound {:.1})",
+        worst[0] as f64 / 1e6,
+        odometry_bound as f64 / 1e6,
+        worst[1] as f64 / 1e6,
+        plan_bound as f64 / 1e6
+    );
+    assert!(worst[0] <= odometry_bound, "odometry {}", worst[0]);
+    assert!(worst[1] <= plan_bound, "plan {}", worst[1]);
+    assert_eq!(stats.class(Class::Odometry).sent_messages, 600);
+    assert_eq!(stats.class(Class::Plan).sent_messages, 60);
+    assert_eq!(stats.class(Class::Odometry).drops.total(), 0);
+    // Keyframes still get the rest of the link.
+    assert!(stats.class(Class::Keyframe).sent_messages > 250);
+
+    // Without fragmentation (one frame per keyframe, burst to match) a plan can
+    // wait behind a whole keyframe on the link.
+    let (worst_whole, _) = priority_run(7_000, 7_000);
+    eprintln!(
+        "unfragmented: worst odometry {:.1} ms, plan {:.1} ms",
+        worst_whole[0] as f64 / 1e6,
+        worst_whole[1] as f64 / 1e6
+    );
+    assert!(worst_whole[1] > tx_ns(6_039, rate));
+}
+
+/// A→B keyframes over store-and-forward, B→A acknowledgements, both through
+/// shapers; every frame in either direction sent during the partition is lost.
+#[test]
+fn store_and_forward_loses_nothing_over_a_30s_partition() {
+    let (rate, mtu) = (250_000, 1_200);
+    let mut c = config(rate, mtu as u64, mtu);
+    c.keyframe = ClassConfig {
+        capacity_messages: 64,
+        ..ClassConfig::store_and_forward()
+    };
+    let mut a = LinkShaper::new(c).unwrap();
+    let mut b = LinkShaper::new(c).unwrap();
+    let mut at_b = Reassembler::default();
+    let mut at_a = Reassembler::default();
+    let partitioned = |t: u64| (10 * S..40 * S).contains(&t);
+    let latency = 20 * MS;
+    // In flight: (arrival, to_b, bytes).
+    let mut flight: Vec<(u64, bool, Vec<u8>)> = Vec::new();
+    let mut accepted = Vec::new();
+    let mut received = Vec::new();
+    let mut now = 0u64;
+    let mut next_offer = 0u64;
+    while now <= 120 * S {
+        let t_offer = (next_offer < 60).then_some(next_offer * S);
+        let t_flight = flight.iter().map(|f| f.0).min();
+        let candidates = [
+            t_offer,
+            a.next_send_time(now),
+            b.next_send_time(now),
+            t_flight,
+        ];
+        let Some(t) = candidates.into_iter().flatten().min() else {
+            break;
+        };
+        now = t;
+        if t_offer == Some(now) {
+            let body = (next_offer as u32).to_le_bytes().repeat(1_500); // 6 kB
+            accepted.push(a.offer(now, Class::Keyframe, body).unwrap().0);
+            next_offer += 1;
+        }
+        let (due, rest): (Vec<_>, Vec<_>) = flight.drain(..).partition(|f| f.0 <= now);
+        flight = rest;
+        for (_, to_b, bytes) in due {
+            if to_b {
+                match at_b.push(now, 0, &bytes).unwrap() {
+                    Some(Incoming::Message(m)) => {
+                        received.push(m.message_id);
+                        assert!(m.ack_requested);
+                        b.queue_ack(m.message_id);
+                    }
+                    Some(Incoming::Duplicate {
+                        message_id,
+                        ack_requested: true,
+                        ..
+                    }) => b.queue_ack(message_id),
+                    _ => {}
+                }
+            } else if let Some(Incoming::Ack { ids, .. }) = at_a.push(now, 1, &bytes).unwrap() {
+                for id in ids {
+                    a.acknowledge(now, MessageId(id));
+                }
+            }
+        }
+        for (shaper, to_b) in [(&mut a, true), (&mut b, false)] {
+            while let Some(f) = shaper.poll(now) {
+                if !partitioned(now) {
+                    flight.push((now + latency, to_b, f.bytes));
+                }
+            }
+        }
+    }
+    let stats = a.stats().class(Class::Keyframe);
+    eprintln!(
+        "store-and-forward over a 30 s partition: {} accepted, {} received, {} retransmissions, {} duplicates at the receiver",
+        accepted.len(),
+        received.len(),
+        stats.retransmitted_messages,
+        at_b.stats().duplicates
+    );
+    assert_eq!(accepted.len(), 60);
+    assert_eq!(
+        received, accepted,
+        "every accepted keyframe, once, in order"
+    );
+    assert_eq!(stats.drops.total(), 0);
+    assert_eq!(stats.acknowledged_messages, 60);
+    assert_eq!(
+        a.queued_messages(Class::Keyframe),
+        0,
+        "store empty once acknowledged"
+    );
+    assert!(stats.retransmitted_messages > 0);
+}
+
+#[test]
+fn a_full_store_refuses_and_keeps_what_it_accepted() {
+    let mut c = config(100_000, 1_200, 1_200);
+    c.keyframe = ClassConfig {
+        capacity_messages: 3,
+        ..ClassConfig::store_and_forward()
+    };
+    let mut s = LinkShaper::new(c).unwrap();
+    for i in 0..3 {
+        s.offer(0, Class::Keyframe, vec![i; 100]).unwrap();
+    }
+    assert_eq!(
+        s.offer(0, Class::Keyframe, vec![9; 100]),
+        Err(Refused::StoreFull)
+    );
+    // Sending does not free the store; acknowledging does.
+    let mut t = 0;
+    while let Some(next) = s.next_send_time(t) {
+        t = next;
+        if s.poll(t).is_none() || t > 10 * S {
+            break;
+        }
+    }
+    assert_eq!(s.queued_messages(Class::Keyframe), 3);
+    assert_eq!(
+        s.offer(t, Class::Keyframe, vec![9; 100]),
+        Err(Refused::StoreFull)
+    );
+    assert!(s.acknowledge(t, MessageId(0)));
+    assert!(!s.acknowledge(t, MessageId(0)));
+    assert!(s.offer(t, Class::Keyframe, vec![9; 100]).is_ok());
+    let st = s.stats().class(Class::Keyframe);
+    assert_eq!(st.drops.store_full, 2);
+    assert_eq!(st.acknowledged_messages, 1);
+}
+
+#[test]
+fn keep_latest_supersedes_and_drop_oldest_overflows() {
+    let mut c = config(8_000, 1_200, 1_200); // 1 kB/s: nothing drains quickly
+    c.bulk = ClassConfig {
+        capacity_messages: 2,
+        ..ClassConfig::default()
+    };
+    let mut s = LinkShaper::new(c).unwrap();
+    // Odometry: a partly sent message is finished; waiting ones are replaced.
+    s.offer(0, Class::Odometry, vec![1; 2_000]).unwrap();
+    let first = s.poll(0).unwrap(); // fragment 0 of 2
+    assert!(matches!(
+        first.kind,
+        FrameKind::Data {
+            index: 0,
+            count: 2,
+            ..
+        }
+    ));
+    s.offer(0, Class::Odometry, vec![2; 50]).unwrap();
+    s.offer(0, Class::Odometry, vec![3; 50]).unwrap();
+    assert_eq!(s.queued_messages(Class::Odometry), 2);
+    assert_eq!(s.stats().class(Class::Odometry).drops.superseded, 1);
+    // Bulk: a bounded FIFO that drops its oldest.
+    for i in 0..5 {
+        s.offer(0, Class::Bulk, vec![i; 10]).unwrap();
+    }
+    assert_eq!(s.queued_messages(Class::Bulk), 2);
+    assert_eq!(s.stats().class(Class::Bulk).drops.overflow, 3);
+    // Too large for the class capacity.
+    c.plan.capacity_bytes = 100;
+    let mut s = LinkShaper::new(c).unwrap();
+    assert!(matches!(
+        s.offer(0, Class::Plan, vec![0; 101]),
+        Err(Refused::TooLarge { .. })
+    ));
+    assert_eq!(s.stats().class(Class::Plan).drops.too_large, 1);
+}
+
+#[test]
+fn unlimited_links_send_at_once_and_count_bytes() {
+    let mut s = LinkShaper::new(ShaperConfig::default()).unwrap();
+    s.offer(5, Class::Keyframe, vec![0; 10_000]).unwrap();
+    assert_eq!(s.next_send_time(5), Some(5));
+    let mut n = 0;
+    while s.poll(5).is_some() {
+        n += 1;
+    }
+    assert_eq!(n, 10_000usize.div_ceil(1_200 - DATA_HEADER_BYTES));
+    assert_eq!(s.next_send_time(5), None);
+    let st = s.stats().class(Class::Keyframe);
+    assert_eq!(st.sent_bytes, 10_000 + n as u64 * DATA_HEADER_BYTES as u64);
+    assert_eq!(st.completion_delay.max_ns, 0);
+}
+
+#[test]
+fn age_of_information_is_a_time_average() {
+    let mut a = AgeOfInformation::default();
+    // Updates generated every second, delivered 0.2 s later: age saws between
+    // 0.2 and 1.2 s, mean 0.7 s.
+    for i in 0..100u64 {
+        a.record(i * S + 200 * MS, i * S);
+    }
+    let mean = a.mean_s(99 * S + 200 * MS).unwrap();
+    assert!((mean - 0.7).abs() < 1e-9, "{mean}");
+    assert!((a.peak_ns as f64 * 1e-9 - 1.2).abs() < 1e-9);
+    // A stale update does not make the information younger.
+    a.record(100 * S, 5 * S);
+    assert_eq!(a.newest_generated_ns, Some(99 * S));
+}
+
+#[test]
+fn reassembler_bounds_memory_times_out_and_drops_duplicates() {
+    let r_config = ReassemblyConfig {
+        max_bytes: 10_000,
+        max_messages: 4,
+        timeout_s: 1.0,
+        dedup_window: 8,
+    };
+    let mut r = Reassembler::new(r_config).unwrap();
+    let mut s = LinkShaper::new(ShaperConfig::default()).unwrap();
+    // Six 3-fragment messages; deliver only the first fragment of each.
+    for i in 0..6u8 {
+        s.offer(0, Class::Bulk, vec![i; 3_000]).unwrap();
+    }
+    let frames: Vec<Frame> = std::iter::from_fn(|| s.poll(0)).collect();
+    assert_eq!(frames.len(), 18);
+    for f in frames.iter().step_by(3) {
+        assert_eq!(r.push(0, 7, &f.bytes).unwrap(), None);
+    }
+    assert_eq!(r.partial_messages(), 4);
+    assert_eq!(r.stats().evicted, 2);
+    assert!(r.held_bytes() <= 10_000);
+    // Time out the rest.
+    r.expire(2 * S);
+    assert_eq!(r.partial_messages(), 0);
+    assert_eq!(r.held_bytes(), 0);
+    assert_eq!(r.stats().incomplete_timed_out, 4);
+    // Complete one message, out of order, then see its fragments again.
+    let msg: Vec<&Frame> = frames[3..6].iter().collect();
+    assert_eq!(r.push(3 * S, 7, &msg[2].bytes).unwrap(), None);
+    assert_eq!(r.push(3 * S, 7, &msg[0].bytes).unwrap(), None);
+    let Some(Incoming::Message(m)) = r.push(3 * S, 7, &msg[1].bytes).unwrap() else {
+        panic!("expected a message");
+    };
+    assert_eq!(
+        (m.message_id, m.bytes.len(), m.class),
+        (1, 3_000, Class::Bulk)
+    );
+    assert_eq!(r.push(3 * S, 7, &msg[0].bytes).unwrap(), None);
+    assert!(matches!(
+        r.push(3 * S, 7, &msg[2].bytes).unwrap(),
+        Some(Incoming::Duplicate {
+            message_id: 1,
+            ack_requested: false,
+            ..
+        })
+    ));
+    assert_eq!(r.stats().duplicates, 2);
+    // The same id from another source is another message.
+    assert_eq!(r.push(3 * S, 8, &msg[0].bytes).unwrap(), None);
+}
+
+#[test]
+fn reassembler_rejects_malformed_frames() {
+    let mut r = Reassembler::default();
+    assert_eq!(r.push(0, 0, &[]), Err(FrameError::Truncated(0)));
+    assert_eq!(r.push(0, 0, &[9]), Err(FrameError::UnknownKind(9)));
+    assert_eq!(r.push(0, 0, &[0, 1, 0]), Err(FrameError::Truncated(3)));
+    let mut bad_class = frame::data_frame(
+        &DataHeader {
+            class: Class::Bulk,
+            ack_requested: false,
+            message_id: 1,
+            index: 0,
+            count: 2,
+        },
+        b"abc",
+    );
+    bad_class[1] = 4;
+    assert_eq!(r.push(0, 0, &bad_class), Err(FrameError::UnknownClass(4)));
+    let mut bad_index = bad_class.clone();
+    bad_index[1] = 0;
+    bad_index[7] = 2;
+    assert!(matches!(
+        r.push(0, 0, &bad_index),
+        Err(FrameError::BadFragment { .. })
+    ));
+    assert_eq!(
+        r.push(0, 0, &[1, 2, 0, 1, 2, 3, 4]),
+        Err(FrameError::BadAck)
+    );
+    // Fragment counts that disagree.
+    let f = |count| {
+        frame::data_frame(
+            &DataHeader {
+                class: Class::Bulk,
+                ack_requested: false,
+                message_id: 5,
+                index: 0,
+                count,
+            },
+            b"x",
+        )
+    };
+    assert_eq!(r.push(0, 0, &f(3)).unwrap(), None);
+    assert_eq!(r.push(0, 0, &f(4)), Err(FrameError::Inconsistent(5)));
+    assert_eq!(r.stats().malformed_frames, 7);
+}
+
+#[test]
+fn config_reads_from_toml_and_names_bad_keys() {
+    let c: ShaperConfig = toml::from_str(
+        "rate_bps = 100_000\nburst_bytes = 2000\nmtu_bytes = 1000\n[plan]\npolicy = \"keep_latest\"\n",
+    )
+    .unwrap();
+    c.validate().unwrap();
+    assert_eq!(c.plan.policy, QueuePolicy::KeepLatest);
+    assert_eq!(
+        c.odometry,
+        ClassConfig::keep_latest(),
+        "untouched tables keep their default"
+    );
+    assert!(toml::from_str::<ShaperConfig>("rate_bsp = 1").is_err());
+    let err = |c: ShaperConfig| c.validate().unwrap_err().key;
+    assert_eq!(
+        err(ShaperConfig {
+            rate_bps: Some(0),
+            ..c
+        }),
+        "rate_bps"
+    );
+    assert_eq!(err(ShaperConfig { mtu_bytes: 10, ..c }), "mtu_bytes");
+    assert_eq!(
+        err(ShaperConfig {
+            burst_bytes: 999,
+            ..c
+        }),
+        "burst_bytes"
+    );
+    let mut bad = c;
+    bad.keyframe.retransmit_timeout_s = f64::NAN;
+    assert_eq!(err(bad), "keyframe.retransmit_timeout_s");
+    let e = ShaperConfig { mtu_bytes: 10, ..c }.validate().unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "`mtu_bytes` must be between 64 and 65507 (got 10)"
+    );
+    assert_eq!(
+        ReassemblyConfig {
+            timeout_s: -1.0,
+            ..ReassemblyConfig::default()
+        }
+        .validate()
+        .unwrap_err()
+        .key,
+        "timeout_s"
+    );
+}
+
+proptest! {
+    #[test]
+    fn reassembler_never_panics_on_random_frames(
+        frames in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 0..40),
+    ) {
+        let mut r = Reassembler::new(ReassemblyConfig { max_bytes: 200, max_messages: 3, ..ReassemblyConfig::default() }).unwrap();
+        for (i, f) in frames.iter().enumerate() {
+            let _ = r.push(i as u64 * MS, (i % 2) as u32, f);
+            prop_assert!(r.held_bytes() <= 200);
+            prop_assert!(r.partial_messages() <= 3);
+        }
+    }
+
+    /// Whatever the sizes and MTU, fragments reassemble to the original bytes,
+    /// and no frame exceeds the MTU.
+    #[test]
+    fn fragments_reassemble_exactly(
+        mtu in 64usize..2_000,
+        sizes in proptest::collection::vec(0usize..5_000, 1..6),
+    ) {
+        let mut s = LinkShaper::new(ShaperConfig { mtu_bytes: mtu, ..ShaperConfig::default() }).unwrap();
+        let mut r = Reassembler::default();
+        let messages: Vec<Vec<u8>> = sizes.iter().enumerate().map(|(i, n)| (0..*n).map(|j| (i * 31 + j) as u8).collect()).collect();
+        for m in &messages {
+            s.offer(0, Class::Bulk, m.clone()).unwrap();
+        }
+        let mut out = Vec::new();
+        while let Some(f) = s.poll(0) {
+            prop_assert!(f.bytes.len() <= mtu);
+            if let Some(Incoming::Message(m)) = r.push(0, 0, &f.bytes).unwrap() {
+                out.push(m.bytes);
+            }
+        }
+        prop_assert_eq!(out, messages);
+    }
+}
