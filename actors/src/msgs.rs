@@ -5,11 +5,13 @@
 //! | `odometry` | [`Odometry`] | vehicle → sensor, explorer, link |
 //! | `sensor/frame` | [`DepthFrame`] | sensor → mapper |
 //! | `plan/committed` | [`Plan`] | explorer/planner → vehicle, link |
+//! | `grid/snapshot` | [`GridSnapshot`] | local grid → planner, collision |
 //! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
 //! | `link/tx`, `link/rx` | [`LinkTx`](crate::runtime::LinkTx), [`LinkRx`](crate::runtime::LinkRx) | link ↔ network |
 
 use nalgebra::{Isometry3, Vector3};
 
+use crate::grid::LocalGrid;
 use crate::runtime::{Message, RobotId, Time, Topic};
 use crate::trajectory::Trajectory;
 
@@ -102,11 +104,53 @@ pub struct PeerOdometry {
 }
 impl Message for PeerOdometry {}
 
+/// The local grid and its distance fields, as the planner and collision checker read
+/// them. Published shared (one `Arc`, no copies per subscriber).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridSnapshot {
+    /// When it was taken.
+    pub stamp: Time,
+    /// The grid.
+    pub grid: LocalGrid,
+    /// Distance from each cell to unsafe (occupied or unknown) space, metres.
+    pub unsafe_distance_m: Vec<f64>,
+    /// Distance from each cell to the nearest frontier, metres (∞ without one).
+    pub frontier_distance_m: Vec<f64>,
+}
+
+impl Message for GridSnapshot {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + 4 * self.grid.values().len()
+            + 8 * (self.unsafe_distance_m.len() + self.frontier_distance_m.len())
+    }
+}
+
+impl GridSnapshot {
+    /// Distance to unsafe space at a world point (0 outside the grid: unknown).
+    #[must_use]
+    pub fn clearance_m(&self, p: &nalgebra::Point3<f64>) -> f64 {
+        self.grid
+            .cell_of(p)
+            .map_or(0.0, |c| self.unsafe_distance_m[self.grid.index(c)])
+    }
+
+    /// Distance to the nearest frontier at a world point (∞ outside the grid).
+    #[must_use]
+    pub fn frontier_distance(&self, p: &nalgebra::Point3<f64>) -> f64 {
+        self.grid.cell_of(p).map_or(f64::INFINITY, |c| {
+            self.frontier_distance_m[self.grid.index(c)]
+        })
+    }
+}
+
 /// Body pose and velocity from the vehicle.
 pub const ODOMETRY: Topic<Odometry> = Topic::new("odometry");
 /// Depth + intensity frames from the sensor.
 pub const DEPTH_FRAME: Topic<DepthFrame> = Topic::new("sensor/frame");
 /// The committed plan.
 pub const PLAN: Topic<Plan> = Topic::new("plan/committed");
+/// Local grid snapshots.
+pub const GRID_SNAPSHOT: Topic<GridSnapshot> = Topic::new("grid/snapshot");
 /// Peers' odometry from the link.
 pub const PEER_ODOMETRY: Topic<PeerOdometry> = Topic::new("peer/odometry");

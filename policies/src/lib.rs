@@ -3,14 +3,20 @@
 //! - [`route::WaypointRoute`] — a scripted exploration behaviour that needs no map:
 //!   it follows waypoints handed to it (for instance a cave's tunnel centre lines).
 //!
-//! [`behaviour_by_name`] is how the robot assembly turns a config string into a
-//! behaviour.
+//! - [`selection::Greedy`] (single-step best action, paper Alg. 1) and
+//!   [`selection::RandomFeasible`] (the baseline) choose among the planner's
+//!   candidates.
+//!
+//! [`behaviour_by_name`] and [`selection_by_name`] are how the robot assembly turns
+//! config strings into policies.
 #![deny(missing_docs)]
 
 pub mod route;
+pub mod selection;
 
 use nalgebra::Point3;
 use troupe_actors::explorer::ExplorationBehaviour;
+use troupe_actors::planner::ActionSelection;
 use troupe_actors::runtime::Time;
 
 /// Inputs a behaviour may need besides its own parameters.
@@ -36,6 +42,9 @@ pub enum PolicyError {
     /// Unknown name.
     #[error("unknown exploration behaviour `{0}` (known: {known})", known = BEHAVIOURS.join(", "))]
     UnknownBehaviour(String),
+    /// Unknown selection policy.
+    #[error("unknown action selection `{0}` (known: {known})", known = SELECTIONS.join(", "))]
+    UnknownSelection(String),
     /// Missing or bad input.
     #[error("behaviour `{behaviour}`: {reason}")]
     BadInput {
@@ -65,5 +74,20 @@ pub fn behaviour_by_name(
             Ok(Box::new(move || Box::new(prototype.clone())))
         }
         other => Err(PolicyError::UnknownBehaviour(other.to_string())),
+    }
+}
+
+/// Names accepted by [`selection_by_name`].
+pub const SELECTIONS: &[&str] = &["greedy", "random"];
+
+/// Builds fresh instances of an action-selection policy (one per planner start).
+pub type SelectionFactory = Box<dyn Fn() -> Box<dyn ActionSelection> + Send>;
+
+/// A factory for the named action-selection policy.
+pub fn selection_by_name(name: &str) -> Result<SelectionFactory, PolicyError> {
+    match name {
+        "greedy" => Ok(Box::new(|| Box::new(selection::Greedy))),
+        "random" => Ok(Box::new(|| Box::new(selection::RandomFeasible))),
+        other => Err(PolicyError::UnknownSelection(other.to_string())),
     }
 }

@@ -1,8 +1,13 @@
 //! A robot's configuration (the `[robot]` table of a scenario, or a robot file).
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
+use troupe_actors::planner::PlannerConfig;
 use troupe_actors::runtime::RestartPolicy;
+
+/// The `behaviour` value that selects the grid + planner pipeline.
+pub const PLANNER: &str = "planner";
 
 /// Modelled compute latency per standard actor, seconds (sim-time executor).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -16,6 +21,10 @@ pub struct ActorLatencies {
     pub explorer: f64,
     /// Link.
     pub link: f64,
+    /// Local grid (ray tracing and distance fields).
+    pub grid: f64,
+    /// Planner (one round).
+    pub planner: f64,
 }
 
 impl Default for ActorLatencies {
@@ -25,6 +34,8 @@ impl Default for ActorLatencies {
             sensor: 0.01,
             explorer: 0.01,
             link: 0.0,
+            grid: 0.05,
+            planner: 0.1,
         }
     }
 }
@@ -33,8 +44,16 @@ impl Default for ActorLatencies {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RobotConfig {
-    /// Exploration behaviour by name (see `troupe_policies::BEHAVIOURS`).
+    /// How the robot decides where to go: a route behaviour by name (see
+    /// `troupe_policies::BEHAVIOURS`), or `"planner"` for the local grid and the
+    /// information-driven motion-primitive planner.
     pub behaviour: String,
+    /// Action selection of the planner (see `troupe_policies::SELECTIONS`).
+    pub selection: String,
+    /// The local grid (planner behaviour).
+    pub grid: GridConfig,
+    /// The planner (planner behaviour).
+    pub planner: PlannerConfig,
     /// Cruise speed, m/s.
     pub speed_mps: f64,
     /// Turn-in-place rate, rad/s.
@@ -57,6 +76,9 @@ impl Default for RobotConfig {
     fn default() -> Self {
         RobotConfig {
             behaviour: "waypoint_route".into(),
+            selection: "greedy".into(),
+            grid: GridConfig::default(),
+            planner: PlannerConfig::default(),
             speed_mps: 1.0,
             yaw_rate_rad_s: 1.0,
             replan_rate_hz: 1.0,
@@ -118,11 +140,39 @@ impl RobotConfig {
         non_negative("latency_s.sensor", self.latency_s.sensor)?;
         non_negative("latency_s.explorer", self.latency_s.explorer)?;
         non_negative("latency_s.link", self.latency_s.link)?;
+        non_negative("latency_s.grid", self.latency_s.grid)?;
+        non_negative("latency_s.planner", self.latency_s.planner)?;
+        if let Err(reason) = self.grid.validate() {
+            return Err(ConfigError {
+                key: "grid".into(),
+                rule: "must be a valid grid",
+                value: reason,
+            });
+        }
+        positive("planner.rate_hz", self.planner.rate_hz)?;
+        positive("planner.knot_step_s", self.planner.knot_step_s)?;
+        positive(
+            "planner.round.planning_period_s",
+            self.planner.round.planning_period_s,
+        )?;
+        non_negative(
+            "planner.round.collision_radius_m",
+            self.planner.round.collision_radius_m,
+        )?;
+        if !troupe_policies::SELECTIONS.contains(&self.selection.as_str()) {
+            return Err(ConfigError {
+                key: "selection".into(),
+                rule: "must name a known action selection (greedy, random)",
+                value: format!("{:?}", self.selection),
+            });
+        }
         non_negative("restart.window_s", self.restart.window_s)?;
-        if !troupe_policies::BEHAVIOURS.contains(&self.behaviour.as_str()) {
+        if self.behaviour != PLANNER
+            && !troupe_policies::BEHAVIOURS.contains(&self.behaviour.as_str())
+        {
             return Err(ConfigError {
                 key: "behaviour".into(),
-                rule: "must name a known behaviour (waypoint_route)",
+                rule: "must be \"planner\" or a known route behaviour (waypoint_route)",
                 value: format!("{:?}", self.behaviour),
             });
         }

@@ -9,12 +9,15 @@ mod config;
 
 use nalgebra::Point3;
 use troupe_actors::explorer::ExplorerActor;
+use troupe_actors::grid::GridActor;
 use troupe_actors::link::LinkActor;
+use troupe_actors::msgs::PinholeIntrinsics;
+use troupe_actors::planner::PlannerActor;
 use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
-use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name};
+use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
 
-pub use config::{ActorLatencies, ConfigError, RobotConfig};
+pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig};
 
 /// Builds a frame source (called at start and on every sensor restart).
 pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
@@ -29,6 +32,8 @@ pub struct RobotParts {
     pub route: Vec<Point3<f64>>,
     /// Earliest departure on the route, seconds of run time.
     pub depart_at_s: f64,
+    /// The camera's intrinsics (the planner scores views with them).
+    pub camera: PinholeIntrinsics,
 }
 
 /// Why a robot could not be assembled.
@@ -54,52 +59,70 @@ impl FrameSource for BoxedSource {
     }
 }
 
-/// Assembles a robot: vehicle, sensor, explorer and link, in that order.
+/// Assembles a robot: vehicle, sensor, then either the explorer (route behaviours)
+/// or the local grid and the planner (`behaviour = "planner"`), then the link.
 pub fn assemble(
     name: &str,
     config: &RobotConfig,
     parts: RobotParts,
 ) -> Result<RobotSpec, AssembleError> {
     config.validate()?;
-    let behaviour = behaviour_by_name(
-        &config.behaviour,
-        &BehaviourInputs {
-            route: parts.route,
-            speed_mps: config.speed_mps,
-            yaw_rate_rad_s: config.yaw_rate_rad_s,
-            depart_at_s: parts.depart_at_s,
-        },
-    )?;
     let options = |latency_s: f64| ActorOptions {
         latency: LatencyModel::fixed(latency_s),
         restart: config.restart,
         blocking: false,
     };
+    let heavy = |latency_s: f64| ActorOptions {
+        blocking: true,
+        ..options(latency_s)
+    };
     let mut frame_source = parts.frame_source;
     let sensor_rate_hz = config.sensor_rate_hz;
-    let replan_rate_hz = config.replan_rate_hz;
     let link = config.link;
     let mut robot = RobotSpec::new(name);
-    robot
-        .add(parts.vehicle)
-        .add(
-            ActorSpec::new("sensor", move || {
-                SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
-            })
-            .with_options(ActorOptions {
-                blocking: true,
-                ..options(config.latency_s.sensor)
-            }),
-        )
-        .add(
+    robot.add(parts.vehicle).add(
+        ActorSpec::new("sensor", move || {
+            SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
+        })
+        .with_options(heavy(config.latency_s.sensor)),
+    );
+    if config.behaviour == PLANNER {
+        let selection = selection_by_name(&config.selection)?;
+        let grid = config.grid;
+        let planner = config.planner;
+        let camera = parts.camera;
+        robot
+            .add(
+                ActorSpec::new("grid", move || GridActor::new(grid))
+                    .with_options(heavy(config.latency_s.grid)),
+            )
+            .add(
+                ActorSpec::new("planner", move || {
+                    PlannerActor::new(planner, camera, selection())
+                })
+                .with_options(heavy(config.latency_s.planner)),
+            );
+    } else {
+        let behaviour = behaviour_by_name(
+            &config.behaviour,
+            &BehaviourInputs {
+                route: parts.route,
+                speed_mps: config.speed_mps,
+                yaw_rate_rad_s: config.yaw_rate_rad_s,
+                depart_at_s: parts.depart_at_s,
+            },
+        )?;
+        let replan_rate_hz = config.replan_rate_hz;
+        robot.add(
             ActorSpec::new("explorer", move || {
                 ExplorerActor::new(behaviour(), replan_rate_hz)
             })
             .with_options(options(config.latency_s.explorer)),
-        )
-        .add(
-            ActorSpec::new("link", move || LinkActor::new(link))
-                .with_options(options(config.latency_s.link)),
         );
+    }
+    robot.add(
+        ActorSpec::new("link", move || LinkActor::new(link))
+            .with_options(options(config.latency_s.link)),
+    );
     Ok(robot)
 }

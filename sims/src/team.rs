@@ -16,7 +16,7 @@ use troupe_robot::{AssembleError, RobotParts, assemble};
 use crate::faults::PanicOnce;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::scenario::{Fault, Scenario};
-use crate::sim_sensor::SimCameraSource;
+use crate::sim_sensor::{SimCameraSource, intrinsics_of};
 use crate::vehicle::{SimVehicle, new_body};
 use crate::world::{CaveWorld, World};
 
@@ -270,6 +270,7 @@ impl Team {
                 // The robot furthest into the tunnel leaves first; the others follow
                 // at intervals so that robots sharing the first tunnel stay apart.
                 depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
+                camera: intrinsics_of(&scenario.camera),
             };
             let mut robot = assemble(&format!("robot{i}"), &scenario.robot, parts)?;
             for fault in &scenario.faults {

@@ -9,10 +9,12 @@
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
 
+mod actor;
 pub mod distance;
 pub mod frontier;
 mod local;
 
+pub use actor::{GridActor, GridConfig, insert_frame};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 
 #[cfg(test)]

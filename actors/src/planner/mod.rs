@@ -5,8 +5,16 @@
 //!   acceleration and jerk limits, and stopping primitives.
 //! - [`bounds`]: the steady-state velocity bound of Eq. 4.2.
 //! - [`library`]: the motion primitive libraries of thesis Table 4.2 and paper Table I.
+//! - [`csqmi`]: the information reward.
+//! - [`round`]: one planning round: candidates, feasibility, safety, rewards.
+//! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
+//!   primitives; the choice among candidates is an [`ActionSelection`] policy.
 
+mod actor;
 pub mod bounds;
 pub mod csqmi;
 pub mod library;
 pub mod primitives;
+pub mod round;
+
+pub use actor::{ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport};

@@ -1,0 +1,224 @@
+//! The planner actor: at a fixed rate, scores the motion primitive library from the
+//! committed reference state against the latest grid snapshot, lets an
+//! [`ActionSelection`] policy choose, and commits the choice followed by its
+//! stopping primitive (thesis §4.1.3: if nothing is safe, the stopping trajectory is
+//! sent).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::primitives::{FlatState, Primitive};
+use super::round::{Candidate, RoundConfig};
+use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan};
+use crate::runtime::{
+    Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
+};
+use crate::trajectory::{Knot, Trajectory};
+
+/// Chooses among scored candidates. Implementations live in `troupe-policies`.
+pub trait ActionSelection: Send + 'static {
+    /// Index of the chosen candidate, or `None` to stop.
+    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize>;
+}
+
+impl ActionSelection for Box<dyn ActionSelection> {
+    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize> {
+        (**self).select(candidates, rng)
+    }
+}
+
+/// Planner settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlannerConfig {
+    /// Replanning rate, Hz (thesis: 1 Hz).
+    pub rate_hz: f64,
+    /// The round: library, limits, rewards, safety.
+    pub round: RoundConfig,
+    /// Spacing of the knots sent to the vehicle, seconds.
+    pub knot_step_s: f64,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        PlannerConfig {
+            rate_hz: 1.0,
+            round: RoundConfig::default(),
+            knot_step_s: 0.1,
+        }
+    }
+}
+
+/// What one planning round did (for reports and the selection comparison).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanningReport {
+    /// When.
+    pub stamp: Time,
+    /// Safe, feasible candidates.
+    pub candidates: usize,
+    /// Reward of the chosen one (`None`: the stopping trajectory was sent).
+    pub chosen_reward: Option<f64>,
+}
+impl Message for PlanningReport {}
+
+/// Planning reports.
+pub const PLANNING_REPORT: Topic<PlanningReport> = Topic::new("planner/report");
+
+/// The committed reference: a primitive until `switch_s`, then its stopping primitive.
+#[derive(Clone, Debug)]
+struct Committed {
+    start: Time,
+    primitive: Primitive,
+    switch_s: f64,
+    stopping: Primitive,
+}
+
+impl Committed {
+    fn state_at(&self, t: Time) -> FlatState {
+        let s = (t - self.start).as_secs_f64();
+        if s < self.switch_s {
+            self.primitive.state_at(s)
+        } else {
+            self.stopping.state_at(s - self.switch_s)
+        }
+    }
+
+    fn trajectory(&self, step_s: f64) -> Trajectory {
+        let end_s = self.switch_s + self.stopping.duration_s();
+        let n = (end_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
+        let knots = (0..=n)
+            .map(|i| {
+                let s = end_s * i as f64 / n as f64;
+                let state = self.state_at(self.start + Duration::from_secs_f64(s));
+                Knot {
+                    time: self.start + Duration::from_secs_f64(s),
+                    position_m: state.position_m().into(),
+                    yaw_rad: state.yaw_rad(),
+                }
+            })
+            .collect();
+        // Knots are finite and in time order by construction.
+        Trajectory::new(knots).unwrap_or_default()
+    }
+}
+
+const REPLAN: TimerId = TimerId(0);
+
+/// See the [module docs](self).
+pub struct PlannerActor<S> {
+    config: PlannerConfig,
+    camera: PinholeIntrinsics,
+    selection: S,
+    snapshot: Option<Arc<GridSnapshot>>,
+    odometry: Option<Arc<Odometry>>,
+    committed: Option<Committed>,
+}
+
+impl<S: ActionSelection> PlannerActor<S> {
+    /// A planner scoring views of `camera`, choosing with `selection`.
+    #[must_use]
+    pub fn new(config: PlannerConfig, camera: PinholeIntrinsics, selection: S) -> Self {
+        PlannerActor {
+            config,
+            camera,
+            selection,
+            snapshot: None,
+            odometry: None,
+            committed: None,
+        }
+    }
+
+    fn plan(&mut self, ctx: &mut Context<'_>) {
+        let (Some(snapshot), Some(odometry)) = (self.snapshot.clone(), self.odometry.clone())
+        else {
+            return;
+        };
+        let now = ctx.now();
+        let root = match &self.committed {
+            Some(c) => c.state_at(now),
+            None => {
+                let (_, _, yaw) = odometry.pose.rotation.euler_angles();
+                FlatState::at_rest(odometry.pose.translation.vector, yaw)
+            }
+        };
+        let round = &self.config.round;
+        let candidates = round.candidates(&root, &snapshot, &self.camera);
+        let choice = self.selection.select(&candidates, ctx.rng());
+        tracing::debug!(
+            robot = ctx.robot_name(),
+            time = %now,
+            candidates = candidates.len(),
+            reward = choice.map(|i| candidates[i].reward),
+            "planning round"
+        );
+        let committed = match choice.and_then(|i| candidates.get(i)) {
+            Some(c) => Committed {
+                start: now,
+                primitive: c.primitive.clone(),
+                switch_s: round.planning_period_s.min(c.primitive.duration_s()),
+                stopping: c.stopping.clone(),
+            },
+            None => {
+                tracing::debug!(robot = ctx.robot_name(), time = %now, candidates = candidates.len(), "no safe action: stopping");
+                let Some(stopping) = round.limits.stopping(&root) else {
+                    return;
+                };
+                Committed {
+                    start: now,
+                    primitive: stopping.clone(),
+                    switch_s: stopping.duration_s(),
+                    stopping: Primitive::forward_arc(
+                        &stopping.end_state(),
+                        super::primitives::Action::STOP,
+                        1.0,
+                    ),
+                }
+            }
+        };
+        ctx.publish(
+            &PLANNING_REPORT,
+            PlanningReport {
+                stamp: now,
+                candidates: candidates.len(),
+                chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+            },
+        );
+        ctx.publish(
+            &PLAN,
+            Plan {
+                stamp: now,
+                trajectory: committed.trajectory(self.config.knot_step_s),
+            },
+        );
+        self.committed = Some(committed);
+    }
+}
+
+impl<S: ActionSelection> Actor for PlannerActor<S> {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
+        ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::LATEST);
+        ctx.set_timer(
+            REPLAN,
+            Duration::from_secs_f64(1.0 / self.config.rate_hz.max(1e-3)),
+        );
+        Ok(())
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Message(m) => {
+                if let Some(odometry) = m.get_arc(&ODOMETRY) {
+                    self.odometry = Some(odometry);
+                } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
+                    self.snapshot = Some(snapshot);
+                }
+            }
+            Event::Timer(_) => self.plan(ctx),
+        }
+        Ok(())
+    }
+}

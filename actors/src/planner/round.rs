@@ -1,0 +1,209 @@
+//! One planning round as plain code: generate the library's primitives from a state,
+//! keep the feasible and safe ones, score them (thesis §4.1.3, paper V-B).
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::csqmi::{ViewRewardParams, view_information};
+use super::library::{self, LibraryParams, LibrarySpec};
+use super::primitives::{Action, DynamicLimits, FlatState, Primitive};
+use crate::msgs::{GridSnapshot, PinholeIntrinsics};
+
+/// A feasible, safe candidate and its reward.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    /// The primitive.
+    pub primitive: Primitive,
+    /// The stopping primitive from its state one planning period in.
+    pub stopping: Primitive,
+    /// CSQMI at the end pose, nats.
+    pub information: f64,
+    /// Frontier-distance reward V = d(ξ₀) − d(ξτ), metres (0 when there is no frontier).
+    pub frontier_gain_m: f64,
+    /// Objective I + αV.
+    pub reward: f64,
+}
+
+/// Which library to plan with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LibraryChoice {
+    /// Thesis Table 4.2b (40 primitives).
+    Minimal,
+    /// Thesis Table 4.2a (186 primitives).
+    Large,
+    /// Paper Table I (65 primitives).
+    Paper,
+}
+
+impl LibraryChoice {
+    /// The library's specs.
+    #[must_use]
+    pub fn specs(self) -> Vec<LibrarySpec> {
+        match self {
+            LibraryChoice::Minimal => library::minimal(),
+            LibraryChoice::Large => library::large(),
+            LibraryChoice::Paper => library::paper(),
+        }
+    }
+}
+
+/// Settings of a planning round.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RoundConfig {
+    /// Library.
+    pub library: LibraryChoice,
+    /// Library bounds.
+    pub library_params: LibraryParams,
+    /// Dynamic limits and duration search.
+    pub limits: DynamicLimits,
+    /// Weight α of the frontier reward (paper Eq. 8).
+    pub frontier_weight: f64,
+    /// CSQMI beam settings.
+    pub view: ViewRewardParams,
+    /// Required clearance of the robot centre from unsafe space, metres (r_coll).
+    pub collision_radius_m: f64,
+    /// Time between collision checks along a primitive, seconds.
+    pub check_step_s: f64,
+    /// Planning period Δt_p: the primitive runs this long before its stopping
+    /// primitive takes over, seconds.
+    pub planning_period_s: f64,
+}
+
+impl Default for RoundConfig {
+    fn default() -> Self {
+        RoundConfig {
+            library: LibraryChoice::Minimal,
+            library_params: LibraryParams {
+                max_speed_mps: 1.5,
+                perpendicular_speed_mps: 1.0,
+                ..LibraryParams::default()
+            },
+            limits: DynamicLimits {
+                max_accel_mps2: 3.0,
+                max_jerk_mps3: 10.0,
+                ..DynamicLimits::default()
+            },
+            frontier_weight: 5.0,
+            view: ViewRewardParams::default(),
+            collision_radius_m: 0.4,
+            check_step_s: 0.1,
+            planning_period_s: 1.0,
+        }
+    }
+}
+
+/// The body pose of a flat state (level, heading ψ).
+#[must_use]
+pub fn pose_of(state: &FlatState) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(state.position_m()),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), state.yaw_rad()),
+    )
+}
+
+/// Whether every sample of `primitive` on `[0, until_s]` keeps `margin_m` from unsafe space.
+fn safe(
+    primitive: &Primitive,
+    until_s: f64,
+    snapshot: &GridSnapshot,
+    margin_m: f64,
+    step_s: f64,
+) -> bool {
+    let n = (until_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
+    (0..=n).all(|i| {
+        let p = Point3::from(
+            primitive
+                .state_at(until_s * i as f64 / n as f64)
+                .position_m(),
+        );
+        snapshot.clearance_m(&p) >= margin_m
+    })
+}
+
+impl RoundConfig {
+    /// Clearance a sample point needs in the distance field: r_coll plus the
+    /// discretisation slack (the field measures between cell centres).
+    #[must_use]
+    pub fn margin_m(&self, resolution_m: f64) -> f64 {
+        self.collision_radius_m + resolution_m * (3f64.sqrt() + 1.0) / 2.0
+    }
+
+    /// The primitive for an action: fixed duration, or the shortest feasible one.
+    #[must_use]
+    pub fn primitive(
+        &self,
+        from: &FlatState,
+        action: Action,
+        fixed_duration_s: Option<f64>,
+    ) -> Option<Primitive> {
+        match fixed_duration_s {
+            Some(tau) => {
+                let p = Primitive::forward_arc(from, action, tau);
+                self.limits.admits(&p).then_some(p)
+            }
+            None => self.limits.shortest(from, action),
+        }
+    }
+
+    /// Checks a primitive and its stopping primitive against the snapshot; returns
+    /// the stopping primitive when both are safe.
+    #[must_use]
+    pub fn safe_with_stop(
+        &self,
+        primitive: &Primitive,
+        snapshot: &GridSnapshot,
+    ) -> Option<Primitive> {
+        let margin = self.margin_m(snapshot.grid.resolution_m());
+        let switch = self.planning_period_s.min(primitive.duration_s());
+        if !safe(primitive, switch, snapshot, margin, self.check_step_s) {
+            return None;
+        }
+        let stopping = self.limits.stopping(&primitive.state_at(switch))?;
+        safe(
+            &stopping,
+            stopping.duration_s(),
+            snapshot,
+            margin,
+            self.check_step_s,
+        )
+        .then_some(stopping)
+    }
+
+    /// Every feasible, safe candidate from `from`, scored.
+    #[must_use]
+    pub fn candidates(
+        &self,
+        from: &FlatState,
+        snapshot: &GridSnapshot,
+        camera: &PinholeIntrinsics,
+    ) -> Vec<Candidate> {
+        let start_frontier = snapshot.frontier_distance(&Point3::from(from.position_m()));
+        self.library
+            .specs()
+            .iter()
+            .flat_map(|spec| library::actions(spec, &self.library_params))
+            .filter_map(|(action, fixed)| {
+                let primitive = self.primitive(from, action, fixed)?;
+                let stopping = self.safe_with_stop(&primitive, snapshot)?;
+                let end = primitive.end_state();
+                let information =
+                    view_information(&snapshot.grid, &pose_of(&end), camera, &self.view);
+                let end_frontier = snapshot.frontier_distance(&Point3::from(end.position_m()));
+                let frontier_gain_m = if start_frontier.is_finite() && end_frontier.is_finite() {
+                    start_frontier - end_frontier
+                } else {
+                    0.0
+                };
+                Some(Candidate {
+                    reward: information + self.frontier_weight * frontier_gain_m,
+                    primitive,
+                    stopping,
+                    information,
+                    frontier_gain_m,
+                })
+            })
+            .collect()
+    }
+}
