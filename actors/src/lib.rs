@@ -5,6 +5,7 @@
 //!   and run a team under the deterministic [`SimExecutor`](runtime::SimExecutor) or
 //!   the real-time [`RealtimeExecutor`](runtime::RealtimeExecutor).
 //! - [`msgs`]: the standard topics and message types.
+//! - [`mapper`]: map models fitted to depth + intensity frames (SOGMM, thesis §6).
 //! - Standard actors: [`sensor`], [`explorer`], [`link`].
 //! - [`trajectory`]: sampled trajectories that plans carry.
 #![deny(missing_docs)]
@@ -13,6 +14,7 @@ pub mod explorer;
 pub mod geometry;
 pub mod grid;
 pub mod link;
+pub mod mapper;
 pub mod msgs;
 pub mod planner;
 pub mod runtime;

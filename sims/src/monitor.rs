@@ -6,7 +6,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use nalgebra::Point3;
 use serde::Serialize;
-use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::runtime::{Publication, Tap};
 
 use crate::camera::CameraParams;
@@ -44,6 +44,11 @@ pub struct RobotTruth {
     pub frames: u64,
     /// Frames with no valid pixel.
     pub empty_frames: u64,
+    /// Committed plans received.
+    pub plans: u64,
+    /// Committed plans with a knot closer to the rock than the body radius (ground
+    /// truth): a plan the robot should never have committed.
+    pub unsafe_plans: u64,
 }
 
 /// Everything the monitor knows.
@@ -135,6 +140,21 @@ impl Tap for GroundTruthMonitor {
             truth
                 .coverage
                 .observe(&self.camera, &frame.pose, &image, self.pixel_stride);
+        } else if let Some(plan) = p.get(&PLAN) {
+            let unsafe_plan = plan
+                .trajectory
+                .knots()
+                .iter()
+                .any(|k| self.world.sdf_m(&k.position_m) < self.radius_m);
+            let mut truth = lock_truth(&self.truth);
+            let Some(robot) = truth.robots.get_mut(r) else {
+                return;
+            };
+            robot.plans += 1;
+            if unsafe_plan {
+                robot.unsafe_plans += 1;
+                tracing::warn!(robot = r, time = %p.time, "committed plan enters the rock (ground truth)");
+            }
         } else if let Some(odometry) = p.get(&ODOMETRY) {
             let position = Point3::from(odometry.pose.translation.vector);
             let (_, _, yaw) = odometry.pose.rotation.euler_angles();

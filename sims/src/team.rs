@@ -118,6 +118,10 @@ pub struct RobotTruthSummary {
     pub frames: u64,
     /// Frames with no return at all.
     pub empty_frames: u64,
+    /// Committed plans.
+    pub plans: u64,
+    /// Committed plans with a knot inside the rock (ground truth).
+    pub unsafe_plans: u64,
 }
 
 impl From<&RobotTruth> for RobotTruthSummary {
@@ -129,6 +133,8 @@ impl From<&RobotTruth> for RobotTruthSummary {
             max_speed_mps: t.max_speed_mps,
             frames: t.frames,
             empty_frames: t.empty_frames,
+            plans: t.plans,
+            unsafe_plans: t.unsafe_plans,
         }
     }
 }

@@ -31,8 +31,13 @@ pub struct GridConfig {
     pub publish_rate_hz: f64,
     /// Every n-th pixel in u and v of a depth frame becomes a ray.
     pub pixel_stride: u32,
-    /// Cells within this distance of the robot's centre are free (the robot is there).
-    pub body_clearance_m: f64,
+    /// Unknown cells within this distance of the robot's centre become free whenever
+    /// odometry arrives (the body is there; observed cells are never overridden).
+    pub body_radius_m: f64,
+    /// Unknown cells within this distance of the first pose become free: the robot
+    /// starts in a clear spot (without it, nothing would be safe before the first look
+    /// around).
+    pub start_clearance_m: f64,
 }
 
 impl Default for GridConfig {
@@ -43,7 +48,8 @@ impl Default for GridConfig {
             logodds: LogOddsParams::default(),
             publish_rate_hz: 1.0,
             pixel_stride: 2,
-            body_clearance_m: 1.0,
+            body_radius_m: 0.3,
+            start_clearance_m: 1.2,
         }
     }
 }
@@ -82,11 +88,13 @@ impl GridConfig {
         if self.pixel_stride == 0 {
             return Err("pixel_stride must be ≥ 1".into());
         }
-        if !(self.body_clearance_m.is_finite() && self.body_clearance_m >= 0.0) {
-            return Err(format!(
-                "body_clearance_m must be ≥ 0, got {}",
-                self.body_clearance_m
-            ));
+        for (key, value) in [
+            ("body_radius_m", self.body_radius_m),
+            ("start_clearance_m", self.start_clearance_m),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("{key} must be ≥ 0, got {value}"));
+            }
         }
         self.logodds.validate().map_err(|e| format!("logodds: {e}"))
     }
@@ -153,34 +161,14 @@ impl GridActor {
         if !position.coords.iter().all(|v| v.is_finite()) {
             return;
         }
-        let clearance = self.config.body_clearance_m;
+        let first = self.position.is_none();
+        let (body, start) = (self.config.body_radius_m, self.config.start_clearance_m);
         let grid = self.grid_at(position);
         // The window follows the robot; novel boxes stay unknown until observed again
         // (rebuilding them from GMM keyframes comes with the mapper).
         grid.shift_to(&position);
-        clear_body(grid, &position, clearance);
+        grid.clear_unknown_sphere(&position, if first { start.max(body) } else { body });
         self.position = Some(position);
-    }
-}
-
-/// Marks the cells within `radius_m` of `centre` free: the robot's body is there.
-fn clear_body(grid: &mut LocalGrid, centre: &Point3<f64>, radius_m: f64) {
-    if radius_m <= 0.0 {
-        return;
-    }
-    let res = grid.resolution_m();
-    let n = (radius_m / res).ceil() as i32;
-    for dz in -n..=n {
-        for dy in -n..=n {
-            for dx in -n..=n {
-                let offset = Vector3::new(f64::from(dx), f64::from(dy), f64::from(dz)) * res;
-                if offset.norm() <= radius_m {
-                    let p = centre + offset;
-                    // A zero-length free ray: one miss in the cell holding p.
-                    grid.insert_ray(&p, &p, false, None);
-                }
-            }
-        }
     }
 }
 

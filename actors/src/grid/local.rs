@@ -346,6 +346,41 @@ impl LocalGrid {
         }
     }
 
+    /// Marks the unknown cells whose centres lie within `radius_m` of `centre` as free
+    /// (one miss each); cells already observed keep their values. Used for space the
+    /// robot's body occupies, which cannot be rock, without overriding what the sensor
+    /// saw.
+    pub fn clear_unknown_sphere(&mut self, centre: &Point3<f64>, radius_m: f64) {
+        if !(radius_m > 0.0 && centre.coords.iter().all(|v| v.is_finite())) {
+            return;
+        }
+        let geometry = self.geometry();
+        let n = (radius_m / self.lattice.cell_m).ceil() as i64 + 1;
+        let Some(middle) = geometry.cell_of(centre) else {
+            return;
+        };
+        let (miss, min, max) = (self.params.miss, self.params.min, self.params.max);
+        for dz in -n..=n {
+            for dy in -n..=n {
+                for dx in -n..=n {
+                    let offset = [dx, dy, dz];
+                    let cell = [0, 1, 2].map(|i| middle[i] as i64 + offset[i]);
+                    if (0..3).any(|i| cell[i] < 0 || cell[i] >= self.dims[i] as i64) {
+                        continue;
+                    }
+                    let cell = cell.map(|v| v as usize);
+                    if (geometry.cell_centre(cell) - centre).norm() > radius_m {
+                        continue;
+                    }
+                    let i = self.index(cell);
+                    if self.classify(self.cells[i]) == CellState::Unknown {
+                        self.cells[i] = (self.cells[i] + miss).clamp(min, max);
+                    }
+                }
+            }
+        }
+    }
+
     /// Moves the window so that it is centred on `centre` (snapped to the lattice):
     /// cells in the overlap keep their values, the rest become unknown. Returns the
     /// novel boxes (at most three, disjoint) that must be rebuilt from the maps

@@ -152,7 +152,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             time = %now,
             candidates = candidates.len(),
             reward = choice.map(|i| candidates[i].reward),
-            "planning round"
+            position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );
         let committed = match choice.and_then(|i| candidates.get(i)) {
             Some(c) => Committed {

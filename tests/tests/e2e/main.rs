@@ -2,5 +2,6 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod planner_team;
 mod realtime_team;
 mod team_run;

@@ -1,0 +1,557 @@
+//! Expectation–maximisation for a full-covariance 4D mixture in log space through
+//! Cholesky factors (thesis App. A, Eqs. A.1–A.3).
+//!
+//! **E-step.** `ln γ_nb = ln π_b + ln N(x_n | μ_b, Σ_b) − ln Σ_a π_a N(x_n | μ_a, Σ_a)`
+//! (Eq. A.2), with `ln N` from the lower Cholesky factor (Eq. A.3) and the last term by
+//! log-sum-exp.
+//!
+//! **M-step.** `N_b = Σ_n γ_nb`, `π_b = N_b / N`, `μ_b = Σ γ x / N_b`,
+//! `Σ_b = Σ γ (x − μ_b)(x − μ_b)ᵀ / N_b + ε I`. The sums are taken in one pass, centred
+//! on the previous mean (shifted moments, stable because the mean moves little per
+//! iteration). `ε = reg_covar` (default `1e-6`: a 1 mm / 0.001-intensity floor on the
+//! standard deviations, as scikit-learn's default) keeps every covariance positive
+//! definite; as in scikit-learn, `10 f64::EPSILON` is added to each `N_b`.
+//!
+//! **Convergence.** Stop when the mean log-likelihood of the points changes by less than
+//! `tolerance` (default `1e-3` nats per point) between iterations, or after
+//! `max_iterations` (default 100). The value compared is the one of the E-step, i.e. of
+//! the parameters before that iteration's M-step (scikit-learn's convention).
+//!
+//! **Restricted E-step** ([`EStep::Restricted`], the default). A component `m` whose
+//! joint log-density `ℓ_m(x) = ln π_m + ln N(x | μ_m, Σ_m)` is below
+//! `max_b ℓ_b(x) − ln 10¹⁰` has responsibility below `1e-10` and is skipped. To find
+//! the others without visiting all `M`: the spatial Mahalanobis distance lower-bounds the
+//! 4D one (a marginal's quadratic form never exceeds the joint's), so
+//! `ℓ_m(x) ≤ c_m − ½ d²_xyz,m(x)` with `c_m = ln π_m + ln N_max`, and `ℓ_m(x) ≥ T` is
+//! only possible inside the ellipsoid `d²_xyz,m ≤ 2 (c_m − T)`, whose axis-aligned box
+//! has half-widths `sqrt(2 (c_m − T) Σ_m,ii)`. Each iteration picks a threshold `T`
+//! (the 2 % quantile of the points' "anchor" log-densities minus `ln 10¹⁰`; the anchor
+//! of a point is its most responsible component of the previous iteration, or its
+//! k-means++ centre at the start), lists every component in the grid cells its box
+//! overlaps, and evaluates a point on its cell's list only when its anchor proves
+//! `max_b ℓ_b(x) − ln 10¹⁰ ≥ ℓ_anchor(x) − ln 10¹⁰ ≥ T`; the other points (about 2 %)
+//! are evaluated over all components. Every component left out therefore has
+//! responsibility below `1e-10` relative to the best one, so each responsibility is
+//! within `M · 1e-10` of the dense value and each point's log-likelihood within
+//! `M · 1e-10` nats.
+//!
+//! Determinism: points are processed in a fixed order (sorted by grid cell) in fixed
+//! chunks; each chunk accumulates its own sums, and the chunk sums are added in chunk
+//! order, so the result does not depend on the number of rayon threads.
+
+use nalgebra::{Matrix4, Vector4};
+use rayon::prelude::*;
+
+use super::SogmmError;
+use super::gmm::{Chol4, Gmm4};
+use super::grid::{CellLists, PointGrid};
+
+/// `ln 10¹⁰`: components below the best one by more than this are skipped by the
+/// restricted E-step (responsibility < 1e-10 relative).
+pub const LOG_TRUNCATION: f64 = 23.025_850_929_940_457;
+
+/// Quantile of the anchor log-densities that sets the restricted E-step's threshold.
+const ANCHOR_QUANTILE: f64 = 0.005;
+
+/// Points per accumulation chunk (fixed: part of the summation order).
+const CHUNK: usize = 2048;
+
+/// How the E-step visits components.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EStep {
+    /// Every point against every component: the exact reference.
+    Dense,
+    /// Only the components that can reach responsibility 1e-10 relative to the best one
+    /// (see the module doc).
+    Restricted,
+}
+
+/// EM settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EmConfig {
+    /// `ε` added to every covariance diagonal.
+    pub reg_covar: f64,
+    /// Convergence threshold on the change of the mean log-likelihood, nats per point.
+    pub tolerance: f64,
+    /// Iteration cap.
+    pub max_iterations: usize,
+    /// E-step variant.
+    pub e_step: EStep,
+}
+
+impl Default for EmConfig {
+    /// `reg_covar = 1e-6`, `tolerance = 1e-3`, `max_iterations = 100`, restricted E-step.
+    fn default() -> Self {
+        Self {
+            reg_covar: 1e-6,
+            tolerance: 1e-3,
+            max_iterations: 100,
+            e_step: EStep::Restricted,
+        }
+    }
+}
+
+/// What an EM run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EmReport {
+    /// Iterations (E-step + M-step pairs) run.
+    pub iterations: usize,
+    /// Whether the tolerance rule stopped the loop.
+    pub converged: bool,
+    /// Mean log-likelihood of the points at each E-step.
+    pub log_likelihood_trace: Vec<f64>,
+    /// Average number of components evaluated per point and iteration.
+    pub mean_components_per_point: f64,
+    /// Average number of components with a non-negligible responsibility per point and
+    /// iteration (all of them for the dense E-step).
+    pub mean_kept_per_point: f64,
+    /// Point evaluations that fell back to all components (restricted E-step).
+    pub dense_fallbacks: usize,
+}
+
+/// Mixture parameters during EM (unchecked; validated into a [`Gmm4`] at the end).
+#[derive(Clone, Debug)]
+struct Params {
+    weights: Vec<f64>,
+    means: Vec<Vector4<f64>>,
+    covs: Vec<Matrix4<f64>>,
+}
+
+/// Per-chunk sums of the fused E/M pass.
+struct Partial {
+    n: Vec<f64>,
+    s1: Vec<[f64; 4]>,
+    s2: Vec<[f64; 10]>,
+    ll: f64,
+    evaluated: usize,
+    kept: usize,
+    fallbacks: usize,
+}
+
+impl Partial {
+    fn new(m: usize) -> Self {
+        Self {
+            n: vec![0.0; m],
+            s1: vec![[0.0; 4]; m],
+            s2: vec![[0.0; 10]; m],
+            ll: 0.0,
+            evaluated: 0,
+            kept: 0,
+            fallbacks: 0,
+        }
+    }
+
+    fn add(&mut self, other: &Partial) {
+        for (a, b) in self.n.iter_mut().zip(&other.n) {
+            *a += b;
+        }
+        for (a, b) in self.s1.iter_mut().zip(&other.s1) {
+            for k in 0..4 {
+                a[k] += b[k];
+            }
+        }
+        for (a, b) in self.s2.iter_mut().zip(&other.s2) {
+            for k in 0..10 {
+                a[k] += b[k];
+            }
+        }
+        self.ll += other.ll;
+        self.evaluated += other.evaluated;
+        self.kept += other.kept;
+        self.fallbacks += other.fallbacks;
+    }
+
+    #[inline(always)]
+    fn accumulate(&mut self, m: usize, r: f64, d: [f64; 4]) {
+        self.n[m] += r;
+        let s1 = &mut self.s1[m];
+        let rd = [r * d[0], r * d[1], r * d[2], r * d[3]];
+        for k in 0..4 {
+            s1[k] += rd[k];
+        }
+        let s2 = &mut self.s2[m];
+        s2[0] += rd[0] * d[0];
+        s2[1] += rd[1] * d[0];
+        s2[2] += rd[1] * d[1];
+        s2[3] += rd[2] * d[0];
+        s2[4] += rd[2] * d[1];
+        s2[5] += rd[2] * d[2];
+        s2[6] += rd[3] * d[0];
+        s2[7] += rd[3] * d[1];
+        s2[8] += rd[3] * d[2];
+        s2[9] += rd[3] * d[3];
+    }
+}
+
+fn factor(params: &Params) -> Result<(Vec<Chol4>, Vec<f64>), SogmmError> {
+    let mut chol = Vec::with_capacity(params.weights.len());
+    let mut logc = Vec::with_capacity(params.weights.len());
+    for (component, ((w, mean), cov)) in params
+        .weights
+        .iter()
+        .zip(&params.means)
+        .zip(&params.covs)
+        .enumerate()
+    {
+        let c = Chol4::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?;
+        logc.push(w.ln() + c.log_norm);
+        chol.push(c);
+    }
+    Ok((chol, logc))
+}
+
+/// M-step from hard labels: the starting mixture of EM after k-means++ (KInit, Fig. 6.1).
+/// `assignment[i] < m` is the cluster of point `i`; covariances get `+ reg_covar · I`.
+pub fn init_from_partition(
+    points: &[Vector4<f64>],
+    assignment: &[u32],
+    m: usize,
+    reg_covar: f64,
+) -> Result<Gmm4, SogmmError> {
+    if points.is_empty() || m == 0 {
+        return Err(SogmmError::TooFewPoints {
+            points: points.len(),
+            needed: 1,
+        });
+    }
+    let mut count = vec![0.0f64; m];
+    let mut sum = vec![Vector4::zeros(); m];
+    for (p, &a) in points.iter().zip(assignment) {
+        let a = a as usize;
+        if a >= m {
+            return Err(SogmmError::InvalidInput("assignment out of range"));
+        }
+        count[a] += 1.0;
+        sum[a] += p;
+    }
+    let means: Vec<Vector4<f64>> = sum
+        .iter()
+        .zip(&count)
+        .map(|(s, c)| s / (c + 10.0 * f64::EPSILON))
+        .collect();
+    let mut covs = vec![Matrix4::zeros(); m];
+    for (p, &a) in points.iter().zip(assignment) {
+        let d = p - means[a as usize];
+        covs[a as usize] += d * d.transpose();
+    }
+    let n = points.len() as f64;
+    for (cov, c) in covs.iter_mut().zip(&count) {
+        *cov /= c + 10.0 * f64::EPSILON;
+        *cov += Matrix4::identity() * reg_covar;
+    }
+    let mut weights: Vec<f64> = count.iter().map(|c| c / n).collect();
+    let total: f64 = weights.iter().sum();
+    weights.iter_mut().for_each(|w| *w /= total);
+    Gmm4::new(weights, means, covs)
+}
+
+/// Run EM from `init` on `points` (see the module doc for the E-step variants, the
+/// regularisation and the convergence rule). Deterministic.
+pub fn fit_em(
+    points: &[Vector4<f64>],
+    init: &Gmm4,
+    config: &EmConfig,
+) -> Result<(Gmm4, EmReport), SogmmError> {
+    fit_em_anchored(points, init, None, config)
+}
+
+/// [`fit_em`] with the starting anchor of every point given (e.g. its k-means++ cluster;
+/// any component is valid, see the module doc); `None` uses the nearest mean in 4D.
+pub(crate) fn fit_em_anchored(
+    points: &[Vector4<f64>],
+    init: &Gmm4,
+    anchors: Option<&[u32]>,
+    config: &EmConfig,
+) -> Result<(Gmm4, EmReport), SogmmError> {
+    if points.is_empty() {
+        return Err(SogmmError::TooFewPoints {
+            points: 0,
+            needed: 1,
+        });
+    }
+    let m = init.len();
+    let mut params = Params {
+        weights: init.weights().to_vec(),
+        means: init.means().to_vec(),
+        covs: init.covariances().to_vec(),
+    };
+    let (grid, order) = sorted_grid(points, init);
+    let xs: Vec<[f64; 4]> = order
+        .iter()
+        .map(|&i| {
+            let p = points[i as usize];
+            [p[0], p[1], p[2], p[3]]
+        })
+        .collect();
+    let cells: Vec<u32> = order.iter().map(|&i| grid.point_cell[i as usize]).collect();
+    let mut anchors: Vec<u32> = match anchors {
+        Some(a) if a.len() == points.len() && a.iter().all(|&k| (k as usize) < m) => {
+            order.iter().map(|&i| a[i as usize]).collect()
+        }
+        _ => nearest_means(&xs, init.means()),
+    };
+
+    let mut report = EmReport::default();
+    let mut prev_ll = f64::NEG_INFINITY;
+    let mut evaluated_total = 0usize;
+    let mut kept_total = 0usize;
+    for _ in 0..config.max_iterations {
+        let (chol, logc) = factor(&params)?;
+        let (lists, anchor_ll, threshold) = match config.e_step {
+            EStep::Dense => (None, vec![], f64::NEG_INFINITY),
+            EStep::Restricted => {
+                let anchor_ll: Vec<f64> = xs
+                    .iter()
+                    .zip(&anchors)
+                    .map(|(x, &a)| logc[a as usize] - 0.5 * chol[a as usize].mahalanobis2(x))
+                    .collect();
+                let threshold = quantile(&anchor_ll, ANCHOR_QUANTILE) - LOG_TRUNCATION;
+                let boxes: Vec<Option<([f64; 3], [f64; 3])>> = (0..m)
+                    .map(|k| reach_box(&params.means[k], &params.covs[k], logc[k], threshold))
+                    .collect();
+                (Some(grid.component_lists(&boxes)), anchor_ll, threshold)
+            }
+        };
+        let ctx = PassCtx {
+            xs: &xs,
+            cells: &cells,
+            chol: &chol,
+            logc: &logc,
+            means: &params.means,
+            lists: lists.as_ref(),
+            anchor_ll: &anchor_ll,
+            threshold,
+        };
+        let (total, new_anchors) = fused_pass(&ctx, m);
+        anchors = new_anchors;
+        let ll = total.ll / xs.len() as f64;
+        report.log_likelihood_trace.push(ll);
+        report.iterations += 1;
+        evaluated_total += total.evaluated;
+        kept_total += total.kept;
+        report.dense_fallbacks += total.fallbacks;
+        m_step(&mut params, &total, xs.len(), config.reg_covar);
+        if (ll - prev_ll).abs() < config.tolerance {
+            report.converged = true;
+            break;
+        }
+        prev_ll = ll;
+    }
+    let denom = (xs.len() * report.iterations.max(1)) as f64;
+    report.mean_components_per_point = evaluated_total as f64 / denom;
+    report.mean_kept_per_point = kept_total as f64 / denom;
+    let total_w: f64 = params.weights.iter().sum();
+    params.weights.iter_mut().for_each(|w| *w /= total_w);
+    let gmm = Gmm4::new(params.weights, params.means, params.covs)?;
+    Ok((gmm, report))
+}
+
+/// Grid over the spatial part of the points (cell side from the starting model) and the
+/// processing order: points sorted by cell, stable.
+fn sorted_grid(points: &[Vector4<f64>], init: &Gmm4) -> (PointGrid, Vec<u32>) {
+    let xyz: Vec<[f64; 3]> = points.iter().map(|p| [p[0], p[1], p[2]]).collect();
+    // Cell side: half the median over components of the 3σ half-width along the widest
+    // axis; clamped to [extent/512, extent/8].
+    let mut widths: Vec<f64> = init
+        .covariances()
+        .iter()
+        .map(|c| 3.0 * c[(0, 0)].max(c[(1, 1)]).max(c[(2, 2)]).sqrt())
+        .collect();
+    let median = if widths.is_empty() {
+        1.0
+    } else {
+        quantile(&widths.split_off(0), 0.5)
+    };
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &xyz {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let extent = (0..3)
+        .map(|a| hi[a] - lo[a])
+        .fold(0.0f64, f64::max)
+        .max(1e-6);
+    let h = (0.5 * median).clamp(extent / 512.0, extent / 8.0);
+    let grid = PointGrid::new(&xyz, h);
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.sort_by_key(|&i| grid.point_cell[i as usize]);
+    (grid, order)
+}
+
+fn nearest_means(xs: &[[f64; 4]], means: &[Vector4<f64>]) -> Vec<u32> {
+    xs.par_chunks(CHUNK)
+        .flat_map_iter(|chunk| {
+            chunk
+                .iter()
+                .map(|x| {
+                    let mut best = (f64::INFINITY, 0u32);
+                    for (k, mu) in means.iter().enumerate() {
+                        let d: f64 = (0..4).map(|a| (x[a] - mu[a]).powi(2)).sum();
+                        if d < best.0 {
+                            best = (d, k as u32);
+                        }
+                    }
+                    best.1
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// The `q`-quantile (nearest rank, lower) of finite values; `−∞` if there are none.
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NEG_INFINITY;
+    }
+    let k = ((v.len() - 1) as f64 * q).floor() as usize;
+    let (_, kth, _) = v.select_nth_unstable_by(k, f64::total_cmp);
+    *kth
+}
+
+/// Axis-aligned box of the spatial ellipsoid where `ℓ_m` can reach `threshold`
+/// (half-widths `sqrt(2 (c_m − T) Σ_ii)`); `None` if `c_m ≤ T` (never reaches it).
+fn reach_box(
+    mean: &Vector4<f64>,
+    cov: &Matrix4<f64>,
+    logc: f64,
+    threshold: f64,
+) -> Option<([f64; 3], [f64; 3])> {
+    let k2 = 2.0 * (logc - threshold);
+    if k2.is_nan() || k2 <= 0.0 {
+        return None;
+    }
+    let mut lo = [0.0; 3];
+    let mut hi = [0.0; 3];
+    for a in 0..3 {
+        let r = (k2 * cov[(a, a)]).sqrt();
+        lo[a] = mean[a] - r;
+        hi[a] = mean[a] + r;
+    }
+    Some((lo, hi))
+}
+
+struct PassCtx<'a> {
+    xs: &'a [[f64; 4]],
+    cells: &'a [u32],
+    chol: &'a [Chol4],
+    logc: &'a [f64],
+    means: &'a [Vector4<f64>],
+    lists: Option<&'a CellLists>,
+    anchor_ll: &'a [f64],
+    threshold: f64,
+}
+
+/// E-step and M-step sums in one pass over the points, chunked; chunk sums added in
+/// chunk order. Returns the totals and each point's most responsible component.
+fn fused_pass(ctx: &PassCtx<'_>, m: usize) -> (Partial, Vec<u32>) {
+    let n = ctx.xs.len();
+    let chunks: Vec<(Partial, Vec<u32>)> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
+            chunk_pass(ctx, m, range)
+        })
+        .collect();
+    let mut total = Partial::new(m);
+    let mut anchors = Vec::with_capacity(n);
+    for (p, a) in &chunks {
+        total.add(p);
+        anchors.extend_from_slice(a);
+    }
+    (total, anchors)
+}
+
+fn chunk_pass(ctx: &PassCtx<'_>, m: usize, range: std::ops::Range<usize>) -> (Partial, Vec<u32>) {
+    let mut part = Partial::new(m);
+    let mut anchors = Vec::with_capacity(range.len());
+    let mut ids: Vec<u32> = Vec::with_capacity(m);
+    let mut lls: Vec<f64> = Vec::with_capacity(m);
+    let all: Vec<u32> = (0..m as u32).collect();
+    for i in range {
+        let x = &ctx.xs[i];
+        let (candidates, truncate): (&[u32], bool) = match ctx.lists {
+            None => (&all, false),
+            Some(lists) => {
+                if ctx.anchor_ll[i] - LOG_TRUNCATION >= ctx.threshold {
+                    (lists.get(ctx.cells[i]), true)
+                } else {
+                    part.fallbacks += 1;
+                    (&all, true)
+                }
+            }
+        };
+        part.evaluated += candidates.len();
+        ids.clear();
+        lls.clear();
+        let mut best = (f64::NEG_INFINITY, 0u32);
+        for &k in candidates {
+            let l = ctx.logc[k as usize] - 0.5 * ctx.chol[k as usize].mahalanobis2(x);
+            if l > best.0 {
+                best = (l, k);
+            }
+            ids.push(k);
+            lls.push(l);
+        }
+        let max = best.0;
+        let cut = if truncate {
+            max - LOG_TRUNCATION
+        } else {
+            f64::NEG_INFINITY
+        };
+        // One exponential per kept component: e = exp(ℓ − max), γ = e / Σ e.
+        let mut s = 0.0;
+        let mut kept = 0;
+        for j in 0..lls.len() {
+            let l = lls[j];
+            if l >= cut {
+                let e = (l - max).exp();
+                s += e;
+                lls[kept] = e;
+                ids[kept] = ids[j];
+                kept += 1;
+            }
+        }
+        part.ll += max + s.ln();
+        part.kept += kept;
+        anchors.push(best.1);
+        let inv_s = 1.0 / s;
+        for (&k, &e) in ids[..kept].iter().zip(&lls[..kept]) {
+            let r = e * inv_s;
+            let mu = &ctx.means[k as usize];
+            let d = [x[0] - mu[0], x[1] - mu[1], x[2] - mu[2], x[3] - mu[3]];
+            part.accumulate(k as usize, r, d);
+        }
+    }
+    (part, anchors)
+}
+
+fn m_step(params: &mut Params, total: &Partial, n_points: usize, reg: f64) {
+    let n = n_points as f64;
+    for k in 0..params.weights.len() {
+        let nk = total.n[k] + 10.0 * f64::EPSILON;
+        let d = Vector4::new(
+            total.s1[k][0],
+            total.s1[k][1],
+            total.s1[k][2],
+            total.s1[k][3],
+        ) / nk;
+        let s = &total.s2[k];
+        let mut cov = Matrix4::new(
+            s[0], s[1], s[3], s[6], //
+            s[1], s[2], s[4], s[7], //
+            s[3], s[4], s[5], s[8], //
+            s[6], s[7], s[8], s[9],
+        ) / nk;
+        cov -= d * d.transpose();
+        for a in 0..4 {
+            cov[(a, a)] += reg;
+        }
+        params.means[k] += d;
+        params.covs[k] = cov;
+        params.weights[k] = nk / n;
+    }
+}

@@ -1,0 +1,606 @@
+//! Mixture types: the joint 4D model [`Gmm4`] (x, y, z, intensity; thesis Eq. 6.1), its
+//! spatial marginal [`Gmm3`] (Eq. 6.11), the intensity conditional
+//! [`IntensityConditional`] (Eqs. 6.12–6.13), log-likelihoods through Cholesky factors
+//! (App. A, Eq. A.3) and sampling (§6.1.5).
+//!
+//! Covariances are never inverted: every Mahalanobis distance is a forward substitution
+//! with the lower Cholesky factor `L` (`Σ = L Lᵀ`), and `ln |Σ| = 2 Σ ln L_jj`.
+
+use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use rand::Rng;
+use rayon::prelude::*;
+
+use super::SogmmError;
+
+/// `ln(2π)`.
+pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
+
+/// Largest allowed `|Σ w − 1|` for a valid mixture.
+pub const WEIGHT_SUM_TOLERANCE: f64 = 1e-9;
+
+/// Relative asymmetry `|Σ − Σᵀ|_max / |Σ|_max` accepted for a covariance.
+const SYMMETRY_TOLERANCE: f64 = 1e-9;
+
+/// Points per rayon task in the batched evaluations (results are per point, so the
+/// split does not change any value).
+const BATCH: usize = 1024;
+
+/// One 4D component in the form the hot loops use: mean, packed lower Cholesky factor
+/// and the log normaliser `−(D/2) ln 2π − Σ ln L_jj` (Eq. A.3, without the weight).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Chol4 {
+    pub(crate) mean: [f64; 4],
+    /// Row-major packed lower triangle: l00, l10, l11, l20, l21, l22, l30, l31, l32, l33.
+    l: [f64; 10],
+    inv_diag: [f64; 4],
+    pub(crate) log_norm: f64,
+}
+
+impl Chol4 {
+    /// Factor `cov`; `None` if it is not positive definite (or not finite).
+    pub(crate) fn new(mean: &Vector4<f64>, cov: &Matrix4<f64>) -> Option<Self> {
+        if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let l = cov.cholesky()?.l();
+        let packed = [
+            l[(0, 0)],
+            l[(1, 0)],
+            l[(1, 1)],
+            l[(2, 0)],
+            l[(2, 1)],
+            l[(2, 2)],
+            l[(3, 0)],
+            l[(3, 1)],
+            l[(3, 2)],
+            l[(3, 3)],
+        ];
+        let diag = [l[(0, 0)], l[(1, 1)], l[(2, 2)], l[(3, 3)]];
+        if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
+            return None;
+        }
+        let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
+        Some(Self {
+            mean: [mean[0], mean[1], mean[2], mean[3]],
+            l: packed,
+            inv_diag: diag.map(|d| 1.0 / d),
+            log_norm: -2.0 * LN_2PI - log_det_half,
+        })
+    }
+
+    /// Squared Mahalanobis distance `|L⁻¹ (x − μ)|²` by forward substitution (Eq. A.3).
+    #[inline(always)]
+    pub(crate) fn mahalanobis2(&self, x: &[f64; 4]) -> f64 {
+        let l = &self.l;
+        let d0 = x[0] - self.mean[0];
+        let d1 = x[1] - self.mean[1];
+        let d2 = x[2] - self.mean[2];
+        let d3 = x[3] - self.mean[3];
+        let y0 = d0 * self.inv_diag[0];
+        let y1 = (d1 - l[1] * y0) * self.inv_diag[1];
+        let y2 = (d2 - l[3] * y0 - l[4] * y1) * self.inv_diag[2];
+        let y3 = (d3 - l[6] * y0 - l[7] * y1 - l[8] * y2) * self.inv_diag[3];
+        y0 * y0 + y1 * y1 + y2 * y2 + y3 * y3
+    }
+}
+
+/// One 3D component: mean, packed lower Cholesky factor, log normaliser.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Chol3 {
+    pub(crate) mean: [f64; 3],
+    l: [f64; 6],
+    inv_diag: [f64; 3],
+    pub(crate) log_norm: f64,
+}
+
+impl Chol3 {
+    pub(crate) fn new(mean: &Vector3<f64>, cov: &Matrix3<f64>) -> Option<Self> {
+        if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let l = cov.cholesky()?.l();
+        let diag = [l[(0, 0)], l[(1, 1)], l[(2, 2)]];
+        if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
+            return None;
+        }
+        let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
+        Some(Self {
+            mean: [mean[0], mean[1], mean[2]],
+            l: [
+                l[(0, 0)],
+                l[(1, 0)],
+                l[(1, 1)],
+                l[(2, 0)],
+                l[(2, 1)],
+                l[(2, 2)],
+            ],
+            inv_diag: diag.map(|d| 1.0 / d),
+            log_norm: -1.5 * LN_2PI - log_det_half,
+        })
+    }
+
+    /// Squared Mahalanobis distance by forward substitution.
+    #[inline(always)]
+    pub(crate) fn mahalanobis2(&self, x: &[f64; 3]) -> f64 {
+        let l = &self.l;
+        let d0 = x[0] - self.mean[0];
+        let d1 = x[1] - self.mean[1];
+        let d2 = x[2] - self.mean[2];
+        let y0 = d0 * self.inv_diag[0];
+        let y1 = (d1 - l[1] * y0) * self.inv_diag[1];
+        let y2 = (d2 - l[3] * y0 - l[4] * y1) * self.inv_diag[2];
+        y0 * y0 + y1 * y1 + y2 * y2
+    }
+
+    /// `μ + L z`.
+    #[inline]
+    fn transform(&self, z: [f64; 3]) -> Vector3<f64> {
+        let l = &self.l;
+        Vector3::new(
+            self.mean[0] + l[0] * z[0],
+            self.mean[1] + l[1] * z[0] + l[2] * z[1],
+            self.mean[2] + l[3] * z[0] + l[4] * z[1] + l[5] * z[2],
+        )
+    }
+}
+
+/// `ln Σ exp(v)` over a slice, stable (max shifted). `−∞` for an empty slice.
+#[inline]
+pub(crate) fn log_sum_exp(values: &[f64]) -> f64 {
+    let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !max.is_finite() {
+        return max;
+    }
+    let s: f64 = values.iter().map(|v| (v - max).exp()).sum();
+    max + s.ln()
+}
+
+fn check_weights(weights: &[f64]) -> Result<(), SogmmError> {
+    if weights.is_empty() {
+        return Err(SogmmError::EmptyModel);
+    }
+    for (component, w) in weights.iter().enumerate() {
+        if !w.is_finite() || *w < 0.0 {
+            return Err(SogmmError::InvalidWeight {
+                component,
+                weight: *w,
+            });
+        }
+    }
+    let sum: f64 = weights.iter().sum();
+    if (sum - 1.0).abs() > WEIGHT_SUM_TOLERANCE {
+        return Err(SogmmError::WeightsDoNotSumToOne { sum });
+    }
+    Ok(())
+}
+
+fn asymmetry<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
+    let scale = m.amax().max(f64::MIN_POSITIVE);
+    (m - m.transpose()).amax() / scale
+}
+
+/// A Gaussian mixture over (x, y, z, intensity) (thesis Eq. 6.1): weights `π_m`, means
+/// `μ_m ∈ ℝ⁴`, full covariances `Σ_m ∈ ℝ⁴ˣ⁴`, with the Cholesky factors and
+/// log-determinants cached at construction.
+///
+/// Invariants (checked by [`Gmm4::new`]): at least one component, weights finite,
+/// non-negative and summing to 1 within [`WEIGHT_SUM_TOLERANCE`], means finite,
+/// covariances symmetric and positive definite.
+#[derive(Clone, Debug)]
+pub struct Gmm4 {
+    weights: Vec<f64>,
+    means: Vec<Vector4<f64>>,
+    covariances: Vec<Matrix4<f64>>,
+    chol: Vec<Chol4>,
+    log_weights: Vec<f64>,
+}
+
+impl PartialEq for Gmm4 {
+    /// Equal parameters (the caches follow from them).
+    fn eq(&self, other: &Self) -> bool {
+        self.weights == other.weights
+            && self.means == other.means
+            && self.covariances == other.covariances
+    }
+}
+
+impl Gmm4 {
+    /// A validated mixture; fails on any broken invariant (see the type doc).
+    pub fn new(
+        weights: Vec<f64>,
+        means: Vec<Vector4<f64>>,
+        covariances: Vec<Matrix4<f64>>,
+    ) -> Result<Self, SogmmError> {
+        if means.len() != weights.len() || covariances.len() != weights.len() {
+            return Err(SogmmError::LengthMismatch {
+                weights: weights.len(),
+                means: means.len(),
+                covariances: covariances.len(),
+            });
+        }
+        check_weights(&weights)?;
+        let mut chol = Vec::with_capacity(weights.len());
+        for (component, (mean, cov)) in means.iter().zip(&covariances).enumerate() {
+            if asymmetry(cov) > SYMMETRY_TOLERANCE {
+                return Err(SogmmError::NotPositiveDefinite { component });
+            }
+            chol.push(Chol4::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?);
+        }
+        let log_weights = weights.iter().map(|w| w.ln()).collect();
+        Ok(Self {
+            weights,
+            means,
+            covariances,
+            chol,
+            log_weights,
+        })
+    }
+
+    /// Number of components `M`.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Never true for a constructed mixture (kept for the `len` convention).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+
+    /// Weights `π_m`.
+    #[must_use]
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Means `μ_m` (x, y, z in metres, intensity).
+    #[must_use]
+    pub fn means(&self) -> &[Vector4<f64>] {
+        &self.means
+    }
+
+    /// Covariances `Σ_m`.
+    #[must_use]
+    pub fn covariances(&self) -> &[Matrix4<f64>] {
+        &self.covariances
+    }
+
+    /// `ln |Σ_m|` from the cached Cholesky factor (`2 Σ ln L_jj`).
+    #[must_use]
+    pub fn ln_determinant(&self, m: usize) -> f64 {
+        -2.0 * (self.chol[m].log_norm + 2.0 * LN_2PI)
+    }
+
+    /// Re-check every invariant of the type doc (weights sum to 1, covariances PD).
+    pub fn validate(&self) -> Result<(), SogmmError> {
+        Self::new(
+            self.weights.clone(),
+            self.means.clone(),
+            self.covariances.clone(),
+        )
+        .map(|_| ())
+    }
+
+    /// `ln π_m + ln N(x | μ_m, Σ_m)` (Eq. A.2 numerator, Eq. A.3).
+    #[must_use]
+    pub fn log_component(&self, m: usize, x: &Vector4<f64>) -> f64 {
+        let c = &self.chol[m];
+        self.log_weights[m] + c.log_norm - 0.5 * c.mahalanobis2(&[x[0], x[1], x[2], x[3]])
+    }
+
+    /// `ln p(x) = ln Σ_m π_m N(x | μ_m, Σ_m)` by log-sum-exp over all components (exact,
+    /// dense).
+    #[must_use]
+    pub fn log_likelihood(&self, x: &Vector4<f64>) -> f64 {
+        let xs = [x[0], x[1], x[2], x[3]];
+        let mut buf = Vec::with_capacity(self.len());
+        buf.extend(
+            self.chol
+                .iter()
+                .zip(&self.log_weights)
+                .map(|(c, lw)| lw + c.log_norm - 0.5 * c.mahalanobis2(&xs)),
+        );
+        log_sum_exp(&buf)
+    }
+
+    /// [`Gmm4::log_likelihood`] of many points, in parallel (values do not depend on the
+    /// thread count).
+    #[must_use]
+    pub fn log_likelihoods(&self, xs: &[Vector4<f64>]) -> Vec<f64> {
+        xs.par_chunks(BATCH)
+            .flat_map_iter(|chunk| chunk.iter().map(|x| self.log_likelihood(x)))
+            .collect()
+    }
+
+    /// Mean of [`Gmm4::log_likelihoods`], summed in point order.
+    #[must_use]
+    pub fn mean_log_likelihood(&self, xs: &[Vector4<f64>]) -> f64 {
+        if xs.is_empty() {
+            return f64::NAN;
+        }
+        self.log_likelihoods(xs).iter().sum::<f64>() / xs.len() as f64
+    }
+
+    /// The spatial marginal `p(x, y, z)` (Eq. 6.11): same weights, the first three mean
+    /// entries and the top-left 3×3 covariance block.
+    #[must_use]
+    pub fn marginal_spatial(&self) -> Gmm3 {
+        let means: Vec<Vector3<f64>> = self.means.iter().map(|m| m.xyz()).collect();
+        let covs: Vec<Matrix3<f64>> = self
+            .covariances
+            .iter()
+            .map(|c| c.fixed_view::<3, 3>(0, 0).into_owned())
+            .collect();
+        let chol = means
+            .iter()
+            .zip(&covs)
+            .map(|(m, c)| {
+                // A principal block of a PD matrix is PD; the factor exists.
+                Chol3::new(m, c).unwrap_or_else(unreachable_block)
+            })
+            .collect();
+        Gmm3 {
+            weights: self.weights.clone(),
+            log_weights: self.log_weights.clone(),
+            means,
+            covariances: covs,
+            chol,
+        }
+    }
+
+    /// The intensity conditional `p(g | x, y, z)` (Eq. 6.12), ready for batched queries.
+    #[must_use]
+    pub fn intensity_conditional(&self) -> IntensityConditional {
+        IntensityConditional::new(self)
+    }
+}
+
+#[cold]
+fn unreachable_block() -> Chol3 {
+    // Only reachable if a validated 4×4 PD covariance had a non-PD leading block, which
+    // cannot happen; return a harmless, far-away unit component rather than panic.
+    Chol3 {
+        mean: [f64::MAX; 3],
+        l: [1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+        inv_diag: [1.0; 3],
+        log_norm: f64::NEG_INFINITY,
+    }
+}
+
+/// A Gaussian mixture over (x, y, z): the spatial marginal of a [`Gmm4`] (Eq. 6.11),
+/// used to sample the reconstructed surface (§6.1.5) and, later, the relevant-subset
+/// test (Eq. 6.9).
+#[derive(Clone, Debug)]
+pub struct Gmm3 {
+    weights: Vec<f64>,
+    log_weights: Vec<f64>,
+    means: Vec<Vector3<f64>>,
+    covariances: Vec<Matrix3<f64>>,
+    chol: Vec<Chol3>,
+}
+
+impl Gmm3 {
+    /// A validated 3D mixture (same invariants as [`Gmm4::new`]).
+    pub fn new(
+        weights: Vec<f64>,
+        means: Vec<Vector3<f64>>,
+        covariances: Vec<Matrix3<f64>>,
+    ) -> Result<Self, SogmmError> {
+        if means.len() != weights.len() || covariances.len() != weights.len() {
+            return Err(SogmmError::LengthMismatch {
+                weights: weights.len(),
+                means: means.len(),
+                covariances: covariances.len(),
+            });
+        }
+        check_weights(&weights)?;
+        let mut chol = Vec::with_capacity(weights.len());
+        for (component, (mean, cov)) in means.iter().zip(&covariances).enumerate() {
+            if asymmetry(cov) > SYMMETRY_TOLERANCE {
+                return Err(SogmmError::NotPositiveDefinite { component });
+            }
+            chol.push(Chol3::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?);
+        }
+        let log_weights = weights.iter().map(|w| w.ln()).collect();
+        Ok(Self {
+            weights,
+            log_weights,
+            means,
+            covariances,
+            chol,
+        })
+    }
+
+    /// Number of components.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Never true for a constructed mixture.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+
+    /// Weights.
+    #[must_use]
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Means, metres.
+    #[must_use]
+    pub fn means(&self) -> &[Vector3<f64>] {
+        &self.means
+    }
+
+    /// Covariances, m².
+    #[must_use]
+    pub fn covariances(&self) -> &[Matrix3<f64>] {
+        &self.covariances
+    }
+
+    /// `ln p(x)` by log-sum-exp over all components.
+    #[must_use]
+    pub fn log_likelihood(&self, x: &Vector3<f64>) -> f64 {
+        let xs = [x[0], x[1], x[2]];
+        let buf: Vec<f64> = self
+            .chol
+            .iter()
+            .zip(&self.log_weights)
+            .map(|(c, lw)| lw + c.log_norm - 0.5 * c.mahalanobis2(&xs))
+            .collect();
+        log_sum_exp(&buf)
+    }
+
+    /// Draw `n` points (§6.1.5): component by its weight, then `μ + L z` with `z` standard
+    /// normal from the Box–Muller transform. Deterministic for a given `rng` state.
+    pub fn sample<R: Rng + ?Sized>(&self, n: usize, rng: &mut R) -> Vec<Vector3<f64>> {
+        let mut cumulative = Vec::with_capacity(self.len());
+        let mut acc = 0.0;
+        for w in &self.weights {
+            acc += w;
+            cumulative.push(acc);
+        }
+        let total = acc;
+        let last = self.len() - 1;
+        (0..n)
+            .map(|_| {
+                let u = rng.random::<f64>() * total;
+                let m = cumulative.partition_point(|c| *c <= u).min(last);
+                let (z0, z1) = box_muller(rng);
+                let (z2, _) = box_muller(rng);
+                self.chol[m].transform([z0, z1, z2])
+            })
+            .collect()
+    }
+}
+
+/// Two independent standard normal draws from two uniforms (Box–Muller).
+pub(crate) fn box_muller<R: Rng + ?Sized>(rng: &mut R) -> (f64, f64) {
+    // 1 − U lies in (0, 1], so the logarithm is finite.
+    let u1 = 1.0 - rng.random::<f64>();
+    let u2 = rng.random::<f64>();
+    let r = (-2.0 * u1.ln()).sqrt();
+    let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+    (r * c, r * s)
+}
+
+/// Expected intensity and its variance at a point (Eqs. 6.12–6.13).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntensityEstimate {
+    /// `λ(x) = Σ_m w_m(x) λ_m(x)` (Eq. 6.13).
+    pub mean: f64,
+    /// `Σ_m w_m(x) (ν_m² + λ_m(x)²) − λ(x)²`, the variance of the mixture of Eq. 6.12.
+    pub variance: f64,
+}
+
+/// The conditional `p(g | x)` of a [`Gmm4`] (Eq. 6.12), with per-component regression
+/// vectors `b_m = Σ_xx⁻¹ Σ_xg` and conditional variances
+/// `ν_m² = Σ_gg − Σ_gx Σ_xx⁻¹ Σ_xg` precomputed by Cholesky solves.
+#[derive(Clone, Debug)]
+pub struct IntensityConditional {
+    spatial: Vec<Chol3>,
+    log_weights: Vec<f64>,
+    mean_g: Vec<f64>,
+    regression: Vec<[f64; 3]>,
+    cond_var: Vec<f64>,
+}
+
+impl IntensityConditional {
+    /// Precompute from a joint model.
+    #[must_use]
+    pub fn new(gmm: &Gmm4) -> Self {
+        let n = gmm.len();
+        let mut spatial = Vec::with_capacity(n);
+        let mut regression = Vec::with_capacity(n);
+        let mut cond_var = Vec::with_capacity(n);
+        for (mean, cov) in gmm.means.iter().zip(&gmm.covariances) {
+            let sxx = cov.fixed_view::<3, 3>(0, 0).into_owned();
+            let sxg: Vector3<f64> = cov.fixed_view::<3, 1>(0, 3).into_owned();
+            let sgg = cov[(3, 3)];
+            match sxx.cholesky() {
+                Some(ch) => {
+                    let b = ch.solve(&sxg);
+                    spatial.push(Chol3::new(&mean.xyz(), &sxx).unwrap_or_else(unreachable_block));
+                    regression.push([b[0], b[1], b[2]]);
+                    cond_var.push((sgg - sxg.dot(&b)).max(0.0));
+                }
+                None => {
+                    spatial.push(unreachable_block());
+                    regression.push([0.0; 3]);
+                    cond_var.push(sgg);
+                }
+            }
+        }
+        Self {
+            spatial,
+            log_weights: gmm.log_weights.clone(),
+            mean_g: gmm.means.iter().map(|m| m[3]).collect(),
+            regression,
+            cond_var,
+        }
+    }
+
+    /// Expected intensity and variance at one point (dense over all components).
+    #[must_use]
+    pub fn estimate(&self, x: &Vector3<f64>) -> IntensityEstimate {
+        let mut buf = Vec::with_capacity(self.log_weights.len());
+        self.estimate_with(x, &mut buf)
+    }
+
+    fn estimate_with(&self, x: &Vector3<f64>, buf: &mut Vec<f64>) -> IntensityEstimate {
+        let xs = [x[0], x[1], x[2]];
+        buf.clear();
+        buf.extend(
+            self.spatial
+                .iter()
+                .zip(&self.log_weights)
+                .map(|(c, lw)| lw + c.log_norm - 0.5 * c.mahalanobis2(&xs)),
+        );
+        let max = buf.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (mut wsum, mut m1, mut m2) = (0.0, 0.0, 0.0);
+        for (m, lw) in buf.iter().enumerate() {
+            // Far from every component (max = −∞) fall back to the prior weights.
+            let w = if max.is_finite() {
+                (lw - max).exp()
+            } else {
+                self.log_weights[m].exp()
+            };
+            if w == 0.0 {
+                continue;
+            }
+            let c = &self.spatial[m];
+            let b = &self.regression[m];
+            let lambda = self.mean_g[m]
+                + b[0] * (xs[0] - c.mean[0])
+                + b[1] * (xs[1] - c.mean[1])
+                + b[2] * (xs[2] - c.mean[2]);
+            wsum += w;
+            m1 += w * lambda;
+            m2 += w * (self.cond_var[m] + lambda * lambda);
+        }
+        let mean = m1 / wsum;
+        IntensityEstimate {
+            mean,
+            variance: (m2 / wsum - mean * mean).max(0.0),
+        }
+    }
+
+    /// [`IntensityConditional::estimate`] for a batch of points, in parallel batches
+    /// (§6.1.5); each value depends only on its point.
+    #[must_use]
+    pub fn estimate_batch(&self, xs: &[Vector3<f64>]) -> Vec<IntensityEstimate> {
+        xs.par_chunks(BATCH)
+            .flat_map_iter(|chunk| {
+                let mut buf = Vec::with_capacity(self.log_weights.len());
+                chunk
+                    .iter()
+                    .map(move |x| self.estimate_with(x, &mut buf))
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    }
+}
