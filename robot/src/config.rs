@@ -135,7 +135,13 @@ impl RobotConfig {
         positive("replan_rate_hz", self.replan_rate_hz)?;
         positive("sensor_rate_hz", self.sensor_rate_hz)?;
         positive("radius_m", self.radius_m)?;
-        non_negative("link.odometry_rate_hz", self.link.odometry_rate_hz)?;
+        if let Err(reason) = self.link.validate() {
+            return Err(ConfigError {
+                key: "link".into(),
+                rule: "must be valid",
+                value: reason,
+            });
+        }
         non_negative("latency_s.vehicle", self.latency_s.vehicle)?;
         non_negative("latency_s.sensor", self.latency_s.sensor)?;
         non_negative("latency_s.explorer", self.latency_s.explorer)?;

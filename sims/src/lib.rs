@@ -13,6 +13,7 @@ pub mod camera;
 pub mod coverage;
 pub mod faults;
 pub mod monitor;
+pub mod network;
 pub mod report;
 pub mod scenario;
 pub mod sim_sensor;

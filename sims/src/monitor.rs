@@ -6,7 +6,10 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use nalgebra::Point3;
 use serde::Serialize;
+use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
+
+use crate::network::Positions;
 use troupe_actors::runtime::{Publication, Tap};
 
 use crate::camera::CameraParams;
@@ -49,6 +52,8 @@ pub struct RobotTruth {
     /// Committed plans with a knot closer to the rock than the body radius (ground
     /// truth): a plan the robot should never have committed.
     pub unsafe_plans: u64,
+    /// The link's latest counters.
+    pub link: Option<LinkStatus>,
 }
 
 /// Everything the monitor knows.
@@ -73,6 +78,7 @@ pub struct GroundTruthMonitor {
     pixel_stride: usize,
     radius_m: f64,
     truth: Arc<Mutex<Truth>>,
+    positions: Positions,
 }
 
 impl GroundTruthMonitor {
@@ -100,6 +106,7 @@ impl GroundTruthMonitor {
             camera,
             pixel_stride,
             radius_m,
+            positions: Arc::new(Mutex::new(vec![[0.0; 3]; count])),
             truth: Arc::new(Mutex::new(Truth {
                 coverage,
                 robots,
@@ -108,6 +115,12 @@ impl GroundTruthMonitor {
                 in_contact: vec![false; count * count],
             })),
         }
+    }
+
+    /// Robot positions as last seen, for the network's range model.
+    #[must_use]
+    pub fn positions(&self) -> Positions {
+        self.positions.clone()
     }
 
     /// Shared handle on the metrics.
@@ -140,6 +153,10 @@ impl Tap for GroundTruthMonitor {
             truth
                 .coverage
                 .observe(&self.camera, &frame.pose, &image, self.pixel_stride);
+        } else if let Some(status) = p.get(&LINK_STATUS) {
+            if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
+                robot.link = Some(status.clone());
+            }
         } else if let Some(plan) = p.get(&PLAN) {
             let unsafe_plan = plan
                 .trajectory
@@ -157,6 +174,14 @@ impl Tap for GroundTruthMonitor {
             }
         } else if let Some(odometry) = p.get(&ODOMETRY) {
             let position = Point3::from(odometry.pose.translation.vector);
+            if let Some(slot) = self
+                .positions
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .get_mut(r)
+            {
+                *slot = position.coords.into();
+            }
             let (_, _, yaw) = odometry.pose.rotation.euler_angles();
             let mut truth = lock_truth(&self.truth);
             let Some(robot) = truth.robots.get_mut(r) else {

@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use troupe_comms::simnet::SimNetConfig;
 use troupe_robot::RobotConfig;
 
 use crate::camera::CameraParams;
@@ -33,20 +34,6 @@ impl Default for WorldConfig {
             seed: 7,
             cave: CaveParams::default(),
         }
-    }
-}
-
-/// The in-process network between robots.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct NetworkConfig {
-    /// One-way latency, seconds.
-    pub latency_s: f64,
-}
-
-impl Default for NetworkConfig {
-    fn default() -> Self {
-        NetworkConfig { latency_s: 0.02 }
     }
 }
 
@@ -107,8 +94,9 @@ pub struct Scenario {
     pub robot: RobotConfig,
     /// The simulated vehicle of every robot.
     pub vehicle: VehicleConfig,
-    /// Network between robots.
-    pub network: NetworkConfig,
+    /// The simulated network between robots (`[network.default]` for every pair,
+    /// `[[network.pairs]]` overrides, `[[network.partitions]]`).
+    pub network: SimNetConfig,
     /// Metrics.
     pub metrics: MetricsConfig,
     /// Scheduled faults.
@@ -130,7 +118,7 @@ impl Default for Scenario {
             },
             robot: RobotConfig::default(),
             vehicle: VehicleConfig::default(),
-            network: NetworkConfig::default(),
+            network: SimNetConfig::default(),
             metrics: MetricsConfig::default(),
             faults: Vec::new(),
         }
@@ -255,12 +243,12 @@ impl Scenario {
         self.vehicle
             .validate()
             .map_err(|reason| invalid("vehicle", reason))?;
-        if !(self.network.latency_s.is_finite() && self.network.latency_s >= 0.0) {
-            return Err(invalid(
-                "network.latency_s",
-                format!("must be ≥ 0, got {}", self.network.latency_s),
-            ));
-        }
+        self.network.validate().map_err(|e| {
+            invalid(
+                &format!("network.{}", e.key),
+                format!("{}, got {}", e.rule, e.value),
+            )
+        })?;
         let m = &self.metrics;
         if !(m.coverage_cell_m.is_finite() && m.coverage_cell_m >= 0.05) {
             return Err(invalid(

@@ -3,18 +3,21 @@
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use troupe_actors::link::LinkStatus;
 use troupe_actors::runtime::{
-    ActorOptions, ActorSpec, IdealNetwork, LatencyModel, LatencySummary, RobotReport, RobotSpec,
-    SimExecutor, Time, TopicStats,
+    ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
+    Time, TopicStats,
 };
+use troupe_comms::simnet::NetStats;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
 use crate::faults::PanicOnce;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
+use crate::network::ScenarioNetwork;
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::{SimCameraSource, intrinsics_of};
 use crate::vehicle::{SimVehicle, new_body};
@@ -29,6 +32,7 @@ pub struct Team {
     world: Arc<CaveWorld>,
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
+    network_stats: Arc<Mutex<NetStats>>,
 }
 
 /// Everything a run produced.
@@ -122,6 +126,8 @@ pub struct RobotTruthSummary {
     pub plans: u64,
     /// Committed plans with a knot inside the rock (ground truth).
     pub unsafe_plans: u64,
+    /// The link's counters at the end (shaper and reassembly).
+    pub link: Option<LinkStatus>,
 }
 
 impl From<&RobotTruth> for RobotTruthSummary {
@@ -135,6 +141,7 @@ impl From<&RobotTruth> for RobotTruthSummary {
             empty_frames: t.empty_frames,
             plans: t.plans,
             unsafe_plans: t.unsafe_plans,
+            link: t.link.clone(),
         }
     }
 }
@@ -162,6 +169,8 @@ pub struct Summary {
     pub min_inter_robot_distance_m: Option<f64>,
     /// Events processed by the executor.
     pub events: u64,
+    /// The simulated network: frames routed, delivered, dropped by reason.
+    pub network: NetStats,
     /// Per robot.
     pub per_robot: Vec<RobotSummary>,
     /// Messages and bytes per topic, summed over robots.
@@ -301,15 +310,27 @@ impl Team {
             scenario.robot.radius_m,
         );
         let truth = monitor.truth();
-        let mut executor = SimExecutor::new(team, scenario.seed).with_network(IdealNetwork {
-            latency: Duration::from_secs_f64(scenario.network.latency_s),
-        });
+        let network = ScenarioNetwork::new(
+            scenario.network.clone(),
+            scenario.seed ^ 0x6e65_7477,
+            monitor.positions(),
+        )
+        .map_err(|reason| {
+            AssembleError::Config(troupe_robot::ConfigError {
+                key: "network".into(),
+                rule: "must be a valid network",
+                value: reason,
+            })
+        })?;
+        let network_stats = network.stats();
+        let mut executor = SimExecutor::new(team, scenario.seed).with_network(network);
         executor.add_tap(monitor);
         Ok(Team {
             scenario: scenario.clone(),
             world,
             executor,
             truth,
+            network_stats,
         })
     }
 
@@ -355,6 +376,10 @@ impl Team {
         let reports = self.executor.finish();
         let wall_s = started.elapsed().as_secs_f64();
         let truth = lock_truth(&self.truth);
+        let network = *self
+            .network_stats
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let summary = summarise(
             &self.scenario,
             &self.world,
@@ -362,6 +387,7 @@ impl Team {
             &reports,
             over_time,
             events,
+            network,
         );
         let timing = Timing {
             wall_s,
@@ -415,6 +441,7 @@ fn summarise(
     reports: &[RobotReport],
     over_time: Vec<[f64; 2]>,
     events: u64,
+    network: NetStats,
 ) -> Summary {
     let mut topics: BTreeMap<String, TopicStats> = BTreeMap::new();
     for r in reports {
@@ -472,6 +499,7 @@ fn summarise(
             .is_finite()
             .then_some(truth.min_inter_robot_distance_m),
         events,
+        network,
         per_robot,
         topics,
     }

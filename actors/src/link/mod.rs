@@ -1,21 +1,30 @@
-//! The link actor: the only actor that talks to other robots.
+//! The link actor: the only actor that talks to other robots (DESIGN §5).
 //!
-//! This first version forwards the robot's odometry to every peer at a fixed rate
-//! and publishes what peers send as [`PEER_ODOMETRY`]. Packets that do not decode,
-//! come from another team, or whose envelope sender disagrees with the network's
-//! sender are rejected with a reason and counted (as actor errors).
+//! Outgoing: the robot's odometry is encoded in a versioned envelope
+//! (`troupe_comms::wire`) at a fixed rate and offered to a [`LinkShaper`] — token
+//! bucket, strict priority classes, fragmentation to the MTU, per-class queue
+//! policies — whose frames go out on [`LINK_TX`] as the bucket allows. Incoming frames
+//! from [`LINK_RX`] are reassembled, decoded and validated; odometry is published as
+//! [`PEER_ODOMETRY`]. A frame or message that does not decode, comes from another
+//! team, or whose envelope sender disagrees with the network's sender is rejected
+//! with a reason and counted (as an actor error). Every second the shaper and
+//! reassembler counters are published on [`LINK_STATUS`].
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use troupe_comms::shaping::{
+    Incoming, LinkShaper, MessageId, Reassembler, ReassemblyConfig, ReassemblyStats, ShaperConfig,
+    ShaperStats,
+};
 use troupe_comms::wire::{self, Envelope, Payload};
 
 use crate::msgs::{ODOMETRY, Odometry, PEER_ODOMETRY, PeerOdometry};
 use crate::runtime::{
-    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx,
-    QueuePolicy, Time, TimerId,
+    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, Message,
+    QueuePolicy, RobotId, Time, TimerId, Topic,
 };
 
 /// Link settings.
@@ -26,6 +35,10 @@ pub struct LinkConfig {
     pub team: u32,
     /// How often odometry is sent to peers, Hz (thesis §8.2.3: 10 Hz).
     pub odometry_rate_hz: f64,
+    /// Outgoing shaping (rate, burst, MTU, per-class policies).
+    pub shaper: ShaperConfig,
+    /// Incoming reassembly limits.
+    pub reassembly: ReassemblyConfig,
 }
 
 impl Default for LinkConfig {
@@ -33,34 +46,125 @@ impl Default for LinkConfig {
         LinkConfig {
             team: 0,
             odometry_rate_hz: 10.0,
+            shaper: ShaperConfig::default(),
+            reassembly: ReassemblyConfig::default(),
         }
     }
 }
 
-const SEND: TimerId = TimerId(0);
+impl LinkConfig {
+    /// Checks the settings; the error names the key (relative to the link table).
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.odometry_rate_hz.is_finite() && self.odometry_rate_hz >= 0.0) {
+            return Err(format!(
+                "odometry_rate_hz must be ≥ 0, got {}",
+                self.odometry_rate_hz
+            ));
+        }
+        self.shaper.validate().map_err(|e| format!("shaper.{e}"))?;
+        self.reassembly
+            .validate()
+            .map_err(|e| format!("reassembly.{e}"))
+    }
+}
+
+/// The link's counters, published every second.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LinkStatus {
+    /// When.
+    #[serde(skip)]
+    pub stamp: Time,
+    /// Outgoing: per class offered, sent, dropped by reason, queue delay, age of information.
+    pub shaper: ShaperStats,
+    /// Incoming: frames, completed messages, duplicates, timeouts, evictions.
+    pub reassembly: ReassemblyStats,
+    /// Messages rejected after reassembly (decode errors, wrong team or sender).
+    pub rejected_messages: u64,
+}
+impl Message for LinkStatus {}
+
+/// Link counters.
+pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
+
+const SEND_ODOMETRY: TimerId = TimerId(0);
+const PUMP: TimerId = TimerId(1);
+const STATUS: TimerId = TimerId(2);
 
 /// See the [module docs](self).
 pub struct LinkActor {
     config: LinkConfig,
+    shaper: LinkShaper,
+    reassembler: Reassembler,
     sequence: u64,
     latest: Option<Arc<Odometry>>,
     sent_stamp: Option<Time>,
+    rejected: u64,
 }
 
 impl LinkActor {
-    /// A link actor with the given settings.
-    #[must_use]
-    pub fn new(config: LinkConfig) -> Self {
-        LinkActor {
+    /// A link actor; fails if the shaper or reassembly settings are invalid.
+    pub fn new(config: LinkConfig) -> Result<Self, ActorError> {
+        let shaper = LinkShaper::new(config.shaper)
+            .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
+        let reassembler = Reassembler::new(config.reassembly)
+            .map_err(|e| ActorError::msg(format!("link reassembly: {e}")))?;
+        Ok(LinkActor {
             config,
+            shaper,
+            reassembler,
             sequence: 0,
             latest: None,
             sent_stamp: None,
+            rejected: 0,
+        })
+    }
+
+    /// Encodes and offers one payload to the shaper.
+    fn send(&mut self, payload: Payload, stamp: Time, ctx: &mut Context<'_>) -> ActorResult {
+        let class = payload.class();
+        let envelope = Envelope::new(
+            self.config.team,
+            ctx.robot().0,
+            self.sequence,
+            stamp.as_nanos(),
+            payload,
+        );
+        let bytes = wire::encode(&envelope)
+            .map_err(|e| ActorError::with_source("encoding a message", e))?;
+        self.sequence += 1;
+        if let Err(refused) = self.shaper.offer(ctx.now().as_nanos(), class, bytes) {
+            tracing::debug!(
+                robot = ctx.robot_name(),
+                ?class,
+                "link refused a message: {refused}"
+            );
+        }
+        self.pump(ctx);
+        Ok(())
+    }
+
+    /// Sends every frame the bucket allows now and arms the pump for the next one.
+    fn pump(&mut self, ctx: &mut Context<'_>) {
+        let now = ctx.now().as_nanos();
+        while let Some(frame) = self.shaper.poll(now) {
+            ctx.publish(
+                &LINK_TX,
+                LinkTx {
+                    to: Destination::Broadcast,
+                    bytes: Arc::from(frame.bytes),
+                },
+            );
+        }
+        match self.shaper.next_send_time(now) {
+            Some(next) => {
+                ctx.set_timer(PUMP, Duration::from_nanos(next.saturating_sub(now).max(1)))
+            }
+            None => ctx.cancel_timer(PUMP),
         }
     }
 
     fn send_odometry(&mut self, ctx: &mut Context<'_>) -> ActorResult {
-        let Some(odometry) = self.latest.as_ref() else {
+        let Some(odometry) = self.latest.clone() else {
             return Ok(());
         };
         if self.sent_stamp == Some(odometry.stamp) {
@@ -72,70 +176,92 @@ impl LinkActor {
             orientation_xyzw: [q.i, q.j, q.k, q.w],
             velocity_mps: odometry.velocity_mps.into(),
         });
-        let envelope = Envelope::new(
-            self.config.team,
-            ctx.robot().0,
-            self.sequence,
-            odometry.stamp.as_nanos(),
-            payload,
-        );
-        let bytes =
-            wire::encode(&envelope).map_err(|e| ActorError::with_source("encoding odometry", e))?;
-        self.sequence += 1;
         self.sent_stamp = Some(odometry.stamp);
-        ctx.publish(
-            &LINK_TX,
-            LinkTx {
-                to: Destination::Broadcast,
-                bytes: Arc::from(bytes),
-            },
-        );
-        Ok(())
+        self.send(payload, odometry.stamp, ctx)
     }
 
-    fn receive(
+    fn receive_frame(&mut self, from: RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now().as_nanos();
+        let incoming = self
+            .reassembler
+            .push(now, from.0, bytes)
+            .map_err(|e| ActorError::with_source(format!("rejected a frame from {from}"), e))?;
+        match incoming {
+            None => Ok(()),
+            Some(Incoming::Message(message)) => {
+                if message.ack_requested {
+                    self.shaper.queue_ack(message.message_id);
+                    self.pump(ctx);
+                }
+                let result = self.receive_message(from, &message.bytes, ctx);
+                if result.is_err() {
+                    self.rejected += 1;
+                }
+                result
+            }
+            Some(Incoming::Duplicate {
+                message_id,
+                ack_requested,
+                ..
+            }) => {
+                if ack_requested {
+                    self.shaper.queue_ack(message_id);
+                    self.pump(ctx);
+                }
+                Ok(())
+            }
+            Some(Incoming::Ack { ids, .. }) => {
+                // One shaper serves the broadcast medium: an acknowledgement from any
+                // peer releases the stored message.
+                for id in ids {
+                    self.shaper.acknowledge(now, MessageId(id));
+                }
+                self.pump(ctx);
+                Ok(())
+            }
+        }
+    }
+
+    fn receive_message(
         &mut self,
-        from: crate::runtime::RobotId,
+        from: RobotId,
         bytes: &[u8],
         ctx: &mut Context<'_>,
     ) -> ActorResult {
         let envelope = wire::decode(bytes)
-            .map_err(|e| ActorError::with_source(format!("rejected a packet from {from}"), e))?;
+            .map_err(|e| ActorError::with_source(format!("rejected a message from {from}"), e))?;
         if envelope.team != self.config.team {
             return Err(ActorError::msg(format!(
-                "rejected a packet from {from}: team {} is not ours ({})",
+                "rejected a message from {from}: team {} is not ours ({})",
                 envelope.team, self.config.team
             )));
         }
         if envelope.sender != from.0 {
             return Err(ActorError::msg(format!(
-                "rejected a packet from {from}: envelope names robot{} as its sender",
+                "rejected a message from {from}: envelope names robot{} as its sender",
                 envelope.sender
             )));
         }
-        match envelope.payload {
-            Payload::Odometry(o) => {
-                let [x, y, z, w] = o.orientation_xyzw;
-                let pose = Isometry3::from_parts(
-                    Translation3::from(Vector3::from(o.position_m)),
-                    UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
-                );
-                ctx.publish(
-                    &PEER_ODOMETRY,
-                    PeerOdometry {
-                        robot: from,
-                        odometry: Odometry {
-                            stamp: Time::from_nanos(envelope.stamp_ns),
-                            pose,
-                            velocity_mps: Vector3::from(o.velocity_mps),
-                        },
-                        received_at: ctx.now(),
+        // Heartbeats only prove liveness; keyframes, plans and grid change sets are
+        // not consumed yet.
+        if let Payload::Odometry(o) = envelope.payload {
+            let [x, y, z, w] = o.orientation_xyzw;
+            let pose = Isometry3::from_parts(
+                Translation3::from(Vector3::from(o.position_m)),
+                UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+            );
+            ctx.publish(
+                &PEER_ODOMETRY,
+                PeerOdometry {
+                    robot: from,
+                    odometry: Odometry {
+                        stamp: Time::from_nanos(envelope.stamp_ns),
+                        pose,
+                        velocity_mps: Vector3::from(o.velocity_mps),
                     },
-                );
-            }
-            Payload::Heartbeat(_) => {}
-            // Keyframes, plans and grid change sets: not consumed yet.
-            _ => {}
+                    received_at: ctx.now(),
+                },
+            );
         }
         Ok(())
     }
@@ -144,25 +270,42 @@ impl LinkActor {
 impl Actor for LinkActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
-        ctx.subscribe(&LINK_RX, QueuePolicy::fifo(1024));
+        ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
         if self.config.odometry_rate_hz > 0.0 {
             ctx.set_timer(
-                SEND,
+                SEND_ODOMETRY,
                 Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz),
             );
         }
+        ctx.set_timer(STATUS, Duration::from_secs(1));
         Ok(())
     }
 
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         match event {
-            Event::Timer(_) => self.send_odometry(ctx),
+            Event::Timer(SEND_ODOMETRY) => self.send_odometry(ctx),
+            Event::Timer(PUMP) => {
+                self.pump(ctx);
+                Ok(())
+            }
+            Event::Timer(_) => {
+                ctx.publish(
+                    &LINK_STATUS,
+                    LinkStatus {
+                        stamp: ctx.now(),
+                        shaper: *self.shaper.stats(),
+                        reassembly: *self.reassembler.stats(),
+                        rejected_messages: self.rejected,
+                    },
+                );
+                Ok(())
+            }
             Event::Message(m) => {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.latest = Some(odometry);
                     Ok(())
                 } else if let Some(rx) = m.get(&LINK_RX) {
-                    self.receive(rx.from, &rx.bytes, ctx)
+                    self.receive_frame(rx.from, &rx.bytes, ctx)
                 } else {
                     Ok(())
                 }

@@ -122,3 +122,26 @@ impl Actor for Box<dyn Actor> {
         (**self).stop(ctx);
     }
 }
+
+/// An actor whose construction failed: its start hook reports the error (counted and
+/// logged like any hook error) and it handles nothing, so the rest of the robot runs
+/// on. Lets factories return `Result<A, ActorError>`.
+impl<A: Actor> Actor for Result<A, ActorError> {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        match self {
+            Ok(actor) => actor.start(ctx),
+            Err(e) => Err(ActorError::msg(format!("actor could not be built: {e}"))),
+        }
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match self {
+            Ok(actor) => actor.handle(event, ctx),
+            Err(_) => Ok(()),
+        }
+    }
+    fn stop(&mut self, ctx: &mut Context<'_>) {
+        if let Ok(actor) = self {
+            actor.stop(ctx);
+        }
+    }
+}

@@ -25,12 +25,12 @@
 //! `ℓ_m(x) ≤ c_m − ½ d²_xyz,m(x)` with `c_m = ln π_m + ln N_max`, and `ℓ_m(x) ≥ T` is
 //! only possible inside the ellipsoid `d²_xyz,m ≤ 2 (c_m − T)`, whose axis-aligned box
 //! has half-widths `sqrt(2 (c_m − T) Σ_m,ii)`. Each iteration picks a threshold `T`
-//! (the 2 % quantile of the points' "anchor" log-densities minus `ln 10¹⁰`; the anchor
+//! (the 0.5 % quantile of the points' "anchor" log-densities minus `ln 10¹⁰`; the anchor
 //! of a point is its most responsible component of the previous iteration, or its
 //! k-means++ centre at the start), lists every component in the grid cells its box
 //! overlaps, and evaluates a point on its cell's list only when its anchor proves
-//! `max_b ℓ_b(x) − ln 10¹⁰ ≥ ℓ_anchor(x) − ln 10¹⁰ ≥ T`; the other points (about 2 %)
-//! are evaluated over all components. Every component left out therefore has
+//! `max_b ℓ_b(x) − ln 10¹⁰ ≥ ℓ_anchor(x) − ln 10¹⁰ ≥ T`; the other points
+//! (about 0.5 %) are evaluated over all components. Every component left out therefore has
 //! responsibility below `1e-10` relative to the best one, so each responsibility is
 //! within `M · 1e-10` of the dense value and each point's log-likelihood within
 //! `M · 1e-10` nats.

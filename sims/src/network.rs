@@ -1,0 +1,73 @@
+//! The simulated network of a scenario: `troupe_comms::simnet` (latency, jitter,
+//! random and bursty loss, reordering, duplication, range-dependent rate and radius,
+//! scheduled partitions) behind the sim-time executor's network interface. Robot
+//! positions come from the ground-truth monitor.
+
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+
+use troupe_actors::runtime::{Destination, RobotId, SimNetwork, Time};
+use troupe_comms::simnet::{NetStats, SimNet, SimNetConfig};
+
+/// Positions of the robots (index = robot), metres, shared with the monitor.
+pub type Positions = Arc<Mutex<Vec<[f64; 3]>>>;
+
+/// Locks shared state; a poisoned lock still holds usable numbers.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// See the [module docs](self).
+pub struct ScenarioNetwork {
+    net: SimNet,
+    positions: Positions,
+    stats: Arc<Mutex<NetStats>>,
+}
+
+impl ScenarioNetwork {
+    /// A network from its configuration; `seed` drives every random effect.
+    pub fn new(config: SimNetConfig, seed: u64, positions: Positions) -> Result<Self, String> {
+        let net = SimNet::new(config, seed).map_err(|e| e.to_string())?;
+        Ok(ScenarioNetwork {
+            net,
+            positions,
+            stats: Arc::default(),
+        })
+    }
+
+    /// Shared handle on the network's counters (all pairs together).
+    #[must_use]
+    pub fn stats(&self) -> Arc<Mutex<NetStats>> {
+        self.stats.clone()
+    }
+}
+
+impl SimNetwork for ScenarioNetwork {
+    fn route(
+        &mut self,
+        now: Time,
+        from: RobotId,
+        to: Destination,
+        bytes: usize,
+        team_size: usize,
+        deliveries: &mut Vec<(RobotId, Time)>,
+    ) {
+        let positions = lock(&self.positions).clone();
+        let targets: Vec<u32> = match to {
+            Destination::Broadcast => (0..team_size as u32).filter(|r| *r != from.0).collect(),
+            Destination::Robot(r) if r != from && (r.0 as usize) < team_size => vec![r.0],
+            Destination::Robot(_) => Vec::new(),
+        };
+        for target in targets {
+            let routing = self
+                .net
+                .route(now.as_nanos(), from.0, target, bytes, &positions);
+            deliveries.extend(
+                routing
+                    .deliveries
+                    .iter()
+                    .map(|d| (RobotId(d.to), Time::from_nanos(d.arrival_ns))),
+            );
+        }
+        *lock(&self.stats) = self.net.stats();
+    }
+}
