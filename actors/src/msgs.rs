@@ -5,6 +5,8 @@
 //! | `odometry` | [`Odometry`] | vehicle → sensor, explorer, link |
 //! | `sensor/frame` | [`DepthFrame`] | sensor → mapper |
 //! | `plan/committed` | [`Plan`] | explorer/planner → vehicle, link |
+//! | `mapper/keyframe` | [`Keyframe`] | mapper → link |
+//! | `peer/keyframe` | [`PeerKeyframe`] | link → local grid |
 //! | `grid/snapshot` | [`GridSnapshot`] | local grid → planner, collision |
 //! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
 //! | `link/tx`, `link/rx` | [`LinkTx`](crate::runtime::LinkTx), [`LinkRx`](crate::runtime::LinkRx) | link ↔ network |
@@ -143,6 +145,50 @@ impl GridSnapshot {
         })
     }
 }
+
+/// A keyframe: a SOGMM fitted to one observation, with its sensor pose (§8.2.2).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Keyframe {
+    /// Per-robot keyframe counter.
+    pub id: u32,
+    /// Observation time.
+    pub stamp: Time,
+    /// Sensor (body) pose of the observation, in the owner's world frame.
+    pub pose: nalgebra::Isometry3<f64>,
+    /// Number of points the mixture was fitted to.
+    pub support_size: u32,
+    /// The mixture over (x, y, z, intensity) in the world frame.
+    pub gmm: crate::mapper::sogmm::Gmm4,
+}
+
+impl Message for Keyframe {
+    fn payload_bytes(&self) -> usize {
+        // Mean 4 + covariance 16 + weight, f64.
+        std::mem::size_of::<Self>() + self.gmm.len() * 21 * 8
+    }
+}
+
+/// A keyframe received from a peer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerKeyframe {
+    /// The peer.
+    pub robot: RobotId,
+    /// Its keyframe (in the peer's world frame: robots of one team share a frame
+    /// in simulation; the Eq. 8.1 frame change comes with multi-frame teams).
+    pub keyframe: Keyframe,
+    /// When it arrived here.
+    pub received_at: Time,
+}
+impl Message for PeerKeyframe {
+    fn payload_bytes(&self) -> usize {
+        self.keyframe.payload_bytes()
+    }
+}
+
+/// This robot's keyframes.
+pub const KEYFRAME: Topic<Keyframe> = Topic::new("mapper/keyframe");
+/// Peers' keyframes from the link.
+pub const PEER_KEYFRAME: Topic<PeerKeyframe> = Topic::new("peer/keyframe");
 
 /// Body pose and velocity from the vehicle.
 pub const ODOMETRY: Topic<Odometry> = Topic::new("odometry");

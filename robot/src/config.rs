@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
+use troupe_actors::mapper::MapperConfig;
 use troupe_actors::planner::PlannerConfig;
 use troupe_actors::runtime::RestartPolicy;
 
@@ -25,6 +26,8 @@ pub struct ActorLatencies {
     pub grid: f64,
     /// Planner (one round).
     pub planner: f64,
+    /// Mapper (one keyframe fit; thesis Table 4.1: 0.4 s).
+    pub mapper: f64,
 }
 
 impl Default for ActorLatencies {
@@ -36,6 +39,7 @@ impl Default for ActorLatencies {
             link: 0.0,
             grid: 0.05,
             planner: 0.1,
+            mapper: 0.4,
         }
     }
 }
@@ -54,6 +58,8 @@ pub struct RobotConfig {
     pub grid: GridConfig,
     /// The planner (planner behaviour).
     pub planner: PlannerConfig,
+    /// The SOGMM mapper (keyframes shared over the link); off by default.
+    pub mapper: MapperConfig,
     /// Cruise speed, m/s.
     pub speed_mps: f64,
     /// Turn-in-place rate, rad/s.
@@ -79,6 +85,7 @@ impl Default for RobotConfig {
             selection: "greedy".into(),
             grid: GridConfig::default(),
             planner: PlannerConfig::default(),
+            mapper: MapperConfig::default(),
             speed_mps: 1.0,
             yaw_rate_rad_s: 1.0,
             replan_rate_hz: 1.0,
@@ -148,6 +155,14 @@ impl RobotConfig {
         non_negative("latency_s.link", self.latency_s.link)?;
         non_negative("latency_s.grid", self.latency_s.grid)?;
         non_negative("latency_s.planner", self.latency_s.planner)?;
+        non_negative("latency_s.mapper", self.latency_s.mapper)?;
+        if let Err(reason) = self.mapper.validate() {
+            return Err(ConfigError {
+                key: "mapper".into(),
+                rule: "must be valid",
+                value: reason,
+            });
+        }
         if let Err(reason) = self.grid.validate() {
             return Err(ConfigError {
                 key: "grid".into(),

@@ -11,6 +11,7 @@ use nalgebra::Point3;
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
 use troupe_actors::link::LinkActor;
+use troupe_actors::mapper::MapperActor;
 use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_actors::planner::PlannerActor;
 use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
@@ -59,8 +60,9 @@ impl FrameSource for BoxedSource {
     }
 }
 
-/// Assembles a robot: vehicle, sensor, then either the explorer (route behaviours)
-/// or the local grid and the planner (`behaviour = "planner"`), then the link.
+/// Assembles a robot: vehicle, sensor, the mapper if enabled, then either the
+/// explorer (route behaviours) or the local grid and the planner
+/// (`behaviour = "planner"`), then the link.
 pub fn assemble(
     name: &str,
     config: &RobotConfig,
@@ -86,6 +88,13 @@ pub fn assemble(
         })
         .with_options(heavy(config.latency_s.sensor)),
     );
+    if config.mapper.enabled {
+        let mapper = config.mapper;
+        robot.add(
+            ActorSpec::new("mapper", move || MapperActor::new(mapper))
+                .with_options(heavy(config.latency_s.mapper)),
+        );
+    }
     if config.behaviour == PLANNER {
         let selection = selection_by_name(&config.selection)?;
         let grid = config.grid;

@@ -1,11 +1,12 @@
 //! The link actor: the only actor that talks to other robots (DESIGN §5).
 //!
-//! Outgoing: the robot's odometry is encoded in a versioned envelope
+//! Outgoing: the robot's odometry and keyframes are encoded in a versioned envelope
 //! (`troupe_comms::wire`) at a fixed rate and offered to a [`LinkShaper`] — token
 //! bucket, strict priority classes, fragmentation to the MTU, per-class queue
 //! policies — whose frames go out on [`LINK_TX`] as the bucket allows. Incoming frames
 //! from [`LINK_RX`] are reassembled, decoded and validated; odometry is published as
-//! [`PEER_ODOMETRY`]. A frame or message that does not decode, comes from another
+//! [`PEER_ODOMETRY`], keyframes (from the mapper's [`KEYFRAME`]) as
+//! [`PEER_KEYFRAME`]. A frame or message that does not decode, comes from another
 //! team, or whose envelope sender disagrees with the network's sender is rejected
 //! with a reason and counted (as an actor error). Every second the shaper and
 //! reassembler counters are published on [`LINK_STATUS`].
@@ -21,11 +22,17 @@ use troupe_comms::shaping::{
 };
 use troupe_comms::wire::{self, Envelope, Payload};
 
-use crate::msgs::{ODOMETRY, Odometry, PEER_ODOMETRY, PeerOdometry};
+use crate::msgs::{
+    KEYFRAME, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_ODOMETRY, PeerKeyframe, PeerOdometry,
+};
+
+mod convert;
+
 use crate::runtime::{
     Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, Message,
     QueuePolicy, RobotId, Time, TimerId, Topic,
 };
+pub use convert::{keyframe_from_wire, keyframe_to_wire};
 
 /// Link settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -242,8 +249,23 @@ impl LinkActor {
                 envelope.sender
             )));
         }
-        // Heartbeats only prove liveness; keyframes, plans and grid change sets are
-        // not consumed yet.
+        if let Payload::Keyframe(keyframe) = &envelope.payload {
+            let keyframe = keyframe_from_wire(keyframe, Time::from_nanos(envelope.stamp_ns))
+                .map_err(|e| {
+                    ActorError::with_source(format!("rejected a keyframe from {from}"), e)
+                })?;
+            ctx.publish(
+                &PEER_KEYFRAME,
+                PeerKeyframe {
+                    robot: from,
+                    keyframe,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        // Heartbeats only prove liveness; plans and grid change sets are not consumed
+        // yet.
         if let Payload::Odometry(o) = envelope.payload {
             let [x, y, z, w] = o.orientation_xyzw;
             let pose = Isometry3::from_parts(
@@ -271,6 +293,7 @@ impl Actor for LinkActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
+        ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
         if self.config.odometry_rate_hz > 0.0 {
             ctx.set_timer(
                 SEND_ODOMETRY,
@@ -304,6 +327,12 @@ impl Actor for LinkActor {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.latest = Some(odometry);
                     Ok(())
+                } else if let Some(keyframe) = m.get(&KEYFRAME) {
+                    self.send(
+                        Payload::Keyframe(keyframe_to_wire(keyframe)),
+                        keyframe.stamp,
+                        ctx,
+                    )
                 } else if let Some(rx) = m.get(&LINK_RX) {
                     self.receive_frame(rx.from, &rx.bytes, ctx)
                 } else {

@@ -2,4 +2,10 @@
 //!
 //! - [`sogmm`]: self-organizing 4D Gaussian mixtures (thesis §6, App. A): fit one frame,
 //!   evaluate, marginalise, sample, and regress intensity.
+//! - [`keyframe`]: keyframe selection by frustum overlap (§8.2.2).
+//! - [`MapperActor`]: fits a SOGMM to each keyframe and publishes it for sharing.
+mod actor;
+pub mod keyframe;
 pub mod sogmm;
+
+pub use actor::{MapperActor, MapperConfig, decimate};

@@ -2,6 +2,7 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod keyframes;
 mod planner_team;
 mod realtime_team;
 mod team_run;
