@@ -51,7 +51,7 @@ pub fn keyframe_from_wire(keyframe: &wire::Keyframe, stamp: Time) -> Result<Keyf
         return Err(ActorError::msg("keyframe mixture is not 4D"));
     };
     let total: f64 = components.iter().map(|c| f64::from(c.weight)).sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return Err(ActorError::msg("keyframe weights sum to zero"));
     }
     let weights = components
