@@ -14,7 +14,10 @@ use serde::{Deserialize, Serialize};
 use super::distance::unsafe_distance;
 use super::frontier::frontier_distance;
 use super::{LocalGrid, LogOddsParams};
-use crate::msgs::{DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry};
+use crate::msgs::{
+    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, Keyframe, ODOMETRY, Odometry,
+    PEER_KEYFRAME,
+};
 use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
 
 /// Settings of the local grid (paper VI: 20 m × 20 m × 12 m at 0.2 m).
@@ -34,6 +37,8 @@ pub struct GridConfig {
     /// Unknown cells within this distance of the robot's centre become free whenever
     /// odometry arrives (the body is there; observed cells are never overridden).
     pub body_radius_m: f64,
+    /// Most points sampled from one peer keyframe (at most its support size).
+    pub peer_keyframe_samples: usize,
     /// Unknown cells within this distance of the first pose become free: the robot
     /// starts in a clear spot (without it, nothing would be safe before the first look
     /// around).
@@ -50,6 +55,7 @@ impl Default for GridConfig {
             pixel_stride: 2,
             body_radius_m: 0.3,
             start_clearance_m: 1.2,
+            peer_keyframe_samples: 2000,
         }
     }
 }
@@ -124,6 +130,22 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     }
 }
 
+/// Ray-traces a keyframe GMM into a grid (§8.2.2): `min(support, max_samples)`
+/// points drawn from its spatial marginal, each a hit at the end of a ray from the
+/// keyframe's sensor position.
+pub fn insert_keyframe(
+    grid: &mut LocalGrid,
+    keyframe: &Keyframe,
+    max_samples: usize,
+    rng: &mut impl rand::Rng,
+) {
+    let origin = Point3::from(keyframe.pose.translation.vector);
+    let n = (keyframe.support_size as usize).min(max_samples);
+    for p in keyframe.gmm.marginal_spatial().sample(n, rng) {
+        grid.insert_ray(&origin, &Point3::from(p), true, None);
+    }
+}
+
 const PUBLISH: TimerId = TimerId(0);
 
 /// See the [module docs](self).
@@ -176,6 +198,7 @@ impl Actor for GridActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::KeepLatest { depth: 2 });
+        ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
         ctx.set_timer(
             PUBLISH,
             Duration::from_secs_f64(1.0 / self.config.publish_rate_hz),
@@ -188,6 +211,11 @@ impl Actor for GridActor {
             Event::Message(m) => {
                 if let Some(odometry) = m.get(&ODOMETRY) {
                     self.on_odometry(odometry);
+                } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
+                    if let Some(grid) = self.grid.as_mut() {
+                        let n = self.config.peer_keyframe_samples;
+                        insert_keyframe(grid, &peer.keyframe, n, ctx.rng());
+                    }
                 } else if let Some(frame) = m.get(&DEPTH_FRAME) {
                     let position = Point3::from(frame.pose.translation.vector);
                     if !position.coords.iter().all(|v| v.is_finite()) {

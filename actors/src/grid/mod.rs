@@ -14,7 +14,7 @@ pub mod distance;
 pub mod frontier;
 mod local;
 
-pub use actor::{GridActor, GridConfig, insert_frame};
+pub use actor::{GridActor, GridConfig, insert_frame, insert_keyframe};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 
 #[cfg(test)]
