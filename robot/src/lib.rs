@@ -80,7 +80,7 @@ pub fn assemble(
     };
     let mut frame_source = parts.frame_source;
     let sensor_rate_hz = config.sensor_rate_hz;
-    let link = config.link;
+    let link = config.link.clone();
     let mut robot = RobotSpec::new(name);
     robot.add(parts.vehicle).add(
         ActorSpec::new("sensor", move || {
@@ -130,7 +130,7 @@ pub fn assemble(
         );
     }
     robot.add(
-        ActorSpec::new("link", move || LinkActor::new(link))
+        ActorSpec::new("link", move || LinkActor::new(link.clone()))
             .with_options(options(config.latency_s.link)),
     );
     Ok(robot)

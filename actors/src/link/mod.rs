@@ -27,15 +27,18 @@ use crate::msgs::{
 };
 
 mod convert;
+mod frames;
+
+pub use convert::{keyframe_from_wire, keyframe_to_wire};
+pub use frames::{PeerFrame, transform_gmm, transform_keyframe};
 
 use crate::runtime::{
     Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, Message,
     QueuePolicy, RobotId, Time, TimerId, Topic,
 };
-pub use convert::{keyframe_from_wire, keyframe_to_wire};
 
 /// Link settings.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LinkConfig {
     /// Team id written in every envelope; packets of other teams are rejected.
@@ -46,6 +49,8 @@ pub struct LinkConfig {
     pub shaper: ShaperConfig,
     /// Incoming reassembly limits.
     pub reassembly: ReassemblyConfig,
+    /// Peers whose world frame differs from ours (Eq. 8.1); others share our frame.
+    pub peer_frames: Vec<PeerFrame>,
 }
 
 impl Default for LinkConfig {
@@ -55,6 +60,7 @@ impl Default for LinkConfig {
             odometry_rate_hz: 10.0,
             shaper: ShaperConfig::default(),
             reassembly: ReassemblyConfig::default(),
+            peer_frames: Vec::new(),
         }
     }
 }
@@ -124,6 +130,15 @@ impl LinkActor {
             sent_stamp: None,
             rejected: 0,
         })
+    }
+
+    /// The transform from a peer's world frame into ours, if it differs.
+    fn frame_of(&self, peer: RobotId) -> Option<Isometry3<f64>> {
+        self.config
+            .peer_frames
+            .iter()
+            .find(|f| f.robot == peer.0)
+            .map(PeerFrame::transform)
     }
 
     /// Encodes and offers one payload to the shaper.
@@ -249,11 +264,16 @@ impl LinkActor {
                 envelope.sender
             )));
         }
+        let frame = self.frame_of(from);
         if let Payload::Keyframe(keyframe) = &envelope.payload {
-            let keyframe = keyframe_from_wire(keyframe, Time::from_nanos(envelope.stamp_ns))
-                .map_err(|e| {
+            let reject = |e| ActorError::with_source(format!("rejected a keyframe from {from}"), e);
+            let mut keyframe = keyframe_from_wire(keyframe, Time::from_nanos(envelope.stamp_ns))
+                .map_err(reject)?;
+            if let Some(t) = frame {
+                keyframe = transform_keyframe(&keyframe, &t).map_err(|e| {
                     ActorError::with_source(format!("rejected a keyframe from {from}"), e)
                 })?;
+            }
             ctx.publish(
                 &PEER_KEYFRAME,
                 PeerKeyframe {
@@ -278,8 +298,10 @@ impl LinkActor {
                     robot: from,
                     odometry: Odometry {
                         stamp: Time::from_nanos(envelope.stamp_ns),
-                        pose,
-                        velocity_mps: Vector3::from(o.velocity_mps),
+                        pose: frame.map_or(pose, |t| t * pose),
+                        velocity_mps: frame.map_or(Vector3::from(o.velocity_mps), |t| {
+                            t.rotation * Vector3::from(o.velocity_mps)
+                        }),
                     },
                     received_at: ctx.now(),
                 },
