@@ -6,10 +6,13 @@
 //!   the real-time [`RealtimeExecutor`](runtime::RealtimeExecutor).
 //! - [`msgs`]: the standard topics and message types.
 //! - [`mapper`]: map models fitted to depth + intensity frames (SOGMM, thesis §6).
+//! - [`collision`]: ellipsoid distance, gradient and collision probability against
+//!   Gaussian surface models (thesis §7).
 //! - Standard actors: [`sensor`], [`explorer`], [`link`].
 //! - [`trajectory`]: sampled trajectories that plans carry.
 #![deny(missing_docs)]
 
+pub mod collision;
 pub mod explorer;
 pub mod geometry;
 pub mod grid;

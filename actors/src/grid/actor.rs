@@ -148,7 +148,8 @@ pub fn insert_keyframe(
 
 const PUBLISH: TimerId = TimerId(0);
 
-/// See the [module docs](self).
+/// Keeps a [`LocalGrid`] centred on the robot from its depth frames and its peers'
+/// keyframes, and publishes [`GridSnapshot`]s with the distance fields.
 pub struct GridActor {
     config: GridConfig,
     grid: Option<LocalGrid>,

@@ -100,7 +100,8 @@ pub fn decimate(frame: &DepthFrame, stride: u32) -> DepthFrame {
     }
 }
 
-/// See the [module docs](self).
+/// Decides keyframes by frustum overlap (§8.2.2), fits a SOGMM to each (§6) and
+/// publishes it on [`KEYFRAME`].
 pub struct MapperActor {
     config: MapperConfig,
     selector: KeyframeSelector,

@@ -107,7 +107,10 @@ impl Committed {
 
 const REPLAN: TimerId = TimerId(0);
 
-/// See the [module docs](self).
+/// Replans at a fixed rate: scores the primitive library from the committed reference
+/// state against the latest grid snapshot, lets the [`ActionSelection`] policy choose,
+/// and commits the choice followed by its stopping primitive (the stopping trajectory
+/// alone when nothing is safe, thesis §4.1.3).
 pub struct PlannerActor<S> {
     config: PlannerConfig,
     camera: PinholeIntrinsics,
