@@ -20,8 +20,8 @@ use crate::world::World;
 /// Collision checks along the path are this far apart, metres.
 const PATH_CHECK_STEP_M: f64 = 0.05;
 
-/// Ground truth about one robot.
-#[derive(Clone, Debug, Default, Serialize)]
+/// Ground truth about one robot (the serialised fields are what `summary.json` reports).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct RobotTruth {
     /// Last known position.
     #[serde(skip)]

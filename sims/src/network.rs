@@ -52,15 +52,10 @@ impl SimNetwork for ScenarioNetwork {
         deliveries: &mut Vec<(RobotId, Time)>,
     ) {
         let positions = lock(&self.positions).clone();
-        let targets: Vec<u32> = match to {
-            Destination::Broadcast => (0..team_size as u32).filter(|r| *r != from.0).collect(),
-            Destination::Robot(r) if r != from && (r.0 as usize) < team_size => vec![r.0],
-            Destination::Robot(_) => Vec::new(),
-        };
-        for target in targets {
+        for target in to.recipients(from, team_size) {
             let routing = self
                 .net
-                .route(now.as_nanos(), from.0, target, bytes, &positions);
+                .route(now.as_nanos(), from.0, target.0, bytes, &positions);
             deliveries.extend(
                 routing
                     .deliveries

@@ -7,7 +7,6 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
-use troupe_actors::link::LinkStatus;
 use troupe_actors::runtime::{
     ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
     Time, TopicStats,
@@ -100,50 +99,11 @@ pub struct RobotSummary {
     pub name: String,
     /// Ground truth.
     #[serde(flatten)]
-    pub truth: RobotTruthSummary,
+    pub truth: RobotTruth,
     /// Actors.
     pub actors: Vec<ActorSummary>,
     /// Messages and bytes per topic.
     pub topics: BTreeMap<String, TopicStats>,
-}
-
-/// Ground truth of one robot, as reported.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct RobotTruthSummary {
-    /// Path length, metres.
-    pub distance_m: f64,
-    /// Collision episodes with the world.
-    pub collisions: u64,
-    /// Smallest clearance between body and world, metres.
-    pub min_clearance_m: f64,
-    /// Highest speed, m/s.
-    pub max_speed_mps: f64,
-    /// Frames rendered.
-    pub frames: u64,
-    /// Frames with no return at all.
-    pub empty_frames: u64,
-    /// Committed plans.
-    pub plans: u64,
-    /// Committed plans with a knot inside the rock (ground truth).
-    pub unsafe_plans: u64,
-    /// The link's counters at the end (shaper and reassembly).
-    pub link: Option<LinkStatus>,
-}
-
-impl From<&RobotTruth> for RobotTruthSummary {
-    fn from(t: &RobotTruth) -> Self {
-        RobotTruthSummary {
-            distance_m: t.distance_m,
-            collisions: t.collisions,
-            min_clearance_m: t.min_clearance_m,
-            max_speed_mps: t.max_speed_mps,
-            frames: t.frames,
-            empty_frames: t.empty_frames,
-            plans: t.plans,
-            unsafe_plans: t.unsafe_plans,
-            link: t.link.clone(),
-        }
-    }
 }
 
 /// The deterministic results of a run (`summary.json`).
@@ -457,7 +417,7 @@ fn summarise(
         .zip(&truth.robots)
         .map(|(r, t)| RobotSummary {
             name: r.name.clone(),
-            truth: t.into(),
+            truth: t.clone(),
             actors: r
                 .actors
                 .iter()

@@ -21,6 +21,19 @@ pub enum Destination {
     Robot(RobotId),
 }
 
+impl Destination {
+    /// The robots of a team of `team_size` that a packet from `from` goes to.
+    pub fn recipients(self, from: RobotId, team_size: usize) -> impl Iterator<Item = RobotId> {
+        (0..team_size as u32).map(RobotId).filter(move |r| {
+            *r != from
+                && match self {
+                    Destination::Broadcast => true,
+                    Destination::Robot(to) => *r == to,
+                }
+        })
+    }
+}
+
 /// A packet handed to the network by the link actor.
 #[derive(Clone, Debug)]
 pub struct LinkTx {
@@ -91,17 +104,6 @@ impl SimNetwork for IdealNetwork {
         deliveries: &mut Vec<(RobotId, Time)>,
     ) {
         let arrival = now + self.latency;
-        match to {
-            Destination::Broadcast => deliveries.extend(
-                (0..team_size as u32)
-                    .map(RobotId)
-                    .filter(|r| *r != from)
-                    .map(|r| (r, arrival)),
-            ),
-            Destination::Robot(r) if r != from && (r.0 as usize) < team_size => {
-                deliveries.push((r, arrival));
-            }
-            Destination::Robot(_) => {}
-        }
+        deliveries.extend(to.recipients(from, team_size).map(|r| (r, arrival)));
     }
 }

@@ -20,7 +20,7 @@ use tokio::time::Instant;
 
 use super::context::{Command, Outgoing, RobotId};
 use super::inputs::Inputs;
-use super::network::{Destination, LINK_RX, LINK_TX, LinkRx, LinkTx};
+use super::network::{LINK_RX, LINK_TX, LinkRx, LinkTx};
 use super::registry::{TopicRegistry, apply_command};
 use super::slot::{Hook, HookOutcome, Slot};
 use super::spec::RobotSpec;
@@ -168,25 +168,19 @@ impl Shared {
 
     fn transmit(&self, from: usize, packet: &LinkTx) {
         let from_id = self.robots[from].id;
-        for (to, robot) in self.robots.iter().enumerate() {
-            let wanted = match packet.to {
-                Destination::Broadcast => to != from,
-                Destination::Robot(r) => r == robot.id && to != from,
-            };
-            if wanted {
-                let message = Arc::new(LinkRx {
-                    from: from_id,
-                    bytes: packet.bytes.clone(),
-                });
-                let mut outputs = vec![Outgoing {
-                    topic: LINK_RX.name_cow(),
-                    type_id: TypeId::of::<LinkRx>(),
-                    type_name: std::any::type_name::<LinkRx>(),
-                    bytes: message.payload_bytes(),
-                    payload: message,
-                }];
-                self.route(to, &mut outputs);
-            }
+        for to in packet.to.recipients(from_id, self.robots.len()) {
+            let message = Arc::new(LinkRx {
+                from: from_id,
+                bytes: packet.bytes.clone(),
+            });
+            let mut outputs = vec![Outgoing {
+                topic: LINK_RX.name_cow(),
+                type_id: TypeId::of::<LinkRx>(),
+                type_name: std::any::type_name::<LinkRx>(),
+                bytes: message.payload_bytes(),
+                payload: message,
+            }];
+            self.route(to.0 as usize, &mut outputs);
         }
     }
 }
