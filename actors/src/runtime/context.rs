@@ -33,6 +33,19 @@ pub(crate) struct Outgoing {
     pub(crate) bytes: usize,
 }
 
+impl Outgoing {
+    /// A publication of `message` on `topic`.
+    pub(crate) fn new<T: Message>(topic: &Topic<T>, message: Arc<T>) -> Self {
+        Outgoing {
+            topic: topic.name_cow(),
+            type_id: TypeId::of::<T>(),
+            type_name: std::any::type_name::<T>(),
+            bytes: message.payload_bytes(),
+            payload: message,
+        }
+    }
+}
+
 /// A request to the runtime made from a hook.
 #[derive(Debug)]
 pub(crate) enum Command {
@@ -105,14 +118,7 @@ impl Context<'_> {
 
     /// Publishes an already shared message (no copy).
     pub fn publish_arc<T: Message>(&mut self, topic: &Topic<T>, message: Arc<T>) {
-        let bytes = message.payload_bytes();
-        self.outbox.push(Outgoing {
-            topic: topic.name_cow(),
-            type_id: TypeId::of::<T>(),
-            type_name: std::any::type_name::<T>(),
-            payload: message,
-            bytes,
-        });
+        self.outbox.push(Outgoing::new(topic, message));
     }
 
     /// Subscribes to a topic with the given queue policy. Call it from

@@ -27,7 +27,7 @@ use super::spec::RobotSpec;
 use super::stats::{RobotReport, TopicStats};
 use super::tap::{Publication, Tap};
 use super::time::Time;
-use super::topic::{Message, Received};
+use super::topic::Received;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // A panic while holding an input lock cannot leave the queues inconsistent
@@ -173,13 +173,7 @@ impl Shared {
                 from: from_id,
                 bytes: packet.bytes.clone(),
             });
-            let mut outputs = vec![Outgoing {
-                topic: LINK_RX.name_cow(),
-                type_id: TypeId::of::<LinkRx>(),
-                type_name: std::any::type_name::<LinkRx>(),
-                bytes: message.payload_bytes(),
-                payload: message,
-            }];
+            let mut outputs = vec![Outgoing::new(&LINK_RX, message)];
             self.route(to.0 as usize, &mut outputs);
         }
     }

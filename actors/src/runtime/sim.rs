@@ -22,7 +22,7 @@ use super::spec::RobotSpec;
 use super::stats::RobotReport;
 use super::tap::{Publication, Tap};
 use super::time::Time;
-use super::topic::{Message, Received};
+use super::topic::Received;
 
 enum Kind {
     Activate {
@@ -416,13 +416,7 @@ impl SimExecutor {
             }
             Kind::Network { to, from, bytes } => {
                 let message = Arc::new(LinkRx { from, bytes });
-                let mut outputs = vec![Outgoing {
-                    topic: LINK_RX.name_cow(),
-                    type_id: TypeId::of::<LinkRx>(),
-                    type_name: std::any::type_name::<LinkRx>(),
-                    bytes: message.payload_bytes(),
-                    payload: message,
-                }];
+                let mut outputs = vec![Outgoing::new(&LINK_RX, message)];
                 self.world
                     .route(&mut self.clock, &mut self.robots[to as usize], &mut outputs);
             }
