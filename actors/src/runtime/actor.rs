@@ -19,6 +19,17 @@ pub enum Event {
     Timer(TimerId),
 }
 
+impl Event {
+    /// The message, if this event is one.
+    #[must_use]
+    pub fn message(&self) -> Option<&Received> {
+        match self {
+            Event::Message(m) => Some(m),
+            Event::Timer(_) => None,
+        }
+    }
+}
+
 /// A failure an actor reports from a hook. The runtime logs and counts it; the
 /// actor keeps running. (A *panic* is different: the runtime restarts the actor.)
 #[derive(Debug)]

@@ -12,7 +12,6 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::sync::Arc;
 
-use super::actor::Event;
 use super::context::{Outgoing, RobotId};
 use super::inputs::Inputs;
 use super::network::{IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, SimNetwork};
@@ -491,16 +490,5 @@ impl SimExecutor {
             }
         }
         self.reports()
-    }
-}
-
-impl Event {
-    /// The message, if this event is one.
-    #[must_use]
-    pub fn message(&self) -> Option<&Received> {
-        match self {
-            Event::Message(m) => Some(m),
-            Event::Timer(_) => None,
-        }
     }
 }
