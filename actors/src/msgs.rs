@@ -9,6 +9,9 @@
 //! | `peer/keyframe` | [`PeerKeyframe`] | link → local grid |
 //! | `grid/snapshot` | [`GridSnapshot`] | local grid → planner, collision |
 //! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
+//! | `peer/plan` | [`PeerPlan`] | link → collision |
+//! | `plan/candidates` | [`PlanCandidates`] | planner → collision |
+//! | `plan/decision` | [`PlanDecision`] | collision → planner |
 //! | `link/tx`, `link/rx` | [`LinkTx`](crate::runtime::LinkTx), [`LinkRx`](crate::runtime::LinkRx) | link ↔ network |
 
 use nalgebra::{Isometry3, Vector3};
@@ -200,3 +203,79 @@ pub const PLAN: Topic<Plan> = Topic::new("plan/committed");
 pub const GRID_SNAPSHOT: Topic<GridSnapshot> = Topic::new("grid/snapshot");
 /// Peers' odometry from the link.
 pub const PEER_ODOMETRY: Topic<PeerOdometry> = Topic::new("peer/odometry");
+/// Peers' committed plans from the link.
+pub const PEER_PLAN: Topic<PeerPlan> = Topic::new("peer/plan");
+/// Ranked candidates of a planning round, for the collision actor.
+pub const PLAN_CANDIDATES: Topic<PlanCandidates> = Topic::new("plan/candidates");
+/// The collision actor's verdict on a planning round.
+pub const PLAN_DECISION: Topic<PlanDecision> = Topic::new("plan/decision");
+
+/// Another robot's committed plan, as received over the link (thesis §8.2.3: plans at
+/// 1 Hz with the sender's priority).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerPlan {
+    /// The peer.
+    pub robot: RobotId,
+    /// Its priority; larger values are avoided by smaller ones (§8.2.3).
+    pub priority: u16,
+    /// The plan, moved into this robot's world frame.
+    pub plan: Plan,
+    /// When it arrived here.
+    pub received_at: Time,
+}
+
+impl Message for PeerPlan {
+    fn payload_bytes(&self) -> usize {
+        self.plan.payload_bytes()
+    }
+}
+
+/// One candidate of a planning round: a primitive followed by its stopping primitive.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CandidatePlan {
+    /// The primitive, then its stopping primitive from `switch_at` on.
+    pub trajectory: Trajectory,
+    /// When the stopping primitive takes over (the next replanning time at the latest).
+    pub switch_at: Time,
+    /// The planner's score (higher is better).
+    pub reward: f64,
+}
+
+/// The candidates of one planning round, best first (planner → collision). The
+/// collision actor commits the first one it accepts, or `stop` when it accepts none
+/// (thesis §4.1.3: the stopping trajectory is always available).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanCandidates {
+    /// Round number (per planner, increasing).
+    pub round: u64,
+    /// When the round ran.
+    pub stamp: Time,
+    /// Ranked candidates.
+    pub candidates: Vec<CandidatePlan>,
+    /// The stopping trajectory from the current reference state.
+    pub stop: Trajectory,
+}
+
+impl Message for PlanCandidates {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.stop.payload_bytes()
+            + self
+                .candidates
+                .iter()
+                .map(|c| c.trajectory.payload_bytes())
+                .sum::<usize>()
+    }
+}
+
+/// Which candidate of a round the collision actor committed.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlanDecision {
+    /// The round decided.
+    pub round: u64,
+    /// Index into the round's candidates, or `None`: the stopping trajectory.
+    pub chosen: Option<usize>,
+    /// Candidates rejected before the chosen one, with the reason for each.
+    pub rejected: Vec<(usize, String)>,
+}
+impl Message for PlanDecision {}
