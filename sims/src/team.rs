@@ -20,7 +20,7 @@ use crate::network::ScenarioNetwork;
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::{SimCameraSource, intrinsics_of};
 use crate::vehicle::{SimVehicle, new_body};
-use crate::world::{CaveWorld, World};
+use crate::world::{Site, World};
 
 /// Seconds between the departures of consecutive robots.
 pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
@@ -28,7 +28,7 @@ pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
 /// A team ready to run.
 pub struct Team {
     scenario: Scenario,
-    world: Arc<CaveWorld>,
+    world: Arc<dyn Site>,
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
     network_stats: Arc<Mutex<NetStats>>,
@@ -141,13 +141,14 @@ pub struct Summary {
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct WorldSummary {
     /// Generator.
-    pub kind: String,
+    pub kind: crate::world::WorldKind,
     /// Generator seed.
     pub seed: u64,
     /// Free volume (coverage denominator), m³.
     pub free_volume_m3: f64,
-    /// Length of the tunnel centre lines, metres.
-    pub tunnel_length_m: f64,
+    /// Length scale of the world: all tunnel centre lines of a cave, one robot's
+    /// waypoint route elsewhere, metres.
+    pub route_length_m: f64,
     /// Coverage cell edge, metres.
     pub coverage_cell_m: f64,
 }
@@ -201,16 +202,13 @@ impl Team {
         scenario: &Scenario,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
-        let world = Arc::new(CaveWorld::generate(
-            &scenario.world.cave,
-            scenario.world.seed,
-        ));
+        let world = scenario.world.build();
         let shared_world: Arc<dyn World> = world.clone();
         let count = scenario.robots as usize;
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
             let start = world.start_position(i, count);
-            let route = world.centreline_route(i, count);
+            let route = world.route(i, count);
             let heading = route
                 .iter()
                 .find(|p| (p.xy() - start.xy()).norm() > 0.1)
@@ -342,7 +340,7 @@ impl Team {
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         let summary = summarise(
             &self.scenario,
-            &self.world,
+            self.world.as_ref(),
             &truth,
             &reports,
             over_time,
@@ -396,7 +394,7 @@ fn inject_panic(
 
 fn summarise(
     scenario: &Scenario,
-    world: &CaveWorld,
+    world: &dyn Site,
     truth: &Truth,
     reports: &[RobotReport],
     over_time: Vec<[f64; 2]>,
@@ -441,10 +439,10 @@ fn summarise(
         duration_s: scenario.duration_s,
         robots: reports.len(),
         world: WorldSummary {
-            kind: scenario.world.kind.clone(),
+            kind: scenario.world.kind,
             seed: scenario.world.seed,
             free_volume_m3: truth.coverage.free_volume_m3(),
-            tunnel_length_m: world.graph().total_length_m(),
+            route_length_m: world.route_length_m(),
             coverage_cell_m: scenario.metrics.coverage_cell_m,
         },
         coverage: CoverageSummary {
