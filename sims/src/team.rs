@@ -12,6 +12,7 @@ use troupe_actors::runtime::{
     Time, TopicStats,
 };
 use troupe_comms::simnet::NetStats;
+use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
 use crate::faults::PanicOnce;
@@ -69,6 +70,12 @@ pub struct SeriesRow {
     pub team_coverage: f64,
     /// Team explored volume, m³.
     pub team_explored_m3: f64,
+    /// Distance to the nearest other robot, metres (empty with one robot).
+    pub nearest_robot_m: Option<f64>,
+    /// Link bytes sent so far per class: odometry, plans, keyframes, bulk.
+    pub sent_bytes: [u64; 4],
+    /// Link bytes received so far.
+    pub received_bytes: u64,
 }
 
 /// Counters of one actor.
@@ -313,6 +320,15 @@ impl Team {
             over_time.push([t, coverage]);
             for (i, r) in truth.robots.iter().enumerate() {
                 let p = r.position.unwrap_or_else(Point3::origin);
+                let nearest_robot_m = truth
+                    .robots
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .filter_map(|(_, o)| Some((o.position? - r.position?).norm()))
+                    .reduce(f64::min);
+                let sent_bytes =
+                    Class::ALL.map(|c| r.link.as_ref().map_or(0, |l| l.shaper.class(c).sent_bytes));
                 timeseries.push(SeriesRow {
                     time_s: t,
                     robot: i,
@@ -325,6 +341,9 @@ impl Team {
                     frames: r.frames,
                     team_coverage: coverage,
                     team_explored_m3: truth.coverage.explored_volume_m3(),
+                    nearest_robot_m,
+                    sent_bytes,
+                    received_bytes: r.received_bytes,
                 });
             }
             drop(truth);

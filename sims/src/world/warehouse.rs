@@ -93,7 +93,7 @@ impl WarehouseParams {
                 self.shelf_rows, self.shelf_depth_m, self.aisle_width_m, y
             ));
         }
-        if self.units_per_row() == 0 || !(self.end_margin_m >= 2.0) {
+        if self.units_per_row() == 0 || self.end_margin_m.is_nan() || self.end_margin_m < 2.0 {
             return Err(format!(
                 "end_margin_m must be ≥ 2 m and leave room for one shelf unit, got {}",
                 self.end_margin_m
