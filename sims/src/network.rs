@@ -8,6 +8,8 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use troupe_actors::runtime::{Destination, RobotId, SimNetwork, Time};
 use troupe_comms::simnet::{NetStats, SimNet, SimNetConfig};
 
+use crate::faults::LossBurst;
+
 /// Positions of the robots (index = robot), metres, shared with the monitor.
 pub type Positions = Arc<Mutex<Vec<[f64; 3]>>>;
 
@@ -21,6 +23,7 @@ pub struct ScenarioNetwork {
     net: SimNet,
     positions: Positions,
     stats: Arc<Mutex<NetStats>>,
+    bursts: Vec<LossBurst>,
 }
 
 impl ScenarioNetwork {
@@ -31,7 +34,15 @@ impl ScenarioNetwork {
             net,
             positions,
             stats: Arc::default(),
+            bursts: Vec::new(),
         })
+    }
+
+    /// Adds scheduled loss bursts (applied before the network's own model).
+    #[must_use]
+    pub fn with_loss_bursts(mut self, bursts: Vec<LossBurst>) -> Self {
+        self.bursts = bursts;
+        self
     }
 
     /// Shared handle on the network's counters (all pairs together).
@@ -53,6 +64,15 @@ impl SimNetwork for ScenarioNetwork {
     ) {
         let positions = lock(&self.positions).clone();
         for target in to.recipients(from, team_size) {
+            // Every burst draws for every packet it covers, so one burst's losses do
+            // not depend on another's.
+            let mut lost = false;
+            for burst in &mut self.bursts {
+                lost |= burst.drops(now, from, target);
+            }
+            if lost {
+                continue;
+            }
             let routing = self
                 .net
                 .route(now.as_nanos(), from.0, target.0, bytes, &positions);

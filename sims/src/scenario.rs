@@ -11,6 +11,7 @@ use troupe_comms::simnet::SimNetConfig;
 use troupe_robot::RobotConfig;
 
 use crate::camera::CameraParams;
+pub use crate::faults::Fault;
 use crate::vehicle::VehicleConfig;
 pub use crate::world::{WorldConfig, WorldKind};
 
@@ -34,21 +35,6 @@ impl Default for MetricsConfig {
             sample_period_s: 1.0,
         }
     }
-}
-
-/// A fault injected at a scheduled time.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, tag = "kind", rename_all = "snake_case")]
-pub enum Fault {
-    /// The named actor's handler panics once at `at_s` (tests supervision).
-    ActorPanic {
-        /// Robot index.
-        robot: usize,
-        /// Actor name (`vehicle`, `sensor`, `explorer`, `link`).
-        actor: String,
-        /// Time of the panic, seconds.
-        at_s: f64,
-    },
 }
 
 /// A whole scenario.
@@ -239,30 +225,9 @@ impl Scenario {
             ));
         }
         for (i, fault) in self.faults.iter().enumerate() {
-            match fault {
-                Fault::ActorPanic { robot, actor, at_s } => {
-                    if *robot >= self.robots as usize {
-                        return Err(invalid(
-                            &format!("faults[{i}].robot"),
-                            format!("must be < robots ({}), got {robot}", self.robots),
-                        ));
-                    }
-                    if !["vehicle", "sensor", "explorer", "link"].contains(&actor.as_str()) {
-                        return Err(invalid(
-                            &format!("faults[{i}].actor"),
-                            format!(
-                                "must be one of vehicle, sensor, explorer, link; got {actor:?}"
-                            ),
-                        ));
-                    }
-                    if !(at_s.is_finite() && *at_s >= 0.0) {
-                        return Err(invalid(
-                            &format!("faults[{i}].at_s"),
-                            format!("must be ≥ 0, got {at_s}"),
-                        ));
-                    }
-                }
-            }
+            fault
+                .validate(self.robots)
+                .map_err(|(key, reason)| invalid(&format!("faults[{i}].{key}"), reason))?;
         }
         Ok(())
     }

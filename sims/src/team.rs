@@ -1,7 +1,6 @@
 //! A team of simulated robots in one process, under the sim-time executor.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -11,11 +10,11 @@ use troupe_actors::runtime::{
     ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
     Time, TopicStats,
 };
-use troupe_comms::simnet::NetStats;
+use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
-use crate::faults::PanicOnce;
+use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_factory};
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
 use crate::scenario::{Fault, Scenario};
@@ -33,6 +32,7 @@ pub struct Team {
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
     network_stats: Arc<Mutex<NetStats>>,
+    fault_counters: Vec<Arc<FaultCounters>>,
 }
 
 /// Everything a run produced.
@@ -138,10 +138,22 @@ pub struct Summary {
     pub events: u64,
     /// The simulated network: frames routed, delivered, dropped by reason.
     pub network: NetStats,
+    /// Scheduled faults and what each did.
+    pub faults: Vec<FaultReport>,
     /// Per robot.
     pub per_robot: Vec<RobotSummary>,
     /// Messages and bytes per topic, summed over robots.
     pub topics: BTreeMap<String, TopicStats>,
+}
+
+/// A scheduled fault and its effect.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct FaultReport {
+    /// The fault as scheduled.
+    pub fault: Fault,
+    /// What it did.
+    #[serde(flatten)]
+    pub effect: FaultEffect,
 }
 
 /// The world, as reported.
@@ -212,6 +224,8 @@ impl Team {
         let world = scenario.world.build();
         let shared_world: Arc<dyn World> = world.clone();
         let count = scenario.robots as usize;
+        let fault_counters: Vec<Arc<FaultCounters>> =
+            scenario.faults.iter().map(|_| Arc::default()).collect();
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
             let start = world.start_position(i, count);
@@ -253,15 +267,8 @@ impl Team {
                 camera: intrinsics_of(&scenario.camera),
             };
             let mut robot = assemble(&format!("robot{i}"), &scenario.robot, parts)?;
-            for fault in &scenario.faults {
-                let Fault::ActorPanic {
-                    robot: r,
-                    actor,
-                    at_s,
-                } = fault;
-                if *r == i {
-                    robot = inject_panic(robot, actor, Time::from_secs_f64(*at_s));
-                }
+            for (fault, counters) in scenario.faults.iter().zip(&fault_counters) {
+                robot = inject_fault(robot, i, fault, counters);
             }
             customize(i, &mut robot);
             team.push(robot);
@@ -275,8 +282,37 @@ impl Team {
             scenario.robot.radius_m,
         );
         let truth = monitor.truth();
+        let mut network_config = scenario.network.clone();
+        let mut bursts = Vec::new();
+        for (k, (fault, counters)) in scenario.faults.iter().zip(&fault_counters).enumerate() {
+            match fault {
+                Fault::LinkPartition {
+                    robots,
+                    at_s,
+                    until_s,
+                } => network_config.partitions.push(Partition {
+                    start_s: *at_s,
+                    end_s: *until_s,
+                    groups: Vec::new(),
+                    cut: vec![*robots],
+                }),
+                Fault::LossBurst {
+                    robots,
+                    at_s,
+                    until_s,
+                    loss_probability,
+                } => bursts.push(LossBurst::new(
+                    robots.clone(),
+                    [*at_s, *until_s],
+                    *loss_probability,
+                    scenario.seed ^ (0x6c6f_7373 + k as u64),
+                    counters.clone(),
+                )),
+                Fault::ActorPanic { .. } | Fault::RobotCrash { .. } => {}
+            }
+        }
         let network = ScenarioNetwork::new(
-            scenario.network.clone(),
+            network_config,
             scenario.seed ^ 0x6e65_7477,
             monitor.positions(),
         )
@@ -288,6 +324,7 @@ impl Team {
             })
         })?;
         let network_stats = network.stats();
+        let network = network.with_loss_bursts(bursts);
         let mut executor = SimExecutor::new(team, scenario.seed).with_network(network);
         executor.add_tap(monitor);
         Ok(Team {
@@ -296,6 +333,7 @@ impl Team {
             executor,
             truth,
             network_stats,
+            fault_counters,
         })
     }
 
@@ -357,7 +395,7 @@ impl Team {
             .network_stats
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let summary = summarise(
+        let mut summary = summarise(
             &self.scenario,
             self.world.as_ref(),
             &truth,
@@ -366,6 +404,23 @@ impl Team {
             events,
             network,
         );
+        summary.faults = self
+            .scenario
+            .faults
+            .iter()
+            .zip(&self.fault_counters)
+            .map(|(fault, counters)| {
+                let mut effect = counters.effect();
+                // The network applies partitions itself; they strike when they begin.
+                if let Fault::LinkPartition { at_s, .. } = fault {
+                    effect.struck = *at_s < end;
+                }
+                FaultReport {
+                    fault: fault.clone(),
+                    effect,
+                }
+            })
+            .collect();
         let timing = Timing {
             wall_s,
             sim_s: end,
@@ -392,21 +447,40 @@ impl Team {
     }
 }
 
-fn inject_panic(
-    robot: troupe_actors::runtime::RobotSpec,
-    actor: &str,
-    at: Time,
-) -> troupe_actors::runtime::RobotSpec {
+/// Applies one scheduled fault to robot `index` (faults aimed elsewhere, and network
+/// faults, leave it as it is).
+fn inject_fault(
+    robot: RobotSpec,
+    index: usize,
+    fault: &Fault,
+    counters: &Arc<FaultCounters>,
+) -> RobotSpec {
+    let (target, actor_name) = match fault {
+        Fault::ActorPanic { robot, actor, .. } => (*robot, Some(actor.as_str())),
+        Fault::RobotCrash { robot, .. } => (*robot, None),
+        Fault::LinkPartition { .. } | Fault::LossBurst { .. } => return robot,
+    };
+    if target != index {
+        return robot;
+    }
     let name = robot.name().to_string();
-    let actors = robot.into_actors();
-    let mut rebuilt = troupe_actors::runtime::RobotSpec::new(name);
-    for spec in actors {
-        if spec.name() == actor {
-            let fired = Arc::new(AtomicBool::new(false));
-            rebuilt.add(spec.wrap(move |inner| Box::new(PanicOnce::new(inner, at, fired.clone()))));
-        } else {
-            rebuilt.add(spec);
-        }
+    let mut rebuilt = RobotSpec::new(name);
+    for spec in robot.into_actors() {
+        let spec = match (fault, actor_name) {
+            (Fault::ActorPanic { at_s, .. }, Some(actor)) if spec.name() == actor => {
+                let at = Time::from_secs_f64(*at_s);
+                let counters = counters.clone();
+                spec.wrap(move |inner| Box::new(PanicOnce::new(inner, at, counters.clone())))
+            }
+            (Fault::RobotCrash { at_s, down_s, .. }, None) if spec.name() != "vehicle" => {
+                let at = Time::from_secs_f64(*at_s);
+                let reboot = Time::from_secs_f64(at_s + down_s);
+                let counters = counters.clone();
+                spec.map_factory(move |factory| crashing_factory(factory, at, reboot, counters))
+            }
+            _ => spec,
+        };
+        rebuilt.add(spec);
     }
     rebuilt
 }
@@ -477,6 +551,7 @@ fn summarise(
             .then_some(truth.min_inter_robot_distance_m),
         events,
         network,
+        faults: Vec::new(),
         per_robot,
         topics,
     }

@@ -29,7 +29,7 @@ pub use network::{Destination, IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, S
 pub use queue::QueuePolicy;
 pub use realtime::{RealtimeExecutor, RealtimeHandle};
 pub use sim::SimExecutor;
-pub use spec::{ActorOptions, ActorSpec, LatencyModel, RestartPolicy, RobotSpec};
+pub use spec::{ActorFactory, ActorOptions, ActorSpec, LatencyModel, RestartPolicy, RobotSpec};
 pub use stats::{
     ActorReport, ActorStats, LatencyHistogram, LatencySummary, RobotReport, TopicStats,
 };

@@ -110,7 +110,8 @@ pub struct ActorOptions {
     pub blocking: bool,
 }
 
-pub(crate) type ActorFactory = Box<dyn FnMut() -> Box<dyn Actor> + Send>;
+/// Builds actor instances (called at start and on every restart).
+pub type ActorFactory = Box<dyn FnMut() -> Box<dyn Actor> + Send>;
 
 /// An actor to be run: a name, a factory (called at start and on every restart) and
 /// options.
@@ -177,6 +178,14 @@ impl ActorSpec {
     {
         let mut inner = self.factory;
         self.factory = Box::new(move || wrapper(inner()));
+        self
+    }
+
+    /// Replaces the factory with one built from it — for wrappers that must build
+    /// fresh instances themselves (a simulated crash and reboot loses all state).
+    #[must_use]
+    pub fn map_factory(mut self, f: impl FnOnce(ActorFactory) -> ActorFactory) -> Self {
+        self.factory = f(self.factory);
         self
     }
 }

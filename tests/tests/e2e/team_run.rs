@@ -147,3 +147,58 @@ fn injected_panics_are_restarted_counted_and_the_run_completes() {
         s.per_robot[1].truth.frames
     );
 }
+
+#[test]
+fn crash_partition_and_loss_burst_strike_are_reported_and_the_team_keeps_exploring() {
+    let scenario = Scenario {
+        duration_s: 60.0,
+        faults: vec![
+            Fault::RobotCrash {
+                robot: 1,
+                at_s: 15.0,
+                down_s: 10.0,
+            },
+            Fault::LinkPartition {
+                robots: [0, 1],
+                at_s: 30.0,
+                until_s: 40.0,
+            },
+            Fault::LossBurst {
+                robots: Vec::new(),
+                at_s: 45.0,
+                until_s: 55.0,
+                loss_probability: 0.5,
+            },
+        ],
+        ..Scenario::default()
+    };
+    let output = run(&scenario);
+    let s = &output.summary;
+    assert_eq!(s.faults.len(), 3);
+    assert!(s.faults.iter().all(|f| f.effect.struck), "{:?}", s.faults);
+    assert!(s.faults[0].effect.dropped_events > 0);
+    assert!(s.faults[2].effect.dropped_packets > 0);
+    assert!(s.network.partitioned > 0);
+    assert_eq!(s.collisions, 0);
+    // Robot 1 lost ten seconds of frames (5 Hz) and nothing else: it rebooted, its
+    // sensor came back, and its route resumed.
+    let frames = s.per_robot[1].truth.frames;
+    assert!((230..=260).contains(&frames), "{frames} frames");
+    let distance_at = |t: f64| {
+        output
+            .timeseries
+            .iter()
+            .find(|r| r.robot == 1 && (r.time_s - t).abs() < 1e-9)
+            .map(|r| r.distance_m)
+            .expect("sample")
+    };
+    assert!(
+        distance_at(60.0) - distance_at(26.0) > 15.0,
+        "robot 1 did not resume: {} m then {} m",
+        distance_at(26.0),
+        distance_at(60.0)
+    );
+    for robot in &s.per_robot {
+        assert!(robot.actors.iter().all(|a| !a.stopped), "{}", robot.name);
+    }
+}
