@@ -146,6 +146,15 @@ impl Scenario {
                 parse_error(format!("key `{key}`: {inner}"))
             }
         })?;
+        let mut scenario = scenario;
+        // A mesh file is named relative to the scenario file.
+        let mesh = &mut scenario.world.mesh.path;
+        if mesh.is_relative()
+            && !mesh.as_os_str().is_empty()
+            && let Some(dir) = path.parent().filter(|d| d.is_dir())
+        {
+            *mesh = dir.join(&*mesh);
+        }
         scenario.validate(path)?;
         Ok(scenario)
     }

@@ -173,12 +173,23 @@ impl Study {
             Some(relative) => {
                 let scenario_path = path.parent().unwrap_or(Path::new(".")).join(relative);
                 let base_text = read(&scenario_path)?;
-                base_text.parse::<Table>().map_err(|e| {
+                let mut table = base_text.parse::<Table>().map_err(|e| {
                     invalid(format!(
                         "scenario `{}` is not valid TOML: {e}",
                         scenario_path.display()
                     ))
-                })?
+                })?;
+                // A mesh file is named relative to the scenario file.
+                if let Some(Value::String(mesh)) = table
+                    .get_mut("world")
+                    .and_then(|w| w.get_mut("mesh"))
+                    .and_then(|m| m.get_mut("path"))
+                    && Path::new(mesh.as_str()).is_relative()
+                    && let Some(dir) = scenario_path.parent()
+                {
+                    *mesh = dir.join(mesh.as_str()).display().to_string();
+                }
+                table
             }
             None => Table::new(),
         };

@@ -221,7 +221,13 @@ impl Team {
         scenario: &Scenario,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
-        let world = scenario.world.build();
+        let world = scenario.world.build().map_err(|e| {
+            AssembleError::Config(troupe_robot::ConfigError {
+                key: "world.mesh.path".into(),
+                rule: "must be a readable PLY or OBJ mesh",
+                value: e.to_string(),
+            })
+        })?;
         let shared_world: Arc<dyn World> = world.clone();
         let count = scenario.robots as usize;
         let fault_counters: Vec<Arc<FaultCounters>> =

@@ -4,8 +4,10 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::mesh::MeshError;
 use super::{
-    CaveParams, CaveWorld, DoorParams, OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
+    CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpeningScene, Site, Warehouse,
+    WarehouseParams, WindowParams,
 };
 
 /// The kinds of world `troupe run` can build.
@@ -20,6 +22,8 @@ pub enum WorldKind {
     Window,
     /// A building with a door 12 m ahead (`[world.door]`, thesis §5.2).
     Door,
+    /// A triangle mesh from a PLY or OBJ file (`[world.mesh]`).
+    Mesh,
 }
 
 /// The world to explore.
@@ -39,6 +43,8 @@ pub struct WorldConfig {
     pub window: WindowParams,
     /// Door scene parameters.
     pub door: DoorParams,
+    /// Mesh world parameters.
+    pub mesh: MeshParams,
 }
 
 impl Default for WorldConfig {
@@ -50,6 +56,7 @@ impl Default for WorldConfig {
             warehouse: WarehouseParams::default(),
             window: WindowParams::default(),
             door: DoorParams::default(),
+            mesh: MeshParams::default(),
         }
     }
 }
@@ -66,17 +73,22 @@ impl WorldConfig {
             WorldKind::Warehouse => self.warehouse.validate().map_err(|r| ("warehouse", r)),
             WorldKind::Window => self.window.validate().map_err(|r| ("window", r)),
             WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
+            WorldKind::Mesh => self.mesh.validate().map_err(|r| ("mesh", r)),
         }
     }
 
     /// Builds the selected world (validate first).
-    #[must_use]
-    pub fn build(&self) -> Arc<dyn Site> {
-        match self.kind {
+    ///
+    /// # Errors
+    ///
+    /// A mesh file that cannot be read.
+    pub fn build(&self) -> Result<Arc<dyn Site>, MeshError> {
+        Ok(match self.kind {
             WorldKind::Cave => Arc::new(CaveWorld::generate(&self.cave, self.seed)),
             WorldKind::Warehouse => Arc::new(Warehouse::generate(&self.warehouse, self.seed)),
             WorldKind::Window => Arc::new(OpeningScene::window(&self.window, self.seed)),
             WorldKind::Door => Arc::new(OpeningScene::door(&self.door, self.seed)),
-        }
+            WorldKind::Mesh => Arc::new(MeshWorld::load(&self.mesh, self.seed)?),
+        })
     }
 }

@@ -16,6 +16,8 @@
 mod box_room;
 pub mod cave;
 mod config;
+pub mod mesh;
+mod mesh_io;
 pub mod noise;
 pub mod scenes;
 pub mod solids;
@@ -24,6 +26,7 @@ pub mod warehouse;
 pub use box_room::BoxRoom;
 pub use cave::{CaveParams, CaveWorld};
 pub use config::{WorldConfig, WorldKind};
+pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
 pub use troupe_actors::geometry::Aabb;
 pub use warehouse::{Warehouse, WarehouseParams};
