@@ -6,6 +6,7 @@
 //! - [`coverage`]: explored-volume coverage.
 //! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
 //!   assembled with.
+//! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`report`]: `troupe run`.
 #![deny(missing_docs)]
 
@@ -16,6 +17,7 @@ pub mod monitor;
 pub mod network;
 pub mod report;
 pub mod scenario;
+pub mod sequence;
 pub mod sim_sensor;
 pub mod team;
 pub mod vehicle;
