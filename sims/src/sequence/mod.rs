@@ -40,9 +40,12 @@
 //! z forward) in the world. troupe's body frame (x forward, y left, z up; see
 //! `msgs::DepthFrame`) is `optical · R` with `R` = [`optical_from_body`].
 
+mod build;
 mod png_io;
 #[cfg(test)]
 mod tests;
+
+pub use build::{MapBuildOptions, MapStats, build_map, integrate};
 
 use std::path::{Path, PathBuf};
 
