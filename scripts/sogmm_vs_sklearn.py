@@ -104,7 +104,7 @@ def main():
         rel = abs(ours["ll"] - sk_ll) / abs(sk_ll)
         worst = max(worst, rel)
         print(f"| {ours['frame']} | {ours['sigma']} | {ours['n']} | {ours['m']} | "
-              f"{ours['ll']:.4f} | {sk_ll:.4f} | {100 * rel:.3f} % | "
+              f"{ours['ll']:.6f} | {sk_ll:.6f} | {100 * rel:.1e} % | "
               f"{ours['iterations']} / {sk_it} | {ours['em_s']:.2f} | {sk_s:.2f} | "
               f"{sk_s / ours['em_s']:.1f}× |")
     print(f"\nlargest relative difference of the mean log-likelihood: {100 * worst:.3f} % "
