@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use rand::SeedableRng;
 use troupe_actors::mapper::MapModel;
 use troupe_actors::mapper::mapfile::GmmMap;
 use troupe_sims::camera::CameraParams;
 use troupe_sims::sequence::record_camera;
-use troupe_sims::world::{Aabb, BoxRoom};
+use troupe_sims::world::{Aabb, BoxRoom, World};
 
 fn troupe(args: &[&str], dir: &Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_troupe"))
@@ -21,12 +22,16 @@ fn troupe(args: &[&str], dir: &Path) -> std::process::Output {
         .unwrap()
 }
 
-/// Eight 64×48 frames turning on the spot in a box room, 0.1 s apart.
-fn record(dir: &Path) -> PathBuf {
-    let room = BoxRoom::new(Aabb::new(
+fn room() -> BoxRoom {
+    BoxRoom::new(Aabb::new(
         Point3::new(-2.0, -2.0, -1.0),
         Point3::new(3.0, 2.5, 1.5),
-    ));
+    ))
+}
+
+/// Eight 64×48 frames turning on the spot in a box room, 0.1 s apart.
+fn record(dir: &Path) -> PathBuf {
+    let room = room();
     let camera = CameraParams {
         width: 64,
         height: 48,
@@ -102,6 +107,21 @@ fn map_writes_a_loadable_map_a_ply_and_a_json_line() {
                 "room is closed within 5 m"
             );
         }
+        // The map lies on the walls: points sampled from it are within a few cm of
+        // them on average (a wrong pose convention would put them metres away).
+        let merged = map.merged_occupied().unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let samples = merged.marginal_spatial().sample(5000, &mut rng);
+        let room = room();
+        let mean_m = samples
+            .iter()
+            .map(|p| room.sdf_m(&Point3::from(*p)).abs())
+            .sum::<f64>()
+            / samples.len() as f64;
+        assert!(
+            mean_m < 0.02,
+            "{model}: mean distance to the walls {mean_m} m"
+        );
         let ply = std::fs::read(dir.path().join(&out_dir).join("map.ply")).unwrap();
         assert!(ply.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
         let header_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
