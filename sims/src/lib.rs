@@ -6,6 +6,7 @@
 //! - [`coverage`]: explored-volume coverage.
 //! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
 //!   assembled with.
+//! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`report`]: `troupe run`.
 #![deny(missing_docs)]
 
@@ -17,6 +18,7 @@ pub mod network;
 pub mod plot;
 pub mod report;
 pub mod scenario;
+pub mod sequence;
 pub mod sim_sensor;
 pub mod study;
 pub mod team;

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use troupe_actors::mapper::MapModel;
 use troupe_sims::report::write_run;
 use troupe_sims::scenario::Scenario;
 use troupe_sims::study::{Study, run_variants, write_study};
@@ -30,6 +31,11 @@ enum Command {
     /// (means and 95% intervals over seeds), plots, and each run's report under
     /// `OUT/<study>/runs/`.
     Sweep(SweepArgs),
+    /// Build a map from a recorded sequence (TUM RGB-D layout: camera.toml, depth.txt,
+    /// rgb.txt, groundtruth.txt, depth/ and rgb/ PNGs); write `map.troupe` (the
+    /// keyframe mixtures) and `map.ply` (points sampled from it, with intensity) to
+    /// OUT, and print one JSON line of statistics.
+    Map(MapArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -45,6 +51,41 @@ struct SweepArgs {
     /// List the runs and exit without running them.
     #[arg(long)]
     dry_run: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct MapArgs {
+    /// The sequence directory.
+    sequence_dir: PathBuf,
+    /// Map model of each keyframe: `sogmm` (self-organizing, thesis §6) or `windowed`
+    /// (fixed-size occupied + free-space GMMs, paper §IV-A).
+    #[arg(long, default_value = "sogmm")]
+    model: MapModel,
+    /// SOGMM mean-shift bandwidth σ (smaller: more components, finer map).
+    #[arg(long, default_value_t = 0.02)]
+    bandwidth: f64,
+    /// Use every N-th frame of the sequence.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    stride: usize,
+    /// Fit every N-th pixel in each image direction.
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    pixel_stride: u32,
+    /// Keyframe overlap threshold: a frame becomes a keyframe when less than this
+    /// fraction of its view is covered by an earlier keyframe.
+    #[arg(long, default_value_t = 0.5)]
+    overlap: f64,
+    /// Points sampled from the map into the PLY file.
+    #[arg(long, value_name = "N", default_value_t = 200_000)]
+    ply_points: usize,
+    /// Seed of the fits and of the PLY sampling.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output directory (created if needed); default `maps/<sequence directory name>`.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Never show a progress bar (it is shown only on a terminal anyway).
+    #[arg(long)]
+    no_progress: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -84,6 +125,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run(args),
         Command::Sweep(args) => sweep(args),
+        Command::Map(args) => map(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -92,6 +134,75 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn progress_bar(len: u64, hidden: bool) -> ProgressBar {
+    if hidden || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+fn map(args: MapArgs) -> anyhow::Result<()> {
+    use rand::SeedableRng;
+    use troupe_actors::mapper::mapfile::{sample_surface, write_atomically, write_ply};
+    use troupe_sims::sequence::{MapBuildOptions, Sequence, build_map};
+
+    if !(args.bandwidth.is_finite() && args.bandwidth > 0.0) {
+        anyhow::bail!("--bandwidth must be a number > 0, got {}", args.bandwidth);
+    }
+    if args.stride == 0 || args.pixel_stride == 0 {
+        anyhow::bail!("--stride and --pixel-stride must be at least 1");
+    }
+    if !(0.0..=1.0).contains(&args.overlap) {
+        anyhow::bail!("--overlap must be in [0, 1], got {}", args.overlap);
+    }
+    let sequence = Sequence::open(&args.sequence_dir)?;
+    let options = MapBuildOptions {
+        model: args.model,
+        bandwidth: args.bandwidth,
+        frame_stride: args.stride,
+        pixel_stride: args.pixel_stride,
+        overlap_threshold: args.overlap,
+        seed: args.seed,
+        ..MapBuildOptions::default()
+    };
+    let frames = sequence.len().div_ceil(args.stride) as u64;
+    let bar = progress_bar(frames, args.no_progress);
+    let (gmm_map, stats) = build_map(&sequence, &options, |done, total| {
+        bar.set_position(done as u64);
+        bar.set_message(format!("{done}/{total} frames"));
+    })?;
+    bar.finish_and_clear();
+    let merged = gmm_map.merged_occupied().with_context(|| {
+        format!(
+            "no keyframe of {} could be fitted ({} frames, {} failed fits)",
+            args.sequence_dir.display(),
+            stats.frames,
+            stats.failed_fits
+        )
+    })?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = args
+            .sequence_dir
+            .file_name()
+            .map_or_else(|| "sequence".into(), |n| n.to_string_lossy().into_owned());
+        PathBuf::from("maps").join(name)
+    });
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
+    let points = sample_surface(&merged, args.ply_points, &mut rng);
+    let mut ply = Vec::with_capacity(256 + 19 * points.len());
+    write_ply(&mut ply, &points).context("encoding the PLY point cloud")?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    gmm_map.save(&out.join("map.troupe"))?;
+    write_atomically(&out.join("map.ply"), &ply)?;
+    println!("{}", serde_json::to_string(&stats)?);
+    Ok(())
 }
 
 fn run(args: RunArgs) -> anyhow::Result<()> {
@@ -118,16 +229,10 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
     scenario.validate(&source)?;
     let team = Team::new(&scenario)
         .with_context(|| format!("assembling the robots of {}", source.display()))?;
-    let bar = if !args.no_progress && std::io::stderr().is_terminal() {
-        let bar = ProgressBar::new((scenario.duration_s * 10.0).round() as u64);
-        bar.set_style(
-            ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = progress_bar(
+        (scenario.duration_s * 10.0).round() as u64,
+        args.no_progress,
+    );
     let duration_s = scenario.duration_s;
     let output = team.run(|t| {
         bar.set_position((t * 10.0).round() as u64);
