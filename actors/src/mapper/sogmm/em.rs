@@ -35,16 +35,6 @@
 //! within `M · 1e-10` of the dense value and each point's log-likelihood within
 //! `M · 1e-10` nats.
 //!
-//! The lists are then thinned per cell: a cell only needs the components that can reach
-//! the threshold of *its own* points, `T_c = max(T, min_{x∈c} ℓ_anchor(x) − ln 10¹⁰)`
-//! (over the cell's points that do not fall back), and along each axis `a` the spatial
-//! Mahalanobis distance is at least the 1D one, `d²_xyz ≥ g_a² / Σ_m,aa`, with `g_a` the
-//! gap between `μ_m,a` and the cell's extent. A component is listed in a cell only if
-//! `c_m − ½ max_a g_a² / Σ_m,aa ≥ T_c`. This drops only components that the bound above
-//! already excludes for every point of the cell, so the components kept for every point,
-//! and hence every result, are exactly those of the unthinned lists (thesis-level
-//! speed-up, no change in values).
-//!
 //! Determinism: points are processed in a fixed order (sorted by grid cell) in fixed
 //! chunks; each chunk accumulates its own sums, and the chunk sums are added in chunk
 //! order, so the result does not depend on the number of rayon threads.
@@ -74,9 +64,6 @@ pub enum EStep {
     /// Only the components that can reach responsibility 1e-10 relative to the best one
     /// (see the module doc).
     Restricted,
-    /// [`EStep::Restricted`] with the per-box lists only, without the per-cell thinning:
-    /// the reference that shows the thinning changes no value (slower).
-    RestrictedUnthinned,
 }
 
 /// EM settings.
@@ -296,7 +283,7 @@ pub(crate) fn fit_em_anchored(
             [p[0], p[1], p[2], p[3]]
         })
         .collect();
-    let cells: Vec<u32> = order.iter().map(|&i| grid.point_slot[i as usize]).collect();
+    let cells: Vec<u32> = order.iter().map(|&i| grid.point_cell[i as usize]).collect();
     let mut anchors: Vec<u32> = match anchors {
         Some(a) if a.len() == points.len() && a.iter().all(|&k| (k as usize) < m) => {
             order.iter().map(|&i| a[i as usize]).collect()
@@ -312,7 +299,7 @@ pub(crate) fn fit_em_anchored(
         let (chol, logc) = factor(&params)?;
         let (lists, anchor_ll, threshold) = match config.e_step {
             EStep::Dense => (None, vec![], f64::NEG_INFINITY),
-            EStep::Restricted | EStep::RestrictedUnthinned => {
+            EStep::Restricted => {
                 let anchor_ll: Vec<f64> = xs
                     .iter()
                     .zip(&anchors)
@@ -322,14 +309,7 @@ pub(crate) fn fit_em_anchored(
                 let boxes: Vec<Option<([f64; 3], [f64; 3])>> = (0..m)
                     .map(|k| reach_box(&params.means[k], &params.covs[k], logc[k], threshold))
                     .collect();
-                let thin = config.e_step == EStep::Restricted;
-                let cell_threshold = cell_thresholds(&cells, &anchor_ll, threshold, grid.slots());
-                let lists = grid.component_lists(&boxes, |k, slot, lo, h| {
-                    !thin
-                        || reaches_cell(&params.means[k], &params.covs[k], logc[k], lo, h)
-                            >= cell_threshold[slot]
-                });
-                (Some(lists), anchor_ll, threshold)
+                (Some(grid.component_lists(&boxes)), anchor_ll, threshold)
             }
         };
         let ctx = PassCtx {
@@ -397,7 +377,7 @@ fn sorted_grid(points: &[Vector4<f64>], init: &Gmm4) -> (PointGrid, Vec<u32>) {
     let h = (0.5 * median).clamp(extent / 512.0, extent / 8.0);
     let grid = PointGrid::new(&xyz, h);
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.sort_by_key(|&i| grid.point_slot[i as usize]);
+    order.sort_by_key(|&i| grid.point_cell[i as usize]);
     (grid, order)
 }
 
@@ -430,38 +410,6 @@ fn quantile(values: &[f64], q: f64) -> f64 {
     let k = ((v.len() - 1) as f64 * q).floor() as usize;
     let (_, kth, _) = v.select_nth_unstable_by(k, f64::total_cmp);
     *kth
-}
-
-/// Per occupied cell: `max(T, min ℓ_anchor − ln 10¹⁰)` over its points that pass the
-/// global test (see the module doc); `+∞` (no component needed) where every point falls
-/// back to the dense E-step. A margin of `1e-9` nats absorbs rounding.
-fn cell_thresholds(slots: &[u32], anchor_ll: &[f64], threshold: f64, n_slots: usize) -> Vec<f64> {
-    let mut t = vec![f64::INFINITY; n_slots];
-    for (&s, &a) in slots.iter().zip(anchor_ll) {
-        let need = a - LOG_TRUNCATION;
-        if need >= threshold {
-            let slot = &mut t[s as usize];
-            *slot = slot.min(need);
-        }
-    }
-    t.iter_mut().for_each(|v| {
-        if v.is_finite() {
-            *v = v.max(threshold) - 1e-9;
-        }
-    });
-    t
-}
-
-/// Upper bound of `ℓ_m(x)` over the cell `[lo, lo + h]³`: `c_m − ½ max_a g_a² / Σ_aa`
-/// with `g_a` the gap between the mean and the cell along axis `a` (module doc).
-#[inline]
-fn reaches_cell(mean: &Vector4<f64>, cov: &Matrix4<f64>, logc: f64, lo: [f64; 3], h: f64) -> f64 {
-    let mut worst: f64 = 0.0;
-    for a in 0..3 {
-        let gap = (lo[a] - mean[a]).max(mean[a] - (lo[a] + h)).max(0.0);
-        worst = worst.max(gap * gap / cov[(a, a)]);
-    }
-    logc - 0.5 * worst
 }
 
 /// Axis-aligned box of the spatial ellipsoid where `ℓ_m` can reach `threshold`

@@ -515,52 +515,6 @@ fn restricted_e_step_matches_dense() {
     assert!((a - b).abs() < EmConfig::default().tolerance, "{a} vs {b}");
 }
 
-/// The per-cell thinning of the restricted E-step's lists drops only components that
-/// cannot be kept for any point of the cell: whole fits are bit-identical with and
-/// without it, while fewer components are visited.
-#[test]
-fn thinned_lists_change_no_value() {
-    let fp = room_frame(80, 60);
-    for (sigma, seed) in [(0.02, 3), (0.03, 4)] {
-        let (init, seeding) = kinit(&fp, sigma, seed);
-        let run = |e_step| {
-            em::fit_em_anchored(
-                &fp.points,
-                &init,
-                Some(&seeding.assignment),
-                &EmConfig {
-                    e_step,
-                    ..EmConfig::default()
-                },
-            )
-            .unwrap()
-        };
-        let (thin, thin_report) = run(EStep::Restricted);
-        let (full, full_report) = run(EStep::RestrictedUnthinned);
-        assert_eq!(thin, full);
-        assert_eq!(
-            thin_report.log_likelihood_trace,
-            full_report.log_likelihood_trace
-        );
-        assert_eq!(
-            thin_report.mean_kept_per_point,
-            full_report.mean_kept_per_point
-        );
-        assert!(
-            thin_report.mean_components_per_point < full_report.mean_components_per_point,
-            "{} vs {}",
-            thin_report.mean_components_per_point,
-            full_report.mean_components_per_point
-        );
-        eprintln!(
-            "σ {sigma}: components visited per point {:.1} thinned, {:.1} unthinned; kept {:.1}",
-            thin_report.mean_components_per_point,
-            full_report.mean_components_per_point,
-            thin_report.mean_kept_per_point
-        );
-    }
-}
-
 fn dr1_ll(fp: &FramePoints, init: &Gmm4) -> f64 {
     fit_em(
         &fp.points,
