@@ -1,14 +1,85 @@
 //! The mapper actor: decides keyframes by frustum overlap (§8.2.2), fits a SOGMM to
-//! each keyframe (§6) and publishes it on [`KEYFRAME`] for the link to share.
+//! each keyframe (§6) and publishes it on [`KEYFRAME`] for the link to share; feeds
+//! every keyframe into the robot's incremental global map (§6.1.4, [`GlobalMap`]) and
+//! publishes the map's statistics on [`MAPPER_STATS`].
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use super::global::{FrameUpdate, GlobalMap, GlobalMapConfig};
 use super::keyframe::{Frustum, KeyframeSelector};
-use super::sogmm::{SogmmConfig, fit_depth_frame};
+use super::sogmm::{SogmmConfig, fit_depth_frame, frame_points};
 use crate::msgs::{DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, PinholeIntrinsics};
-use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy};
+use crate::runtime::{
+    Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, Time, Topic,
+};
+
+/// Statistics of the mapper after a keyframe (published on [`MAPPER_STATS`]).
+///
+/// The `_s` fields are wall-clock seconds measured on this machine, for monitoring: they
+/// differ between runs, unlike everything else the simulation produces.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapStats {
+    /// Time of the keyframe's observation.
+    pub stamp: Time,
+    /// Keyframes fitted so far.
+    pub keyframes: u32,
+    /// Components of the keyframe's mixture.
+    pub keyframe_components: usize,
+    /// Wall-clock seconds of the keyframe fit.
+    pub keyframe_fit_s: f64,
+    /// Components of the global map `|K|` (0 when it is disabled).
+    pub components: usize,
+    /// Points represented by the global map (`Σ n_k`).
+    pub support_points: f64,
+    /// Bytes of the global map's parameters.
+    pub bytes: usize,
+    /// Relevant points cached for a later local fit.
+    pub cached_points: usize,
+    /// What the global map did with this keyframe (`None` when it is disabled or the
+    /// update failed).
+    pub update: Option<MapUpdateStats>,
+}
+
+/// One global-map update (a summary of [`FrameUpdate`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MapUpdateStats {
+    /// Points tested for relevance (cached + new).
+    pub tested_points: usize,
+    /// Relevant points (Eq. 6.9).
+    pub relevant_points: usize,
+    /// Points fitted into a local model.
+    pub fitted_points: usize,
+    /// Components added.
+    pub new_components: usize,
+    /// Wall-clock seconds: relevant subset, local fit, merge.
+    pub relevant_s: f64,
+    /// Wall-clock seconds of the local fit.
+    pub fit_s: f64,
+    /// Wall-clock seconds of the merge and hashing.
+    pub merge_s: f64,
+}
+
+impl From<&FrameUpdate> for MapUpdateStats {
+    fn from(u: &FrameUpdate) -> Self {
+        MapUpdateStats {
+            tested_points: u.tested_points,
+            relevant_points: u.relevant_points,
+            fitted_points: u.fitted_points,
+            new_components: u.new_components,
+            relevant_s: u.relevant_s,
+            fit_s: u.fit_s,
+            merge_s: u.merge_s,
+        }
+    }
+}
+
+impl Message for MapStats {}
+
+/// The mapper's statistics, one message per keyframe.
+pub const MAPPER_STATS: Topic<MapStats> = Topic::new("mapper/stats");
 
 /// Mapper settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,6 +96,16 @@ pub struct MapperConfig {
     pub overlap_threshold: f64,
     /// Earlier keyframes compared against.
     pub remembered_keyframes: usize,
+    /// Maintain the incremental global map (§6.1.4) from the keyframes.
+    pub global_map: bool,
+    /// Cell side α of the global map's spatial hash, metres (§6.1.4.3).
+    pub hash_cell_m: f64,
+    /// Relevance threshold φ (ln points per m³, see [`GlobalMapConfig`]).
+    pub relevance_threshold: f64,
+    /// Fit a local model once this many relevant points are at hand (§6.1.4.1).
+    pub min_relevant_points: usize,
+    /// Most relevant points cached between keyframes.
+    pub max_cached_points: usize,
 }
 
 impl Default for MapperConfig {
@@ -35,6 +116,11 @@ impl Default for MapperConfig {
             pixel_stride: 2,
             overlap_threshold: 0.5,
             remembered_keyframes: 16,
+            global_map: true,
+            hash_cell_m: 0.2,
+            relevance_threshold: 4.0,
+            min_relevant_points: 500,
+            max_cached_points: 20_000,
         }
     }
 }
@@ -57,7 +143,25 @@ impl MapperConfig {
         if self.remembered_keyframes == 0 {
             return Err("remembered_keyframes must be ≥ 1".into());
         }
-        Ok(())
+        self.global_map_config(0)
+            .validate()
+            .map_err(|e| format!("global map: {e}"))
+    }
+
+    /// The settings of the global map, with local fits seeded from `seed`.
+    #[must_use]
+    pub fn global_map_config(&self, seed: u64) -> GlobalMapConfig {
+        GlobalMapConfig {
+            cell_m: self.hash_cell_m,
+            relevance_threshold: self.relevance_threshold,
+            min_relevant_points: self.min_relevant_points,
+            max_cached_points: self.max_cached_points,
+            sogmm: SogmmConfig {
+                bandwidth: self.bandwidth,
+                seed,
+                ..SogmmConfig::default()
+            },
+        }
     }
 }
 
@@ -101,11 +205,13 @@ pub fn decimate(frame: &DepthFrame, stride: u32) -> DepthFrame {
 }
 
 /// Decides keyframes by frustum overlap (§8.2.2), fits a SOGMM to each (§6) and
-/// publishes it on [`KEYFRAME`].
+/// publishes it on [`KEYFRAME`]; maintains the global map (§6.1.4) from the keyframes
+/// and publishes [`MapStats`] on [`MAPPER_STATS`].
 pub struct MapperActor {
     config: MapperConfig,
     selector: KeyframeSelector,
     keyframes: u32,
+    global: Option<GlobalMap>,
 }
 
 impl MapperActor {
@@ -116,6 +222,32 @@ impl MapperActor {
             config,
             selector: KeyframeSelector::new(config.overlap_threshold, config.remembered_keyframes),
             keyframes: 0,
+            global: None,
+        }
+    }
+
+    /// The global map (`None` when disabled or before the actor started).
+    #[must_use]
+    pub fn global_map(&self) -> Option<&GlobalMap> {
+        self.global.as_ref()
+    }
+
+    /// Feed a keyframe into the global map; a failed update is logged and skipped (the
+    /// map keeps what it had), so one bad frame does not cost the whole map.
+    fn update_global(&mut self, frame: &DepthFrame, ctx: &Context<'_>) -> Option<MapUpdateStats> {
+        let map = self.global.as_mut()?;
+        let points = frame_points(
+            &frame.depth_m,
+            &frame.intensity,
+            &frame.intrinsics,
+            &frame.pose,
+        );
+        match points.and_then(|p| map.insert_frame(&p)) {
+            Ok(update) => Some(MapUpdateStats::from(&update)),
+            Err(e) => {
+                tracing::warn!(robot = ctx.robot_name(), error = %e, "global map update skipped");
+                None
+            }
         }
     }
 }
@@ -123,6 +255,15 @@ impl MapperActor {
 impl Actor for MapperActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::LATEST);
+        self.global = if self.config.global_map {
+            let seed = u64::from(ctx.robot().0) << 32;
+            Some(
+                GlobalMap::new(self.config.global_map_config(seed))
+                    .map_err(|e| ActorError::with_source("creating the global map", e))?,
+            )
+        } else {
+            None
+        };
         Ok(())
     }
 
@@ -143,8 +284,11 @@ impl Actor for MapperActor {
             seed: u64::from(self.keyframes) ^ (u64::from(ctx.robot().0) << 32),
             ..SogmmConfig::default()
         };
+        let started = Instant::now();
         let fit = fit_depth_frame(&small, &config)
             .map_err(|e| ActorError::with_source("fitting a keyframe SOGMM", e))?;
+        let keyframe_fit_s = started.elapsed().as_secs_f64();
+        let keyframe_components = fit.gmm.len();
         ctx.publish_arc(
             &KEYFRAME,
             Arc::new(Keyframe {
@@ -156,16 +300,173 @@ impl Actor for MapperActor {
             }),
         );
         self.keyframes += 1;
+        let update = self.update_global(&small, ctx);
+        let map = self.global.as_ref();
+        ctx.publish_arc(
+            &MAPPER_STATS,
+            Arc::new(MapStats {
+                stamp: frame.stamp,
+                keyframes: self.keyframes,
+                keyframe_components,
+                keyframe_fit_s,
+                components: map.map_or(0, GlobalMap::len),
+                support_points: map.map_or(0.0, GlobalMap::total_support),
+                bytes: map.map_or(0, GlobalMap::parameter_bytes),
+                cached_points: map.map_or(0, GlobalMap::cached_points),
+                update,
+            }),
+        );
         Ok(())
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use std::sync::Mutex;
+    use std::time::Duration;
+
     use nalgebra::{Isometry3, Vector3};
 
     use super::*;
-    use crate::runtime::Time;
+    use crate::mapper::global::COMPONENT_BYTES;
+    use crate::mapper::sogmm::synthetic;
+    use crate::runtime::{ActorSpec, RobotSpec, SimExecutor, TimerId};
+
+    const TICK: TimerId = TimerId(0);
+    const FLIGHT: usize = 16;
+
+    /// Publishes the frames of a synthetic corridor flight, one per tick.
+    struct Frames {
+        next: usize,
+    }
+
+    impl Actor for Frames {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TICK, Duration::from_millis(500));
+            Ok(())
+        }
+        fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            if matches!(event, Event::Timer(TICK)) && self.next < FLIGHT {
+                let intrinsics = synthetic::intrinsics(48, 36);
+                let pose = synthetic::flight_pose(self.next * 8, FLIGHT * 8, 30.0);
+                let (depth_m, intensity) =
+                    synthetic::Scene::corridor(30.0).render(&intrinsics, &pose);
+                ctx.publish(
+                    &DEPTH_FRAME,
+                    DepthFrame {
+                        stamp: ctx.now(),
+                        pose,
+                        intrinsics,
+                        depth_m,
+                        intensity,
+                    },
+                );
+                self.next += 1;
+            }
+            Ok(())
+        }
+    }
+
+    type Seen = Arc<Mutex<Vec<(Option<u32>, Option<MapStats>)>>>;
+
+    struct Recorder {
+        seen: Seen,
+    }
+
+    impl Actor for Recorder {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(1024));
+            ctx.subscribe(&MAPPER_STATS, QueuePolicy::fifo(1024));
+            Ok(())
+        }
+        fn handle(&mut self, event: &Event, _ctx: &mut Context<'_>) -> ActorResult {
+            let Some(m) = event.message() else {
+                return Ok(());
+            };
+            let entry = (
+                m.get(&KEYFRAME).map(|k| k.id),
+                m.get(&MAPPER_STATS).cloned(),
+            );
+            if let Ok(mut seen) = self.seen.lock() {
+                seen.push(entry);
+            }
+            Ok(())
+        }
+    }
+
+    fn run(config: MapperConfig) -> (Vec<u32>, Vec<MapStats>) {
+        let seen: Seen = Arc::default();
+        let sink = seen.clone();
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("frames", || Frames { next: 0 }))
+            .with(ActorSpec::new("mapper", move || MapperActor::new(config)))
+            .with(ActorSpec::new("recorder", move || Recorder {
+                seen: sink.clone(),
+            }));
+        let mut sim = SimExecutor::new(vec![robot], 1);
+        sim.run_until(Time::from_secs_f64(0.5 * FLIGHT as f64 + 1.0));
+        let seen = seen.lock().unwrap();
+        let ids = seen.iter().filter_map(|e| e.0).collect();
+        let stats = seen.iter().filter_map(|e| e.1.clone()).collect();
+        (ids, stats)
+    }
+
+    #[test]
+    fn mapper_publishes_keyframes_and_global_map_stats() {
+        let config = MapperConfig {
+            enabled: true,
+            pixel_stride: 1,
+            min_relevant_points: 100,
+            ..MapperConfig::default()
+        };
+        let (ids, stats) = run(config);
+        assert!(ids.len() >= 3, "{} keyframes", ids.len());
+        assert_eq!(ids, (0..ids.len() as u32).collect::<Vec<_>>());
+        assert_eq!(stats.len(), ids.len(), "one stats message per keyframe");
+        for (i, s) in stats.iter().enumerate() {
+            assert_eq!(s.keyframes as usize, i + 1);
+            assert!(s.keyframe_components > 0);
+            assert!(s.update.is_some());
+            assert_eq!(s.bytes, s.components * COMPONENT_BYTES);
+        }
+        assert!(stats.windows(2).all(|w| w[0].components <= w[1].components));
+        let last = &stats[stats.len() - 1];
+        assert!(last.components > stats[0].components, "the map grew");
+        assert!(last.support_points > 0.0);
+        // Disabled: keyframes as before, statistics without a map.
+        let (ids_off, stats_off) = run(MapperConfig {
+            global_map: false,
+            ..config
+        });
+        assert_eq!(ids_off, ids);
+        assert!(
+            stats_off
+                .iter()
+                .all(|s| s.components == 0 && s.update.is_none())
+        );
+    }
+
+    #[test]
+    fn config_rejects_bad_global_map_settings() {
+        assert!(MapperConfig::default().validate().is_ok());
+        for bad in [
+            MapperConfig {
+                hash_cell_m: 0.0,
+                ..MapperConfig::default()
+            },
+            MapperConfig {
+                relevance_threshold: f64::NAN,
+                ..MapperConfig::default()
+            },
+            MapperConfig {
+                min_relevant_points: 0,
+                ..MapperConfig::default()
+            },
+        ] {
+            let e = bad.validate().unwrap_err();
+            assert!(e.starts_with("global map:"), "{e}");
+        }
+    }
 
     #[test]
     fn decimation_keeps_every_ray() {

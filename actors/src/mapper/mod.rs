@@ -7,9 +7,14 @@
 //! - [`model`]: [`MapModel`] (which of the two) and [`fit_keyframe`].
 //! - [`merge`]: support-weighted merging of mixtures (Eqs. 3.4–3.5).
 //! - [`mapfile`]: saving and loading a map (versioned binary layout), PLY export.
+//! - [`global`]: the incremental global map (§6.1.4) and [`hash`], its spatial hash
+//!   (§6.1.4.3).
 //! - [`keyframe`]: keyframe selection by frustum overlap (§8.2.2).
-//! - [`MapperActor`]: fits a SOGMM to each keyframe and publishes it for sharing.
+//! - [`MapperActor`]: fits a SOGMM to each keyframe and publishes it for sharing,
+//!   maintains the global map and publishes [`MapStats`] on [`MAPPER_STATS`].
 mod actor;
+pub mod global;
+pub mod hash;
 pub mod keyframe;
 pub mod mapfile;
 pub mod merge;
@@ -17,5 +22,5 @@ pub mod model;
 pub mod sogmm;
 pub mod windowed;
 
-pub use actor::{MapperActor, MapperConfig, decimate};
+pub use actor::{MAPPER_STATS, MapStats, MapUpdateStats, MapperActor, MapperConfig, decimate};
 pub use model::{KeyframeFit, MapModel, fit_keyframe};

@@ -282,6 +282,30 @@ impl Gmm4 {
         .map(|_| ())
     }
 
+    /// Append the components of `other` and replace every weight by `weights` (first
+    /// this model's components, then `other`'s): the merge of a local model into the
+    /// global one, "appending the parameters and re-normalizing the weights" (thesis
+    /// §6.1.4.2). The cached Cholesky factors are reused, so the cost is linear in the
+    /// number of components with a small constant. On error (wrong length, weights not
+    /// summing to 1, see [`Gmm4::new`]) `self` is left unchanged.
+    pub fn append_reweighted(&mut self, other: &Gmm4, weights: Vec<f64>) -> Result<(), SogmmError> {
+        let n = self.len() + other.len();
+        if weights.len() != n {
+            return Err(SogmmError::LengthMismatch {
+                weights: weights.len(),
+                means: n,
+                covariances: n,
+            });
+        }
+        check_weights(&weights)?;
+        self.means.extend_from_slice(&other.means);
+        self.covariances.extend_from_slice(&other.covariances);
+        self.chol.extend_from_slice(&other.chol);
+        self.log_weights = weights.iter().map(|w| w.ln()).collect();
+        self.weights = weights;
+        Ok(())
+    }
+
     /// `ln π_m + ln N(x | μ_m, Σ_m)` (Eq. A.2 numerator, Eq. A.3).
     #[must_use]
     pub fn log_component(&self, m: usize, x: &Vector4<f64>) -> f64 {

@@ -206,6 +206,110 @@ impl Scene {
         Self { rects }
     }
 
+    /// A corridor `length_m` long along +x (from x = 0), 4 m wide (y ∈ [−2, 2]) and
+    /// 3 m high, closed at both ends: checkerboard floor, striped left wall, chequered
+    /// right wall, uniform ceiling, and a box every 3 m alternating between the sides,
+    /// each face with its own intensity. The scene of the simulated flights
+    /// ([`flight_pose`]).
+    #[must_use]
+    pub fn corridor(length_m: f64) -> Self {
+        let (w, h) = (2.0, 3.0);
+        let l = length_m.max(1.0);
+        let mut rects = vec![
+            rect(
+                [0.0, -w, 0.0],
+                [l, 0.0, 0.0],
+                [0.0, 2.0 * w, 0.0],
+                Texture::Checker {
+                    low: 0.2,
+                    high: 0.6,
+                    period_m: 0.5,
+                },
+            ),
+            rect(
+                [0.0, -w, h],
+                [l, 0.0, 0.0],
+                [0.0, 2.0 * w, 0.0],
+                Texture::Uniform(0.8),
+            ),
+            rect(
+                [0.0, w, 0.0],
+                [l, 0.0, 0.0],
+                [0.0, 0.0, h],
+                Texture::Stripes {
+                    base: 0.5,
+                    amplitude: 0.25,
+                    period_m: 1.0,
+                },
+            ),
+            rect(
+                [0.0, -w, 0.0],
+                [l, 0.0, 0.0],
+                [0.0, 0.0, h],
+                Texture::Checker {
+                    low: 0.35,
+                    high: 0.75,
+                    period_m: 0.6,
+                },
+            ),
+            rect(
+                [0.0, -w, 0.0],
+                [0.0, 2.0 * w, 0.0],
+                [0.0, 0.0, h],
+                Texture::Uniform(0.45),
+            ),
+            rect(
+                [l, -w, 0.0],
+                [0.0, 2.0 * w, 0.0],
+                [0.0, 0.0, h],
+                Texture::Uniform(0.55),
+            ),
+        ];
+        let mut x0 = 2.0;
+        let mut side = 1.0;
+        let mut k = 0u32;
+        while x0 + 0.6 < l {
+            let (y0, y1) = if side > 0.0 { (1.0, 1.6) } else { (-1.6, -1.0) };
+            let z1 = 0.5 + 0.25 * f64::from(k % 4);
+            let (x1, dx, dy) = (x0 + 0.6, 0.6, y1 - y0);
+            let g = 0.15 + 0.1 * f64::from(k % 5);
+            rects.push(rect(
+                [x0, y0, 0.0],
+                [0.0, dy, 0.0],
+                [0.0, 0.0, z1],
+                Texture::Uniform(g),
+            ));
+            rects.push(rect(
+                [x1, y0, 0.0],
+                [0.0, dy, 0.0],
+                [0.0, 0.0, z1],
+                Texture::Uniform(g + 0.2),
+            ));
+            rects.push(rect(
+                [x0, y0, 0.0],
+                [dx, 0.0, 0.0],
+                [0.0, 0.0, z1],
+                Texture::Uniform(g + 0.1),
+            ));
+            rects.push(rect(
+                [x0, y1, 0.0],
+                [dx, 0.0, 0.0],
+                [0.0, 0.0, z1],
+                Texture::Uniform(g + 0.3),
+            ));
+            rects.push(rect(
+                [x0, y0, z1],
+                [dx, 0.0, 0.0],
+                [0.0, dy, 0.0],
+                Texture::Uniform(g + 0.4),
+            ));
+            x0 += 3.0;
+            side = -side;
+            k += 1;
+        }
+        Self { rects }
+    }
+
     /// Nearest hit along a ray: `(t, intensity)` with the point at `o + t·d`.
     #[must_use]
     pub fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, f64)> {
@@ -290,5 +394,28 @@ pub fn room_pose() -> Isometry3<f64> {
     Isometry3::from_parts(
         Translation3::new(0.0, 0.0, 1.3),
         UnitQuaternion::from_euler_angles(0.0, 15f64.to_radians(), 25f64.to_radians()),
+    )
+}
+
+/// Pose `i` of `n` of a flight through [`Scene::corridor`]`(length_m)`: the camera
+/// moves along the centre line from x = 0.5 m to `length_m − 4` m at 1.2–1.6 m height,
+/// looking ahead with a yaw sweeping ±35° (period 40 frames) and a slight downward
+/// pitch, so consecutive frames overlap strongly and every part of the corridor is seen.
+#[must_use]
+pub fn flight_pose(i: usize, n: usize, length_m: f64) -> Isometry3<f64> {
+    let s = if n > 1 {
+        i as f64 / (n - 1) as f64
+    } else {
+        0.0
+    };
+    let x = 0.5 + s * (length_m - 4.5).max(0.0);
+    let phase = std::f64::consts::TAU * i as f64 / 40.0;
+    let y = 0.4 * (0.5 * phase).sin();
+    let z = 1.4 + 0.2 * (0.7 * phase).sin();
+    let yaw = 35f64.to_radians() * phase.sin();
+    let pitch = 10f64.to_radians() + 5f64.to_radians() * (0.5 * phase).cos();
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(0.0, pitch, yaw),
     )
 }
