@@ -326,6 +326,31 @@ impl LocalGrid {
         hit: bool,
         region: Option<&CellBox>,
     ) {
+        match region {
+            None => self.insert_ray_where(origin, end, hit, |_| true),
+            Some(r) => self.insert_ray_where(origin, end, hit, |c| r.contains(c)),
+        }
+    }
+
+    /// [`LocalGrid::insert_ray`] changing only the cells inside one of `boxes` (the
+    /// novel boxes of a window move, thesis Fig. 3.2); nothing changes for no boxes.
+    pub fn insert_ray_boxes(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        boxes: &[CellBox],
+    ) {
+        self.insert_ray_where(origin, end, hit, |c| boxes.iter().any(|b| b.contains(c)));
+    }
+
+    fn insert_ray_where(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        keep: impl Fn([usize; 3]) -> bool,
+    ) {
         let Some(walk) = self.walk(origin, end) else {
             return;
         };
@@ -333,7 +358,7 @@ impl LocalGrid {
         let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
         for step in walk {
             let Some(i) = step.index else { continue };
-            if region.is_some_and(|r| !r.contains(step.cell)) {
+            if !keep(step.cell) {
                 continue;
             }
             let delta = if step.is_end && hit {

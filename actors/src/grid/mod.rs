@@ -6,6 +6,8 @@
 //!   positions agree cell for cell on what they share.
 //! - [`LocalGrid::shift_to`]: the moving window — copy the overlap, return the (at
 //!   most three) novel boxes to rebuild (Fig. 3.2).
+//! - [`ComponentStore`]: the keyframe GMM components the novel boxes are rebuilt
+//!   from, sampled deterministically, with a spatial index over their means.
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
 
@@ -13,9 +15,13 @@ mod actor;
 pub mod distance;
 pub mod frontier;
 mod local;
+mod store;
 
 pub use actor::{GridActor, GridConfig, insert_frame, insert_keyframe};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
+pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod store_tests;
