@@ -1,9 +1,12 @@
 //! The local grid actor: keeps a [`LocalGrid`] centred on the robot and publishes
 //! snapshots (grid + distance fields) for the planner and the collision checker.
 //!
-//! Inputs today are the robot's own depth frames, ray-traced directly (the
-//! occupancy-grid baseline of thesis §8.2.5); rebuilding from GMMs (own and peers'
-//! keyframes, §3.2.3) plugs in here when the mapper publishes them.
+//! Inputs: the robot's own keyframe GMMs (`msgs::KEYFRAME`, when the mapper is on) and
+//! its peers' (`msgs::PEER_KEYFRAME`), kept in a [`ComponentStore`] and ray-traced from
+//! their sensor origins; when the window moves, the novel boxes are rebuilt from the
+//! stored components that can reach them (thesis §3.2.3, Fig. 3.2). The robot's own
+//! depth frames can also be ray-traced directly (the occupancy-grid baseline of
+//! §8.2.5; on by default so that the grid works without the mapper).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -13,9 +16,9 @@ use serde::{Deserialize, Serialize};
 
 use super::distance::unsafe_distance;
 use super::frontier::frontier_distance;
-use super::{LocalGrid, LogOddsParams};
+use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams};
 use crate::msgs::{
-    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, Keyframe, ODOMETRY, Odometry,
+    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, KEYFRAME, Keyframe, ODOMETRY, Odometry,
     PEER_KEYFRAME,
 };
 use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
@@ -37,8 +40,17 @@ pub struct GridConfig {
     /// Unknown cells within this distance of the robot's centre become free whenever
     /// odometry arrives (the body is there; observed cells are never overridden).
     pub body_radius_m: f64,
-    /// Most points sampled from one peer keyframe (at most its support size).
+    /// Most points sampled from one keyframe, own or a peer's (at most its support
+    /// size), split over its components by weight.
     pub peer_keyframe_samples: usize,
+    /// Ray-trace the robot's own depth frames directly (the occupancy-grid baseline).
+    /// With the mapper on, turn this off to build the grid from GMMs only (§3.2.3);
+    /// with both, a keyframe's observations count twice.
+    pub trace_depth_frames: bool,
+    /// Most keyframes kept for rebuilding novel boxes; the oldest goes first.
+    pub max_stored_keyframes: usize,
+    /// Bucket edge of the spatial index over component means, metres.
+    pub index_cell_m: f64,
     /// Unknown cells within this distance of the first pose become free: the robot
     /// starts in a clear spot (without it, nothing would be safe before the first look
     /// around).
@@ -56,6 +68,9 @@ impl Default for GridConfig {
             body_radius_m: 0.3,
             start_clearance_m: 1.2,
             peer_keyframe_samples: 2000,
+            trace_depth_frames: true,
+            max_stored_keyframes: 256,
+            index_cell_m: 4.0,
         }
     }
 }
@@ -93,6 +108,15 @@ impl GridConfig {
         }
         if self.pixel_stride == 0 {
             return Err("pixel_stride must be ≥ 1".into());
+        }
+        if self.max_stored_keyframes == 0 {
+            return Err("max_stored_keyframes must be ≥ 1".into());
+        }
+        if !(self.index_cell_m.is_finite() && self.index_cell_m > 0.0) {
+            return Err(format!(
+                "index_cell_m must be > 0, got {}",
+                self.index_cell_m
+            ));
         }
         for (key, value) in [
             ("body_radius_m", self.body_radius_m),
@@ -148,12 +172,14 @@ pub fn insert_keyframe(
 
 const PUBLISH: TimerId = TimerId(0);
 
-/// Keeps a [`LocalGrid`] centred on the robot from its depth frames and its peers'
-/// keyframes, and publishes [`GridSnapshot`]s with the distance fields.
+/// Keeps a [`LocalGrid`] centred on the robot from its own and its peers' keyframes
+/// (and optionally its depth frames), and publishes [`GridSnapshot`]s with the
+/// distance fields.
 pub struct GridActor {
     config: GridConfig,
     grid: Option<LocalGrid>,
     position: Option<Point3<f64>>,
+    store: ComponentStore,
 }
 
 impl GridActor {
@@ -164,18 +190,41 @@ impl GridActor {
             config,
             grid: None,
             position: None,
+            store: ComponentStore::new(
+                config.peer_keyframe_samples,
+                config.max_stored_keyframes,
+                config.index_cell_m,
+            ),
+        }
+    }
+
+    /// Stores a keyframe's components and ray-traces them into the grid (if there is
+    /// one yet: otherwise they enter when the first pose creates it).
+    fn on_keyframe(&mut self, source: KeyframeSource, keyframe: &Keyframe) {
+        let Some(k) = self.store.insert(source, keyframe) else {
+            return;
+        };
+        if let Some(grid) = self.grid.as_mut() {
+            self.store.trace_keyframe(grid, k);
         }
     }
 
     fn grid_at(&mut self, position: Point3<f64>) -> &mut LocalGrid {
         let config = self.config;
+        let store = &self.store;
         self.grid.get_or_insert_with(|| {
-            LocalGrid::centred(
+            let mut grid = LocalGrid::centred(
                 &position,
                 &Vector3::from(config.size_m),
                 config.resolution_m,
                 config.logodds,
-            )
+            );
+            let whole = CellBox {
+                min: [0; 3],
+                max: grid.dims(),
+            };
+            store.rebuild(&mut grid, &[whole]);
+            grid
         })
     }
 
@@ -186,10 +235,14 @@ impl GridActor {
         }
         let first = self.position.is_none();
         let (body, start) = (self.config.body_radius_m, self.config.start_clearance_m);
-        let grid = self.grid_at(position);
-        // The window follows the robot; novel boxes stay unknown until observed again
-        // (rebuilding them from GMM keyframes comes with the mapper).
-        grid.shift_to(&position);
+        self.grid_at(position);
+        let (Some(grid), store) = (self.grid.as_mut(), &self.store) else {
+            return;
+        };
+        // The window follows the robot; the novel boxes are rebuilt from the stored
+        // keyframe components that can reach them (Fig. 3.2).
+        let novel = grid.shift_to(&position);
+        store.rebuild(grid, &novel);
         grid.clear_unknown_sphere(&position, if first { start.max(body) } else { body });
         self.position = Some(position);
     }
@@ -200,6 +253,7 @@ impl Actor for GridActor {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::KeepLatest { depth: 2 });
         ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
+        ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(32));
         ctx.set_timer(
             PUBLISH,
             Duration::from_secs_f64(1.0 / self.config.publish_rate_hz),
@@ -213,11 +267,13 @@ impl Actor for GridActor {
                 if let Some(odometry) = m.get(&ODOMETRY) {
                     self.on_odometry(odometry);
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
-                    if let Some(grid) = self.grid.as_mut() {
-                        let n = self.config.peer_keyframe_samples;
-                        insert_keyframe(grid, &peer.keyframe, n, ctx.rng());
-                    }
+                    self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe);
+                } else if let Some(own) = m.get(&KEYFRAME) {
+                    self.on_keyframe(KeyframeSource::Own, own);
                 } else if let Some(frame) = m.get(&DEPTH_FRAME) {
+                    if !self.config.trace_depth_frames {
+                        return Ok(());
+                    }
                     let position = Point3::from(frame.pose.translation.vector);
                     if !position.coords.iter().all(|v| v.is_finite()) {
                         return Err(ActorError::msg("depth frame with a non-finite pose"));

@@ -22,6 +22,6 @@ pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 
 #[cfg(test)]
-mod tests;
-#[cfg(test)]
 mod store_tests;
+#[cfg(test)]
+mod tests;

@@ -303,9 +303,11 @@ impl ComponentStore {
             let origin = self.keyframes[component.keyframe].origin;
             let dir = component.mean - origin;
             let margin = component.radius_m + 2.0 * cell_m;
-            let touches = world
-                .iter()
-                .any(|b| b.expanded(margin).clip_ray(&origin, &dir, 0.0, 1.0).is_some());
+            let touches = world.iter().any(|b| {
+                b.expanded(margin)
+                    .clip_ray(&origin, &dir, 0.0, 1.0)
+                    .is_some()
+            });
             if !touches {
                 continue;
             }

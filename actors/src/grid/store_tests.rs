@@ -1,7 +1,9 @@
 //! Component store tests: the moving window rebuilt from stored GMM components equals
 //! a rebuild from scratch at the new pose, cell for cell (thesis §3.2.3, Fig. 3.2).
 
-use nalgebra::{Isometry3, Matrix3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3, Vector4};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3, Vector4,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -99,16 +101,25 @@ fn incremental_moves_equal_a_rebuild_from_scratch() {
         let stats = store.rebuild(&mut rebuilt, &[all]);
         assert!(stats.rays > 0);
         assert_eq!(moved.geometry(), rebuilt.geometry(), "case {case}");
-        assert!(moved.values() == rebuilt.values(), "case {case}: cells differ");
+        assert!(
+            moved.values() == rebuilt.values(),
+            "case {case}: cells differ"
+        );
         // The same again without the index or the ray–box test: every keyframe traced
         // whole, in order.
         let mut naive = empty_grid(&last);
         for k in 0..store.keyframe_count() {
             store.trace_keyframe(&mut naive, k);
         }
-        assert!(naive.values() == rebuilt.values(), "case {case}: filter lost rays");
+        assert!(
+            naive.values() == rebuilt.values(),
+            "case {case}: filter lost rays"
+        );
         assert!(naive.values().iter().any(|v| *v != 0.0));
-        assert!(skipped > 0, "case {case}: the ray–box test never skipped anything");
+        assert!(
+            skipped > 0,
+            "case {case}: the ray–box test never skipped anything"
+        );
     }
 }
 
@@ -130,7 +141,10 @@ fn samples_are_fixed_per_keyframe_and_component() {
     let (b, _) = grid_of(&kf, KeyframeSource::Own);
     assert!(a.values() == b.values());
     let (c, _) = grid_of(&kf, KeyframeSource::Peer(RobotId(1)));
-    assert!(a.values() != c.values(), "another source draws other samples");
+    assert!(
+        a.values() != c.values(),
+        "another source draws other samples"
+    );
     let mut other = kf.clone();
     other.id = 8;
     let (d, _) = grid_of(&other, KeyframeSource::Own);
