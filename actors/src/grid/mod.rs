@@ -8,12 +8,14 @@
 //!   most three) novel boxes to rebuild (Fig. 3.2).
 //! - [`ComponentStore`]: the keyframe GMM components the novel boxes are rebuilt
 //!   from, sampled deterministically, with a spatial index over their means.
+//! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
 
 mod actor;
 pub mod distance;
 pub mod frontier;
+pub mod hca;
 mod local;
 mod store;
 
@@ -25,3 +27,5 @@ pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 mod store_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod hca_tests;
