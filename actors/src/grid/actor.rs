@@ -211,7 +211,7 @@ impl GridActor {
 
     fn grid_at(&mut self, position: Point3<f64>) -> &mut LocalGrid {
         let config = self.config;
-        let store = &self.store;
+        let store = &mut self.store;
         self.grid.get_or_insert_with(|| {
             let mut grid = LocalGrid::centred(
                 &position,
@@ -236,7 +236,7 @@ impl GridActor {
         let first = self.position.is_none();
         let (body, start) = (self.config.body_radius_m, self.config.start_clearance_m);
         self.grid_at(position);
-        let (Some(grid), store) = (self.grid.as_mut(), &self.store) else {
+        let (Some(grid), store) = (self.grid.as_mut(), &mut self.store) else {
             return;
         };
         // The window follows the robot; the novel boxes are rebuilt from the stored

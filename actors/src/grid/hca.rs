@@ -16,8 +16,8 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams};
 use super::distance::unsafe_distance;
+use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, UpdateRule};
 use crate::msgs::Keyframe;
 
 /// Settings of the variable-resolution map (thesis §5.1, Table 5.1). Off by default.
@@ -76,7 +76,10 @@ impl HcaConfig {
         }
         let ok = |v: f64| v.is_finite() && v > 0.0;
         if !(ok(self.alpha_min_m) && self.alpha_min_m >= 0.01) {
-            return Err(format!("alpha_min_m must be ≥ 0.01, got {}", self.alpha_min_m));
+            return Err(format!(
+                "alpha_min_m must be ≥ 0.01, got {}",
+                self.alpha_min_m
+            ));
         }
         if !(self.alpha_max_m.is_finite() && self.alpha_max_m >= self.alpha_min_m) {
             return Err(format!(
@@ -85,7 +88,10 @@ impl HcaConfig {
             ));
         }
         if !ok(self.alpha_step_m) {
-            return Err(format!("alpha_step_m must be > 0, got {}", self.alpha_step_m));
+            return Err(format!(
+                "alpha_step_m must be > 0, got {}",
+                self.alpha_step_m
+            ));
         }
         if self.level_count() > 10_000 {
             return Err("(alpha_max_m − alpha_min_m) / alpha_step_m must be ≤ 10000".into());
@@ -245,7 +251,13 @@ const RECENT_KEYFRAMES: usize = 32;
 impl KeyframePair {
     /// Records a new latest keyframe (non-finite poses are ignored).
     pub fn push(&mut self, keyframe: &Keyframe) {
-        if !keyframe.pose.translation.vector.iter().all(|v| v.is_finite()) {
+        if !keyframe
+            .pose
+            .translation
+            .vector
+            .iter()
+            .all(|v| v.is_finite())
+        {
             return;
         }
         if self.recent.len() >= RECENT_KEYFRAMES {
@@ -275,10 +287,11 @@ impl KeyframePair {
 
 impl KeyframePair {
     /// A store holding the past keyframe (if any) and the latest, in that order, to
-    /// regenerate maps from (`max_samples` points per keyframe at most).
+    /// regenerate maps from (`max_samples` points per keyframe at most), updating by
+    /// `rule`.
     #[must_use]
-    pub fn store(&self, beta_m: f64, max_samples: usize) -> ComponentStore {
-        let mut store = ComponentStore::new(max_samples, 2, 4.0);
+    pub fn store(&self, beta_m: f64, max_samples: usize, rule: UpdateRule) -> ComponentStore {
+        let mut store = ComponentStore::new(max_samples, 2, 4.0).with_rule(rule);
         for keyframe in self.past(beta_m).into_iter().chain(self.latest()) {
             store.insert(KeyframeSource::Own, keyframe);
         }
@@ -294,7 +307,7 @@ pub fn regenerate(
     logodds: LogOddsParams,
     centre: &Point3<f64>,
     alpha_m: f64,
-    store: &ComponentStore,
+    store: &mut ComponentStore,
 ) -> LocalGrid {
     let mut grid = LocalGrid::centred(centre, &config.size_m(alpha_m), alpha_m, logodds);
     let whole = CellBox {

@@ -356,19 +356,26 @@ impl LocalGrid {
         };
         let (min, max) = (self.params.min, self.params.max);
         let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
-        for step in walk {
-            let Some(i) = step.index else { continue };
-            if !keep(step.cell) {
-                continue;
+        let cells = &mut self.cells;
+        walk.for_each_inside(|i, cell, is_end| {
+            if keep(cell) {
+                let delta = if is_end && hit { hit_delta } else { miss_delta };
+                let v = &mut cells[i];
+                *v = (*v + delta).clamp(min, max);
             }
-            let delta = if step.is_end && hit {
-                hit_delta
-            } else {
-                miss_delta
-            };
-            let cell = &mut self.cells[i];
-            *cell = (*cell + delta).clamp(min, max);
-        }
+        });
+    }
+
+    /// Replaces all values (tests only; the length must match).
+    #[cfg(test)]
+    pub(super) fn set_values_for_test(&mut self, values: Vec<f32>) {
+        assert_eq!(values.len(), self.cells.len());
+        self.cells = values;
+    }
+
+    /// Mutable log-odds values, row-major (x fastest), for the scan update.
+    pub(super) fn values_mut(&mut self) -> &mut [f32] {
+        &mut self.cells
     }
 
     /// Marks the unknown cells whose centres lie within `radius_m` of `centre` as free
@@ -506,6 +513,32 @@ pub struct RayWalk {
 }
 
 impl RayWalk {
+    /// Visits the cells of the walk that lie inside the window, in order, as
+    /// `(linear index, local cell, is_end)`: the same cells as the iterator, in a
+    /// tight loop without the per-step [`RayStep`].
+    #[inline]
+    pub fn for_each_inside(mut self, mut visit: impl FnMut(usize, [usize; 3], bool)) {
+        let dims = self.dims.map(|d| d as u64);
+        while self.remaining > 0 {
+            let c = self.local;
+            if (c[0] as u64) < dims[0] && (c[1] as u64) < dims[1] && (c[2] as u64) < dims[2] {
+                visit(self.index as usize, c.map(|v| v as usize), false);
+            }
+            let x_first = self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2];
+            let y_not_z = self.t_next[1] <= self.t_next[2];
+            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+            self.local[axis] += self.step[axis];
+            self.index += self.step[axis] * self.stride[axis];
+            self.t_next[axis] += self.t_delta[axis];
+            self.remaining -= 1;
+        }
+        let c = self.end_local;
+        if self.inside(&c) {
+            let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
+            visit(i as usize, c.map(|v| v as usize), true);
+        }
+    }
+
     fn inside(&self, c: &[i64; 3]) -> bool {
         (c[0] as u64) < self.dims[0] as u64
             && (c[1] as u64) < self.dims[1] as u64

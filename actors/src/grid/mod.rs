@@ -17,15 +17,17 @@ pub mod distance;
 pub mod frontier;
 pub mod hca;
 mod local;
+mod scan;
 mod store;
 
 pub use actor::{GridActor, GridConfig, insert_frame, insert_keyframe};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
+pub use scan::{ScanScratch, UpdateRule};
 pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 
+#[cfg(test)]
+mod hca_tests;
 #[cfg(test)]
 mod store_tests;
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod hca_tests;

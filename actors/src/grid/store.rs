@@ -15,6 +15,7 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use super::scan::{ScanScratch, UpdateRule};
 use super::{CellBox, LocalGrid};
 use crate::geometry::Aabb;
 use crate::mapper::sogmm::gmm::box_muller;
@@ -88,6 +89,8 @@ pub struct ComponentStore {
     /// Largest `|mean − origin| + radius` over all components, metres: no sample ray
     /// of any component leaves the ball of this radius around its mean.
     max_reach_m: f64,
+    rule: UpdateRule,
+    scratch: ScanScratch,
 }
 
 /// SplitMix64 finaliser: a well-mixed 64-bit seed from a counter.
@@ -135,7 +138,17 @@ impl ComponentStore {
             components: Vec::new(),
             index: HashMap::new(),
             max_reach_m: 0.0,
+            rule: UpdateRule::PerRay,
+            scratch: ScanScratch::default(),
         }
+    }
+
+    /// The same store updating the grid by `rule`: with [`UpdateRule::PerScan`] the
+    /// samples of one keyframe form one scan.
+    #[must_use]
+    pub fn with_rule(mut self, rule: UpdateRule) -> Self {
+        self.rule = rule;
+        self
     }
 
     /// Number of stored keyframes.
@@ -253,18 +266,51 @@ impl ComponentStore {
     /// Ray-traces every sample of stored keyframe `k` (as returned by
     /// [`ComponentStore::insert`]) into the whole grid: a hit at each sample, misses on
     /// the way from the keyframe's sensor origin (§8.2.2). Returns the rays inserted.
-    pub fn trace_keyframe(&self, grid: &mut LocalGrid, k: usize) -> usize {
+    pub fn trace_keyframe(&mut self, grid: &mut LocalGrid, k: usize) -> usize {
         let Some(keyframe) = self.keyframes.get(k) else {
             return 0;
         };
+        let all: Vec<u32> = (keyframe.first as u32..keyframe.end as u32).collect();
+        self.trace(grid, &all, None)
+    }
+
+    /// Ray-traces the samples of `components` (sorted, in storage order) into `grid`,
+    /// only into `boxes` if given; with [`UpdateRule::PerScan`] each keyframe's share
+    /// is one scan. Returns the rays inserted.
+    fn trace(
+        &mut self,
+        grid: &mut LocalGrid,
+        components: &[u32],
+        boxes: Option<&[CellBox]>,
+    ) -> usize {
         let mut points = Vec::new();
+        let mut scan = Vec::new();
         let mut rays = 0;
-        for component in &self.components[keyframe.first..keyframe.end] {
-            component.sample_into(&mut points);
-            for p in &points {
-                grid.insert_ray(&keyframe.origin, p, true, None);
+        let mut at = 0;
+        while at < components.len() {
+            let k = self.components[components[at] as usize].keyframe;
+            let origin = self.keyframes[k].origin;
+            scan.clear();
+            while at < components.len() && self.components[components[at] as usize].keyframe == k {
+                let component = &self.components[components[at] as usize];
+                component.sample_into(&mut points);
+                match self.rule {
+                    UpdateRule::PerScan => scan.extend_from_slice(&points),
+                    UpdateRule::PerRay => {
+                        for p in &points {
+                            match boxes {
+                                None => grid.insert_ray(&origin, p, true, None),
+                                Some(b) => grid.insert_ray_boxes(&origin, p, true, b),
+                            }
+                        }
+                    }
+                }
+                rays += points.len();
+                at += 1;
             }
-            rays += points.len();
+            if self.rule == UpdateRule::PerScan {
+                self.scratch.insert_scan(grid, &origin, &scan, true, boxes);
+            }
         }
         rays
     }
@@ -278,7 +324,7 @@ impl ComponentStore {
     /// The test is conservative: every sample ray of a skipped component misses every
     /// box. Components are traced in storage order, so cells see their updates in the
     /// same order as in a rebuild from scratch.
-    pub fn rebuild(&self, grid: &mut LocalGrid, boxes: &[CellBox]) -> RebuildStats {
+    pub fn rebuild(&mut self, grid: &mut LocalGrid, boxes: &[CellBox]) -> RebuildStats {
         let mut stats = RebuildStats::default();
         let geometry = grid.geometry();
         let cell_m = geometry.cell_m;
@@ -297,27 +343,19 @@ impl ComponentStore {
         candidates.sort_unstable();
         candidates.dedup();
         stats.candidates = candidates.len();
-        let mut points = Vec::new();
-        for c in candidates {
+        candidates.retain(|&c| {
             let component = &self.components[c as usize];
             let origin = self.keyframes[component.keyframe].origin;
             let dir = component.mean - origin;
             let margin = component.radius_m + 2.0 * cell_m;
-            let touches = world.iter().any(|b| {
+            world.iter().any(|b| {
                 b.expanded(margin)
                     .clip_ray(&origin, &dir, 0.0, 1.0)
                     .is_some()
-            });
-            if !touches {
-                continue;
-            }
-            stats.traced += 1;
-            component.sample_into(&mut points);
-            for p in &points {
-                grid.insert_ray_boxes(&origin, p, true, boxes);
-            }
-            stats.rays += points.len();
-        }
+            })
+        });
+        stats.traced = candidates.len();
+        stats.rays = self.trace(grid, &candidates, Some(boxes));
         stats
     }
 

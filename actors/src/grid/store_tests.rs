@@ -8,6 +8,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::*;
+use crate::grid::UpdateRule;
 use crate::mapper::sogmm::gmm::Gmm4;
 use crate::msgs::Keyframe;
 use crate::runtime::{RobotId, Time};
@@ -177,4 +178,35 @@ fn the_oldest_keyframe_is_evicted_and_the_index_follows() {
     let mut bad = keyframes[0].clone();
     bad.pose.translation.vector.x = f64::NAN;
     assert_eq!(store.insert(KeyframeSource::Own, &bad), None);
+}
+
+#[test]
+fn incremental_moves_equal_a_rebuild_from_scratch_per_scan() {
+    let mut rng = ChaCha8Rng::seed_from_u64(22);
+    let keyframes: Vec<Keyframe> = (0..4).map(|i| random_keyframe(&mut rng, i, 60)).collect();
+    let mut store = ComponentStore::new(3000, 64, 2.0).with_rule(UpdateRule::PerScan);
+    let (from, to) = (Point3::new(-1.0, 0.5, 0.0), Point3::new(1.7, -1.1, 0.6));
+    let mut moved = empty_grid(&from);
+    for kf in &keyframes[..2] {
+        let k = store.insert(KeyframeSource::Own, kf).unwrap();
+        store.trace_keyframe(&mut moved, k);
+    }
+    let novel = moved.shift_to(&to);
+    store.rebuild(&mut moved, &novel);
+    for kf in &keyframes[2..] {
+        let k = store.insert(KeyframeSource::Own, kf).unwrap();
+        store.trace_keyframe(&mut moved, k);
+    }
+    let mut rebuilt = empty_grid(&to);
+    let all = whole(&rebuilt);
+    store.rebuild(&mut rebuilt, &[all]);
+    assert!(moved.values() == rebuilt.values());
+    // Per scan differs from per ray (cells crossed by several rays of a keyframe).
+    let mut per_ray = ComponentStore::new(3000, 64, 2.0);
+    let mut other = empty_grid(&to);
+    for kf in &keyframes {
+        let k = per_ray.insert(KeyframeSource::Own, kf).unwrap();
+        per_ray.trace_keyframe(&mut other, k);
+    }
+    assert!(other.values() != rebuilt.values());
 }

@@ -1,0 +1,139 @@
+//! Inserting a whole scan at once, as OctoMap's `insertPointCloud` does: collect the
+//! cells the scan's rays end in and the cells they cross, then update each cell once —
+//! a hit if any ray ends in it (occupied takes precedence), otherwise a miss.
+//!
+//! Per scan, the result does not depend on the order of the rays, so the rays are
+//! walked in parallel (rayon) and the grid is still the same for any thread count.
+//! This changes the semantics of [`LocalGrid::insert_ray`] (one update per ray and
+//! cell), so it is a separate [`UpdateRule`]: a cell crossed by many rays of one frame
+//! gets one miss, not many, and a cell that holds a surface point stays occupied
+//! even when other rays of the frame pass through it — which keeps thin walls and the
+//! edges of narrow openings from being carved away at coarse resolutions (§5.1).
+
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use nalgebra::Point3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::{CellBox, LocalGrid};
+
+/// How the rays of one scan (a depth frame, or the samples of one keyframe) update the
+/// grid.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UpdateRule {
+    /// Every ray updates every cell it crosses ([`LocalGrid::insert_ray`]).
+    #[default]
+    PerRay,
+    /// Every cell the scan touches is updated once, hits first (OctoMap's
+    /// `insertPointCloud`); see [`ScanScratch::insert_scan`].
+    PerScan,
+}
+
+/// Rays per rayon task.
+const CHUNK_RAYS: usize = 1024;
+
+/// Reusable marks for [`ScanScratch::insert_scan`] (one per grid cell).
+#[derive(Default)]
+pub struct ScanScratch {
+    marks: Vec<AtomicU32>,
+    /// Scan counter: cells marked `2g` this scan are crossed, `2g + 1` hit.
+    generation: u32,
+}
+
+impl Clone for ScanScratch {
+    /// A fresh scratch (marks carry no state between scans).
+    fn clone(&self) -> Self {
+        ScanScratch::default()
+    }
+}
+
+impl std::fmt::Debug for ScanScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScanScratch")
+            .field("cells", &self.marks.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// The cells one chunk of rays touched first: `(crossed, hit)` linear indices.
+type Touched = (Vec<u32>, Vec<u32>);
+
+impl ScanScratch {
+    /// Inserts one scan: rays from `origin` to each of `ends`. Every cell in which a
+    /// ray ends gets one hit if `hit` (surface points); every other cell a ray crosses
+    /// (and, if not `hit`, the end cells too) gets one miss. Only cells inside one of
+    /// `boxes` change (all cells if `None`). Points that are not finite are skipped.
+    /// The result is independent of the order of `ends` and of the thread count.
+    pub fn insert_scan(
+        &mut self,
+        grid: &mut LocalGrid,
+        origin: &Point3<f64>,
+        ends: &[Point3<f64>],
+        hit: bool,
+        boxes: Option<&[CellBox]>,
+    ) {
+        let n = grid.values().len();
+        if self.marks.len() != n || self.generation >= u32::MAX / 2 - 1 {
+            self.marks = (0..n).map(|_| AtomicU32::new(0)).collect();
+            self.generation = 0;
+        }
+        self.generation += 1;
+        let crossed = 2 * self.generation;
+        let ended = if hit { crossed + 1 } else { crossed };
+        let marks = &self.marks;
+        let shared: &LocalGrid = grid;
+        let walk_chunk = |chunk: &[Point3<f64>]| -> Touched {
+            let (mut cross, mut hits) = (Vec::new(), Vec::new());
+            for end in chunk {
+                let Some(walk) = shared.walk(origin, end) else {
+                    continue;
+                };
+                walk.for_each_inside(|i, _, is_end| {
+                    let mark = if is_end { ended } else { crossed };
+                    let before = marks[i].fetch_max(mark, Ordering::Relaxed);
+                    if before < crossed {
+                        cross.push(i as u32);
+                    }
+                    if mark > crossed && before < mark {
+                        hits.push(i as u32);
+                    }
+                });
+            }
+            (cross, hits)
+        };
+        let touched: Vec<Touched> = if ends.len() > CHUNK_RAYS {
+            ends.par_chunks(CHUNK_RAYS).map(walk_chunk).collect()
+        } else {
+            vec![walk_chunk(ends)]
+        };
+        let params = *grid.params();
+        let dims = grid.dims();
+        let inside = |i: usize| {
+            boxes.is_none_or(|bs| {
+                let c = [
+                    i % dims[0],
+                    (i / dims[0]) % dims[1],
+                    i / (dims[0] * dims[1]),
+                ];
+                bs.iter().any(|b| b.contains(c))
+            })
+        };
+        let cells = grid.values_mut();
+        for (cross, hits) in &touched {
+            for &i in hits {
+                let i = i as usize;
+                if inside(i) {
+                    cells[i] = (cells[i] + params.hit).clamp(params.min, params.max);
+                }
+            }
+            for &i in cross {
+                let i = i as usize;
+                if marks[i].load(Ordering::Relaxed) == crossed && inside(i) {
+                    cells[i] = (cells[i] + params.miss).clamp(params.min, params.max);
+                }
+            }
+        }
+    }
+}
