@@ -16,7 +16,10 @@ use serde::{Deserialize, Serialize};
 
 use super::distance::unsafe_distance;
 use super::frontier::frontier_distance;
-use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams};
+use super::hca::{HcaConfig, KeyframePair, hca_round, regenerate, straight_path_in_collision};
+use super::{
+    CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch, UpdateRule,
+};
 use crate::msgs::{
     DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, KEYFRAME, Keyframe, ODOMETRY, Odometry,
     PEER_KEYFRAME,
@@ -51,6 +54,13 @@ pub struct GridConfig {
     pub max_stored_keyframes: usize,
     /// Bucket edge of the spatial index over component means, metres.
     pub index_cell_m: f64,
+    /// How the rays of one frame or keyframe update the grid: `per_ray` (every ray
+    /// updates every cell it crosses) or `per_scan` (each cell once per scan, hits
+    /// first, as OctoMap's `insertPointCloud`; parallel over rays).
+    pub update_rule: UpdateRule,
+    /// Variable resolution and Hierarchical Collision Avoidance (thesis §5.1); off by
+    /// default.
+    pub hca: HcaConfig,
     /// Unknown cells within this distance of the first pose become free: the robot
     /// starts in a clear spot (without it, nothing would be safe before the first look
     /// around).
@@ -71,6 +81,8 @@ impl Default for GridConfig {
             trace_depth_frames: true,
             max_stored_keyframes: 256,
             index_cell_m: 4.0,
+            update_rule: UpdateRule::PerRay,
+            hca: HcaConfig::default(),
         }
     }
 }
@@ -126,6 +138,7 @@ impl GridConfig {
                 return Err(format!("{key} must be ≥ 0, got {value}"));
             }
         }
+        self.hca.validate().map_err(|e| format!("hca: {e}"))?;
         self.logodds.validate().map_err(|e| format!("logodds: {e}"))
     }
 }
@@ -154,6 +167,41 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     }
 }
 
+/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] the frame's
+/// returns form one scan and its no-return pixels (free up to the range) a second.
+pub fn insert_frame_with(
+    grid: &mut LocalGrid,
+    frame: &DepthFrame,
+    stride: u32,
+    rule: UpdateRule,
+    scratch: &mut ScanScratch,
+) {
+    if rule == UpdateRule::PerRay {
+        insert_frame(grid, frame, stride);
+        return;
+    }
+    let k = &frame.intrinsics;
+    let origin = Point3::from(frame.pose.translation.vector);
+    let stride = stride.max(1) as usize;
+    let (mut hits, mut misses) = (Vec::new(), Vec::new());
+    for row in (0..k.height as usize).step_by(stride) {
+        for col in (0..k.width as usize).step_by(stride) {
+            let Some(&depth) = frame.depth_m.get(row * k.width as usize + col) else {
+                continue;
+            };
+            let (u, v) = (col as f64 + 0.5, row as f64 + 0.5);
+            let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
+            if depth > 0.0 {
+                hits.push(origin + frame.pose.rotation * (ray * f64::from(depth)));
+            } else {
+                misses.push(origin + frame.pose.rotation * (ray * k.max_depth_m));
+            }
+        }
+    }
+    scratch.insert_scan(grid, &origin, &hits, true, None);
+    scratch.insert_scan(grid, &origin, &misses, false, None);
+}
+
 /// Ray-traces a keyframe GMM into a grid (§8.2.2): `min(support, max_samples)`
 /// points drawn from its spatial marginal, each a hit at the end of a ray from the
 /// keyframe's sensor position.
@@ -179,7 +227,14 @@ pub struct GridActor {
     config: GridConfig,
     grid: Option<LocalGrid>,
     position: Option<Point3<f64>>,
+    /// Direction of travel (or the body's x axis when hovering), for HCA.
+    heading: Vector3<f64>,
     store: ComponentStore,
+    scratch: ScanScratch,
+    /// Own keyframes for the variable-resolution map (§5.1.1).
+    pair: KeyframePair,
+    /// HCA level of the last round (`α_prev`).
+    hca_level: u32,
 }
 
 impl GridActor {
@@ -190,11 +245,16 @@ impl GridActor {
             config,
             grid: None,
             position: None,
+            heading: Vector3::x(),
             store: ComponentStore::new(
                 config.peer_keyframe_samples,
                 config.max_stored_keyframes,
                 config.index_cell_m,
-            ),
+            )
+            .with_rule(config.update_rule),
+            scratch: ScanScratch::default(),
+            pair: KeyframePair::default(),
+            hca_level: config.hca.top_level(),
         }
     }
 
@@ -233,6 +293,15 @@ impl GridActor {
         if !position.coords.iter().all(|v| v.is_finite()) {
             return;
         }
+        let speed = odometry.velocity_mps.norm();
+        let body_x = odometry.pose.rotation * Vector3::x();
+        self.heading = if speed.is_finite() && speed > 0.1 {
+            odometry.velocity_mps / speed
+        } else if body_x.iter().all(|v| v.is_finite()) {
+            body_x
+        } else {
+            self.heading
+        };
         let first = self.position.is_none();
         let (body, start) = (self.config.body_radius_m, self.config.start_clearance_m);
         self.grid_at(position);
@@ -245,6 +314,48 @@ impl GridActor {
         store.rebuild(grid, &novel);
         grid.clear_unknown_sphere(&position, if first { start.max(body) } else { body });
         self.position = Some(position);
+    }
+}
+
+impl GridActor {
+    /// One round of Hierarchical Collision Avoidance (thesis Alg. 1) when it is on
+    /// and there is a pose and an own keyframe: the map regenerated from the latest
+    /// and one past keyframe at the adapted voxel size, checked along the direction
+    /// of travel.
+    fn hca_snapshot(&mut self, stamp: crate::runtime::Time) -> Option<GridSnapshot> {
+        let hca = self.config.hca;
+        let position = self.position?;
+        if !hca.enabled || self.pair.latest().is_none() {
+            return None;
+        }
+        let mut store = self.pair.store(
+            hca.past_keyframe_distance_m,
+            self.config.peer_keyframe_samples,
+            self.config.update_rule,
+        );
+        let (logodds, heading) = (self.config.logodds, self.heading);
+        let round = hca_round(
+            &hca,
+            self.hca_level,
+            |alpha| regenerate(&hca, logodds, &position, alpha, &mut store),
+            |grid, distance| {
+                straight_path_in_collision(
+                    grid,
+                    distance,
+                    &position,
+                    &heading,
+                    hca.path_length_m(grid.resolution_m()),
+                    hca.required_clearance_m(),
+                )
+            },
+        );
+        self.hca_level = round.level;
+        Some(GridSnapshot {
+            stamp,
+            frontier_distance_m: frontier_distance(&round.grid),
+            unsafe_distance_m: round.unsafe_distance_m,
+            grid: round.grid,
+        })
     }
 }
 
@@ -269,6 +380,7 @@ impl Actor for GridActor {
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
                     self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe);
                 } else if let Some(own) = m.get(&KEYFRAME) {
+                    self.pair.push(own);
                     self.on_keyframe(KeyframeSource::Own, own);
                 } else if let Some(frame) = m.get(&DEPTH_FRAME) {
                     if !self.config.trace_depth_frames {
@@ -278,12 +390,17 @@ impl Actor for GridActor {
                     if !position.coords.iter().all(|v| v.is_finite()) {
                         return Err(ActorError::msg("depth frame with a non-finite pose"));
                     }
-                    let stride = self.config.pixel_stride;
-                    insert_frame(self.grid_at(position), frame, stride);
+                    let (stride, rule) = (self.config.pixel_stride, self.config.update_rule);
+                    self.grid_at(position);
+                    if let Some(grid) = self.grid.as_mut() {
+                        insert_frame_with(grid, frame, stride, rule, &mut self.scratch);
+                    }
                 }
             }
             Event::Timer(_) => {
-                if let Some(grid) = &self.grid {
+                if let Some(snapshot) = self.hca_snapshot(ctx.now()) {
+                    ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
+                } else if let Some(grid) = &self.grid {
                     let snapshot = GridSnapshot {
                         stamp: ctx.now(),
                         unsafe_distance_m: unsafe_distance(grid),
