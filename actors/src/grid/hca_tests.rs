@@ -56,7 +56,7 @@ fn camera() -> PinholeIntrinsics {
 
 /// A keyframe GMM built from the surface points the camera sees at `pose`: one
 /// component per 0.225 m bin (the window edges fall on bin edges) of points (its sample mean and covariance).
-fn keyframe_at(scene: &Scene, id: u32, pose: Isometry3<f64>) -> Keyframe {
+pub(super) fn keyframe_at(scene: &Scene, id: u32, pose: Isometry3<f64>) -> Keyframe {
     let k = camera();
     let (depth, _) = scene.render(&k, &pose);
     let mut bins: BTreeMap<[i64; 3], Vec<Vector3<f64>>> = BTreeMap::new();
@@ -186,4 +186,112 @@ fn the_voxel_size_shrinks_at_the_window_and_grows_after_it() {
         min(after) >= config.alpha_max_m - config.alpha_step_m - 1e-9,
         "after the window the map coarsens again: {table}"
     );
+}
+
+mod actor {
+    //! The same flight through the grid actor: odometry and own keyframes in,
+    //! snapshots at the adapted resolution out.
+
+    use std::sync::{Arc, Mutex};
+    use std::time::Duration;
+
+    use super::*;
+    use crate::grid::{GridActor, GridConfig};
+    use crate::msgs::{GRID_SNAPSHOT, KEYFRAME, ODOMETRY, Odometry};
+    use crate::runtime::{
+        Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RobotSpec, SimExecutor, TimerId,
+    };
+
+    /// Flies along +x at 1 m/s, publishing odometry and a keyframe every 0.2 s.
+    struct Flyer {
+        step: u32,
+        scene: Scene,
+    }
+
+    impl Actor for Flyer {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(0), Duration::from_millis(200));
+            Ok(())
+        }
+        fn handle(&mut self, _: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            let x = f64::from(self.step) * 0.2;
+            let pose =
+                Isometry3::from_parts(Translation3::new(x, 0.0, 0.0), UnitQuaternion::identity());
+            ctx.publish(
+                &ODOMETRY,
+                Odometry {
+                    stamp: ctx.now(),
+                    pose,
+                    velocity_mps: Vector3::x(),
+                },
+            );
+            ctx.publish(&KEYFRAME, keyframe_at(&self.scene, self.step, pose));
+            self.step += 1;
+            Ok(())
+        }
+    }
+
+    /// Records the resolution of every snapshot with its time.
+    struct Sink(Arc<Mutex<Vec<(f64, f64)>>>);
+
+    impl Actor for Sink {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::fifo(256));
+            Ok(())
+        }
+        fn handle(&mut self, event: &Event, _: &mut Context<'_>) -> ActorResult {
+            if let Some(s) = event.message().and_then(|m| m.get(&GRID_SNAPSHOT)) {
+                let mut seen = self.0.lock().unwrap();
+                seen.push((s.stamp.as_secs_f64(), s.resolution_m()));
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_grid_actor_adapts_its_resolution_along_the_flight() {
+        let config = GridConfig {
+            size_m: [12.0, 12.0, 6.0],
+            publish_rate_hz: 5.0,
+            peer_keyframe_samples: 4000,
+            update_rule: UpdateRule::PerScan,
+            hca: HcaConfig {
+                enabled: true,
+                alpha_step_m: 0.05,
+                robot_radius_m: 0.25,
+                collision_margin_m: 0.05,
+                lookahead_m: 1.5,
+                ..HcaConfig::default()
+            },
+            ..GridConfig::default()
+        };
+        config.validate().unwrap();
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let sink = seen.clone();
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("flyer", move || Flyer {
+                step: 0,
+                scene: window_scene(),
+            }))
+            .with(ActorSpec::new("grid", move || GridActor::new(config)))
+            .with(ActorSpec::new("sink", move || Sink(sink.clone())));
+        let mut sim = SimExecutor::new(vec![robot], 1);
+        sim.run_until(Time::from_secs_f64(16.5));
+        let seen = seen.lock().unwrap().clone();
+        assert!(seen.len() > 70);
+        // At 1 m/s, the time is the distance flown (within a tick).
+        let over = |lo: f64, hi: f64| -> Vec<f64> {
+            seen.iter()
+                .filter(|(t, _)| (lo..hi).contains(t))
+                .map(|s| s.1)
+                .collect()
+        };
+        let table = format!("{seen:?}");
+        assert!(over(4.5, 7.5).iter().all(|a| *a >= 0.45 - 1e-9), "{table}");
+        assert!(over(8.6, 10.4).iter().any(|a| *a <= 0.15 + 1e-9), "{table}");
+        assert!(
+            over(12.5, 16.5).iter().all(|a| *a >= 0.45 - 1e-9),
+            "{table}"
+        );
+    }
 }

@@ -366,6 +366,15 @@ impl LocalGrid {
         });
     }
 
+    /// Adds `delta` to the log-odds of the cell at linear `index`, clamped to the
+    /// rules' bounds; an index outside the grid is ignored.
+    pub fn update(&mut self, index: usize, delta: f32) {
+        let (min, max) = (self.params.min, self.params.max);
+        if let Some(v) = self.cells.get_mut(index) {
+            *v = (*v + delta).clamp(min, max);
+        }
+    }
+
     /// Replaces all values (tests only; the length must match).
     #[cfg(test)]
     pub(super) fn set_values_for_test(&mut self, values: Vec<f32>) {
