@@ -528,6 +528,28 @@ impl RayWalk {
     #[inline]
     pub fn for_each_inside(mut self, mut visit: impl FnMut(usize, [usize; 3], bool)) {
         let dims = self.dims.map(|d| d as u64);
+        // Fast path: when the start and end cells lie two cells or more inside the
+        // window, so does every cell between (rounding at a corner strays at most one
+        // cell from their bounding box), and no step needs the bounds check.
+        let interior = |c: &[i64; 3]| (0..3).all(|a| c[a] >= 2 && c[a] + 2 < self.dims[a]);
+        if interior(&self.local) && interior(&self.end_local) {
+            let mut local = self.local;
+            let mut index = self.index;
+            let mut t_next = self.t_next;
+            for _ in 0..self.remaining {
+                visit(index as usize, local.map(|v| v as usize), false);
+                let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
+                let y_not_z = t_next[1] <= t_next[2];
+                let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+                local[axis] += self.step[axis];
+                index += self.step[axis] * self.stride[axis];
+                t_next[axis] += self.t_delta[axis];
+            }
+            let c = self.end_local;
+            let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
+            visit(i as usize, c.map(|v| v as usize), true);
+            return;
+        }
         while self.remaining > 0 {
             let c = self.local;
             if (c[0] as u64) < dims[0] && (c[1] as u64) < dims[1] && (c[2] as u64) < dims[2] {

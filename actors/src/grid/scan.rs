@@ -10,7 +10,7 @@
 //! even when other rays of the frame pass through it — which keeps thin walls and the
 //! edges of narrow openings from being carved away at coarse resolutions (§5.1).
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use nalgebra::Point3;
 use rayon::prelude::*;
@@ -34,12 +34,22 @@ pub enum UpdateRule {
 /// Rays per rayon task.
 const CHUNK_RAYS: usize = 1024;
 
-/// Reusable marks for [`ScanScratch::insert_scan`] (one per grid cell).
+/// Edge of the bricks the marks are stored in, cells (`4³` bytes = one cache line):
+/// a ray's consecutive cells mostly share a brick, where a row-major layout would
+/// jump a whole slab on every z step.
+const BRICK: usize = 4;
+
+/// Reusable marks for [`ScanScratch::insert_scan`]: one byte per grid cell, in
+/// `4 × 4 × 4` bricks.
 #[derive(Default)]
 pub struct ScanScratch {
-    marks: Vec<AtomicU32>,
-    /// Scan counter: cells marked `2g` this scan are crossed, `2g + 1` hit.
-    generation: u32,
+    marks: Vec<AtomicU8>,
+    /// Bricks along x and y.
+    bricks: [usize; 2],
+    dims: [usize; 3],
+    /// Scan counter: cells marked `2g` this scan are crossed, `2g + 1` hit; the marks
+    /// are cleared when it wraps.
+    generation: u8,
 }
 
 impl Clone for ScanScratch {
@@ -57,8 +67,16 @@ impl std::fmt::Debug for ScanScratch {
     }
 }
 
-/// The cells one chunk of rays touched first: `(crossed, hit)` linear indices.
-type Touched = (Vec<u32>, Vec<u32>);
+/// The cells one chunk of rays touched first: `(crossed, hit)` as (linear index,
+/// mark index) pairs.
+type Touched = (Vec<(u32, u32)>, Vec<u32>);
+
+/// Position of a cell's mark in the bricked layout.
+#[inline]
+fn brick_index(c: [usize; 3], bricks: [usize; 2]) -> usize {
+    let brick = (c[2] / BRICK * bricks[1] + c[1] / BRICK) * bricks[0] + c[0] / BRICK;
+    brick * BRICK * BRICK * BRICK + ((c[2] % BRICK) * BRICK + c[1] % BRICK) * BRICK + c[0] % BRICK
+}
 
 impl ScanScratch {
     /// Inserts one scan: rays from `origin` to each of `ends`. Every cell in which a
@@ -74,15 +92,25 @@ impl ScanScratch {
         hit: bool,
         boxes: Option<&[CellBox]>,
     ) {
-        let n = grid.values().len();
-        if self.marks.len() != n || self.generation >= u32::MAX / 2 - 1 {
-            self.marks = (0..n).map(|_| AtomicU32::new(0)).collect();
+        let dims = grid.dims();
+        if self.dims != dims || self.generation >= u8::MAX / 2 - 1 {
+            let bricks = dims.map(|d| d.div_ceil(BRICK));
+            let n = bricks.iter().product::<usize>() * BRICK * BRICK * BRICK;
+            if self.marks.len() == n {
+                self.marks
+                    .iter()
+                    .for_each(|m| m.store(0, Ordering::Relaxed));
+            } else {
+                self.marks = (0..n).map(|_| AtomicU8::new(0)).collect();
+            }
+            self.bricks = [bricks[0], bricks[1]];
+            self.dims = dims;
             self.generation = 0;
         }
         self.generation += 1;
         let crossed = 2 * self.generation;
         let ended = if hit { crossed + 1 } else { crossed };
-        let marks = &self.marks;
+        let (marks, bricks) = (&self.marks, self.bricks);
         let shared: &LocalGrid = grid;
         let walk_chunk = |chunk: &[Point3<f64>]| -> Touched {
             let (mut cross, mut hits) = (Vec::new(), Vec::new());
@@ -90,11 +118,17 @@ impl ScanScratch {
                 let Some(walk) = shared.walk(origin, end) else {
                     continue;
                 };
-                walk.for_each_inside(|i, _, is_end| {
+                walk.for_each_inside(|i, c, is_end| {
                     let mark = if is_end { ended } else { crossed };
-                    let before = marks[i].fetch_max(mark, Ordering::Relaxed);
+                    let b = brick_index(c, bricks);
+                    // Most visits repeat a cell already marked this scan: a plain load
+                    // settles them without a read-modify-write.
+                    if marks[b].load(Ordering::Relaxed) >= mark {
+                        return;
+                    }
+                    let before = marks[b].fetch_max(mark, Ordering::Relaxed);
                     if before < crossed {
-                        cross.push(i as u32);
+                        cross.push((i as u32, b as u32));
                     }
                     if mark > crossed && before < mark {
                         hits.push(i as u32);
@@ -109,7 +143,6 @@ impl ScanScratch {
             vec![walk_chunk(ends)]
         };
         let params = *grid.params();
-        let dims = grid.dims();
         let inside = |i: usize| {
             boxes.is_none_or(|bs| {
                 let c = [
@@ -128,9 +161,9 @@ impl ScanScratch {
                     cells[i] = (cells[i] + params.hit).clamp(params.min, params.max);
                 }
             }
-            for &i in cross {
+            for &(i, b) in cross {
                 let i = i as usize;
-                if marks[i].load(Ordering::Relaxed) == crossed && inside(i) {
+                if marks[b as usize].load(Ordering::Relaxed) == crossed && inside(i) {
                     cells[i] = (cells[i] + params.miss).clamp(params.min, params.max);
                 }
             }

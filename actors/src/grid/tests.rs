@@ -416,3 +416,38 @@ fn a_scan_updates_each_cell_once_in_any_order_and_thread_count() {
         }
     }
 }
+
+#[test]
+fn the_tight_walk_visits_the_iterators_cells() {
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let grid = grid_at(0.0);
+    // Axis-aligned and diagonal rays through cell corners as well as random ones.
+    let mut rays = vec![
+        (Point3::new(-1.0, -1.0, -0.6), Point3::new(1.0, 1.0, 0.6)),
+        (Point3::new(-1.0, 0.0, 0.0), Point3::new(1.4, 0.0, 0.0)),
+        (Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.0)),
+    ];
+    for _ in 0..3000 {
+        let o = Point3::new(
+            rng.random_range(-2.5..2.5),
+            rng.random_range(-2.0..2.0),
+            rng.random_range(-1.5..1.5),
+        );
+        let e = o + Vector3::new(
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-2.0..2.0),
+        );
+        rays.push((o, e));
+    }
+    for (o, e) in rays {
+        let walk = grid.walk(&o, &e).unwrap();
+        let slow: Vec<(usize, [usize; 3], bool)> = walk
+            .clone()
+            .filter_map(|s| s.index.map(|i| (i, s.cell, s.is_end)))
+            .collect();
+        let mut fast = Vec::new();
+        walk.for_each_inside(|i, c, end| fast.push((i, c, end)));
+        assert_eq!(fast, slow, "{o} → {e}");
+    }
+}
