@@ -112,6 +112,10 @@ impl ScanScratch {
         let ended = if hit { crossed + 1 } else { crossed };
         let (marks, bricks) = (&self.marks, self.bricks);
         let shared: &LocalGrid = grid;
+        // On one thread the marks are read and written plainly (no atomic
+        // read-modify-write); in parallel, `fetch_max` decides which thread saw a cell
+        // first.
+        let exclusive = ends.len() <= CHUNK_RAYS || rayon::current_num_threads() == 1;
         let walk_chunk = |chunk: &[Point3<f64>]| -> Touched {
             let (mut cross, mut hits) = (Vec::new(), Vec::new());
             for end in chunk {
@@ -123,10 +127,16 @@ impl ScanScratch {
                     let b = brick_index(c, bricks);
                     // Most visits repeat a cell already marked this scan: a plain load
                     // settles them without a read-modify-write.
-                    if marks[b].load(Ordering::Relaxed) >= mark {
+                    let seen = marks[b].load(Ordering::Relaxed);
+                    if seen >= mark {
                         return;
                     }
-                    let before = marks[b].fetch_max(mark, Ordering::Relaxed);
+                    let before = if exclusive {
+                        marks[b].store(mark, Ordering::Relaxed);
+                        seen
+                    } else {
+                        marks[b].fetch_max(mark, Ordering::Relaxed)
+                    };
                     if before < crossed {
                         cross.push((i as u32, b as u32));
                     }
@@ -137,10 +147,10 @@ impl ScanScratch {
             }
             (cross, hits)
         };
-        let touched: Vec<Touched> = if ends.len() > CHUNK_RAYS {
-            ends.par_chunks(CHUNK_RAYS).map(walk_chunk).collect()
-        } else {
+        let touched: Vec<Touched> = if exclusive {
             vec![walk_chunk(ends)]
+        } else {
+            ends.par_chunks(CHUNK_RAYS).map(walk_chunk).collect()
         };
         let params = *grid.params();
         let inside = |i: usize| {
