@@ -8,6 +8,8 @@
 //!   most three) novel boxes to rebuild (Fig. 3.2).
 //! - [`ComponentStore`]: the keyframe GMM components the novel boxes are rebuilt
 //!   from, sampled deterministically, with a spatial index over their means.
+//! - [`ScanScratch`]: a whole scan inserted at once, each cell updated once (OctoMap's
+//!   semantics, [`UpdateRule::PerScan`]), rays walked in parallel.
 //! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.

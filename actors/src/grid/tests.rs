@@ -451,3 +451,28 @@ fn the_tight_walk_visits_the_iterators_cells() {
         assert_eq!(fast, slow, "{o} → {e}");
     }
 }
+
+#[test]
+fn scan_marks_survive_their_counter_wrapping() {
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let origin = Point3::new(0.1, -0.2, 0.05);
+    let (mut fast, mut slow) = (grid_at(0.0), grid_at(0.0));
+    let mut scratch = ScanScratch::default();
+    // More scans than the byte-sized scan counter holds before it wraps.
+    for scan in 0..300 {
+        let ends: Vec<Point3<f64>> = (0..20)
+            .map(|_| {
+                origin
+                    + Vector3::new(
+                        rng.random_range(-2.0..2.0),
+                        rng.random_range(-1.5..1.5),
+                        rng.random_range(-1.0..1.0),
+                    )
+            })
+            .collect();
+        let hit = scan % 3 != 0;
+        scratch.insert_scan(&mut fast, &origin, &ends, hit, None);
+        scan_reference(&mut slow, &origin, &ends, hit);
+        assert!(fast.values() == slow.values(), "scan {scan}");
+    }
+}
