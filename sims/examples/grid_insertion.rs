@@ -56,7 +56,7 @@ fn main() -> anyhow::Result<()> {
             LogOddsParams::default(),
         );
         let mut scratch = ScanScratch::default();
-        let mut time = |insert: &mut dyn FnMut(&mut LocalGrid)| -> f64 {
+        let time = |insert: &mut dyn FnMut(&mut LocalGrid)| -> f64 {
             let mut times = Vec::with_capacity(REPEATS);
             for _ in 0..REPEATS {
                 let mut grid = empty.clone();
