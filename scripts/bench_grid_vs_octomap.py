@@ -1,11 +1,18 @@
 #!/usr/bin/env python3
 """Ray insertion side by side: troupe's LocalGrid against OctoMap on the same points.
 
-Runs the Rust example (which times LocalGrid and writes the points it used), then
-inserts the same points into an OctoMap OcTree at the same resolution with
-insertPointCloud (C++ under pyoctomap; per scan, OctoMap updates each crossed cell
-once, while LocalGrid updates a cell once per ray that crosses it), and prints both
-rates and their ratio. Needs `pip install pyoctomap numpy`.
+Runs the Rust example (which times LocalGrid three ways and writes the points it
+used), then inserts the same points into an OctoMap OcTree at the same resolution
+with insertPointCloud (C++ under pyoctomap; per scan, OctoMap updates each crossed
+cell once, hits first), and prints every rate and its ratio to OctoMap's, all from
+the same run:
+
+- baseline: the first LocalGrid insertion (RayWalk iterator, per ray) — "before";
+- per_ray: LocalGrid::insert_ray (same semantics, tight loop);
+- per_scan: ScanScratch::insert_scan (OctoMap's semantics, rayon over rays; the
+  thread count is printed).
+
+Needs `pip install pyoctomap numpy`.
 
 Usage: python3 scripts/bench_grid_vs_octomap.py
 """
@@ -62,12 +69,15 @@ def main():
         "frames": len(frames),
         "rays": rays,
         "resolution_m": troupe["resolution_m"],
-        "troupe_rays_per_s": troupe["rays_per_s"],
+        "threads": troupe["threads"],
         "octomap_rays_per_s": round(octomap_rate),
-        "troupe_median_frame_s": troupe["median_frame_s"],
         "octomap_median_frame_s": round(sorted(per_frame)[len(per_frame) // 2], 6),
-        "ratio": round(troupe["rays_per_s"] / octomap_rate, 2),
     }
+    for name in ("baseline", "per_ray", "per_scan"):
+        rate = troupe[f"{name}_rays_per_s"]
+        result[f"{name}_rays_per_s"] = rate
+        result[f"{name}_median_frame_s"] = troupe[f"{name}_median_frame_s"]
+        result[f"{name}_ratio"] = round(rate / octomap_rate, 2)
     print(json.dumps(result, indent=2))
 
 

@@ -132,6 +132,13 @@ impl Message for GridSnapshot {
 }
 
 impl GridSnapshot {
+    /// Voxel size of this snapshot's grid, metres: fixed, or adapted between α_min
+    /// and α_max by Hierarchical Collision Avoidance (thesis §5.1) when it is on.
+    #[must_use]
+    pub fn resolution_m(&self) -> f64 {
+        self.grid.resolution_m()
+    }
+
     /// Distance to unsafe space at a world point (0 outside the grid: unknown).
     #[must_use]
     pub fn clearance_m(&self, p: &nalgebra::Point3<f64>) -> f64 {

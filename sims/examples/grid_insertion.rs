@@ -1,6 +1,12 @@
 //! Rays per second into the local occupancy grid, on simulated 160×120 frames of the
 //! default cave — one side of `scripts/bench_grid_vs_octomap.py`, which times
-//! OctoMap on the very same points.
+//! OctoMap on the very same points. Three ways, each the median of repeats per frame:
+//!
+//! - `baseline`: the first implementation (the `RayWalk` iterator, one update per ray
+//!   and cell), kept here as the "before" of the speed work;
+//! - `per_ray`: `LocalGrid::insert_ray` (same semantics, tight walk loop);
+//! - `per_scan`: `ScanScratch::insert_scan` (each cell once per frame, hits first —
+//!   OctoMap's own semantics — rays walked in parallel on rayon's pool).
 //!
 //! Run: `cargo run --release -p troupe-sims --example grid_insertion -- OUT.bin`
 //! (writes the points it used to OUT.bin: per frame a u32 point count, the sensor
@@ -10,7 +16,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use troupe_actors::grid::{LocalGrid, LogOddsParams};
+use troupe_actors::grid::{LocalGrid, LogOddsParams, ScanScratch};
 use troupe_sims::camera::CameraParams;
 use troupe_sims::world::{CaveParams, CaveWorld};
 
@@ -43,23 +49,37 @@ fn main() -> anyhow::Result<()> {
                 }
             }
         }
-        let mut times = Vec::with_capacity(REPEATS);
-        for _ in 0..REPEATS {
-            let mut grid = LocalGrid::centred(
-                &origin,
-                &Vector3::new(20.0, 20.0, 12.0),
-                RESOLUTION_M,
-                LogOddsParams::default(),
-            );
-            let start = Instant::now();
+        let empty = LocalGrid::centred(
+            &origin,
+            &Vector3::new(20.0, 20.0, 12.0),
+            RESOLUTION_M,
+            LogOddsParams::default(),
+        );
+        let mut scratch = ScanScratch::default();
+        let time = |insert: &mut dyn FnMut(&mut LocalGrid)| -> f64 {
+            let mut times = Vec::with_capacity(REPEATS);
+            for _ in 0..REPEATS {
+                let mut grid = empty.clone();
+                let start = Instant::now();
+                insert(&mut grid);
+                times.push(start.elapsed().as_secs_f64());
+                std::hint::black_box(&grid);
+            }
+            times.sort_by(f64::total_cmp);
+            times[REPEATS / 2]
+        };
+        let baseline = time(&mut |grid| {
+            for end in &ends {
+                baseline_insert(grid, &origin, end);
+            }
+        });
+        let per_ray = time(&mut |grid| {
             for end in &ends {
                 grid.insert_ray(&origin, end, true, None);
             }
-            times.push(start.elapsed().as_secs_f64());
-            std::hint::black_box(&grid);
-        }
-        times.sort_by(f64::total_cmp);
-        per_frame.push(times[REPEATS / 2]);
+        });
+        let per_scan = time(&mut |grid| scratch.insert_scan(grid, &origin, &ends, true, None));
+        per_frame.push([baseline, per_ray, per_scan]);
         rays_total += ends.len();
         file.extend_from_slice(&(ends.len() as u32).to_le_bytes());
         for v in origin.coords.iter() {
@@ -71,18 +91,41 @@ fn main() -> anyhow::Result<()> {
             }
         }
     }
-    let seconds: f64 = per_frame.iter().sum();
-    per_frame.sort_by(f64::total_cmp);
-    println!(
-        "{{\"frames\": {}, \"rays\": {}, \"resolution_m\": {}, \"median_frame_s\": {:.6}, \"rays_per_s\": {:.0}}}",
-        per_frame.len(),
-        rays_total,
-        RESOLUTION_M,
-        per_frame[per_frame.len() / 2],
-        rays_total as f64 / seconds
-    );
+    let mut fields = vec![
+        format!("\"frames\": {}", per_frame.len()),
+        format!("\"rays\": {rays_total}"),
+        format!("\"resolution_m\": {RESOLUTION_M}"),
+        format!("\"threads\": {}", rayon::current_num_threads()),
+    ];
+    for (i, name) in ["baseline", "per_ray", "per_scan"].iter().enumerate() {
+        let mut frames: Vec<f64> = per_frame.iter().map(|f| f[i]).collect();
+        let seconds: f64 = frames.iter().sum();
+        frames.sort_by(f64::total_cmp);
+        fields.push(format!(
+            "\"{name}_median_frame_s\": {:.6}",
+            frames[frames.len() / 2]
+        ));
+        fields.push(format!(
+            "\"{name}_rays_per_s\": {:.0}",
+            rays_total as f64 / seconds
+        ));
+    }
+    println!("{{{}}}", fields.join(", "));
     if let Some(path) = out {
         std::fs::File::create(&path)?.write_all(&file)?;
     }
     Ok(())
+}
+
+/// The first `insert_ray` (through the `RayWalk` iterator), for the "before" rate.
+fn baseline_insert(grid: &mut LocalGrid, origin: &Point3<f64>, end: &Point3<f64>) {
+    let Some(walk) = grid.walk(origin, end) else {
+        return;
+    };
+    let p = *grid.params();
+    for step in walk {
+        if let Some(i) = step.index {
+            grid.update(i, if step.is_end { p.hit } else { p.miss });
+        }
+    }
 }

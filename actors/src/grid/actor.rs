@@ -1,9 +1,12 @@
 //! The local grid actor: keeps a [`LocalGrid`] centred on the robot and publishes
 //! snapshots (grid + distance fields) for the planner and the collision checker.
 //!
-//! Inputs today are the robot's own depth frames, ray-traced directly (the
-//! occupancy-grid baseline of thesis §8.2.5); rebuilding from GMMs (own and peers'
-//! keyframes, §3.2.3) plugs in here when the mapper publishes them.
+//! Inputs: the robot's own keyframe GMMs (`msgs::KEYFRAME`, when the mapper is on) and
+//! its peers' (`msgs::PEER_KEYFRAME`), kept in a [`ComponentStore`] and ray-traced from
+//! their sensor origins; when the window moves, the novel boxes are rebuilt from the
+//! stored components that can reach them (thesis §3.2.3, Fig. 3.2). The robot's own
+//! depth frames can also be ray-traced directly (the occupancy-grid baseline of
+//! §8.2.5; on by default so that the grid works without the mapper).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -13,9 +16,12 @@ use serde::{Deserialize, Serialize};
 
 use super::distance::unsafe_distance;
 use super::frontier::frontier_distance;
-use super::{LocalGrid, LogOddsParams};
+use super::hca::{HcaConfig, KeyframePair, hca_round, regenerate, straight_path_in_collision};
+use super::{
+    CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch, UpdateRule,
+};
 use crate::msgs::{
-    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, Keyframe, ODOMETRY, Odometry,
+    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, KEYFRAME, Keyframe, ODOMETRY, Odometry,
     PEER_KEYFRAME,
 };
 use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
@@ -37,8 +43,24 @@ pub struct GridConfig {
     /// Unknown cells within this distance of the robot's centre become free whenever
     /// odometry arrives (the body is there; observed cells are never overridden).
     pub body_radius_m: f64,
-    /// Most points sampled from one peer keyframe (at most its support size).
+    /// Most points sampled from one keyframe, own or a peer's (at most its support
+    /// size), split over its components by weight.
     pub peer_keyframe_samples: usize,
+    /// Ray-trace the robot's own depth frames directly (the occupancy-grid baseline).
+    /// With the mapper on, turn this off to build the grid from GMMs only (§3.2.3);
+    /// with both, a keyframe's observations count twice.
+    pub trace_depth_frames: bool,
+    /// Most keyframes kept for rebuilding novel boxes; the oldest goes first.
+    pub max_stored_keyframes: usize,
+    /// Bucket edge of the spatial index over component means, metres.
+    pub index_cell_m: f64,
+    /// How the rays of one frame or keyframe update the grid: `per_ray` (every ray
+    /// updates every cell it crosses) or `per_scan` (each cell once per scan, hits
+    /// first, as OctoMap's `insertPointCloud`; parallel over rays).
+    pub update_rule: UpdateRule,
+    /// Variable resolution and Hierarchical Collision Avoidance (thesis §5.1); off by
+    /// default.
+    pub hca: HcaConfig,
     /// Unknown cells within this distance of the first pose become free: the robot
     /// starts in a clear spot (without it, nothing would be safe before the first look
     /// around).
@@ -56,6 +78,11 @@ impl Default for GridConfig {
             body_radius_m: 0.3,
             start_clearance_m: 1.2,
             peer_keyframe_samples: 2000,
+            trace_depth_frames: true,
+            max_stored_keyframes: 256,
+            index_cell_m: 4.0,
+            update_rule: UpdateRule::PerRay,
+            hca: HcaConfig::default(),
         }
     }
 }
@@ -94,6 +121,15 @@ impl GridConfig {
         if self.pixel_stride == 0 {
             return Err("pixel_stride must be ≥ 1".into());
         }
+        if self.max_stored_keyframes == 0 {
+            return Err("max_stored_keyframes must be ≥ 1".into());
+        }
+        if !(self.index_cell_m.is_finite() && self.index_cell_m > 0.0) {
+            return Err(format!(
+                "index_cell_m must be > 0, got {}",
+                self.index_cell_m
+            ));
+        }
         for (key, value) in [
             ("body_radius_m", self.body_radius_m),
             ("start_clearance_m", self.start_clearance_m),
@@ -102,6 +138,7 @@ impl GridConfig {
                 return Err(format!("{key} must be ≥ 0, got {value}"));
             }
         }
+        self.hca.validate().map_err(|e| format!("hca: {e}"))?;
         self.logodds.validate().map_err(|e| format!("logodds: {e}"))
     }
 }
@@ -130,6 +167,41 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     }
 }
 
+/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] the frame's
+/// returns form one scan and its no-return pixels (free up to the range) a second.
+pub fn insert_frame_with(
+    grid: &mut LocalGrid,
+    frame: &DepthFrame,
+    stride: u32,
+    rule: UpdateRule,
+    scratch: &mut ScanScratch,
+) {
+    if rule == UpdateRule::PerRay {
+        insert_frame(grid, frame, stride);
+        return;
+    }
+    let k = &frame.intrinsics;
+    let origin = Point3::from(frame.pose.translation.vector);
+    let stride = stride.max(1) as usize;
+    let (mut hits, mut misses) = (Vec::new(), Vec::new());
+    for row in (0..k.height as usize).step_by(stride) {
+        for col in (0..k.width as usize).step_by(stride) {
+            let Some(&depth) = frame.depth_m.get(row * k.width as usize + col) else {
+                continue;
+            };
+            let (u, v) = (col as f64 + 0.5, row as f64 + 0.5);
+            let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
+            if depth > 0.0 {
+                hits.push(origin + frame.pose.rotation * (ray * f64::from(depth)));
+            } else {
+                misses.push(origin + frame.pose.rotation * (ray * k.max_depth_m));
+            }
+        }
+    }
+    scratch.insert_scan(grid, &origin, &hits, true, None);
+    scratch.insert_scan(grid, &origin, &misses, false, None);
+}
+
 /// Ray-traces a keyframe GMM into a grid (§8.2.2): `min(support, max_samples)`
 /// points drawn from its spatial marginal, each a hit at the end of a ray from the
 /// keyframe's sensor position.
@@ -148,12 +220,21 @@ pub fn insert_keyframe(
 
 const PUBLISH: TimerId = TimerId(0);
 
-/// Keeps a [`LocalGrid`] centred on the robot from its depth frames and its peers'
-/// keyframes, and publishes [`GridSnapshot`]s with the distance fields.
+/// Keeps a [`LocalGrid`] centred on the robot from its own and its peers' keyframes
+/// (and optionally its depth frames), and publishes [`GridSnapshot`]s with the
+/// distance fields.
 pub struct GridActor {
     config: GridConfig,
     grid: Option<LocalGrid>,
     position: Option<Point3<f64>>,
+    /// Direction of travel (or the body's x axis when hovering), for HCA.
+    heading: Vector3<f64>,
+    store: ComponentStore,
+    scratch: ScanScratch,
+    /// Own keyframes for the variable-resolution map (§5.1.1).
+    pair: KeyframePair,
+    /// HCA level of the last round (`α_prev`).
+    hca_level: u32,
 }
 
 impl GridActor {
@@ -164,18 +245,46 @@ impl GridActor {
             config,
             grid: None,
             position: None,
+            heading: Vector3::x(),
+            store: ComponentStore::new(
+                config.peer_keyframe_samples,
+                config.max_stored_keyframes,
+                config.index_cell_m,
+            )
+            .with_rule(config.update_rule),
+            scratch: ScanScratch::default(),
+            pair: KeyframePair::default(),
+            hca_level: config.hca.top_level(),
+        }
+    }
+
+    /// Stores a keyframe's components and ray-traces them into the grid (if there is
+    /// one yet: otherwise they enter when the first pose creates it).
+    fn on_keyframe(&mut self, source: KeyframeSource, keyframe: &Keyframe) {
+        let Some(k) = self.store.insert(source, keyframe) else {
+            return;
+        };
+        if let Some(grid) = self.grid.as_mut() {
+            self.store.trace_keyframe(grid, k);
         }
     }
 
     fn grid_at(&mut self, position: Point3<f64>) -> &mut LocalGrid {
         let config = self.config;
+        let store = &mut self.store;
         self.grid.get_or_insert_with(|| {
-            LocalGrid::centred(
+            let mut grid = LocalGrid::centred(
                 &position,
                 &Vector3::from(config.size_m),
                 config.resolution_m,
                 config.logodds,
-            )
+            );
+            let whole = CellBox {
+                min: [0; 3],
+                max: grid.dims(),
+            };
+            store.rebuild(&mut grid, &[whole]);
+            grid
         })
     }
 
@@ -184,14 +293,69 @@ impl GridActor {
         if !position.coords.iter().all(|v| v.is_finite()) {
             return;
         }
+        let speed = odometry.velocity_mps.norm();
+        let body_x = odometry.pose.rotation * Vector3::x();
+        self.heading = if speed.is_finite() && speed > 0.1 {
+            odometry.velocity_mps / speed
+        } else if body_x.iter().all(|v| v.is_finite()) {
+            body_x
+        } else {
+            self.heading
+        };
         let first = self.position.is_none();
         let (body, start) = (self.config.body_radius_m, self.config.start_clearance_m);
-        let grid = self.grid_at(position);
-        // The window follows the robot; novel boxes stay unknown until observed again
-        // (rebuilding them from GMM keyframes comes with the mapper).
-        grid.shift_to(&position);
+        self.grid_at(position);
+        let (Some(grid), store) = (self.grid.as_mut(), &mut self.store) else {
+            return;
+        };
+        // The window follows the robot; the novel boxes are rebuilt from the stored
+        // keyframe components that can reach them (Fig. 3.2).
+        let novel = grid.shift_to(&position);
+        store.rebuild(grid, &novel);
         grid.clear_unknown_sphere(&position, if first { start.max(body) } else { body });
         self.position = Some(position);
+    }
+}
+
+impl GridActor {
+    /// One round of Hierarchical Collision Avoidance (thesis Alg. 1) when it is on
+    /// and there is a pose and an own keyframe: the map regenerated from the latest
+    /// and one past keyframe at the adapted voxel size, checked along the direction
+    /// of travel.
+    fn hca_snapshot(&mut self, stamp: crate::runtime::Time) -> Option<GridSnapshot> {
+        let hca = self.config.hca;
+        let position = self.position?;
+        if !hca.enabled || self.pair.latest().is_none() {
+            return None;
+        }
+        let mut store = self.pair.store(
+            hca.past_keyframe_distance_m,
+            self.config.peer_keyframe_samples,
+            self.config.update_rule,
+        );
+        let (logodds, heading) = (self.config.logodds, self.heading);
+        let round = hca_round(
+            &hca,
+            self.hca_level,
+            |alpha| regenerate(&hca, logodds, &position, alpha, &mut store),
+            |grid, distance| {
+                straight_path_in_collision(
+                    grid,
+                    distance,
+                    &position,
+                    &heading,
+                    hca.path_length_m(grid.resolution_m()),
+                    hca.required_clearance_m(),
+                )
+            },
+        );
+        self.hca_level = round.level;
+        Some(GridSnapshot {
+            stamp,
+            frontier_distance_m: frontier_distance(&round.grid),
+            unsafe_distance_m: round.unsafe_distance_m,
+            grid: round.grid,
+        })
     }
 }
 
@@ -200,6 +364,7 @@ impl Actor for GridActor {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::KeepLatest { depth: 2 });
         ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
+        ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(32));
         ctx.set_timer(
             PUBLISH,
             Duration::from_secs_f64(1.0 / self.config.publish_rate_hz),
@@ -213,21 +378,29 @@ impl Actor for GridActor {
                 if let Some(odometry) = m.get(&ODOMETRY) {
                     self.on_odometry(odometry);
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
-                    if let Some(grid) = self.grid.as_mut() {
-                        let n = self.config.peer_keyframe_samples;
-                        insert_keyframe(grid, &peer.keyframe, n, ctx.rng());
-                    }
+                    self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe);
+                } else if let Some(own) = m.get(&KEYFRAME) {
+                    self.pair.push(own);
+                    self.on_keyframe(KeyframeSource::Own, own);
                 } else if let Some(frame) = m.get(&DEPTH_FRAME) {
+                    if !self.config.trace_depth_frames {
+                        return Ok(());
+                    }
                     let position = Point3::from(frame.pose.translation.vector);
                     if !position.coords.iter().all(|v| v.is_finite()) {
                         return Err(ActorError::msg("depth frame with a non-finite pose"));
                     }
-                    let stride = self.config.pixel_stride;
-                    insert_frame(self.grid_at(position), frame, stride);
+                    let (stride, rule) = (self.config.pixel_stride, self.config.update_rule);
+                    self.grid_at(position);
+                    if let Some(grid) = self.grid.as_mut() {
+                        insert_frame_with(grid, frame, stride, rule, &mut self.scratch);
+                    }
                 }
             }
             Event::Timer(_) => {
-                if let Some(grid) = &self.grid {
+                if let Some(snapshot) = self.hca_snapshot(ctx.now()) {
+                    ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
+                } else if let Some(grid) = &self.grid {
                     let snapshot = GridSnapshot {
                         stamp: ctx.now(),
                         unsafe_distance_m: unsafe_distance(grid),

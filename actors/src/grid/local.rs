@@ -326,24 +326,65 @@ impl LocalGrid {
         hit: bool,
         region: Option<&CellBox>,
     ) {
+        match region {
+            None => self.insert_ray_where(origin, end, hit, |_| true),
+            Some(r) => self.insert_ray_where(origin, end, hit, |c| r.contains(c)),
+        }
+    }
+
+    /// [`LocalGrid::insert_ray`] changing only the cells inside one of `boxes` (the
+    /// novel boxes of a window move, thesis Fig. 3.2); nothing changes for no boxes.
+    pub fn insert_ray_boxes(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        boxes: &[CellBox],
+    ) {
+        self.insert_ray_where(origin, end, hit, |c| boxes.iter().any(|b| b.contains(c)));
+    }
+
+    fn insert_ray_where(
+        &mut self,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+        hit: bool,
+        keep: impl Fn([usize; 3]) -> bool,
+    ) {
         let Some(walk) = self.walk(origin, end) else {
             return;
         };
         let (min, max) = (self.params.min, self.params.max);
         let (hit_delta, miss_delta) = (self.params.hit, self.params.miss);
-        for step in walk {
-            let Some(i) = step.index else { continue };
-            if region.is_some_and(|r| !r.contains(step.cell)) {
-                continue;
+        let cells = &mut self.cells;
+        walk.for_each_inside(|i, cell, is_end| {
+            if keep(cell) {
+                let delta = if is_end && hit { hit_delta } else { miss_delta };
+                let v = &mut cells[i];
+                *v = (*v + delta).clamp(min, max);
             }
-            let delta = if step.is_end && hit {
-                hit_delta
-            } else {
-                miss_delta
-            };
-            let cell = &mut self.cells[i];
-            *cell = (*cell + delta).clamp(min, max);
+        });
+    }
+
+    /// Adds `delta` to the log-odds of the cell at linear `index`, clamped to the
+    /// rules' bounds; an index outside the grid is ignored.
+    pub fn update(&mut self, index: usize, delta: f32) {
+        let (min, max) = (self.params.min, self.params.max);
+        if let Some(v) = self.cells.get_mut(index) {
+            *v = (*v + delta).clamp(min, max);
         }
+    }
+
+    /// Replaces all values (tests only; the length must match).
+    #[cfg(test)]
+    pub(super) fn set_values_for_test(&mut self, values: Vec<f32>) {
+        assert_eq!(values.len(), self.cells.len());
+        self.cells = values;
+    }
+
+    /// Mutable log-odds values, row-major (x fastest), for the scan update.
+    pub(super) fn values_mut(&mut self) -> &mut [f32] {
+        &mut self.cells
     }
 
     /// Marks the unknown cells whose centres lie within `radius_m` of `centre` as free
@@ -481,6 +522,54 @@ pub struct RayWalk {
 }
 
 impl RayWalk {
+    /// Visits the cells of the walk that lie inside the window, in order, as
+    /// `(linear index, local cell, is_end)`: the same cells as the iterator, in a
+    /// tight loop without the per-step [`RayStep`].
+    #[inline]
+    pub fn for_each_inside(mut self, mut visit: impl FnMut(usize, [usize; 3], bool)) {
+        let dims = self.dims.map(|d| d as u64);
+        // Fast path: when the start and end cells lie two cells or more inside the
+        // window, so does every cell between (rounding at a corner strays at most one
+        // cell from their bounding box), and no step needs the bounds check.
+        let interior = |c: &[i64; 3]| (0..3).all(|a| c[a] >= 2 && c[a] + 2 < self.dims[a]);
+        if interior(&self.local) && interior(&self.end_local) {
+            let mut local = self.local;
+            let mut index = self.index;
+            let mut t_next = self.t_next;
+            for _ in 0..self.remaining {
+                visit(index as usize, local.map(|v| v as usize), false);
+                let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
+                let y_not_z = t_next[1] <= t_next[2];
+                let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+                local[axis] += self.step[axis];
+                index += self.step[axis] * self.stride[axis];
+                t_next[axis] += self.t_delta[axis];
+            }
+            let c = self.end_local;
+            let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
+            visit(i as usize, c.map(|v| v as usize), true);
+            return;
+        }
+        while self.remaining > 0 {
+            let c = self.local;
+            if (c[0] as u64) < dims[0] && (c[1] as u64) < dims[1] && (c[2] as u64) < dims[2] {
+                visit(self.index as usize, c.map(|v| v as usize), false);
+            }
+            let x_first = self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2];
+            let y_not_z = self.t_next[1] <= self.t_next[2];
+            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
+            self.local[axis] += self.step[axis];
+            self.index += self.step[axis] * self.stride[axis];
+            self.t_next[axis] += self.t_delta[axis];
+            self.remaining -= 1;
+        }
+        let c = self.end_local;
+        if self.inside(&c) {
+            let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
+            visit(i as usize, c.map(|v| v as usize), true);
+        }
+    }
+
     fn inside(&self, c: &[i64; 3]) -> bool {
         (c[0] as u64) < self.dims[0] as u64
             && (c[1] as u64) < self.dims[1] as u64

@@ -6,16 +6,30 @@
 //!   positions agree cell for cell on what they share.
 //! - [`LocalGrid::shift_to`]: the moving window — copy the overlap, return the (at
 //!   most three) novel boxes to rebuild (Fig. 3.2).
+//! - [`ComponentStore`]: the keyframe GMM components the novel boxes are rebuilt
+//!   from, sampled deterministically, with a spatial index over their means.
+//! - [`ScanScratch`]: a whole scan inserted at once, each cell updated once (OctoMap's
+//!   semantics, [`UpdateRule::PerScan`]), rays walked in parallel.
+//! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
 
 mod actor;
 pub mod distance;
 pub mod frontier;
+pub mod hca;
 mod local;
+mod scan;
+mod store;
 
-pub use actor::{GridActor, GridConfig, insert_frame, insert_keyframe};
+pub use actor::{GridActor, GridConfig, insert_frame, insert_frame_with, insert_keyframe};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
+pub use scan::{ScanScratch, UpdateRule};
+pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 
+#[cfg(test)]
+mod hca_tests;
+#[cfg(test)]
+mod store_tests;
 #[cfg(test)]
 mod tests;

@@ -313,3 +313,166 @@ fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame() {
     // Paper Fig. 6: AUC ≈ 0.9 at 0.2 m for GMM-reconstructed occupancy.
     assert!(auc >= 0.9, "AUC {auc}");
 }
+
+/// The per-scan update the slow way: sets of crossed and end cells from the ray
+/// iterator, then one update per cell.
+fn scan_reference(grid: &mut LocalGrid, origin: &Point3<f64>, ends: &[Point3<f64>], hit: bool) {
+    use std::collections::BTreeSet;
+    let (mut crossed, mut ended) = (BTreeSet::new(), BTreeSet::new());
+    for end in ends {
+        let Some(walk) = grid.walk(origin, end) else {
+            continue;
+        };
+        for step in walk {
+            if let Some(i) = step.index {
+                if step.is_end && hit {
+                    ended.insert(i);
+                } else {
+                    crossed.insert(i);
+                }
+            }
+        }
+    }
+    let p = *grid.params();
+    let mut values = grid.values().to_vec();
+    for i in &ended {
+        values[*i] = (values[*i] + p.hit).clamp(p.min, p.max);
+    }
+    for i in crossed.difference(&ended) {
+        values[*i] = (values[*i] + p.miss).clamp(p.min, p.max);
+    }
+    let mut expected = grid.clone();
+    expected.set_values_for_test(values);
+    *grid = expected;
+}
+
+#[test]
+fn a_scan_updates_each_cell_once_in_any_order_and_thread_count() {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    for case in 0..6 {
+        let origin = Point3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.5..0.5),
+        );
+        let n = if case % 2 == 0 { 300 } else { 5000 };
+        let hit = case != 3;
+        let mut ends: Vec<Point3<f64>> = (0..n)
+            .map(|_| {
+                let d = Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.5..0.5),
+                );
+                origin + d.normalize() * rng.random_range(0.3..4.0)
+            })
+            .collect();
+        ends.push(Point3::new(f64::NAN, 0.0, 0.0));
+        let mut scratch = ScanScratch::default();
+        let mut fast = grid_at(0.3);
+        // Two scans, so that the second starts from non-zero cells and reused marks.
+        for _ in 0..2 {
+            scratch.insert_scan(&mut fast, &origin, &ends, hit, None);
+        }
+        let mut slow = grid_at(0.3);
+        for _ in 0..2 {
+            scan_reference(&mut slow, &origin, &ends, hit);
+        }
+        assert!(fast.values() == slow.values(), "case {case}");
+        let mut reversed = ends.clone();
+        reversed.reverse();
+        let one_thread = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let mut serial = grid_at(0.3);
+        one_thread.install(|| {
+            let mut scratch = ScanScratch::default();
+            for _ in 0..2 {
+                scratch.insert_scan(&mut serial, &origin, &reversed, hit, None);
+            }
+        });
+        assert!(
+            serial.values() == fast.values(),
+            "case {case}: order or threads matter"
+        );
+        // Restricted to a box: the same cells inside it, nothing outside.
+        let b = CellBox {
+            min: [3, 2, 1],
+            max: [12, 9, 6],
+        };
+        let mut boxed = grid_at(0.3);
+        scratch.insert_scan(&mut boxed, &origin, &ends, hit, Some(&[b]));
+        let mut once = grid_at(0.3);
+        scan_reference(&mut once, &origin, &ends, hit);
+        for (i, (a, e)) in boxed.values().iter().zip(once.values()).enumerate() {
+            let d = boxed.dims();
+            let c = [i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1])];
+            assert_eq!(
+                *a,
+                if b.contains(c) { *e } else { 0.0 },
+                "case {case} cell {c:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_tight_walk_visits_the_iterators_cells() {
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let grid = grid_at(0.0);
+    // Axis-aligned and diagonal rays through cell corners as well as random ones.
+    let mut rays = vec![
+        (Point3::new(-1.0, -1.0, -0.6), Point3::new(1.0, 1.0, 0.6)),
+        (Point3::new(-1.0, 0.0, 0.0), Point3::new(1.4, 0.0, 0.0)),
+        (Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 0.0)),
+    ];
+    for _ in 0..3000 {
+        let o = Point3::new(
+            rng.random_range(-2.5..2.5),
+            rng.random_range(-2.0..2.0),
+            rng.random_range(-1.5..1.5),
+        );
+        let e = o + Vector3::new(
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-2.0..2.0),
+        );
+        rays.push((o, e));
+    }
+    for (o, e) in rays {
+        let walk = grid.walk(&o, &e).unwrap();
+        let slow: Vec<(usize, [usize; 3], bool)> = walk
+            .clone()
+            .filter_map(|s| s.index.map(|i| (i, s.cell, s.is_end)))
+            .collect();
+        let mut fast = Vec::new();
+        walk.for_each_inside(|i, c, end| fast.push((i, c, end)));
+        assert_eq!(fast, slow, "{o} → {e}");
+    }
+}
+
+#[test]
+fn scan_marks_survive_their_counter_wrapping() {
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let origin = Point3::new(0.1, -0.2, 0.05);
+    let (mut fast, mut slow) = (grid_at(0.0), grid_at(0.0));
+    let mut scratch = ScanScratch::default();
+    // More scans than the byte-sized scan counter holds before it wraps.
+    for scan in 0..300 {
+        let ends: Vec<Point3<f64>> = (0..20)
+            .map(|_| {
+                origin
+                    + Vector3::new(
+                        rng.random_range(-2.0..2.0),
+                        rng.random_range(-1.5..1.5),
+                        rng.random_range(-1.0..1.0),
+                    )
+            })
+            .collect();
+        let hit = scan % 3 != 0;
+        scratch.insert_scan(&mut fast, &origin, &ends, hit, None);
+        scan_reference(&mut slow, &origin, &ends, hit);
+        assert!(fast.values() == slow.values(), "scan {scan}");
+    }
+}
