@@ -7,6 +7,9 @@
 //! - [`library`]: the motion primitive libraries of thesis Table 4.2 and paper Table I.
 //! - [`csqmi`]: the information reward.
 //! - [`round`]: one planning round: candidates, feasibility, safety, rewards.
+//! - [`problem`]: the round as a generator of scored children of any state, for
+//!   tree search (MCTS, thesis §4.1.3).
+//! - [`scenes`]: small synthetic snapshots and the camera, for tests and benches.
 //! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
 //!   primitives; the choice among candidates is an [`ActionSelection`] policy.
 
@@ -15,6 +18,8 @@ pub mod bounds;
 pub mod csqmi;
 pub mod library;
 pub mod primitives;
+pub mod problem;
 pub mod round;
+pub mod scenes;
 
 pub use actor::{ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport};
