@@ -11,6 +11,8 @@
 //!   tree search (MCTS, thesis §4.1.3).
 //! - [`teleop`]: teleoperation commands mapped to the closest safe primitive with
 //!   the forward speed adapted to the free space ahead (thesis §5.1.2, Eq. 5.1).
+//! - [`TeleopActor`] commits those primitives at a fixed rate; [`ScriptedTeleop`]
+//!   publishes a timed command script in place of a joystick.
 //! - [`scenes`]: small synthetic snapshots and the camera, for tests and benches.
 //! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
 //!   primitives; the choice among candidates is an [`ActionSelection`] policy.
@@ -24,5 +26,7 @@ pub mod problem;
 pub mod round;
 pub mod scenes;
 pub mod teleop;
+mod teleop_actor;
 
 pub use actor::{ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport};
+pub use teleop_actor::{ScriptedCommand, ScriptedTeleop, TeleopActor, TeleopConfig};
