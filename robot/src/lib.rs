@@ -18,12 +18,7 @@ use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
 
-pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig};
-
-/// The `behaviour` value that selects the local grid + teleoperation (thesis §5):
-/// commands on `teleop/command` are mapped to the closest safe primitive (the
-/// planner's limits, safety margin, rate and knot spacing apply).
-pub const TELEOP: &str = "teleop";
+pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig, TELEOP};
 
 /// Builds a frame source (called at start and on every sensor restart).
 pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
