@@ -182,3 +182,54 @@ impl<'a> PlanningProblem<'a> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::planner::scenes;
+
+    #[test]
+    fn children_are_safe_scored_and_continue_only_through_clear_space() {
+        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let root = FlatState::at_rest(Vector3::zeros(), 0.0);
+        let children = problem.children(&root);
+        assert!(children.len() > 5 && children.len() <= problem.actions().len());
+        let margin = config.margin_m(snapshot.grid.resolution_m());
+        let per_second = RoundConfig {
+            reward_per_second: true,
+            ..config
+        };
+        let rated = PlanningProblem::new(&per_second, &snapshot, &camera);
+        let mut continued = 0;
+        for child in &children {
+            // The end-pose information of thesis §4.1.3, plus α V.
+            let end = child.primitive.end_state();
+            let info = view_information(&snapshot.grid, &pose_of(&end), &camera, &config.view);
+            assert!((child.information - info).abs() < 1e-12);
+            assert!(
+                (child.reward - (info + config.frontier_weight * child.frontier_gain_m)).abs()
+                    < 1e-12
+            );
+            let again = rated.child(&root, child.action_index).expect("same child");
+            assert!((again.reward * child.primitive.duration_s() - child.reward).abs() < 1e-9);
+            // A continuation exists only if the whole primitive keeps the margin.
+            if let Some(next) = problem.continuation(child) {
+                continued += 1;
+                assert_eq!(next, end);
+                for i in 0..=100 {
+                    let t = child.primitive.duration_s() * f64::from(i) / 100.0;
+                    let p = Point3::from(child.primitive.state_at(t).position_m());
+                    assert!(snapshot.clearance_m(&p) >= margin - 0.05, "{p}");
+                }
+            }
+        }
+        assert!(continued > 0);
+        // Out-of-range actions have no child.
+        assert!(problem.child(&root, problem.actions().len()).is_none());
+    }
+}
