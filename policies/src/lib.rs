@@ -5,7 +5,8 @@
 //!
 //! - [`selection::Greedy`] (single-step best action, paper Alg. 1) and
 //!   [`selection::RandomFeasible`] (the baseline) choose among the planner's
-//!   candidates.
+//!   candidates; [`selection::Mcts`] searches sequences of primitives (anytime
+//!   MCTS with UCT, thesis §4.1.3).
 //!
 //! [`behaviour_by_name`] and [`selection_by_name`] are how the robot assembly turns
 //! config strings into policies.
@@ -78,7 +79,7 @@ pub fn behaviour_by_name(
 }
 
 /// Names accepted by [`selection_by_name`].
-pub const SELECTIONS: &[&str] = &["greedy", "random"];
+pub const SELECTIONS: &[&str] = &["greedy", "random", "mcts"];
 
 /// Builds fresh instances of an action-selection policy (one per planner start).
 pub type SelectionFactory = Box<dyn Fn() -> Box<dyn ActionSelection> + Send>;
@@ -88,6 +89,7 @@ pub fn selection_by_name(name: &str) -> Result<SelectionFactory, PolicyError> {
     match name {
         "greedy" => Ok(Box::new(|| Box::new(selection::Greedy))),
         "random" => Ok(Box::new(|| Box::new(selection::RandomFeasible))),
+        "mcts" => Ok(Box::new(|| Box::new(selection::Mcts::default()))),
         other => Err(PolicyError::UnknownSelection(other.to_string())),
     }
 }

@@ -1,4 +1,12 @@
 //! Action selection over scored candidates (thesis §4.1.3, paper Alg. 1).
+//!
+//! - [`Greedy`]: the single best step (paper Alg. 1);
+//! - [`RandomFeasible`]: the baseline, a random safe step;
+//! - [`Mcts`]: anytime Monte Carlo tree search with UCT over primitive sequences.
+
+pub mod mcts;
+
+pub use mcts::{Mcts, SearchOutcome, search};
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;

@@ -10,6 +10,11 @@ use troupe_actors::runtime::RestartPolicy;
 /// The `behaviour` value that selects the grid + planner pipeline.
 pub const PLANNER: &str = "planner";
 
+/// The `behaviour` value that selects the local grid + teleoperation (thesis §5):
+/// commands on `teleop/command` are mapped to the closest safe primitive (the
+/// planner's limits, safety margin, rate and knot spacing apply).
+pub const TELEOP: &str = "teleop";
+
 /// Modelled compute latency per standard actor, seconds (sim-time executor).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -189,11 +194,12 @@ impl RobotConfig {
         }
         non_negative("restart.window_s", self.restart.window_s)?;
         if self.behaviour != PLANNER
+            && self.behaviour != TELEOP
             && !troupe_policies::BEHAVIOURS.contains(&self.behaviour.as_str())
         {
             return Err(ConfigError {
                 key: "behaviour".into(),
-                rule: "must be \"planner\" or a known route behaviour (waypoint_route)",
+                rule: "must be \"planner\", \"teleop\" or a known route behaviour (waypoint_route)",
                 value: format!("{:?}", self.behaviour),
             });
         }

@@ -13,12 +13,12 @@ use troupe_actors::grid::GridActor;
 use troupe_actors::link::LinkActor;
 use troupe_actors::mapper::MapperActor;
 use troupe_actors::msgs::PinholeIntrinsics;
-use troupe_actors::planner::PlannerActor;
+use troupe_actors::planner::{PlannerActor, TeleopActor, TeleopConfig};
 use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
 
-pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig};
+pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig, TELEOP};
 
 /// Builds a frame source (called at start and on every sensor restart).
 pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
@@ -61,8 +61,9 @@ impl FrameSource for BoxedSource {
 }
 
 /// Assembles a robot: vehicle, sensor, the mapper if enabled, then either the
-/// explorer (route behaviours) or the local grid and the planner
-/// (`behaviour = "planner"`), then the link.
+/// explorer (route behaviours), the local grid and the planner
+/// (`behaviour = "planner"`) or the local grid and teleoperation
+/// (`behaviour = "teleop"`), then the link.
 pub fn assemble(
     name: &str,
     config: &RobotConfig,
@@ -95,7 +96,24 @@ pub fn assemble(
                 .with_options(heavy(config.latency_s.mapper)),
         );
     }
-    if config.behaviour == PLANNER {
+    if config.behaviour == TELEOP {
+        let grid = config.grid;
+        let teleop = TeleopConfig {
+            rate_hz: config.planner.rate_hz,
+            round: config.planner.round,
+            knot_step_s: config.planner.knot_step_s,
+            ..TeleopConfig::default()
+        };
+        robot
+            .add(
+                ActorSpec::new("grid", move || GridActor::new(grid))
+                    .with_options(heavy(config.latency_s.grid)),
+            )
+            .add(
+                ActorSpec::new("teleop", move || TeleopActor::new(teleop))
+                    .with_options(heavy(config.latency_s.planner)),
+            );
+    } else if config.behaviour == PLANNER {
         let selection = selection_by_name(&config.selection)?;
         let grid = config.grid;
         let planner = config.planner;

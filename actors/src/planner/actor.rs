@@ -11,6 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::primitives::{FlatState, Primitive};
+use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
 use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan};
 use crate::runtime::{
@@ -22,11 +23,36 @@ use crate::trajectory::{Knot, Trajectory};
 pub trait ActionSelection: Send + 'static {
     /// Index of the chosen candidate, or `None` to stop.
     fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize>;
+
+    /// Index of the chosen candidate among the children of `root` (`candidates`,
+    /// computed by `problem`), or `None` to stop. Search policies override this to
+    /// expand deeper states through `problem` (thesis §4.1.3); by default it is
+    /// [`Self::select`].
+    fn select_in(
+        &mut self,
+        problem: &PlanningProblem<'_>,
+        root: &FlatState,
+        candidates: &[Candidate],
+        rng: &mut ChaCha8Rng,
+    ) -> Option<usize> {
+        let _ = (problem, root);
+        self.select(candidates, rng)
+    }
 }
 
 impl ActionSelection for Box<dyn ActionSelection> {
     fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize> {
         (**self).select(candidates, rng)
+    }
+
+    fn select_in(
+        &mut self,
+        problem: &PlanningProblem<'_>,
+        root: &FlatState,
+        candidates: &[Candidate],
+        rng: &mut ChaCha8Rng,
+    ) -> Option<usize> {
+        (**self).select_in(problem, root, candidates, rng)
     }
 }
 
@@ -148,8 +174,11 @@ impl<S: ActionSelection> PlannerActor<S> {
             }
         };
         let round = &self.config.round;
-        let candidates = round.candidates(&root, &snapshot, &self.camera);
-        let choice = self.selection.select(&candidates, ctx.rng());
+        let problem = PlanningProblem::new(round, &snapshot, &self.camera);
+        let candidates = problem.children(&root);
+        let choice = self
+            .selection
+            .select_in(&problem, &root, &candidates, ctx.rng());
         tracing::debug!(
             robot = ctx.robot_name(),
             time = %now,

@@ -4,23 +4,28 @@
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::csqmi::{ViewRewardParams, view_information};
+use super::csqmi::ViewRewardParams;
 use super::library::{self, LibraryParams, LibrarySpec};
 use super::primitives::{Action, DynamicLimits, FlatState, Primitive};
+use super::problem::{PlanningProblem, SearchParams};
 use crate::msgs::{GridSnapshot, PinholeIntrinsics};
 
 /// A feasible, safe candidate and its reward.
 #[derive(Clone, Debug)]
 pub struct Candidate {
+    /// Index of its action in the library ([`PlanningProblem::actions`]).
+    pub action_index: usize,
     /// The primitive.
     pub primitive: Primitive,
     /// The stopping primitive from its state one planning period in.
     pub stopping: Primitive,
-    /// CSQMI at the end pose, nats.
+    /// CSQMI of the view at the end pose (or the mean over poses along the
+    /// primitive, [`RoundConfig::information_samples`]), nats.
     pub information: f64,
     /// Frontier-distance reward V = d(ξ₀) − d(ξτ), metres (0 when there is no frontier).
     pub frontier_gain_m: f64,
-    /// Objective I + αV.
+    /// Objective I + αV (divided by the duration τ when
+    /// [`RoundConfig::reward_per_second`] is set).
     pub reward: f64,
 }
 
@@ -69,6 +74,14 @@ pub struct RoundConfig {
     /// Planning period Δt_p: the primitive runs this long before its stopping
     /// primitive takes over, seconds.
     pub planning_period_s: f64,
+    /// Views scored per primitive: 1 scores the end pose only (thesis §4.1.3);
+    /// n > 1 averages the views at τ/n, 2τ/n, …, τ.
+    pub information_samples: usize,
+    /// Score a primitive by its objective per second of duration (a rate, so short
+    /// and long primitives compare fairly) instead of the objective itself.
+    pub reward_per_second: bool,
+    /// Anytime tree search settings (used by search policies such as MCTS).
+    pub search: SearchParams,
 }
 
 impl Default for RoundConfig {
@@ -90,6 +103,9 @@ impl Default for RoundConfig {
             collision_radius_m: 0.4,
             check_step_s: 0.1,
             planning_period_s: 1.0,
+            information_samples: 1,
+            reward_per_second: false,
+            search: SearchParams::default(),
         }
     }
 }
@@ -104,7 +120,7 @@ pub fn pose_of(state: &FlatState) -> Isometry3<f64> {
 }
 
 /// Whether every sample of `primitive` on `[0, until_s]` keeps `margin_m` from unsafe space.
-fn safe(
+pub(super) fn safe(
     primitive: &Primitive,
     until_s: f64,
     snapshot: &GridSnapshot,
@@ -171,7 +187,8 @@ impl RoundConfig {
         .then_some(stopping)
     }
 
-    /// Every feasible, safe candidate from `from`, scored.
+    /// Every feasible, safe candidate from `from`, scored (the children of the
+    /// root in [`PlanningProblem`]).
     #[must_use]
     pub fn candidates(
         &self,
@@ -179,31 +196,6 @@ impl RoundConfig {
         snapshot: &GridSnapshot,
         camera: &PinholeIntrinsics,
     ) -> Vec<Candidate> {
-        let start_frontier = snapshot.frontier_distance(&Point3::from(from.position_m()));
-        self.library
-            .specs()
-            .iter()
-            .flat_map(|spec| library::actions(spec, &self.library_params))
-            .filter_map(|(action, fixed)| {
-                let primitive = self.primitive(from, action, fixed)?;
-                let stopping = self.safe_with_stop(&primitive, snapshot)?;
-                let end = primitive.end_state();
-                let information =
-                    view_information(&snapshot.grid, &pose_of(&end), camera, &self.view);
-                let end_frontier = snapshot.frontier_distance(&Point3::from(end.position_m()));
-                let frontier_gain_m = if start_frontier.is_finite() && end_frontier.is_finite() {
-                    start_frontier - end_frontier
-                } else {
-                    0.0
-                };
-                Some(Candidate {
-                    reward: information + self.frontier_weight * frontier_gain_m,
-                    primitive,
-                    stopping,
-                    information,
-                    frontier_gain_m,
-                })
-            })
-            .collect()
+        PlanningProblem::new(self, snapshot, camera).children(from)
     }
 }
