@@ -14,4 +14,6 @@ pub mod surface;
 #[cfg(test)]
 mod reference;
 #[cfg(test)]
+mod table72;
+#[cfg(test)]
 mod tests;
