@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use troupe_sims::report::write_run;
 use troupe_sims::scenario::Scenario;
+use troupe_sims::study::{Study, run_variants, write_study};
 use troupe_sims::team::Team;
 
 /// troupe: teams of robots that explore and map unknown places over weak links.
@@ -24,6 +25,26 @@ enum Command {
     /// Run a team of simulated robots in one process (sim time, deterministic) and
     /// write a report to `OUT/<scenario name>/`.
     Run(RunArgs),
+    /// Run a study: every combination of the study's levels under every seed, in
+    /// parallel; writes `OUT/<study>/results.csv` (one row per run), `aggregate.csv`
+    /// (means and 95% intervals over seeds), plots, and each run's report under
+    /// `OUT/<study>/runs/`.
+    Sweep(SweepArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct SweepArgs {
+    /// Study file (TOML), e.g. `sims/studies/link_constraint.toml`.
+    study: PathBuf,
+    /// Runs at once (default: the number of CPU cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Directory that receives the study directory.
+    #[arg(long, default_value = "runs")]
+    out: PathBuf,
+    /// List the runs and exit without running them.
+    #[arg(long)]
+    dry_run: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -62,6 +83,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),
+        Command::Sweep(args) => sweep(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -128,5 +150,61 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         s.collisions
     );
     println!("report: {}", dir.display());
+    Ok(())
+}
+
+fn sweep(args: SweepArgs) -> anyhow::Result<()> {
+    let study = Study::load(&args.study)?;
+    let variants = study.variants()?;
+    if args.dry_run {
+        for v in &variants {
+            println!("{}", v.name);
+        }
+        return Ok(());
+    }
+    let jobs = args.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    let root = args.out.join(&study.name);
+    let runs_dir = root.join("runs");
+    let total = variants.len();
+    eprintln!(
+        "{}: {total} runs ({} seeds), {jobs} at a time",
+        study.name,
+        study.seeds.len()
+    );
+    let started = std::time::Instant::now();
+    let mut finished = 0usize;
+    let mut write_errors = Vec::new();
+    let rows = run_variants(
+        &variants,
+        &study.coverage_levels,
+        jobs,
+        |variant, output, row| {
+            finished += 1;
+            if let Err(e) = write_run(&runs_dir, &variant.name, output) {
+                write_errors.push(format!("{}: {e}", variant.name));
+            }
+            eprintln!(
+                "[{finished}/{total}] {}: coverage {:.1}%, collisions {}, map bytes {}, {:.0} wall s",
+                variant.name,
+                100.0 * row.final_coverage,
+                row.collisions,
+                row.map_bytes_sent,
+                row.wall_s
+            );
+        },
+    )?;
+    if let Some(e) = write_errors.first() {
+        anyhow::bail!("writing a run report under {}: {e}", runs_dir.display());
+    }
+    let written = write_study(&root, &study, &rows)
+        .with_context(|| format!("writing the study outputs under {}", root.display()))?;
+    println!(
+        "{}: {total} runs in {:.0} wall s; outputs: {}",
+        study.name,
+        started.elapsed().as_secs_f64(),
+        written.join(", ")
+    );
     Ok(())
 }

@@ -10,7 +10,7 @@ use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 
 use crate::network::Positions;
-use troupe_actors::runtime::{Publication, Tap};
+use troupe_actors::runtime::{LINK_RX, Publication, Tap};
 
 use crate::camera::CameraParams;
 use crate::coverage::CoverageGrid;
@@ -54,6 +54,9 @@ pub struct RobotTruth {
     pub unsafe_plans: u64,
     /// The link's latest counters.
     pub link: Option<LinkStatus>,
+    /// Bytes the network delivered to this robot (all classes, fragments and acks
+    /// included).
+    pub received_bytes: u64,
 }
 
 /// Everything the monitor knows.
@@ -153,6 +156,10 @@ impl Tap for GroundTruthMonitor {
             truth
                 .coverage
                 .observe(&self.camera, &frame.pose, &image, self.pixel_stride);
+        } else if let Some(packet) = p.get(&LINK_RX) {
+            if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
+                robot.received_bytes += packet.bytes.len() as u64;
+            }
         } else if let Some(status) = p.get(&LINK_STATUS) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.link = Some(status.clone());

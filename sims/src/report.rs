@@ -8,6 +8,7 @@ use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
 
+use crate::plot::{Chart, Series, write_chart};
 use crate::team::{RunOutput, SeriesRow};
 
 /// Column names of `timeseries.csv`, in order.
@@ -23,6 +24,12 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "frames",
     "team_coverage",
     "team_explored_m3",
+    "nearest_robot_m",
+    "sent_bytes_odometry",
+    "sent_bytes_plan",
+    "sent_bytes_keyframe",
+    "sent_bytes_bulk",
+    "received_bytes",
 ];
 
 /// The time series as CSV text.
@@ -34,7 +41,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -45,7 +52,13 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.distance_m,
             r.frames,
             r.team_coverage,
-            r.team_explored_m3
+            r.team_explored_m3,
+            r.nearest_robot_m.map_or(String::new(), |d| d.to_string()),
+            r.sent_bytes[0],
+            r.sent_bytes[1],
+            r.sent_bytes[2],
+            r.sent_bytes[3],
+            r.received_bytes
         );
     }
     out
@@ -67,6 +80,9 @@ pub fn write_run(root: &Path, name: &str, output: &RunOutput) -> io::Result<Path
         staging.join("timeseries.csv"),
         timeseries_csv(&output.timeseries),
     )?;
+    for (stem, chart) in run_charts(&output.timeseries) {
+        write_chart(&chart, &staging, stem)?;
+    }
     if dir.exists() {
         fs::remove_dir_all(&dir)?;
     }
@@ -79,4 +95,102 @@ fn pretty_json<T: serde::Serialize>(value: &T) -> io::Result<String> {
     let mut s = serde_json::to_string_pretty(value).map_err(io::Error::other)?;
     s.push('\n');
     Ok(s)
+}
+
+/// The plots of a run, by file stem: coverage, link bytes per class and robot, speeds,
+/// distance to the nearest robot, and the trajectories seen from above.
+#[must_use]
+pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
+    let robots = rows.iter().map(|r| r.robot + 1).max().unwrap_or(0);
+    let per_robot = |label: &dyn Fn(usize) -> String,
+                     f: &dyn Fn(&SeriesRow) -> Option<(f64, f64)>| {
+        (0..robots)
+            .map(|i| Series {
+                label: label(i),
+                points: rows.iter().filter(|r| r.robot == i).filter_map(f).collect(),
+                band: Vec::new(),
+            })
+            .collect::<Vec<_>>()
+    };
+    let robot_name = |i: usize| format!("robot{i}");
+    let coverage = Chart {
+        title: "Team coverage of the free volume".into(),
+        x_label: "time (s)".into(),
+        y_label: "coverage (%)".into(),
+        series: vec![Series {
+            label: "team".into(),
+            points: rows
+                .iter()
+                .filter(|r| r.robot == 0)
+                .map(|r| (r.time_s, 100.0 * r.team_coverage))
+                .collect(),
+            band: Vec::new(),
+        }],
+    };
+    let classes = ["odometry", "plans", "keyframes", "bulk"];
+    let mut bytes = Vec::new();
+    for i in 0..robots {
+        for (c, class) in classes.iter().enumerate() {
+            let points: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.robot == i)
+                .map(|r| (r.time_s, r.sent_bytes[c] as f64 / 1e3))
+                .collect();
+            if points.iter().any(|p| p.1 > 0.0) {
+                bytes.push(Series {
+                    label: format!("robot{i} sent {class}"),
+                    points,
+                    band: Vec::new(),
+                });
+            }
+        }
+        bytes.push(Series {
+            label: format!("robot{i} received"),
+            points: rows
+                .iter()
+                .filter(|r| r.robot == i)
+                .map(|r| (r.time_s, r.received_bytes as f64 / 1e3))
+                .collect(),
+            band: Vec::new(),
+        });
+    }
+    vec![
+        ("coverage", coverage),
+        (
+            "link_bytes",
+            Chart {
+                title: "Link bytes, cumulative".into(),
+                x_label: "time (s)".into(),
+                y_label: "kB".into(),
+                series: bytes,
+            },
+        ),
+        (
+            "speed",
+            Chart {
+                title: "Speed".into(),
+                x_label: "time (s)".into(),
+                y_label: "speed (m/s)".into(),
+                series: per_robot(&robot_name, &|r| Some((r.time_s, r.speed_mps))),
+            },
+        ),
+        (
+            "nearest_robot",
+            Chart {
+                title: "Distance to the nearest robot".into(),
+                x_label: "time (s)".into(),
+                y_label: "distance (m)".into(),
+                series: per_robot(&robot_name, &|r| Some((r.time_s, r.nearest_robot_m?))),
+            },
+        ),
+        (
+            "trajectories",
+            Chart {
+                title: "Trajectories (top view)".into(),
+                x_label: "x (m)".into(),
+                y_label: "y (m)".into(),
+                series: per_robot(&robot_name, &|r| Some((r.x_m, r.y_m))),
+            },
+        ),
+    ]
 }

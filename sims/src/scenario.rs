@@ -12,30 +12,7 @@ use troupe_robot::RobotConfig;
 
 use crate::camera::CameraParams;
 use crate::vehicle::VehicleConfig;
-use crate::world::CaveParams;
-
-/// The world to explore.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WorldConfig {
-    /// World generator; only `"cave"` for now.
-    pub kind: String,
-    /// Seed of the world generator (separate from the run seed, so that one cave can
-    /// be explored under many run seeds).
-    pub seed: u64,
-    /// Cave generator parameters.
-    pub cave: CaveParams,
-}
-
-impl Default for WorldConfig {
-    fn default() -> Self {
-        WorldConfig {
-            kind: "cave".into(),
-            seed: 7,
-            cave: CaveParams::default(),
-        }
-    }
-}
+pub use crate::world::{WorldConfig, WorldKind};
 
 /// Ground-truth metrics.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -221,16 +198,9 @@ impl Scenario {
                 format!("must be between 1 and 64, got {}", self.robots),
             ));
         }
-        if self.world.kind != "cave" {
-            return Err(invalid(
-                "world.kind",
-                format!("must be \"cave\", got {:?}", self.world.kind),
-            ));
-        }
         self.world
-            .cave
             .validate()
-            .map_err(|reason| invalid("world.cave", reason))?;
+            .map_err(|(table, reason)| invalid(&format!("world.{table}"), reason))?;
         self.camera
             .validate()
             .map_err(|reason| invalid("camera", reason))?;

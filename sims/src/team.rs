@@ -12,6 +12,7 @@ use troupe_actors::runtime::{
     Time, TopicStats,
 };
 use troupe_comms::simnet::NetStats;
+use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
 use crate::faults::PanicOnce;
@@ -20,7 +21,7 @@ use crate::network::ScenarioNetwork;
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::{SimCameraSource, intrinsics_of};
 use crate::vehicle::{SimVehicle, new_body};
-use crate::world::{CaveWorld, World};
+use crate::world::{Site, World};
 
 /// Seconds between the departures of consecutive robots.
 pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
@@ -28,7 +29,7 @@ pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
 /// A team ready to run.
 pub struct Team {
     scenario: Scenario,
-    world: Arc<CaveWorld>,
+    world: Arc<dyn Site>,
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
     network_stats: Arc<Mutex<NetStats>>,
@@ -69,6 +70,12 @@ pub struct SeriesRow {
     pub team_coverage: f64,
     /// Team explored volume, m³.
     pub team_explored_m3: f64,
+    /// Distance to the nearest other robot, metres (empty with one robot).
+    pub nearest_robot_m: Option<f64>,
+    /// Link bytes sent so far per class: odometry, plans, keyframes, bulk.
+    pub sent_bytes: [u64; 4],
+    /// Link bytes received so far.
+    pub received_bytes: u64,
 }
 
 /// Counters of one actor.
@@ -141,13 +148,14 @@ pub struct Summary {
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct WorldSummary {
     /// Generator.
-    pub kind: String,
+    pub kind: crate::world::WorldKind,
     /// Generator seed.
     pub seed: u64,
     /// Free volume (coverage denominator), m³.
     pub free_volume_m3: f64,
-    /// Length of the tunnel centre lines, metres.
-    pub tunnel_length_m: f64,
+    /// Length scale of the world: all tunnel centre lines of a cave, one robot's
+    /// waypoint route elsewhere, metres.
+    pub route_length_m: f64,
     /// Coverage cell edge, metres.
     pub coverage_cell_m: f64,
 }
@@ -201,16 +209,13 @@ impl Team {
         scenario: &Scenario,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
-        let world = Arc::new(CaveWorld::generate(
-            &scenario.world.cave,
-            scenario.world.seed,
-        ));
+        let world = scenario.world.build();
         let shared_world: Arc<dyn World> = world.clone();
         let count = scenario.robots as usize;
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
             let start = world.start_position(i, count);
-            let route = world.centreline_route(i, count);
+            let route = world.route(i, count);
             let heading = route
                 .iter()
                 .find(|p| (p.xy() - start.xy()).norm() > 0.1)
@@ -315,6 +320,15 @@ impl Team {
             over_time.push([t, coverage]);
             for (i, r) in truth.robots.iter().enumerate() {
                 let p = r.position.unwrap_or_else(Point3::origin);
+                let nearest_robot_m = truth
+                    .robots
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .filter_map(|(_, o)| Some((o.position? - r.position?).norm()))
+                    .reduce(f64::min);
+                let sent_bytes =
+                    Class::ALL.map(|c| r.link.as_ref().map_or(0, |l| l.shaper.class(c).sent_bytes));
                 timeseries.push(SeriesRow {
                     time_s: t,
                     robot: i,
@@ -327,6 +341,9 @@ impl Team {
                     frames: r.frames,
                     team_coverage: coverage,
                     team_explored_m3: truth.coverage.explored_volume_m3(),
+                    nearest_robot_m,
+                    sent_bytes,
+                    received_bytes: r.received_bytes,
                 });
             }
             drop(truth);
@@ -342,7 +359,7 @@ impl Team {
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         let summary = summarise(
             &self.scenario,
-            &self.world,
+            self.world.as_ref(),
             &truth,
             &reports,
             over_time,
@@ -396,7 +413,7 @@ fn inject_panic(
 
 fn summarise(
     scenario: &Scenario,
-    world: &CaveWorld,
+    world: &dyn Site,
     truth: &Truth,
     reports: &[RobotReport],
     over_time: Vec<[f64; 2]>,
@@ -441,10 +458,10 @@ fn summarise(
         duration_s: scenario.duration_s,
         robots: reports.len(),
         world: WorldSummary {
-            kind: scenario.world.kind.clone(),
+            kind: scenario.world.kind,
             seed: scenario.world.seed,
             free_volume_m3: truth.coverage.free_volume_m3(),
-            tunnel_length_m: world.graph().total_length_m(),
+            route_length_m: world.route_length_m(),
             coverage_cell_m: scenario.metrics.coverage_cell_m,
         },
         coverage: CoverageSummary {

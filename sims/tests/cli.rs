@@ -83,3 +83,57 @@ fn a_short_run_writes_the_report() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("coverage"), "{stdout}");
 }
+
+#[test]
+fn a_sweep_writes_one_row_per_run_aggregates_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("base.toml"),
+        "robots = 1\n[world]\nkind = \"window\"\n[robot]\nradius_m = 0.2\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("study.toml"),
+        r#"name = "tiny"
+scenario = "base.toml"
+seeds = [1, 2]
+duration_s = 3.0
+[[axes]]
+key = "robot.speed_mps"
+values = [0.5, 1.0]
+"#,
+    )
+    .unwrap();
+    let out = troupe(
+        &["sweep", "study.toml", "--jobs", "2", "--out", "runs"],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let root = dir.path().join("runs/tiny");
+    let results = std::fs::read_to_string(root.join("results.csv")).unwrap();
+    let lines: Vec<&str> = results.lines().collect();
+    assert_eq!(lines.len(), 5, "{results}");
+    assert!(lines[0].starts_with("run,seed,robot.speed_mps,final_coverage"));
+    // Runs come back in study order whatever order they finished in.
+    assert!(lines[1].starts_with("tiny-0.5-s1,1,0.5,"), "{}", lines[1]);
+    assert!(lines[4].starts_with("tiny-1.0-s2,2,1.0,"), "{}", lines[4]);
+    let aggregate = std::fs::read_to_string(root.join("aggregate.csv")).unwrap();
+    assert_eq!(aggregate.lines().count(), 3, "{aggregate}");
+    for file in [
+        "coverage.svg",
+        "coverage.png",
+        "runs/tiny-0.5-s1/summary.json",
+    ] {
+        assert!(root.join(file).exists(), "{file} missing");
+    }
+    // A bad study is one clear error and writes nothing.
+    std::fs::write(dir.path().join("bad.toml"), "name = \"x\"\nseeds = []\n").unwrap();
+    let out = troupe(&["sweep", "bad.toml", "--out", "bad_runs"], dir.path());
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("seeds"));
+    assert!(!dir.path().join("bad_runs").exists());
+}

@@ -6,16 +6,27 @@
 //! its free space ([`World::bounds`]). The camera sphere-traces it and the coverage metric
 //! samples it; robots never see it directly.
 //!
-//! Implementations: [`CaveWorld`] (procedural tunnel network from a seed) and [`BoxRoom`]
-//! (one analytic box, for tests).
+//! A [`Site`] is a world robots are put into: it also says where they start and which
+//! waypoint route each follows.
+//!
+//! Implementations: [`CaveWorld`] (procedural tunnel network from a seed), [`Warehouse`]
+//! (rows of shelves, thesis §4.2.2), [`OpeningScene`] (the window and door scenes of
+//! §5.2) and [`BoxRoom`] (one analytic box, for tests). [`WorldConfig`] picks one.
 
 mod box_room;
 pub mod cave;
+mod config;
 pub mod noise;
+pub mod scenes;
+pub mod solids;
+pub mod warehouse;
 
 pub use box_room::BoxRoom;
 pub use cave::{CaveParams, CaveWorld};
+pub use config::{WorldConfig, WorldKind};
+pub use scenes::{DoorParams, OpeningScene, WindowParams};
 pub use troupe_actors::geometry::Aabb;
+pub use warehouse::{Warehouse, WarehouseParams};
 
 use nalgebra::{Point3, Vector3};
 
@@ -59,5 +70,33 @@ pub trait World: Send + Sync {
         let d = |axis: Vector3<f64>| self.sdf_m(&(p + axis * h)) - self.sdf_m(&(p - axis * h));
         let g = Vector3::new(d(Vector3::x()), d(Vector3::y()), d(Vector3::z()));
         g.try_normalize(1e-12).unwrap_or_else(Vector3::z)
+    }
+}
+
+/// A world with places for robots: start positions and waypoint routes.
+pub trait Site: World {
+    /// Start position of robot `robot_index` of `robot_count`, in free space.
+    fn start_position(&self, robot_index: usize, robot_count: usize) -> Point3<f64>;
+
+    /// Waypoint route of robot `robot_index` of `robot_count` (for route-following
+    /// behaviours); it starts at [`Site::start_position`] and keeps clear of surfaces.
+    fn route(&self, robot_index: usize, robot_count: usize) -> Vec<Point3<f64>>;
+
+    /// A length scale for reports: the tunnel centre lines of a cave, the route of a
+    /// single robot elsewhere, metres.
+    fn route_length_m(&self) -> f64;
+}
+
+impl Site for CaveWorld {
+    fn start_position(&self, robot_index: usize, robot_count: usize) -> Point3<f64> {
+        CaveWorld::start_position(self, robot_index, robot_count)
+    }
+
+    fn route(&self, robot_index: usize, robot_count: usize) -> Vec<Point3<f64>> {
+        self.centreline_route(robot_index, robot_count)
+    }
+
+    fn route_length_m(&self) -> f64 {
+        self.graph().total_length_m()
     }
 }

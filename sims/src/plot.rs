@@ -1,0 +1,192 @@
+//! Line charts for reports, written as both SVG and PNG (`plotters`, with a small
+//! bundled font so that no system font is needed).
+
+use std::io;
+use std::path::Path;
+use std::sync::OnceLock;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// DejaVu Sans reduced to the characters plot labels use (licence in
+/// `sims/assets/DejaVuSans-LICENSE.txt`).
+const FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
+const FAMILY: &str = "sans-serif";
+const SIZE_PX: (u32, u32) = (900, 560);
+
+/// One line, optionally with a shaded band (for example a 95% confidence interval).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Series {
+    /// Legend entry.
+    pub label: String,
+    /// The line's points `(x, y)`; non-finite points are skipped.
+    pub points: Vec<(f64, f64)>,
+    /// Band around the line as `(x, low, high)`; empty for none.
+    pub band: Vec<(f64, f64, f64)>,
+}
+
+/// A chart: title, axis labels and lines.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Chart {
+    /// Caption.
+    pub title: String,
+    /// Horizontal axis label (with unit).
+    pub x_label: String,
+    /// Vertical axis label (with unit).
+    pub y_label: String,
+    /// The lines.
+    pub series: Vec<Series>,
+}
+
+impl Chart {
+    /// The data range, padded; `[0, 1]` on an axis with no finite data.
+    fn ranges(&self) -> ((f64, f64), (f64, f64)) {
+        let mut x = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut y = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut add = |px: f64, py: f64| {
+            if px.is_finite() && py.is_finite() {
+                x = (x.0.min(px), x.1.max(px));
+                y = (y.0.min(py), y.1.max(py));
+            }
+        };
+        for s in &self.series {
+            s.points.iter().for_each(|&(px, py)| add(px, py));
+            for &(px, lo, hi) in &s.band {
+                add(px, lo);
+                add(px, hi);
+            }
+        }
+        let pad = |(lo, hi): (f64, f64)| {
+            if !(lo.is_finite() && hi.is_finite()) {
+                (0.0, 1.0)
+            } else if hi - lo < 1e-12 {
+                (lo - 0.5, hi + 0.5)
+            } else {
+                (lo, hi + 0.02 * (hi - lo))
+            }
+        };
+        (pad(x), pad(y))
+    }
+}
+
+fn font_ready() -> io::Result<()> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err(io::Error::other(
+            "the bundled plot font could not be loaded",
+        ))
+    }
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, chart: &Chart) -> io::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| io::Error::other(e.to_string());
+    root.fill(&WHITE).map_err(err)?;
+    let ((x0, x1), (y0, y1)) = chart.ranges();
+    let mut c = ChartBuilder::on(root)
+        .caption(&chart.title, (FAMILY, 22))
+        .margin(14)
+        .x_label_area_size(44)
+        .y_label_area_size(76)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(err)?;
+    c.configure_mesh()
+        .x_desc(chart.x_label.as_str())
+        .y_desc(chart.y_label.as_str())
+        .label_style((FAMILY, 14))
+        .axis_desc_style((FAMILY, 15))
+        .draw()
+        .map_err(err)?;
+    for (i, s) in chart.series.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let band: Vec<(f64, f64, f64)> = s
+            .band
+            .iter()
+            .copied()
+            .filter(|(x, lo, hi)| x.is_finite() && lo.is_finite() && hi.is_finite())
+            .collect();
+        if band.len() >= 2 {
+            let outline: Vec<(f64, f64)> = band
+                .iter()
+                .map(|&(x, _, hi)| (x, hi))
+                .chain(band.iter().rev().map(|&(x, lo, _)| (x, lo)))
+                .collect();
+            c.draw_series(std::iter::once(Polygon::new(
+                outline,
+                color.mix(0.18).filled(),
+            )))
+            .map_err(err)?;
+        }
+        let points: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect();
+        c.draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(err)?
+            .label(s.label.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    if chart.series.iter().any(|s| !s.label.is_empty()) {
+        c.configure_series_labels()
+            .label_font((FAMILY, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+/// Writes `dir/<stem>.svg` and `dir/<stem>.png`.
+///
+/// # Errors
+///
+/// Any I/O or drawing error.
+pub fn write_chart(chart: &Chart, dir: &Path, stem: &str) -> io::Result<()> {
+    font_ready()?;
+    let svg = dir.join(format!("{stem}.svg"));
+    let png = dir.join(format!("{stem}.png"));
+    draw(&SVGBackend::new(&svg, SIZE_PX).into_drawing_area(), chart)?;
+    draw(
+        &BitMapBackend::new(&png, SIZE_PX).into_drawing_area(),
+        chart,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn charts_are_written_as_svg_and_png() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let chart = Chart {
+            title: "coverage".into(),
+            x_label: "time (s)".into(),
+            y_label: "coverage (%)".into(),
+            series: vec![Series {
+                label: "gmm".into(),
+                points: vec![(0.0, 0.0), (1.0, 10.0), (2.0, f64::NAN), (3.0, 30.0)],
+                band: vec![(0.0, 0.0, 0.0), (1.0, 8.0, 12.0), (3.0, 25.0, 35.0)],
+            }],
+        };
+        write_chart(&chart, dir.path(), "c").expect("chart written");
+        let svg = std::fs::read_to_string(dir.path().join("c.svg")).expect("svg");
+        assert!(svg.contains("coverage") && svg.contains("gmm"));
+        let png = std::fs::read(dir.path().join("c.png")).expect("png");
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        // An empty chart still draws its axes.
+        write_chart(&Chart::default(), dir.path(), "empty").expect("empty chart written");
+    }
+}

@@ -1,0 +1,823 @@
+//! Studies: a grid of scenario variants × seeds, run in parallel, one CSV row per run
+//! and aggregates with 95% confidence intervals (`troupe sweep STUDY.toml`).
+//!
+//! A study file names a base scenario and its axes. Each axis has levels; a level
+//! overrides keys of the base scenario (dotted keys, as in the scenario file) and may
+//! remove keys. Every combination of levels runs under every seed:
+//!
+//! ```toml
+//! name = "link_constraint"
+//! scenario = "../scenarios/link_constraint_base.toml"  # relative to this file
+//! seeds = [1, 2, 3]
+//!
+//! [[axes]]                     # shorthand: one key, several values
+//! key = "robot.speed_mps"
+//! values = [1.0, 1.5]
+//!
+//! [[axes]]                     # full form: labelled levels with several keys each
+//! name = "map_sharing"
+//! [[axes.levels]]
+//! label = "gmm"
+//! set = { "robot.mapper.enabled" = true }
+//! [[axes.levels]]
+//! label = "none"
+//! unset = ["robot.mapper"]
+//! ```
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use serde::Deserialize;
+use toml::{Table, Value};
+use troupe_comms::wire::Class;
+
+use crate::plot::{Chart, Series, write_chart};
+use crate::scenario::{Scenario, ScenarioError};
+use crate::team::{RunOutput, Summary, Team};
+
+/// One level of an axis.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Level {
+    /// Short name used in run names and result columns.
+    pub label: String,
+    /// Keys to set (dotted keys or nested tables), merged into the base scenario.
+    #[serde(default)]
+    pub set: Table,
+    /// Dotted keys to remove from the base scenario (they take their defaults).
+    #[serde(default)]
+    pub unset: Vec<String>,
+}
+
+/// An axis as written in the file: either `key` + `values` (+ optional `labels`), or
+/// `name` + `levels`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AxisFile {
+    name: Option<String>,
+    key: Option<String>,
+    values: Option<Vec<Value>>,
+    labels: Option<Vec<String>>,
+    levels: Option<Vec<Level>>,
+}
+
+/// A study file as written.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StudyFile {
+    name: String,
+    scenario: Option<PathBuf>,
+    seeds: Vec<u64>,
+    duration_s: Option<f64>,
+    #[serde(default = "default_coverage_levels")]
+    coverage_levels: Vec<f64>,
+    #[serde(default)]
+    axes: Vec<AxisFile>,
+}
+
+fn default_coverage_levels() -> Vec<f64> {
+    vec![0.5, 0.85]
+}
+
+/// A named axis with its levels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Axis {
+    /// Column name in the results.
+    pub name: String,
+    /// Levels, in file order.
+    pub levels: Vec<Level>,
+}
+
+/// A parsed, checked study.
+#[derive(Clone, Debug)]
+pub struct Study {
+    /// Name; outputs go to `OUT/<name>/`.
+    pub name: String,
+    /// Where it was read from (for messages).
+    pub path: PathBuf,
+    /// The base scenario as a TOML table.
+    pub base: Table,
+    /// Run seeds.
+    pub seeds: Vec<u64>,
+    /// Coverage fractions whose first-reach times are reported.
+    pub coverage_levels: Vec<f64>,
+    /// Axes.
+    pub axes: Vec<Axis>,
+}
+
+/// One run of a study: a combination of levels and a seed.
+#[derive(Clone, Debug)]
+pub struct Variant {
+    /// Run name (`<study>-<label>-…-s<seed>`).
+    pub name: String,
+    /// Level label per axis.
+    pub labels: Vec<String>,
+    /// Seed.
+    pub seed: u64,
+    /// The scenario to run.
+    pub scenario: Scenario,
+}
+
+/// Why a study could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    /// The file could not be read.
+    #[error("study file `{path}`: {source}")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The file is not a valid study.
+    #[error("study file `{path}`: {message}")]
+    Invalid {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The base scenario or a variant of it is invalid.
+    #[error("study file `{path}`, run {run}: {source}")]
+    Scenario {
+        /// Study file.
+        path: PathBuf,
+        /// The variant.
+        run: String,
+        /// The scenario error.
+        source: ScenarioError,
+    },
+}
+
+impl Study {
+    /// Reads a study file and its base scenario, and checks every variant.
+    pub fn load(path: &Path) -> Result<Study, StudyError> {
+        let read = |p: &Path| {
+            std::fs::read_to_string(p).map_err(|source| StudyError::Read {
+                path: p.to_owned(),
+                source,
+            })
+        };
+        let invalid = |message: String| StudyError::Invalid {
+            path: path.to_owned(),
+            message,
+        };
+        let text = read(path)?;
+        let deserializer = toml::Deserializer::parse(&text).map_err(|e| invalid(e.to_string()))?;
+        let file: StudyFile = serde_path_to_error::deserialize(deserializer)
+            .map_err(|e| invalid(format!("key `{}`: {}", e.path(), e.inner())))?;
+        let base = match &file.scenario {
+            Some(relative) => {
+                let scenario_path = path.parent().unwrap_or(Path::new(".")).join(relative);
+                let base_text = read(&scenario_path)?;
+                base_text.parse::<Table>().map_err(|e| {
+                    invalid(format!(
+                        "scenario `{}` is not valid TOML: {e}",
+                        scenario_path.display()
+                    ))
+                })?
+            }
+            None => Table::new(),
+        };
+        let mut base = base;
+        if let Some(d) = file.duration_s {
+            base.insert("duration_s".into(), Value::Float(d));
+        }
+        let study = Study {
+            name: file.name.clone(),
+            path: path.to_owned(),
+            base,
+            seeds: file.seeds.clone(),
+            coverage_levels: file.coverage_levels.clone(),
+            axes: file
+                .axes
+                .into_iter()
+                .enumerate()
+                .map(|(i, a)| axis_from_file(a).map_err(|m| invalid(format!("axes[{i}]: {m}"))))
+                .collect::<Result<_, _>>()?,
+        };
+        study.check().map_err(invalid)?;
+        // Every variant must be a valid scenario before anything runs.
+        study.variants()?;
+        Ok(study)
+    }
+
+    fn check(&self) -> Result<(), String> {
+        let name_ok = |s: &str| {
+            !s.is_empty()
+                && !s.starts_with('.')
+                && s.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        };
+        if !name_ok(&self.name) {
+            return Err(format!(
+                "key `name` must use only letters, digits, `-`, `_`, `.`; got {:?}",
+                self.name
+            ));
+        }
+        if self.seeds.is_empty() {
+            return Err("key `seeds` must list at least one seed".into());
+        }
+        if let Some(l) = self
+            .coverage_levels
+            .iter()
+            .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 1.0))
+        {
+            return Err(format!(
+                "key `coverage_levels` must hold fractions in (0, 1], got {l}"
+            ));
+        }
+        for axis in &self.axes {
+            for level in &axis.levels {
+                if !name_ok(&level.label) {
+                    return Err(format!(
+                        "axis `{}`: level label {:?} must use only letters, digits, `-`, `_`, `.`",
+                        axis.name, level.label
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Every combination of levels under every seed, in a fixed order.
+    pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
+        let mut combos: Vec<Vec<&Level>> = vec![Vec::new()];
+        for axis in &self.axes {
+            combos = combos
+                .into_iter()
+                .flat_map(|c| {
+                    axis.levels.iter().map(move |l| {
+                        let mut c = c.clone();
+                        c.push(l);
+                        c
+                    })
+                })
+                .collect();
+        }
+        let mut variants = Vec::new();
+        for combo in &combos {
+            for &seed in &self.seeds {
+                let labels: Vec<String> = combo.iter().map(|l| l.label.clone()).collect();
+                let mut name = self.name.clone();
+                for l in &labels {
+                    name.push('-');
+                    name.push_str(l);
+                }
+                let _ = write!(name, "-s{seed}");
+                let mut table = self.base.clone();
+                for level in combo {
+                    for key in &level.unset {
+                        unset_dotted(&mut table, key);
+                    }
+                    merge_dotted(&mut table, &level.set);
+                }
+                table.insert("seed".into(), Value::Integer(seed as i64));
+                table.insert("name".into(), Value::String(name.clone()));
+                let text = toml::to_string(&table).map_err(|e| StudyError::Invalid {
+                    path: self.path.clone(),
+                    message: format!("run {name}: {e}"),
+                })?;
+                let scenario =
+                    Scenario::from_toml(&text, &PathBuf::from(format!("<study run {name}>")))
+                        .map_err(|source| StudyError::Scenario {
+                            path: self.path.clone(),
+                            run: name.clone(),
+                            source,
+                        })?;
+                variants.push(Variant {
+                    name,
+                    labels,
+                    seed,
+                    scenario,
+                });
+            }
+        }
+        Ok(variants)
+    }
+}
+
+fn axis_from_file(a: AxisFile) -> Result<Axis, String> {
+    match (a.key, a.values, a.levels) {
+        (Some(key), Some(values), None) => {
+            if values.is_empty() {
+                return Err("`values` is empty".into());
+            }
+            let labels = match a.labels {
+                Some(l) if l.len() == values.len() => l,
+                Some(l) => {
+                    return Err(format!("{} labels for {} values", l.len(), values.len()));
+                }
+                None => values.iter().map(value_label).collect(),
+            };
+            Ok(Axis {
+                name: a.name.unwrap_or_else(|| key.clone()),
+                levels: values
+                    .into_iter()
+                    .zip(labels)
+                    .map(|(v, label)| {
+                        let mut set = Table::new();
+                        set.insert(key.clone(), v);
+                        Level {
+                            label,
+                            set,
+                            unset: Vec::new(),
+                        }
+                    })
+                    .collect(),
+            })
+        }
+        (None, None, Some(levels)) => {
+            let name = a
+                .name
+                .ok_or("an axis with `levels` needs a `name`".to_string())?;
+            if levels.is_empty() {
+                return Err("`levels` is empty".into());
+            }
+            Ok(Axis { name, levels })
+        }
+        _ => Err("give either `key` and `values`, or `name` and `levels`".into()),
+    }
+}
+
+fn value_label(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        other => other.to_string().replace(['"', ' '], ""),
+    }
+}
+
+/// Sets `set`'s entries into `table`: dotted keys address nested tables, nested tables
+/// merge recursively.
+fn merge_dotted(table: &mut Table, set: &Table) {
+    for (key, value) in set {
+        let mut parts: Vec<&str> = key.split('.').collect();
+        let Some(last) = parts.pop() else { continue };
+        let mut target = &mut *table;
+        for part in parts {
+            let entry = target
+                .entry(part.to_string())
+                .or_insert_with(|| Value::Table(Table::new()));
+            if !entry.is_table() {
+                *entry = Value::Table(Table::new());
+            }
+            let Value::Table(t) = entry else {
+                unreachable!("replaced by a table above")
+            };
+            target = t;
+        }
+        match (target.get_mut(last), value) {
+            (Some(Value::Table(existing)), Value::Table(new)) => merge_dotted(existing, new),
+            _ => {
+                target.insert(last.to_string(), value.clone());
+            }
+        }
+    }
+}
+
+fn unset_dotted(table: &mut Table, key: &str) {
+    let mut parts: Vec<&str> = key.split('.').collect();
+    let Some(last) = parts.pop() else { return };
+    let mut target = table;
+    for part in parts {
+        match target.get_mut(part) {
+            Some(Value::Table(t)) => target = t,
+            _ => return,
+        }
+    }
+    target.remove(last);
+}
+
+/// The numbers of one run that a study compares.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunRow {
+    /// Run name.
+    pub run: String,
+    /// Level label per axis.
+    pub labels: Vec<String>,
+    /// Seed.
+    pub seed: u64,
+    /// Final coverage fraction.
+    pub final_coverage: f64,
+    /// First time each coverage level was reached, seconds (`None`: never).
+    pub time_to_coverage_s: Vec<Option<f64>>,
+    /// Ground-truth collisions with the world.
+    pub collisions: u64,
+    /// Robot-robot contact episodes.
+    pub robot_contacts: u64,
+    /// Smallest distance between two robot centres, metres.
+    pub min_inter_robot_distance_m: Option<f64>,
+    /// Committed plans that entered unsafe space.
+    pub unsafe_plans: u64,
+    /// Distance flown by all robots, metres.
+    pub distance_m: f64,
+    /// Map bytes sent over the link (keyframe and bulk classes), all robots.
+    pub map_bytes_sent: u64,
+    /// All bytes sent over the link, all robots.
+    pub link_bytes_sent: u64,
+    /// Coverage over time, `[time_s, fraction]`.
+    pub coverage_over_time: Vec<[f64; 2]>,
+    /// Wall seconds.
+    pub wall_s: f64,
+}
+
+impl RunRow {
+    /// Extracts the row from a run's output.
+    #[must_use]
+    pub fn from_output(variant: &Variant, output: &RunOutput, levels: &[f64]) -> Self {
+        let s: &Summary = &output.summary;
+        let over_time = &s.coverage.over_time;
+        let link_bytes = |classes: &[Class]| -> u64 {
+            s.per_robot
+                .iter()
+                .filter_map(|r| r.truth.link.as_ref())
+                .map(|l| {
+                    classes
+                        .iter()
+                        .map(|&c| l.shaper.class(c).sent_bytes)
+                        .sum::<u64>()
+                })
+                .sum()
+        };
+        RunRow {
+            run: variant.name.clone(),
+            labels: variant.labels.clone(),
+            seed: variant.seed,
+            final_coverage: s.coverage.final_fraction,
+            time_to_coverage_s: levels
+                .iter()
+                .map(|&l| over_time.iter().find(|[_, c]| *c >= l).map(|[t, _]| *t))
+                .collect(),
+            collisions: s.collisions,
+            robot_contacts: s.robot_contacts,
+            min_inter_robot_distance_m: s.min_inter_robot_distance_m,
+            unsafe_plans: s.per_robot.iter().map(|r| r.truth.unsafe_plans).sum(),
+            distance_m: s.per_robot.iter().map(|r| r.truth.distance_m).sum(),
+            map_bytes_sent: link_bytes(&[Class::Keyframe, Class::Bulk]),
+            link_bytes_sent: link_bytes(&Class::ALL),
+            coverage_over_time: over_time.clone(),
+            wall_s: output.timing.wall_s,
+        }
+    }
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or(String::new(), |x| format!("{x}"))
+}
+
+/// `results.csv`: one row per run.
+#[must_use]
+pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
+    let mut header: Vec<String> = vec!["run".into(), "seed".into()];
+    header.extend(study.axes.iter().map(|a| a.name.clone()));
+    header.push("final_coverage".into());
+    header.extend(
+        study
+            .coverage_levels
+            .iter()
+            .map(|l| format!("time_to_{}pct_s", (l * 100.0).round())),
+    );
+    header.extend(
+        [
+            "collisions",
+            "robot_contacts",
+            "min_inter_robot_distance_m",
+            "unsafe_plans",
+            "distance_m",
+            "map_bytes_sent",
+            "link_bytes_sent",
+            "wall_s",
+        ]
+        .map(String::from),
+    );
+    let mut out = header.join(",");
+    out.push('\n');
+    for r in rows {
+        let mut cells = vec![r.run.clone(), r.seed.to_string()];
+        cells.extend(r.labels.iter().cloned());
+        cells.push(r.final_coverage.to_string());
+        cells.extend(r.time_to_coverage_s.iter().map(|t| opt(*t)));
+        cells.extend([
+            r.collisions.to_string(),
+            r.robot_contacts.to_string(),
+            opt(r.min_inter_robot_distance_m),
+            r.unsafe_plans.to_string(),
+            r.distance_m.to_string(),
+            r.map_bytes_sent.to_string(),
+            r.link_bytes_sent.to_string(),
+            format!("{:.3}", r.wall_s),
+        ]);
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Mean and 95% confidence half-width (Student t) of a sample.
+#[must_use]
+pub fn mean_ci95(values: &[f64]) -> (f64, f64) {
+    let n = values.len();
+    if n == 0 {
+        return (f64::NAN, f64::NAN);
+    }
+    let mean = values.iter().sum::<f64>() / n as f64;
+    if n == 1 {
+        return (mean, 0.0);
+    }
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    (mean, t_975(n - 1) * (var / n as f64).sqrt())
+}
+
+/// The 97.5% quantile of Student's t with `dof` degrees of freedom.
+fn t_975(dof: usize) -> f64 {
+    const TABLE: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
+    ];
+    TABLE.get(dof.max(1) - 1).copied().unwrap_or(1.96)
+}
+
+/// The runs of one combination of levels, grouped (file order).
+#[must_use]
+pub fn groups(rows: &[RunRow]) -> Vec<(Vec<String>, Vec<&RunRow>)> {
+    let mut order: Vec<Vec<String>> = Vec::new();
+    let mut by: BTreeMap<Vec<String>, Vec<&RunRow>> = BTreeMap::new();
+    for r in rows {
+        if !by.contains_key(&r.labels) {
+            order.push(r.labels.clone());
+        }
+        by.entry(r.labels.clone()).or_default().push(r);
+    }
+    order
+        .into_iter()
+        .map(|k| {
+            let v = by.remove(&k).unwrap_or_default();
+            (k, v)
+        })
+        .collect()
+}
+
+/// `aggregate.csv`: per combination of levels, means and 95% intervals over seeds.
+#[must_use]
+pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
+    let mut header: Vec<String> = study.axes.iter().map(|a| a.name.clone()).collect();
+    header.extend(
+        [
+            "runs",
+            "final_coverage_mean",
+            "final_coverage_ci95",
+            "map_bytes_sent_mean",
+            "map_bytes_sent_ci95",
+            "collisions_total",
+            "robot_contacts_total",
+        ]
+        .map(String::from),
+    );
+    for l in &study.coverage_levels {
+        let p = (l * 100.0).round();
+        header.push(format!("time_to_{p}pct_s_mean"));
+        header.push(format!("reached_{p}pct_runs"));
+    }
+    let mut out = header.join(",");
+    out.push('\n');
+    for (labels, group) in groups(rows) {
+        let mut cells = labels.clone();
+        let cov: Vec<f64> = group.iter().map(|r| r.final_coverage).collect();
+        let bytes: Vec<f64> = group.iter().map(|r| r.map_bytes_sent as f64).collect();
+        let (cm, cc) = mean_ci95(&cov);
+        let (bm, bc) = mean_ci95(&bytes);
+        cells.extend([
+            group.len().to_string(),
+            cm.to_string(),
+            cc.to_string(),
+            bm.to_string(),
+            bc.to_string(),
+            group.iter().map(|r| r.collisions).sum::<u64>().to_string(),
+            group
+                .iter()
+                .map(|r| r.robot_contacts)
+                .sum::<u64>()
+                .to_string(),
+        ]);
+        for i in 0..study.coverage_levels.len() {
+            let reached: Vec<f64> = group
+                .iter()
+                .filter_map(|r| r.time_to_coverage_s[i])
+                .collect();
+            let (m, _) = mean_ci95(&reached);
+            cells.push(if reached.is_empty() {
+                String::new()
+            } else {
+                m.to_string()
+            });
+            cells.push(reached.len().to_string());
+        }
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Runs every variant, `jobs` at a time; `done` is called after each run with its row
+/// (from a worker thread, in completion order). Rows come back in variant order.
+///
+/// # Errors
+///
+/// The first run that could not be assembled (checked variants assemble; this is for
+/// configurations that only fail when the world is built).
+pub fn run_variants(
+    variants: &[Variant],
+    levels: &[f64],
+    jobs: usize,
+    mut done: impl FnMut(&Variant, &RunOutput, &RunRow) + Send,
+) -> Result<Vec<RunRow>, troupe_robot::AssembleError> {
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<RunRow, troupe_robot::AssembleError>>>> =
+        Mutex::new(variants.iter().map(|_| None).collect());
+    let done = Mutex::new(&mut done);
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.clamp(1, variants.len().max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(variant) = variants.get(i) else {
+                        break;
+                    };
+                    let result = Team::new(&variant.scenario).map(|team| {
+                        let output = team.run(|_| {});
+                        let row = RunRow::from_output(variant, &output, levels);
+                        let mut done = done.lock().unwrap_or_else(|e| e.into_inner());
+                        (*done)(variant, &output, &row);
+                        row
+                    });
+                    results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(result);
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// Writes `results.csv` and `aggregate.csv` into `root` and returns the file names.
+///
+/// # Errors
+///
+/// Any I/O error.
+pub fn write_study(root: &Path, study: &Study, rows: &[RunRow]) -> std::io::Result<Vec<String>> {
+    std::fs::create_dir_all(root)?;
+    let files = [
+        ("results.csv", results_csv(study, rows)),
+        ("aggregate.csv", aggregate_csv(study, rows)),
+    ];
+    let mut written = Vec::new();
+    for (name, text) in files {
+        let path = root.join(name);
+        let partial = root.join(format!(".{name}.partial"));
+        std::fs::write(&partial, text)?;
+        std::fs::rename(&partial, &path)?;
+        written.push(path.display().to_string());
+    }
+    write_chart(&coverage_chart(study, rows), root, "coverage")?;
+    written.push(root.join("coverage.{svg,png}").display().to_string());
+    Ok(written)
+}
+
+/// Mean team coverage over time per combination of levels, with 95% bands over seeds.
+#[must_use]
+pub fn coverage_chart(study: &Study, rows: &[RunRow]) -> Chart {
+    let series = groups(rows)
+        .into_iter()
+        .map(|(labels, group)| {
+            let samples = group
+                .iter()
+                .map(|r| r.coverage_over_time.len())
+                .min()
+                .unwrap_or(0);
+            let mut points = Vec::with_capacity(samples);
+            let mut band = Vec::with_capacity(samples);
+            for k in 0..samples {
+                let t = group[0].coverage_over_time[k][0];
+                let values: Vec<f64> = group
+                    .iter()
+                    .map(|r| 100.0 * r.coverage_over_time[k][1])
+                    .collect();
+                let (mean, half) = mean_ci95(&values);
+                points.push((t, mean));
+                band.push((t, mean - half, mean + half));
+            }
+            Series {
+                label: if labels.is_empty() {
+                    study.name.clone()
+                } else {
+                    labels.join(" / ")
+                },
+                points,
+                band,
+            }
+        })
+        .collect();
+    Chart {
+        title: format!("{}: team coverage (mean, 95% band over seeds)", study.name),
+        x_label: "time (s)".into(),
+        y_label: "coverage (%)".into(),
+        series,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, text).expect("write test file");
+        p
+    }
+
+    #[test]
+    fn axes_expand_to_every_combination_under_every_seed() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        write(
+            dir.path(),
+            "base.toml",
+            "duration_s = 5.0\nrobots = 1\n[robot]\nspeed_mps = 0.5\n",
+        );
+        let path = write(
+            dir.path(),
+            "study.toml",
+            r#"
+name = "s"
+scenario = "base.toml"
+seeds = [1, 2]
+[[axes]]
+key = "robot.speed_mps"
+values = [1.0, 1.5]
+[[axes]]
+name = "robots"
+[[axes.levels]]
+label = "one"
+[[axes.levels]]
+label = "two"
+set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
+"#,
+        );
+        let study = Study::load(&path).expect("valid study");
+        let variants = study.variants().expect("variants");
+        assert_eq!(variants.len(), 8);
+        assert_eq!(variants[0].name, "s-1.0-one-s1");
+        assert_eq!(variants[7].name, "s-1.5-two-s2");
+        assert_eq!(variants[7].scenario.robots, 2);
+        assert_eq!(variants[7].scenario.robot.link.odometry_rate_hz, 5.0);
+        assert_eq!(variants[7].scenario.robot.speed_mps, 1.5);
+        assert_eq!(variants[0].scenario.robots, 1);
+        assert_eq!(variants[0].scenario.duration_s, 5.0);
+        assert_eq!(variants[1].scenario.seed, 2);
+    }
+
+    #[test]
+    fn bad_studies_name_the_problem() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let cases = [
+            ("name = \"s\"\nseeds = []\n", "seeds"),
+            ("name = \"s\"\nseeds = [1]\nbogus = 1\n", "bogus"),
+            (
+                "name = \"s\"\nseeds = [1]\n[[axes]]\nkey = \"robots\"\nvalues = [0]\n",
+                "robots",
+            ),
+            (
+                "name = \"s\"\nseeds = [1]\n[[axes]]\nkey = \"robots\"\n",
+                "either `key` and `values`",
+            ),
+            (
+                "name = \"s\"\nseeds = [1]\nscenario = \"missing.toml\"\n",
+                "missing.toml",
+            ),
+        ];
+        for (text, needle) in cases {
+            let path = write(dir.path(), "bad.toml", text);
+            let message = Study::load(&path).expect_err(text).to_string();
+            assert!(
+                message.contains(needle),
+                "{message:?} should mention {needle}"
+            );
+        }
+    }
+
+    #[test]
+    fn confidence_interval_matches_a_hand_computation() {
+        let (m, h) = mean_ci95(&[1.0, 2.0, 3.0]);
+        assert_eq!(m, 2.0);
+        // s = 1, t(2) = 4.303, h = 4.303 / sqrt(3).
+        assert!((h - 4.303 / 3f64.sqrt()).abs() < 1e-12);
+        assert_eq!(mean_ci95(&[5.0]), (5.0, 0.0));
+    }
+}

@@ -1,0 +1,82 @@
+//! The `[world]` table of a scenario: which world, from which seed, with which shape.
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use super::{
+    CaveParams, CaveWorld, DoorParams, OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
+};
+
+/// The kinds of world `troupe run` can build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WorldKind {
+    /// Procedural cave tunnels and chambers (`[world.cave]`).
+    Cave,
+    /// Warehouse with rows of shelves (`[world.warehouse]`, thesis §4.2.2).
+    Warehouse,
+    /// A wall with a window 10 m ahead (`[world.window]`, thesis §5.2.1).
+    Window,
+    /// A building with a door 12 m ahead (`[world.door]`, thesis §5.2).
+    Door,
+}
+
+/// The world to explore.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldConfig {
+    /// Which world.
+    pub kind: WorldKind,
+    /// Seed of the world generator (separate from the run seed, so that one world can
+    /// be explored under many run seeds).
+    pub seed: u64,
+    /// Cave generator parameters.
+    pub cave: CaveParams,
+    /// Warehouse parameters.
+    pub warehouse: WarehouseParams,
+    /// Window scene parameters.
+    pub window: WindowParams,
+    /// Door scene parameters.
+    pub door: DoorParams,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        WorldConfig {
+            kind: WorldKind::Cave,
+            seed: 7,
+            cave: CaveParams::default(),
+            warehouse: WarehouseParams::default(),
+            window: WindowParams::default(),
+            door: DoorParams::default(),
+        }
+    }
+}
+
+impl WorldConfig {
+    /// Checks the parameters of the selected world.
+    ///
+    /// # Errors
+    ///
+    /// `(key, reason)`: the table of the selected world and what is wrong in it.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        match self.kind {
+            WorldKind::Cave => self.cave.validate().map_err(|r| ("cave", r)),
+            WorldKind::Warehouse => self.warehouse.validate().map_err(|r| ("warehouse", r)),
+            WorldKind::Window => self.window.validate().map_err(|r| ("window", r)),
+            WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
+        }
+    }
+
+    /// Builds the selected world (validate first).
+    #[must_use]
+    pub fn build(&self) -> Arc<dyn Site> {
+        match self.kind {
+            WorldKind::Cave => Arc::new(CaveWorld::generate(&self.cave, self.seed)),
+            WorldKind::Warehouse => Arc::new(Warehouse::generate(&self.warehouse, self.seed)),
+            WorldKind::Window => Arc::new(OpeningScene::window(&self.window, self.seed)),
+            WorldKind::Door => Arc::new(OpeningScene::door(&self.door, self.seed)),
+        }
+    }
+}
