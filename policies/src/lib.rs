@@ -7,10 +7,15 @@
 //!   [`selection::RandomFeasible`] (the baseline) choose among the planner's
 //!   candidates.
 //!
+//! - [`priority::PriorityAvoidance`] — priority-based inter-robot avoidance (thesis
+//!   §8.2.3) for the collision actor: cylinders sampled along both plans, stale peers
+//!   as stopping envelopes.
+//!
 //! [`behaviour_by_name`] and [`selection_by_name`] are how the robot assembly turns
 //! config strings into policies.
 #![deny(missing_docs)]
 
+pub mod priority;
 pub mod route;
 pub mod selection;
 
