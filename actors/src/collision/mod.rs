@@ -1,5 +1,7 @@
 //! Continuous-space collision checks against Gaussian surface models (thesis §7).
 //!
+//! - [`CollisionActor`]: commits the first of a planning round's candidates that is
+//!   clear of the local grid's unsafe space and of higher-priority peers, or the stop.
 //! - [`body`]: the robot body ellipsoid from configuration or as the minimum-volume
 //!   enclosing ellipsoid of given points (Khachiyan), placed at a pose.
 //! - [`ellipsoid`]: ellipsoids, the pair distance of Proposition 1 (Eq. 7.4) and its
@@ -11,11 +13,17 @@
 //! - [`surface`]: a set of surface ellipsoids from a GMM with a spatial index: the
 //!   minimum distance (Eq. 7.6) and the blended collision probability (Eq. 7.10).
 
+mod actor;
 pub mod body;
 pub mod ellipsoid;
 pub mod peers;
 pub mod probability;
 pub mod surface;
+
+pub use actor::{
+    COLLISION_STATUS, CollisionActor, CollisionActorConfig, CollisionStatus, Rejection,
+    clear_of_unsafe_space,
+};
 
 #[cfg(test)]
 mod reference;
