@@ -5,7 +5,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    CaveParams, CaveWorld, DoorParams, OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
+    CaveParams, CaveWorld, DoorParams, OpenField, OpenFieldParams, OpeningScene, Site, Warehouse,
+    WarehouseParams, WindowParams,
 };
 
 /// The kinds of world `troupe run` can build.
@@ -20,6 +21,8 @@ pub enum WorldKind {
     Window,
     /// A building with a door 12 m ahead (`[world.door]`, thesis §5.2).
     Door,
+    /// Flat ground with a few boxes; routes cross at the centre (`[world.open_field]`).
+    OpenField,
 }
 
 /// The world to explore.
@@ -39,6 +42,8 @@ pub struct WorldConfig {
     pub window: WindowParams,
     /// Door scene parameters.
     pub door: DoorParams,
+    /// Open field parameters.
+    pub open_field: OpenFieldParams,
 }
 
 impl Default for WorldConfig {
@@ -50,6 +55,7 @@ impl Default for WorldConfig {
             warehouse: WarehouseParams::default(),
             window: WindowParams::default(),
             door: DoorParams::default(),
+            open_field: OpenFieldParams::default(),
         }
     }
 }
@@ -66,6 +72,7 @@ impl WorldConfig {
             WorldKind::Warehouse => self.warehouse.validate().map_err(|r| ("warehouse", r)),
             WorldKind::Window => self.window.validate().map_err(|r| ("window", r)),
             WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
+            WorldKind::OpenField => self.open_field.validate().map_err(|r| ("open_field", r)),
         }
     }
 
@@ -77,6 +84,7 @@ impl WorldConfig {
             WorldKind::Warehouse => Arc::new(Warehouse::generate(&self.warehouse, self.seed)),
             WorldKind::Window => Arc::new(OpeningScene::window(&self.window, self.seed)),
             WorldKind::Door => Arc::new(OpeningScene::door(&self.door, self.seed)),
+            WorldKind::OpenField => Arc::new(OpenField::generate(&self.open_field, self.seed)),
         }
     }
 }
