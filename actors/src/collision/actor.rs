@@ -295,3 +295,156 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    use nalgebra::Point3;
+
+    use super::*;
+    use crate::collision::peers::PeerConflict;
+    use crate::msgs::CandidatePlan;
+    use crate::runtime::{ActorSpec, Publication, RobotId, RobotSpec, SimExecutor, TimerId};
+    use crate::trajectory::Knot;
+
+    /// Rejects every trajectory that ends beyond `x_max` (as if a peer were there).
+    struct Wall {
+        x_max: f64,
+    }
+
+    impl PeerAvoidance for Wall {
+        fn priority(&self, _now: Time) -> u16 {
+            4
+        }
+        fn conflict(
+            &mut self,
+            _now: Time,
+            _me: RobotId,
+            _own: &Odometry,
+            candidate: &Trajectory,
+            _peers: &PeerTable,
+        ) -> Option<PeerConflict> {
+            let end = candidate.knots().last()?.position_m;
+            (end.x > self.x_max).then_some(PeerConflict {
+                peer: RobotId(9),
+                envelope: false,
+                at_s: 0.0,
+                separation_m: 0.0,
+            })
+        }
+    }
+
+    fn line(now: Time, to_x: f64) -> Trajectory {
+        Trajectory::new(vec![
+            Knot {
+                time: now,
+                position_m: Point3::new(0.0, 0.0, 1.0),
+                yaw_rad: 0.0,
+            },
+            Knot {
+                time: now + Duration::from_secs(2),
+                position_m: Point3::new(to_x, 0.0, 1.0),
+                yaw_rad: 0.0,
+            },
+        ])
+        .unwrap()
+    }
+
+    /// Publishes one round per second: candidates ending at x = 3, 2, 1.
+    struct Rounds(u64);
+
+    impl Actor for Rounds {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(0), Duration::from_secs(1));
+            Ok(())
+        }
+        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            self.0 += 1;
+            let now = ctx.now();
+            ctx.publish(
+                &PLAN_CANDIDATES,
+                PlanCandidates {
+                    round: self.0,
+                    stamp: now,
+                    candidates: [3.0, 2.0, 1.0]
+                        .iter()
+                        .map(|&x| CandidatePlan {
+                            trajectory: line(now, x),
+                            switch_at: now + Duration::from_secs(1),
+                            reward: x,
+                        })
+                        .collect(),
+                    stop: line(now, 0.0),
+                },
+            );
+            Ok(())
+        }
+    }
+
+    fn run(x_max: f64) -> (Vec<PlanDecision>, Vec<Plan>, Option<CollisionStatus>) {
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("rounds", || Rounds(0)))
+            .with(ActorSpec::new("collision", move || {
+                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max })
+            }));
+        let log = Arc::new(Mutex::new((Vec::new(), Vec::new(), None)));
+        let tap = log.clone();
+        let mut exec = SimExecutor::new(vec![robot], 1);
+        exec.add_tap(move |p: &Publication<'_>| {
+            let mut log = tap.lock().unwrap();
+            if let Some(d) = p.get(&PLAN_DECISION) {
+                log.0.push(d.clone());
+            }
+            if let Some(plan) = p.get(&PLAN) {
+                log.1.push(plan.clone());
+            }
+            if let Some(s) = p.get(&COLLISION_STATUS) {
+                log.2 = Some(s.clone());
+            }
+        });
+        exec.run_until(Time::from_secs_f64(3.5));
+        let _ = exec.finish();
+        let log = log.lock().unwrap();
+        (log.0.clone(), log.1.clone(), log.2.clone())
+    }
+
+    #[test]
+    fn commits_the_first_accepted_candidate_and_counts_rejections() {
+        let (decisions, plans, status) = run(1.5);
+        assert_eq!(decisions.len(), 3);
+        for d in &decisions {
+            assert_eq!(d.chosen, Some(2));
+            assert_eq!(
+                d.rejected,
+                vec![(0, "peer_plan".to_string()), (1, "peer_plan".to_string())]
+            );
+        }
+        // The committed plan is the accepted candidate (ends at x = 1).
+        assert!(
+            plans
+                .iter()
+                .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 1.0)
+        );
+        let status = status.unwrap();
+        assert_eq!((status.rounds, status.committed, status.stopped), (3, 3, 0));
+        assert_eq!(status.rejected_peer_plan, 6);
+        assert_eq!(status.priority, 4);
+    }
+
+    #[test]
+    fn stops_when_every_candidate_is_rejected() {
+        let (decisions, plans, status) = run(0.5);
+        assert!(
+            decisions
+                .iter()
+                .all(|d| d.chosen.is_none() && d.rejected.len() == 3)
+        );
+        assert!(
+            plans
+                .iter()
+                .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 0.0)
+        );
+        assert_eq!(status.unwrap().stopped, 3);
+    }
+}
