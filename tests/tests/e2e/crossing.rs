@@ -102,3 +102,38 @@ fn without_the_collision_actor_the_crossing_robots_meet() {
     let closest_m = output.summary.min_inter_robot_distance_m.unwrap();
     assert!(closest_m < radii_m, "{closest_m}");
 }
+
+#[test]
+fn planner_robots_commit_through_the_collision_actor() {
+    // The planner pipeline offers ranked candidates and follows the decisions.
+    let mut scenario = Scenario {
+        name: "planner_collision".into(),
+        duration_s: 20.0,
+        robots: 1,
+        ..Scenario::default()
+    };
+    scenario.robot.behaviour = "planner".into();
+    scenario.robot.collision.enabled = true;
+    let stops = Arc::new(Mutex::new(vec![0; 1]));
+    let counters = stops.clone();
+    let team = Team::new_with(&scenario, |i, robot: &mut RobotSpec| {
+        let counters = counters.clone();
+        robot.add(ActorSpec::new("stops", move || {
+            StopCounter(counters.clone(), i)
+        }));
+    })
+    .unwrap();
+    let s = team.run(|_| {}).summary;
+    let robot = &s.per_robot[0];
+    assert_eq!(s.collisions, 0);
+    assert_eq!(robot.truth.unsafe_plans, 0);
+    let decisions = s.topics["plan/decision"].messages;
+    assert!(decisions >= 15, "{decisions} decisions");
+    // Every committed plan came from a decision (the planner no longer commits).
+    assert_eq!(s.topics["plan/committed"].messages, decisions);
+    assert!(
+        robot.truth.distance_m > 1.0,
+        "flew {} m",
+        robot.truth.distance_m
+    );
+}
