@@ -8,10 +8,15 @@
 //!   candidates; [`selection::Mcts`] searches sequences of primitives (anytime
 //!   MCTS with UCT, thesis §4.1.3).
 //!
+//! - [`priority::PriorityAvoidance`] — priority-based inter-robot avoidance (thesis
+//!   §8.2.3) for the collision actor: cylinders sampled along both plans, stale peers
+//!   as stopping envelopes.
+//!
 //! [`behaviour_by_name`] and [`selection_by_name`] are how the robot assembly turns
 //! config strings into policies.
 #![deny(missing_docs)]
 
+pub mod priority;
 pub mod route;
 pub mod selection;
 

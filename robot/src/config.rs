@@ -1,11 +1,14 @@
 //! A robot's configuration (the `[robot]` table of a scenario, or a robot file).
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::collision::CollisionActorConfig;
+use troupe_actors::collision::body::BodyConfig;
 use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
 use troupe_actors::mapper::MapperConfig;
 use troupe_actors::planner::PlannerConfig;
 use troupe_actors::runtime::RestartPolicy;
+use troupe_policies::priority::PriorityConfig;
 
 /// The `behaviour` value that selects the grid + planner pipeline.
 pub const PLANNER: &str = "planner";
@@ -33,6 +36,8 @@ pub struct ActorLatencies {
     pub planner: f64,
     /// Mapper (one keyframe fit; thesis Table 4.1: 0.4 s).
     pub mapper: f64,
+    /// Collision actor (one round's checks).
+    pub collision: f64,
 }
 
 impl Default for ActorLatencies {
@@ -45,6 +50,52 @@ impl Default for ActorLatencies {
             grid: 0.05,
             planner: 0.1,
             mapper: 0.4,
+            collision: 0.005,
+        }
+    }
+}
+
+/// The `[robot.collision]` table: the collision actor between planning and the vehicle
+/// (thesis §7, §8.2.3). Off by default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CollisionConfig {
+    /// Whether the robot has a collision actor (plans then go through it).
+    pub enabled: bool,
+    /// The body ellipsoid (`[robot.collision.body]`); its bounding radius is the
+    /// clearance required in the local grid's distance field.
+    pub body: BodyConfig,
+    /// Extra clearance from unsafe space, metres.
+    pub margin_m: f64,
+    /// Spacing of the distance-field samples, seconds.
+    pub check_step_s: f64,
+    /// Inter-robot avoidance (`[robot.collision.peers]`): priority, cylinder size,
+    /// check radius, sample cap, stale-plan age. Its priority is also the one the link
+    /// sends with this robot's plans.
+    pub peers: PriorityConfig,
+}
+
+impl Default for CollisionConfig {
+    fn default() -> Self {
+        let check = CollisionActorConfig::default();
+        CollisionConfig {
+            enabled: false,
+            body: check.body,
+            margin_m: check.margin_m,
+            check_step_s: check.check_step_s,
+            peers: PriorityConfig::default(),
+        }
+    }
+}
+
+impl CollisionConfig {
+    /// The collision actor's own settings.
+    #[must_use]
+    pub fn actor(&self) -> CollisionActorConfig {
+        CollisionActorConfig {
+            body: self.body.clone(),
+            margin_m: self.margin_m,
+            check_step_s: self.check_step_s,
         }
     }
 }
@@ -65,6 +116,8 @@ pub struct RobotConfig {
     pub planner: PlannerConfig,
     /// The SOGMM mapper (keyframes shared over the link); off by default.
     pub mapper: MapperConfig,
+    /// The collision actor and inter-robot avoidance; off by default.
+    pub collision: CollisionConfig,
     /// Cruise speed, m/s.
     pub speed_mps: f64,
     /// Turn-in-place rate, rad/s.
@@ -91,6 +144,7 @@ impl Default for RobotConfig {
             grid: GridConfig::default(),
             planner: PlannerConfig::default(),
             mapper: MapperConfig::default(),
+            collision: CollisionConfig::default(),
             speed_mps: 1.0,
             yaw_rate_rad_s: 1.0,
             replan_rate_hz: 1.0,
@@ -161,6 +215,21 @@ impl RobotConfig {
         non_negative("latency_s.grid", self.latency_s.grid)?;
         non_negative("latency_s.planner", self.latency_s.planner)?;
         non_negative("latency_s.mapper", self.latency_s.mapper)?;
+        non_negative("latency_s.collision", self.latency_s.collision)?;
+        if let Err(reason) = self.collision.actor().validate() {
+            return Err(ConfigError {
+                key: "collision".into(),
+                rule: "must be valid",
+                value: reason,
+            });
+        }
+        if let Err(reason) = self.collision.peers.validate() {
+            return Err(ConfigError {
+                key: "collision.peers".into(),
+                rule: "must be valid",
+                value: reason,
+            });
+        }
         if let Err(reason) = self.mapper.validate() {
             return Err(ConfigError {
                 key: "mapper".into(),
@@ -227,5 +296,26 @@ mod tests {
             ..RobotConfig::default()
         };
         assert_eq!(c.validate().unwrap_err().key, "behaviour");
+        let mut c = RobotConfig::default();
+        c.collision.peers.max_samples = 1;
+        assert_eq!(c.validate().unwrap_err().key, "collision.peers");
+        let mut c = RobotConfig::default();
+        c.collision.body.semi_axes_m = [0.3, 0.0, 0.1];
+        assert_eq!(c.validate().unwrap_err().key, "collision");
+    }
+
+    #[test]
+    fn collision_table_parses_with_defaults() {
+        let c: RobotConfig = toml::from_str(
+            "[collision]\nenabled = true\n[collision.peers]\npriority = 3\ncylinder_radius_m = 0.5\n",
+        )
+        .unwrap();
+        assert!(c.collision.enabled);
+        assert_eq!(c.collision.peers.priority, 3);
+        assert_eq!(
+            c.collision.peers.max_samples,
+            PriorityConfig::default().max_samples
+        );
+        c.validate().unwrap();
     }
 }

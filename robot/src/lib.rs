@@ -8,6 +8,7 @@
 mod config;
 
 use nalgebra::Point3;
+use troupe_actors::collision::CollisionActor;
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
 use troupe_actors::link::LinkActor;
@@ -16,9 +17,10 @@ use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_actors::planner::{PlannerActor, TeleopActor, TeleopConfig};
 use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
+use troupe_policies::priority::PriorityAvoidance;
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
 
-pub use config::{ActorLatencies, ConfigError, PLANNER, RobotConfig, TELEOP};
+pub use config::{ActorLatencies, CollisionConfig, ConfigError, PLANNER, RobotConfig, TELEOP};
 
 /// Builds a frame source (called at start and on every sensor restart).
 pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
@@ -63,7 +65,9 @@ impl FrameSource for BoxedSource {
 /// Assembles a robot: vehicle, sensor, the mapper if enabled, then either the
 /// explorer (route behaviours), the local grid and the planner
 /// (`behaviour = "planner"`) or the local grid and teleoperation
-/// (`behaviour = "teleop"`), then the link.
+/// (`behaviour = "teleop"`), the collision actor if enabled (then the explorer or
+/// planner offers candidates to it and it commits plans; the link sends the collision
+/// priority with them), then the link.
 pub fn assemble(
     name: &str,
     config: &RobotConfig,
@@ -81,7 +85,11 @@ pub fn assemble(
     };
     let mut frame_source = parts.frame_source;
     let sensor_rate_hz = config.sensor_rate_hz;
-    let link = config.link.clone();
+    let mut link = config.link.clone();
+    let collision = config.collision.enabled;
+    if collision {
+        link.priority = config.collision.peers.priority;
+    }
     let mut robot = RobotSpec::new(name);
     robot.add(parts.vehicle).add(
         ActorSpec::new("sensor", move || {
@@ -125,7 +133,12 @@ pub fn assemble(
             )
             .add(
                 ActorSpec::new("planner", move || {
-                    PlannerActor::new(planner, camera, selection())
+                    let actor = PlannerActor::new(planner, camera, selection());
+                    if collision {
+                        actor.deferring_to_collision()
+                    } else {
+                        actor
+                    }
                 })
                 .with_options(heavy(config.latency_s.planner)),
             );
@@ -142,9 +155,24 @@ pub fn assemble(
         let replan_rate_hz = config.replan_rate_hz;
         robot.add(
             ActorSpec::new("explorer", move || {
-                ExplorerActor::new(behaviour(), replan_rate_hz)
+                let actor = ExplorerActor::new(behaviour(), replan_rate_hz);
+                if collision {
+                    actor.deferring_to_collision()
+                } else {
+                    actor
+                }
             })
             .with_options(options(config.latency_s.explorer)),
+        );
+    }
+    if collision {
+        let check = config.collision.actor();
+        let peers = config.collision.peers;
+        robot.add(
+            ActorSpec::new("collision", move || {
+                CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
+            })
+            .with_options(options(config.latency_s.collision)),
         );
     }
     robot.add(

@@ -3,6 +3,12 @@
 //! [`ActionSelection`] policy choose, and commits the choice followed by its
 //! stopping primitive (thesis §4.1.3: if nothing is safe, the stopping trajectory is
 //! sent).
+//!
+//! With a collision actor ([`PlannerActor::deferring_to_collision`]) the planner does
+//! not commit itself: it publishes the round's candidates on [`PLAN_CANDIDATES`], the
+//! selection's choice first and the rest by decreasing reward, with the stopping
+//! trajectory, and takes its committed reference from the [`PLAN_DECISION`] that
+//! answers the round.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -13,7 +19,10 @@ use serde::{Deserialize, Serialize};
 use super::primitives::{FlatState, Primitive};
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
-use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan};
+use crate::msgs::{
+    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PLAN_CANDIDATES,
+    PLAN_DECISION, PinholeIntrinsics, Plan, PlanCandidates,
+};
 use crate::runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
 };
@@ -144,6 +153,10 @@ pub struct PlannerActor<S> {
     snapshot: Option<Arc<GridSnapshot>>,
     odometry: Option<Arc<Odometry>>,
     committed: Option<Committed>,
+    deferred: bool,
+    round: u64,
+    /// The last round sent to the collision actor: its candidates (ranked) and stop.
+    pending: Option<(u64, Vec<Committed>, Committed)>,
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
@@ -157,7 +170,88 @@ impl<S: ActionSelection> PlannerActor<S> {
             snapshot: None,
             odometry: None,
             committed: None,
+            deferred: false,
+            round: 0,
+            pending: None,
         }
+    }
+
+    /// Publishes ranked candidates for a collision actor instead of committing, and
+    /// commits what its [`PLAN_DECISION`] says (module docs).
+    #[must_use]
+    pub fn deferring_to_collision(mut self) -> Self {
+        self.deferred = true;
+        self
+    }
+
+    /// The stopping trajectory from `root` as a committed reference.
+    fn stop_from(&self, root: &FlatState, now: Time) -> Option<Committed> {
+        let stopping = self.config.round.limits.stopping(root)?;
+        Some(Committed {
+            start: now,
+            primitive: stopping.clone(),
+            switch_s: stopping.duration_s(),
+            stopping: Primitive::forward_arc(
+                &stopping.end_state(),
+                super::primitives::Action::STOP,
+                1.0,
+            ),
+        })
+    }
+
+    /// Sends the round's candidates to the collision actor, best first: the
+    /// selection's choice, then the rest by decreasing reward.
+    fn defer(
+        &mut self,
+        now: Time,
+        root: &FlatState,
+        candidates: &[Candidate],
+        choice: Option<usize>,
+        ctx: &mut Context<'_>,
+    ) {
+        let Some(stop) = self.stop_from(root, now) else {
+            return;
+        };
+        let mut order: Vec<usize> = (0..candidates.len())
+            .filter(|&i| Some(i) != choice)
+            .collect();
+        order.sort_by(|&a, &b| candidates[b].reward.total_cmp(&candidates[a].reward));
+        if let Some(c) = choice.filter(|&c| c < candidates.len()) {
+            order.insert(0, c);
+        }
+        let period_s = self.config.round.planning_period_s;
+        let ranked: Vec<Committed> = order
+            .iter()
+            .map(|&i| {
+                let c = &candidates[i];
+                Committed {
+                    start: now,
+                    primitive: c.primitive.clone(),
+                    switch_s: period_s.min(c.primitive.duration_s()),
+                    stopping: c.stopping.clone(),
+                }
+            })
+            .collect();
+        self.round += 1;
+        let step = self.config.knot_step_s;
+        ctx.publish(
+            &PLAN_CANDIDATES,
+            PlanCandidates {
+                round: self.round,
+                stamp: now,
+                candidates: ranked
+                    .iter()
+                    .zip(&order)
+                    .map(|(c, &i)| CandidatePlan {
+                        trajectory: c.trajectory(step),
+                        switch_at: now + Duration::from_secs_f64(c.switch_s),
+                        reward: candidates[i].reward,
+                    })
+                    .collect(),
+                stop: stop.trajectory(step),
+            },
+        );
+        self.pending = Some((self.round, ranked, stop));
     }
 
     fn plan(&mut self, ctx: &mut Context<'_>) {
@@ -186,6 +280,18 @@ impl<S: ActionSelection> PlannerActor<S> {
             reward = choice.map(|i| candidates[i].reward),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );
+        if self.deferred {
+            ctx.publish(
+                &PLANNING_REPORT,
+                PlanningReport {
+                    stamp: now,
+                    candidates: candidates.len(),
+                    chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+                },
+            );
+            self.defer(now, &root, &candidates, choice, ctx);
+            return;
+        }
         let committed = match choice.and_then(|i| candidates.get(i)) {
             Some(c) => Committed {
                 start: now,
@@ -195,19 +301,10 @@ impl<S: ActionSelection> PlannerActor<S> {
             },
             None => {
                 tracing::debug!(robot = ctx.robot_name(), time = %now, candidates = candidates.len(), "no safe action: stopping");
-                let Some(stopping) = round.limits.stopping(&root) else {
+                let Some(stop) = self.stop_from(&root, now) else {
                     return;
                 };
-                Committed {
-                    start: now,
-                    primitive: stopping.clone(),
-                    switch_s: stopping.duration_s(),
-                    stopping: Primitive::forward_arc(
-                        &stopping.end_state(),
-                        super::primitives::Action::STOP,
-                        1.0,
-                    ),
-                }
+                stop
             }
         };
         ctx.publish(
@@ -233,6 +330,9 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::LATEST);
+        if self.deferred {
+            ctx.subscribe(&PLAN_DECISION, QueuePolicy::LATEST);
+        }
         ctx.set_timer(
             REPLAN,
             Duration::from_secs_f64(1.0 / self.config.rate_hz.max(1e-3)),
@@ -247,6 +347,17 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                     self.odometry = Some(odometry);
                 } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
                     self.snapshot = Some(snapshot);
+                } else if let Some(decision) = m.get_arc(&PLAN_DECISION)
+                    && let Some((round, ranked, stop)) = self.pending.take()
+                {
+                    if decision.round == round {
+                        self.committed = Some(match decision.chosen {
+                            Some(i) => ranked.get(i).cloned().unwrap_or(stop),
+                            None => stop,
+                        });
+                    } else {
+                        self.pending = Some((round, ranked, stop));
+                    }
                 }
             }
             Event::Timer(_) => self.plan(ctx),

@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use super::mesh::MeshError;
 use super::{
-    CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpeningScene, Site, Warehouse,
-    WarehouseParams, WindowParams,
+    CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpenField, OpenFieldParams,
+    OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
 };
 
 /// The kinds of world `troupe run` can build.
@@ -24,6 +24,8 @@ pub enum WorldKind {
     Door,
     /// A triangle mesh from a PLY or OBJ file (`[world.mesh]`).
     Mesh,
+    /// Flat ground with a few boxes; routes cross at the centre (`[world.open_field]`).
+    OpenField,
 }
 
 /// The world to explore.
@@ -45,6 +47,8 @@ pub struct WorldConfig {
     pub door: DoorParams,
     /// Mesh world parameters.
     pub mesh: MeshParams,
+    /// Open field parameters.
+    pub open_field: OpenFieldParams,
 }
 
 impl Default for WorldConfig {
@@ -57,6 +61,7 @@ impl Default for WorldConfig {
             window: WindowParams::default(),
             door: DoorParams::default(),
             mesh: MeshParams::default(),
+            open_field: OpenFieldParams::default(),
         }
     }
 }
@@ -74,6 +79,7 @@ impl WorldConfig {
             WorldKind::Window => self.window.validate().map_err(|r| ("window", r)),
             WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
             WorldKind::Mesh => self.mesh.validate().map_err(|r| ("mesh", r)),
+            WorldKind::OpenField => self.open_field.validate().map_err(|r| ("open_field", r)),
         }
     }
 
@@ -88,6 +94,7 @@ impl WorldConfig {
             WorldKind::Warehouse => Arc::new(Warehouse::generate(&self.warehouse, self.seed)),
             WorldKind::Window => Arc::new(OpeningScene::window(&self.window, self.seed)),
             WorldKind::Door => Arc::new(OpeningScene::door(&self.door, self.seed)),
+            WorldKind::OpenField => Arc::new(OpenField::generate(&self.open_field, self.seed)),
             WorldKind::Mesh => Arc::new(MeshWorld::load(&self.mesh, self.seed)?),
         })
     }

@@ -11,7 +11,7 @@
 //!
 //! Implementations: [`CaveWorld`] (procedural tunnel network from a seed), [`Warehouse`]
 //! (rows of shelves, thesis §4.2.2), [`OpeningScene`] (the window and door scenes of
-//! §5.2) and [`BoxRoom`] (one analytic box, for tests). [`WorldConfig`] picks one.
+//! §5.2), [`OpenField`] (flat ground and a few boxes, for crossing missions) and [`BoxRoom`] (one analytic box, for tests). [`WorldConfig`] picks one.
 
 mod box_room;
 pub mod cave;
@@ -19,6 +19,7 @@ mod config;
 pub mod mesh;
 mod mesh_io;
 pub mod noise;
+pub mod open_field;
 pub mod scenes;
 pub mod solids;
 pub mod warehouse;
@@ -27,6 +28,7 @@ pub use box_room::BoxRoom;
 pub use cave::{CaveParams, CaveWorld};
 pub use config::{WorldConfig, WorldKind};
 pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
+pub use open_field::{OpenField, OpenFieldParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
 pub use troupe_actors::geometry::Aabb;
 pub use warehouse::{Warehouse, WarehouseParams};

@@ -2,6 +2,7 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod crossing;
 mod keyframes;
 mod planner_team;
 mod realtime_team;

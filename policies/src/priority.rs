@@ -1,0 +1,576 @@
+//! Priority-based inter-robot avoidance (thesis §8.2.3, after \[24\]).
+//!
+//! Every robot has a priority, fixed before the run (optionally raised while it is
+//! blocked, [`PriorityConfig::boost_after_s`]). A robot checks its candidate plans only
+//! against peers of higher priority (ties: the lower robot id wins); those ignore it.
+//! The three cost savings of §8.2.3 are kept:
+//!
+//! 1. only peers within [`PriorityConfig::check_radius_m`] (from their odometry, shared
+//!    at 10 Hz, against plans at 1 Hz) are checked;
+//! 2. both robots are vertical cylinders (radius, height) sampled along both
+//!    trajectories at common times, at most [`PriorityConfig::max_samples`] per pair;
+//! 3. only the candidate primitive and its stopping primitive are checked (the
+//!    candidate trajectory carries both), held at its end until the peer's plan ends.
+//!
+//! Sampling is made continuous-time safe: between two samples `Δt` apart each robot
+//! moves at most `v_max Δt / 2` from the nearer sample, so a pair whose sampled centres
+//! stay `2r + (v₁ + v₂) Δt / 2` apart horizontally never overlaps (the thesis picks a
+//! conservative radius for the same reason).
+//!
+//! A peer whose plan is older than [`PriorityConfig::stale_plan_s`], or that never sent
+//! one, is an obstacle at its last known position inflated by its stopping envelope: the
+//! distance it may have flown since (`|v| · age`) plus its braking distance
+//! `|v|² / (2 a)`.
+
+use serde::{Deserialize, Serialize};
+use troupe_actors::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
+use troupe_actors::msgs::Odometry;
+use troupe_actors::runtime::{RobotId, Time};
+use troupe_actors::trajectory::Trajectory;
+
+/// Settings of the priority check (thesis §8.2.3).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PriorityConfig {
+    /// Fixed priority; larger values are avoided by smaller ones.
+    pub priority: u16,
+    /// Dynamic rule: after this many seconds of consecutive rounds stopped by peers,
+    /// the priority rises by `boost_step` per further such period (0 disables: fixed
+    /// priorities, as in the thesis). Peers learn the raised value with the next plan.
+    pub boost_after_s: f64,
+    /// Priority added per blocked period.
+    pub boost_step: u16,
+    /// Radius of the cylinder model of every robot, metres.
+    pub cylinder_radius_m: f64,
+    /// Height of the cylinder model, metres (centred on the body).
+    pub cylinder_height_m: f64,
+    /// Peers farther than this (centre to centre) are not checked, metres.
+    pub check_radius_m: f64,
+    /// Largest number of sample times per pair (≥ 2).
+    pub max_samples: usize,
+    /// A peer plan older than this is stale, seconds.
+    pub stale_plan_s: f64,
+    /// Braking deceleration assumed for a peer's stopping envelope, m/s².
+    pub stop_decel_mps2: f64,
+}
+
+impl Default for PriorityConfig {
+    fn default() -> Self {
+        PriorityConfig {
+            priority: 0,
+            boost_after_s: 0.0,
+            boost_step: 1,
+            cylinder_radius_m: 0.4,
+            cylinder_height_m: 0.6,
+            check_radius_m: 12.0,
+            max_samples: 60,
+            stale_plan_s: 2.5,
+            stop_decel_mps2: 1.0,
+        }
+    }
+}
+
+impl PriorityConfig {
+    /// Checks every number; the error names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("cylinder_radius_m", self.cylinder_radius_m),
+            ("cylinder_height_m", self.cylinder_height_m),
+            ("check_radius_m", self.check_radius_m),
+            ("stale_plan_s", self.stale_plan_s),
+            ("stop_decel_mps2", self.stop_decel_mps2),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("`{key}` must be a finite number > 0, got {v}"));
+            }
+        }
+        if !(self.boost_after_s.is_finite() && self.boost_after_s >= 0.0) {
+            return Err(format!(
+                "`boost_after_s` must be a finite number ≥ 0, got {}",
+                self.boost_after_s
+            ));
+        }
+        if self.max_samples < 2 {
+            return Err(format!(
+                "`max_samples` must be ≥ 2, got {}",
+                self.max_samples
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Whether this robot (`me`, priority `mine`) must avoid a peer (`peer`, `theirs`):
+/// higher priority wins, ties go to the lower robot id. A peer whose priority is
+/// unknown (no plan yet) is avoided.
+#[must_use]
+pub fn must_yield(me: RobotId, mine: u16, peer: RobotId, theirs: Option<u16>) -> bool {
+    match theirs {
+        None => true,
+        Some(theirs) => theirs > mine || (theirs == mine && peer < me),
+    }
+}
+
+/// The dynamic rule: `base` raised by `step` per full `after_s` of being blocked
+/// (`blocked_s`), saturating; `after_s = 0` keeps it fixed.
+#[must_use]
+pub fn effective_priority(base: u16, after_s: f64, step: u16, blocked_s: f64) -> u16 {
+    if after_s <= 0.0 || blocked_s < after_s {
+        return base;
+    }
+    let periods = (blocked_s / after_s).floor().min(f64::from(u16::MAX)) as u16;
+    base.saturating_add(periods.saturating_mul(step))
+}
+
+/// Where a peer is taken to be, for the check.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PeerModel<'a> {
+    /// Following its (fresh) plan in time.
+    Plan(&'a Trajectory),
+    /// Static at `position_m`, inflated by `envelope_m` (stale or missing plan).
+    Envelope {
+        /// Last known position, metres.
+        position_m: nalgebra::Point3<f64>,
+        /// Extra radius: distance flown since plus braking distance, metres.
+        envelope_m: f64,
+    },
+}
+
+/// How the check models a peer at `now` (plan if fresh, else stopping envelope from the
+/// newest of its odometry and its plan); `None` when nothing is known of its position.
+#[must_use]
+pub fn peer_model<'a>(
+    config: &PriorityConfig,
+    now: Time,
+    track: &'a PeerTrack,
+) -> Option<PeerModel<'a>> {
+    if let Some(plan) = &track.plan
+        && now.saturating_since(plan.received_at).as_secs_f64() <= config.stale_plan_s
+    {
+        return Some(PeerModel::Plan(&plan.plan.trajectory));
+    }
+    let from_odometry = track.odometry.as_ref().map(|o| {
+        (
+            o.odometry.stamp,
+            nalgebra::Point3::from(o.odometry.pose.translation.vector),
+            o.odometry.velocity_mps.norm(),
+        )
+    });
+    let from_plan = track.plan.as_ref().and_then(|p| {
+        let state = p.plan.trajectory.state_at(p.received_at)?;
+        Some((p.received_at, state.position_m, state.velocity_mps.norm()))
+    });
+    let (stamp, position_m, speed) = match (from_odometry, from_plan) {
+        (Some(a), Some(b)) => {
+            if a.0 >= b.0 {
+                a
+            } else {
+                b
+            }
+        }
+        (Some(a), None) | (None, Some(a)) => a,
+        (None, None) => return None,
+    };
+    let age_s = now.saturating_since(stamp).as_secs_f64();
+    let envelope_m = speed * age_s + speed * speed / (2.0 * config.stop_decel_mps2);
+    Some(PeerModel::Envelope {
+        position_m,
+        envelope_m,
+    })
+}
+
+fn max_speed(trajectory: &Trajectory) -> f64 {
+    trajectory
+        .knots()
+        .windows(2)
+        .map(|w| {
+            let dt = (w[1].time - w[0].time).as_secs_f64();
+            if dt > 0.0 {
+                (w[1].position_m - w[0].position_m).norm() / dt
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Checks `candidate` (from `now`) against one peer model with cylinders of `config`,
+/// at most `max_samples` common sample times up to the later of the two trajectories'
+/// ends (module docs); returns the first overlap as `(seconds after now, horizontal
+/// centre distance)`.
+#[must_use]
+pub fn first_overlap(
+    config: &PriorityConfig,
+    now: Time,
+    candidate: &Trajectory,
+    peer: &PeerModel<'_>,
+) -> Option<(f64, f64)> {
+    let own_end = candidate.end_time();
+    let end = match peer {
+        PeerModel::Plan(plan) => own_end.max(plan.end_time()),
+        PeerModel::Envelope { .. } => own_end,
+    };
+    let horizon_s = end.saturating_since(now).as_secs_f64();
+    let n = config.max_samples.max(2);
+    let dt_s = horizon_s / (n - 1) as f64;
+    let (peer_speed, peer_extra) = match peer {
+        PeerModel::Plan(plan) => (max_speed(plan), 0.0),
+        PeerModel::Envelope { envelope_m, .. } => (0.0, *envelope_m),
+    };
+    let min_horizontal = 2.0 * config.cylinder_radius_m
+        + peer_extra
+        + 0.5 * dt_s * (max_speed(candidate) + peer_speed);
+    for i in 0..n {
+        let t_s = dt_s * i as f64;
+        let t = now + std::time::Duration::from_secs_f64(t_s);
+        let own = candidate.state_at(t)?;
+        let other = match peer {
+            PeerModel::Plan(plan) => match plan.state_at(t) {
+                Some(s) => s.position_m,
+                None => continue,
+            },
+            PeerModel::Envelope { position_m, .. } => *position_m,
+        };
+        let d = own.position_m - other;
+        let horizontal = d.xy().norm();
+        if horizontal < min_horizontal && d.z.abs() < config.cylinder_height_m {
+            return Some((t_s, horizontal));
+        }
+        if horizon_s == 0.0 {
+            break;
+        }
+    }
+    None
+}
+
+/// The §8.2.3 check of `candidate` against every peer this robot must yield to
+/// ([`must_yield`]) that is within the check radius of `own`'s position.
+#[must_use]
+pub fn check_candidate(
+    config: &PriorityConfig,
+    now: Time,
+    me: RobotId,
+    mine: u16,
+    own: &Odometry,
+    candidate: &Trajectory,
+    peers: &PeerTable,
+) -> Option<PeerConflict> {
+    let here = nalgebra::Point3::from(own.pose.translation.vector);
+    for (id, track) in peers.iter() {
+        if id == me || !must_yield(me, mine, id, track.priority()) {
+            continue;
+        }
+        let Some(model) = peer_model(config, now, track) else {
+            continue;
+        };
+        let there = match &model {
+            PeerModel::Plan(plan) => plan.state_at(now).map(|s| s.position_m),
+            PeerModel::Envelope { position_m, .. } => Some(*position_m),
+        };
+        let near = there.is_some_and(|p| (p - here).norm() <= config.check_radius_m);
+        if !near {
+            continue;
+        }
+        if let Some((at_s, separation_m)) = first_overlap(config, now, candidate, &model) {
+            return Some(PeerConflict {
+                peer: id,
+                envelope: matches!(model, PeerModel::Envelope { .. }),
+                at_s,
+                separation_m,
+            });
+        }
+    }
+    None
+}
+
+/// [`PeerAvoidance`] by priorities (the module's rules), with the optional dynamic rule.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PriorityAvoidance {
+    config: PriorityConfig,
+    blocked_since: Option<Time>,
+}
+
+impl PriorityAvoidance {
+    /// A checker with these settings.
+    #[must_use]
+    pub fn new(config: PriorityConfig) -> Self {
+        PriorityAvoidance {
+            config,
+            blocked_since: None,
+        }
+    }
+}
+
+impl PeerAvoidance for PriorityAvoidance {
+    fn priority(&self, now: Time) -> u16 {
+        let blocked_s = self
+            .blocked_since
+            .map_or(0.0, |t| now.saturating_since(t).as_secs_f64());
+        effective_priority(
+            self.config.priority,
+            self.config.boost_after_s,
+            self.config.boost_step,
+            blocked_s,
+        )
+    }
+
+    fn conflict(
+        &mut self,
+        now: Time,
+        me: RobotId,
+        own: &Odometry,
+        candidate: &Trajectory,
+        peers: &PeerTable,
+    ) -> Option<PeerConflict> {
+        let mine = self.priority(now);
+        check_candidate(&self.config, now, me, mine, own, candidate, peers)
+    }
+
+    fn record_round(&mut self, now: Time, blocked_by_peers: bool) {
+        if blocked_by_peers {
+            self.blocked_since.get_or_insert(now);
+        } else {
+            self.blocked_since = None;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Point3, Vector3};
+    use troupe_actors::msgs::{PeerOdometry, PeerPlan, Plan};
+    use troupe_actors::trajectory::Knot;
+
+    fn t(s: f64) -> Time {
+        Time::from_secs_f64(s)
+    }
+
+    /// Straight line from `a` to `b` starting at `t0`, at `speed` m/s, knots every 0.1 s.
+    fn line(t0: f64, a: [f64; 3], b: [f64; 3], speed: f64) -> Trajectory {
+        let (a, b) = (Point3::from(a), Point3::from(b));
+        let dur = (b - a).norm() / speed;
+        let n = (dur / 0.1).ceil().max(1.0) as usize;
+        Trajectory::new(
+            (0..=n)
+                .map(|i| Knot {
+                    time: t(t0 + dur * i as f64 / n as f64),
+                    position_m: a + (b - a) * (i as f64 / n as f64),
+                    yaw_rad: 0.0,
+                })
+                .collect(),
+        )
+        .unwrap()
+    }
+
+    fn odom(at: f64, p: [f64; 3], v: [f64; 3]) -> Odometry {
+        Odometry {
+            stamp: t(at),
+            pose: Isometry3::translation(p[0], p[1], p[2]),
+            velocity_mps: Vector3::from(v),
+        }
+    }
+
+    fn table_with(
+        peer: u32,
+        priority: u16,
+        plan: Option<(Trajectory, f64)>,
+        od: Option<Odometry>,
+    ) -> PeerTable {
+        let mut table = PeerTable::default();
+        if let Some((trajectory, received)) = plan {
+            table.update_plan(&PeerPlan {
+                robot: RobotId(peer),
+                priority,
+                plan: Plan {
+                    stamp: t(received),
+                    trajectory,
+                },
+                received_at: t(received),
+            });
+        }
+        if let Some(odometry) = od {
+            let received_at = odometry.stamp;
+            table.update_odometry(&PeerOdometry {
+                robot: RobotId(peer),
+                odometry,
+                received_at,
+            });
+        }
+        table
+    }
+
+    /// Slow reference: smallest horizontal distance over a 1 ms grid.
+    fn dense_min_distance(a: &Trajectory, b: &Trajectory, t0: f64, t1: f64) -> f64 {
+        let mut best = f64::INFINITY;
+        let n = ((t1 - t0) / 0.001).ceil() as usize;
+        for i in 0..=n {
+            let tt = t(t0 + (t1 - t0) * i as f64 / n as f64);
+            let (p, q) = (
+                a.state_at(tt).unwrap().position_m,
+                b.state_at(tt).unwrap().position_m,
+            );
+            best = best.min((p - q).xy().norm());
+        }
+        best
+    }
+
+    #[test]
+    fn priorities_and_ties() {
+        assert!(must_yield(RobotId(1), 1, RobotId(0), Some(2)));
+        assert!(!must_yield(RobotId(1), 3, RobotId(0), Some(2)));
+        assert!(must_yield(RobotId(1), 2, RobotId(0), Some(2)));
+        assert!(!must_yield(RobotId(0), 2, RobotId(1), Some(2)));
+        assert!(must_yield(RobotId(0), 9, RobotId(1), None));
+        assert_eq!(effective_priority(3, 0.0, 1, 100.0), 3);
+        assert_eq!(effective_priority(3, 5.0, 2, 4.9), 3);
+        assert_eq!(effective_priority(3, 5.0, 2, 10.0), 7);
+        assert_eq!(effective_priority(u16::MAX - 1, 1.0, 5, 10.0), u16::MAX);
+    }
+
+    #[test]
+    fn crossing_lines_conflict_and_passing_in_time_does_not() {
+        let config = PriorityConfig::default();
+        // Peer (higher) crosses the origin along x at t = 5 s; we cross along y.
+        let peer = line(0.0, [-5.0, 0.0, 1.0], [5.0, 0.0, 1.0], 1.0);
+        let peers = table_with(0, 5, Some((peer.clone(), 0.0)), None);
+        let own = odom(0.0, [0.0, -5.0, 1.0], [0.0, 1.0, 0.0]);
+        let mine = line(0.0, [0.0, -5.0, 1.0], [0.0, 5.0, 1.0], 1.0);
+        let c = check_candidate(&config, t(0.0), RobotId(1), 1, &own, &mine, &peers).unwrap();
+        assert_eq!(c.peer, RobotId(0));
+        assert!(!c.envelope);
+        assert!((c.at_s - 5.0).abs() < 1.5, "{c:?}");
+        // Ours is faster: passes the origin at t = 2.5 s, 2.5 m ahead of the peer.
+        let fast = line(0.0, [0.0, -5.0, 1.0], [0.0, 5.0, 1.0], 2.0);
+        assert_eq!(
+            check_candidate(&config, t(0.0), RobotId(1), 1, &own, &fast, &peers),
+            None
+        );
+        // With the higher priority we do not check at all.
+        assert_eq!(
+            check_candidate(&config, t(0.0), RobotId(1), 9, &own, &mine, &peers),
+            None
+        );
+        // Different altitude: cylinders do not overlap.
+        let high = line(0.0, [0.0, -5.0, 2.0], [0.0, 5.0, 2.0], 1.0);
+        assert_eq!(
+            check_candidate(&config, t(0.0), RobotId(1), 1, &own, &high, &peers),
+            None
+        );
+        // Out of the check radius: not checked.
+        let far = PriorityConfig {
+            check_radius_m: 3.0,
+            ..config
+        };
+        assert_eq!(
+            check_candidate(&far, t(0.0), RobotId(1), 1, &own, &mine, &peers),
+            None
+        );
+    }
+
+    #[test]
+    fn holding_at_the_end_in_the_peers_path_conflicts() {
+        let config = PriorityConfig::default();
+        let peer = line(0.0, [-8.0, 0.0, 1.0], [8.0, 0.0, 1.0], 1.0);
+        let peers = table_with(0, 5, Some((peer, 0.0)), None);
+        // We stop on the peer's path at t = 2 s; it arrives there at t = 8 s.
+        let mine = line(0.0, [0.0, -2.0, 1.0], [0.0, 0.0, 1.0], 1.0);
+        let own = odom(0.0, [0.0, -2.0, 1.0], [0.0, 1.0, 0.0]);
+        let c = check_candidate(&config, t(0.0), RobotId(1), 1, &own, &mine, &peers).unwrap();
+        assert!(c.at_s > 6.0, "{c:?}");
+    }
+
+    #[test]
+    fn stale_or_missing_plan_is_an_envelope_at_the_last_position() {
+        let config = PriorityConfig::default();
+        let peer = line(0.0, [-5.0, 0.0, 1.0], [5.0, 0.0, 1.0], 1.0);
+        // Plan received at 0 s, now 10 s: stale; odometry at 9.5 s says (2, 0) moving 1 m/s.
+        let peers = table_with(
+            0,
+            5,
+            Some((peer, 0.0)),
+            Some(odom(9.5, [2.0, 0.0, 1.0], [1.0, 0.0, 0.0])),
+        );
+        let track = peers.iter().next().unwrap().1;
+        match peer_model(&config, t(10.0), track).unwrap() {
+            PeerModel::Envelope {
+                position_m,
+                envelope_m,
+            } => {
+                assert_eq!(position_m, Point3::new(2.0, 0.0, 1.0));
+                // 1 m/s · 0.5 s + 1² / (2 · 1).
+                assert!((envelope_m - 1.0).abs() < 1e-9);
+            }
+            other => panic!("{other:?}"),
+        }
+        let own = odom(10.0, [2.0, -4.0, 1.0], [0.0, 1.0, 0.0]);
+        // Stopping 2.0 m short of the peer: needs 2 r + envelope = 1.8 m + sampling slack.
+        let short = line(10.0, [2.0, -4.0, 1.0], [2.0, -2.0, 1.0], 1.0);
+        assert_eq!(
+            check_candidate(&config, t(10.0), RobotId(1), 1, &own, &short, &peers),
+            None
+        );
+        let long = line(10.0, [2.0, -4.0, 1.0], [2.0, -1.5, 1.0], 1.0);
+        let c = check_candidate(&config, t(10.0), RobotId(1), 1, &own, &long, &peers).unwrap();
+        assert!(c.envelope);
+        // Odometry only (no plan ever): unknown priority, avoided as an envelope.
+        let only = table_with(0, 0, None, Some(odom(10.0, [2.0, 0.0, 1.0], [0.0; 3])));
+        let closer = line(10.0, [2.0, -4.0, 1.0], [2.0, -0.7, 1.0], 1.0);
+        let c = check_candidate(&config, t(10.0), RobotId(1), 60_000, &own, &closer, &only);
+        assert!(c.is_some_and(|c| c.envelope));
+        assert!(
+            check_candidate(&config, t(10.0), RobotId(1), 60_000, &own, &long, &only).is_none()
+        );
+    }
+
+    #[test]
+    fn accepted_pairs_keep_their_distance_in_continuous_time() {
+        // Property: whenever the capped, sampled check accepts, the dense minimum
+        // horizontal distance is at least the sum of the cylinder radii.
+        let config = PriorityConfig {
+            max_samples: 20,
+            ..PriorityConfig::default()
+        };
+        let mut accepted = 0;
+        for k in 0..60 {
+            let offset = -6.0 + 0.2 * k as f64;
+            let peer = line(0.0, [-6.0, 0.0, 1.0], [6.0, 0.0, 1.0], 1.0);
+            let peers = table_with(0, 5, Some((peer.clone(), 0.0)), None);
+            let mine = line(0.0, [offset, -4.0, 1.0], [offset, 4.0, 1.0], 1.0);
+            let own = odom(0.0, [offset, -4.0, 1.0], [0.0, 1.0, 0.0]);
+            if check_candidate(&config, t(0.0), RobotId(1), 1, &own, &mine, &peers).is_none() {
+                accepted += 1;
+                let d = dense_min_distance(&mine, &peer, 0.0, 12.0);
+                assert!(d >= 2.0 * config.cylinder_radius_m, "offset {offset}: {d}");
+            }
+        }
+        assert!(accepted > 0 && accepted < 60, "{accepted}");
+    }
+
+    #[test]
+    fn dynamic_rule_raises_priority_while_blocked() {
+        let mut p = PriorityAvoidance::new(PriorityConfig {
+            priority: 2,
+            boost_after_s: 4.0,
+            boost_step: 3,
+            ..PriorityConfig::default()
+        });
+        assert_eq!(p.priority(t(0.0)), 2);
+        p.record_round(t(1.0), true);
+        p.record_round(t(2.0), true);
+        assert_eq!(p.priority(t(4.0)), 2);
+        assert_eq!(p.priority(t(5.0)), 5);
+        p.record_round(t(6.0), false);
+        assert_eq!(p.priority(t(6.0)), 2);
+        assert!(
+            PriorityConfig {
+                max_samples: 1,
+                ..PriorityConfig::default()
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(PriorityConfig::default().validate().is_ok());
+    }
+}
