@@ -1,12 +1,66 @@
-//! Between the robot's keyframes and their wire form (`troupe_comms::wire::Keyframe`,
-//! 60 bytes per 4D component in f32, §8.2.2).
+//! Between the robot's keyframes and plans and their wire forms
+//! (`troupe_comms::wire::Keyframe`, 60 bytes per 4D component in f32, §8.2.2;
+//! `troupe_comms::wire::Plan`, 20 bytes per knot plus the priority, §8.2.3).
 
-use nalgebra::{Isometry3, Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3, Vector4};
+use nalgebra::{
+    Isometry3, Matrix4, Point3, Quaternion, Translation3, UnitQuaternion, Vector3, Vector4,
+};
 use troupe_comms::wire;
 
 use crate::mapper::sogmm::Gmm4;
-use crate::msgs::Keyframe;
+use crate::msgs::{Keyframe, Plan};
 use crate::runtime::{ActorError, Time};
+use crate::trajectory::{Knot, Trajectory};
+
+/// The wire form of a committed plan (thesis §8.2.3): knot times become `f32`
+/// seconds after the first knot, positions and yaw `f32`. `None` for an empty
+/// trajectory (nothing to share).
+#[must_use]
+pub fn plan_to_wire(plan: &Plan, plan_id: u32, priority: u16) -> Option<wire::Plan> {
+    let first = plan.trajectory.knots().first()?;
+    let start = first.time;
+    let knots = plan
+        .trajectory
+        .knots()
+        .iter()
+        .map(|k| wire::PlanKnot {
+            t_s: k.time.saturating_since(start).as_secs_f64() as f32,
+            position_m: [
+                k.position_m.x as f32,
+                k.position_m.y as f32,
+                k.position_m.z as f32,
+            ],
+            yaw_rad: k.yaw_rad as f32,
+        })
+        .collect();
+    Some(wire::Plan {
+        plan_id,
+        priority,
+        start_ns: start.as_nanos(),
+        knots,
+    })
+}
+
+/// A received plan as the robot's type (knot times back on the sender's clock,
+/// `start_ns + t_s`); `stamp` is the envelope's stamp (when it was committed).
+pub fn plan_from_wire(plan: &wire::Plan, stamp: Time) -> Result<Plan, ActorError> {
+    let knots = plan
+        .knots
+        .iter()
+        .map(|k| {
+            // Validated on decode: finite and ≥ 0; the cast saturates.
+            let offset_ns = (f64::from(k.t_s) * 1e9).round() as u64;
+            Knot {
+                time: Time::from_nanos(plan.start_ns.saturating_add(offset_ns)),
+                position_m: Point3::from(k.position_m.map(f64::from)),
+                yaw_rad: f64::from(k.yaw_rad),
+            }
+        })
+        .collect();
+    let trajectory = Trajectory::new(knots)
+        .map_err(|e| ActorError::with_source("plan trajectory is invalid", e))?;
+    Ok(Plan { stamp, trajectory })
+}
 
 /// The wire form of a keyframe (f32; the receiver renormalises the weights).
 #[must_use]

@@ -1,12 +1,14 @@
 //! Changing a peer's data into this robot's world frame (thesis Eq. 8.1):
 //! μʲ = R₀ʲⁱ μⁱ + T₀ʲⁱ, Σʲ = R₀ʲⁱ Σⁱ (R₀ʲⁱ)ᵀ, applied to the spatial block of each
-//! 4D component (intensity is frame-free), and to the sensor pose.
+//! 4D component (intensity is frame-free), to the sensor pose, and to the knots of
+//! peers' plans (§8.2.3).
 
 use nalgebra::{Isometry3, Matrix4, UnitQuaternion, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 use crate::mapper::sogmm::{Gmm4, SogmmError};
-use crate::msgs::Keyframe;
+use crate::msgs::{Keyframe, Plan};
+use crate::trajectory::{Knot, Trajectory, TrajectoryError};
 
 /// Where a peer's world frame sits in ours (T₀ʲⁱ of Eq. 8.1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -61,6 +63,30 @@ pub fn transform_keyframe(
         gmm: transform_gmm(&keyframe.gmm, transform)?,
         pose: transform * keyframe.pose,
         ..keyframe.clone()
+    })
+}
+
+/// A plan moved into another frame (Eq. 8.1 on each knot's position; the heading
+/// is the rotated forward direction's angle about z, exact for yaw-only rotations
+/// and the heading of the horizontal projection otherwise). Fails only if a moved
+/// knot is no longer finite.
+pub fn transform_plan(plan: &Plan, transform: &Isometry3<f64>) -> Result<Plan, TrajectoryError> {
+    let knots = plan
+        .trajectory
+        .knots()
+        .iter()
+        .map(|k| {
+            let forward = transform.rotation * Vector3::new(k.yaw_rad.cos(), k.yaw_rad.sin(), 0.0);
+            Knot {
+                time: k.time,
+                position_m: transform * k.position_m,
+                yaw_rad: forward.y.atan2(forward.x),
+            }
+        })
+        .collect();
+    Ok(Plan {
+        stamp: plan.stamp,
+        trajectory: Trajectory::new(knots)?,
     })
 }
 

@@ -6,7 +6,10 @@
 //! policies — whose frames go out on [`LINK_TX`] as the bucket allows. Incoming frames
 //! from [`LINK_RX`] are reassembled, decoded and validated; odometry is published as
 //! [`PEER_ODOMETRY`], keyframes (from the mapper's [`KEYFRAME`]) as
-//! [`PEER_KEYFRAME`]. A frame or message that does not decode, comes from another
+//! [`PEER_KEYFRAME`], committed plans ([`PLAN`], thesis §8.2.3: at most
+//! [`LinkConfig::plan_rate_hz`], with [`LinkConfig::priority`], in the plan class)
+//! as [`PEER_PLAN`]. Peers' keyframes, odometry and plans are moved into this
+//! robot's world frame with Eq. 8.1 when a [`PeerFrame`] is configured. A frame or message that does not decode, comes from another
 //! team, or whose envelope sender disagrees with the network's sender is rejected
 //! with a reason and counted (as an actor error). Every second the shaper and
 //! reassembler counters are published on [`LINK_STATUS`].
@@ -23,14 +26,15 @@ use troupe_comms::shaping::{
 use troupe_comms::wire::{self, Envelope, Payload};
 
 use crate::msgs::{
-    KEYFRAME, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_ODOMETRY, PeerKeyframe, PeerOdometry,
+    KEYFRAME, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN, PeerKeyframe,
+    PeerOdometry, PeerPlan, Plan,
 };
 
 mod convert;
 mod frames;
 
-pub use convert::{keyframe_from_wire, keyframe_to_wire};
-pub use frames::{PeerFrame, transform_gmm, transform_keyframe};
+pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
+pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
 
 use crate::runtime::{
     Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, Message,
@@ -45,6 +49,12 @@ pub struct LinkConfig {
     pub team: u32,
     /// How often odometry is sent to peers, Hz (thesis §8.2.3: 10 Hz).
     pub odometry_rate_hz: f64,
+    /// Most committed plans sent per second, Hz (thesis §8.2.3: 1 Hz); the latest
+    /// plan goes out as soon as the rate allows. 0 = plans are not shared.
+    pub plan_rate_hz: f64,
+    /// This robot's priority, sent with its plans (§8.2.3: lower-priority robots
+    /// avoid higher-priority ones; larger = higher).
+    pub priority: u16,
     /// Outgoing shaping (rate, burst, MTU, per-class policies).
     pub shaper: ShaperConfig,
     /// Incoming reassembly limits.
@@ -58,6 +68,8 @@ impl Default for LinkConfig {
         LinkConfig {
             team: 0,
             odometry_rate_hz: 10.0,
+            plan_rate_hz: 1.0,
+            priority: 0,
             shaper: ShaperConfig::default(),
             reassembly: ReassemblyConfig::default(),
             peer_frames: Vec::new(),
@@ -72,6 +84,12 @@ impl LinkConfig {
             return Err(format!(
                 "odometry_rate_hz must be ≥ 0, got {}",
                 self.odometry_rate_hz
+            ));
+        }
+        if !(self.plan_rate_hz.is_finite() && self.plan_rate_hz >= 0.0) {
+            return Err(format!(
+                "plan_rate_hz must be ≥ 0, got {}",
+                self.plan_rate_hz
             ));
         }
         self.shaper.validate().map_err(|e| format!("shaper.{e}"))?;
@@ -102,6 +120,7 @@ pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
 const SEND_ODOMETRY: TimerId = TimerId(0);
 const PUMP: TimerId = TimerId(1);
 const STATUS: TimerId = TimerId(2);
+const SEND_PLAN: TimerId = TimerId(3);
 
 /// See the [module docs](self).
 pub struct LinkActor {
@@ -111,6 +130,11 @@ pub struct LinkActor {
     sequence: u64,
     latest: Option<Arc<Odometry>>,
     sent_stamp: Option<Time>,
+    /// The latest committed plan not yet sent.
+    unsent_plan: Option<Arc<Plan>>,
+    /// When the last plan went out (for the rate limit).
+    plan_sent_at: Option<Time>,
+    plans_sent: u32,
     rejected: u64,
 }
 
@@ -128,6 +152,9 @@ impl LinkActor {
             sequence: 0,
             latest: None,
             sent_stamp: None,
+            unsent_plan: None,
+            plan_sent_at: None,
+            plans_sent: 0,
             rejected: 0,
         })
     }
@@ -200,6 +227,43 @@ impl LinkActor {
         });
         self.sent_stamp = Some(odometry.stamp);
         self.send(payload, odometry.stamp, ctx)
+    }
+
+    /// Minimum time between two plans; `None` when plans are not shared.
+    fn plan_period(&self) -> Option<Duration> {
+        (self.config.plan_rate_hz > 0.0)
+            .then(|| Duration::from_secs_f64(1.0 / self.config.plan_rate_hz))
+    }
+
+    /// Sends the latest unsent plan now if the rate allows, else arms the timer
+    /// for when it will.
+    fn send_plan(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let Some(period) = self.plan_period() else {
+            self.unsent_plan = None;
+            return Ok(());
+        };
+        if self.unsent_plan.is_none() {
+            ctx.cancel_timer(SEND_PLAN);
+            return Ok(());
+        }
+        let now = ctx.now();
+        if let Some(last) = self.plan_sent_at {
+            let since = now.saturating_since(last);
+            if since < period {
+                ctx.set_timer(SEND_PLAN, period - since);
+                return Ok(());
+            }
+        }
+        ctx.cancel_timer(SEND_PLAN);
+        let Some(plan) = self.unsent_plan.take() else {
+            return Ok(());
+        };
+        let Some(wire_plan) = plan_to_wire(&plan, self.plans_sent, self.config.priority) else {
+            return Ok(()); // an empty trajectory: nothing to share
+        };
+        self.plans_sent = self.plans_sent.wrapping_add(1);
+        self.plan_sent_at = Some(now);
+        self.send(Payload::Plan(wire_plan), plan.stamp, ctx)
     }
 
     fn receive_frame(&mut self, from: RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
@@ -284,8 +348,24 @@ impl LinkActor {
             );
             return Ok(());
         }
-        // Heartbeats only prove liveness; plans and grid change sets are not consumed
-        // yet.
+        if let Payload::Plan(p) = &envelope.payload {
+            let reject = |e| ActorError::with_source(format!("rejected a plan from {from}"), e);
+            let mut plan = plan_from_wire(p, Time::from_nanos(envelope.stamp_ns))?;
+            if let Some(t) = frame {
+                plan = transform_plan(&plan, &t).map_err(reject)?;
+            }
+            ctx.publish(
+                &PEER_PLAN,
+                PeerPlan {
+                    robot: from,
+                    priority: p.priority,
+                    plan,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        // Heartbeats only prove liveness; grid change sets are not consumed yet.
         if let Payload::Odometry(o) = envelope.payload {
             let [x, y, z, w] = o.orientation_xyzw;
             let pose = Isometry3::from_parts(
@@ -316,6 +396,7 @@ impl Actor for LinkActor {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
         ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
+        ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         if self.config.odometry_rate_hz > 0.0 {
             ctx.set_timer(
                 SEND_ODOMETRY,
@@ -329,6 +410,7 @@ impl Actor for LinkActor {
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         match event {
             Event::Timer(SEND_ODOMETRY) => self.send_odometry(ctx),
+            Event::Timer(SEND_PLAN) => self.send_plan(ctx),
             Event::Timer(PUMP) => {
                 self.pump(ctx);
                 Ok(())
@@ -349,6 +431,9 @@ impl Actor for LinkActor {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.latest = Some(odometry);
                     Ok(())
+                } else if let Some(plan) = m.get_arc(&PLAN) {
+                    self.unsent_plan = Some(plan);
+                    self.send_plan(ctx)
                 } else if let Some(keyframe) = m.get(&KEYFRAME) {
                     self.send(
                         Payload::Keyframe(keyframe_to_wire(keyframe)),
@@ -364,3 +449,6 @@ impl Actor for LinkActor {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;
