@@ -7,6 +7,7 @@ use std::time::Duration;
 use nalgebra::Point3;
 
 use super::*;
+use crate::msgs::Keyframe;
 use crate::runtime::{ActorSpec, Publication, RobotSpec, SimExecutor};
 use crate::trajectory::{Knot, Trajectory};
 
@@ -174,4 +175,141 @@ fn a_zero_plan_rate_shares_no_plans() {
     });
     exec.run_until(Time::from_secs_f64(3.0));
     assert_eq!(*received.lock().unwrap(), 0);
+}
+
+/// Publishes keyframe `n` (a 40-component mixture, about 2.4 kB on the wire) at
+/// `n + 1` seconds, `count` of them.
+struct KeyframeSource {
+    next: u32,
+    count: u32,
+}
+
+fn test_keyframe(id: u32, stamp: Time) -> Keyframe {
+    use nalgebra::{Matrix4, Vector4};
+    let n = 40;
+    let gmm = crate::mapper::sogmm::Gmm4::new(
+        vec![1.0 / n as f64; n],
+        (0..n)
+            .map(|i| Vector4::new(i as f64 * 0.1, f64::from(id), 1.0, 0.5))
+            .collect(),
+        vec![Matrix4::from_diagonal(&Vector4::new(0.01, 0.02, 0.01, 0.005)); n],
+    )
+    .unwrap();
+    Keyframe {
+        id,
+        stamp,
+        pose: nalgebra::Isometry3::translation(f64::from(id), 0.0, 1.0),
+        support_size: 1000,
+        gmm,
+    }
+}
+
+impl Actor for KeyframeSource {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(TICK, Duration::from_secs(1));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if matches!(event, Event::Timer(TICK)) && self.next < self.count {
+            ctx.publish(&KEYFRAME, test_keyframe(self.next, ctx.now()));
+            self.next += 1;
+        }
+        Ok(())
+    }
+}
+
+/// 20 ms latency; everything between robots 0 and 1 is lost from 10 s to 40 s.
+struct OnePairPartition;
+
+impl crate::runtime::SimNetwork for OnePairPartition {
+    fn route(
+        &mut self,
+        now: Time,
+        from: RobotId,
+        to: Destination,
+        _bytes: usize,
+        team_size: usize,
+        deliveries: &mut Vec<(RobotId, Time)>,
+    ) {
+        let cut = (10.0..40.0).contains(&now.as_secs_f64());
+        for r in to.recipients(from, team_size) {
+            let pair = [from.0.min(r.0), from.0.max(r.0)];
+            if !(cut && pair == [0, 1]) {
+                deliveries.push((r, now + Duration::from_millis(20)));
+            }
+        }
+    }
+}
+
+/// Issue 3, item 2 through the actor: with keyframes in store-and-forward, a
+/// partition of one pair loses nothing for that peer, which gets every keyframe
+/// once and in order after healing, while the third robot keeps receiving.
+#[test]
+fn store_and_forward_per_peer_through_the_link_actor() {
+    let mut config = LinkConfig::default();
+    config.shaper.rate_bps = Some(250_000);
+    config.shaper.burst_bytes = 4_096;
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig {
+        capacity_messages: 64,
+        ..troupe_comms::shaping::ClassConfig::store_and_forward()
+    };
+    config.peers = vec![0, 1, 2];
+    let team = vec![
+        RobotSpec::new("r0")
+            .with(link(&config))
+            .with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 50,
+            })),
+        RobotSpec::new("r1").with(link(&config)),
+        RobotSpec::new("r2").with(link(&config)),
+    ];
+    type Log = Vec<(RobotId, u32, Time)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 3).with_network(OnePairPartition);
+    let tap_log = log.clone();
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(k) = p.get(&PEER_KEYFRAME) {
+            assert_eq!(k.robot, RobotId(0));
+            tap_log
+                .lock()
+                .unwrap()
+                .push((p.robot, k.keyframe.id, p.time));
+        }
+    });
+    exec.run_until(Time::from_secs_f64(90.0));
+    let reports = exec.finish();
+    let log = log.lock().unwrap();
+    let expected: Vec<u32> = (0..50).collect();
+    for robot in [RobotId(1), RobotId(2)] {
+        let ids: Vec<u32> = log
+            .iter()
+            .filter(|(r, ..)| *r == robot)
+            .map(|(_, id, _)| *id)
+            .collect();
+        assert_eq!(ids, expected, "{robot}: every keyframe, once, in order");
+    }
+    // Robot 2 was not held back by robot 1's partition.
+    for (_, id, at) in log.iter().filter(|(r, ..)| *r == RobotId(2)) {
+        let offered = Time::from_secs_f64(f64::from(*id + 1));
+        assert!(
+            at.saturating_since(offered) < Duration::from_secs(1),
+            "keyframe {id} at {at:?}"
+        );
+    }
+    // Robot 1 got the partition's keyframes only after it healed.
+    let held = log
+        .iter()
+        .filter(|(r, id, at)| *r == RobotId(1) && (10..39).contains(id) && at.as_secs_f64() >= 40.0)
+        .count();
+    assert_eq!(held, 29);
+    for report in &reports {
+        assert!(
+            report
+                .actors
+                .iter()
+                .all(|a| a.stats.errors == 0 && a.stats.panics == 0),
+            "{report:?}"
+        );
+    }
 }
