@@ -21,8 +21,11 @@
 //!   mtu_bytes = 1200` at 250 kbit/s that is 41.6 ms for odometry and 61.7 ms for
 //!   a plan, against 193 ms for one unfragmented 6 kB keyframe (tested).
 //! - **Queue policies** per class ([`QueuePolicy`]): keep-latest, drop-oldest,
-//!   store-and-forward (acknowledged, in-order go-back-N retransmission, bounded
-//!   store that refuses rather than drops).
+//!   store-and-forward (bounded store that refuses rather than drops; a message
+//!   stays until every intended peer acknowledged it; per-peer in-order go-back-N,
+//!   see [`LinkShaper::add_peer`] and the `store` module). Frames carry their
+//!   addressee ([`Frame::to`]): broadcast, or one peer (acks, and store-and-forward
+//!   fragments while peers are out of step).
 //! - **Counters** ([`ShaperStats`]): drops by reason, queue delay, completion delay
 //!   and age of information per class.
 //!
