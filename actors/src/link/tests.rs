@@ -313,3 +313,145 @@ fn store_and_forward_per_peer_through_the_link_actor() {
         );
     }
 }
+
+/// An in-memory "network" between executors, through the transport hook.
+#[derive(Default)]
+struct MemWire {
+    endpoints: Mutex<Vec<(Vec<u32>, troupe_comms::transport::PacketSink)>>,
+    packets: std::sync::atomic::AtomicU64,
+}
+
+struct MemTransport {
+    wire: Arc<MemWire>,
+    local: Vec<u32>,
+}
+
+impl troupe_comms::transport::PacketTransport for MemTransport {
+    fn start(
+        &self,
+        sink: troupe_comms::transport::PacketSink,
+    ) -> Result<(), troupe_comms::transport::TransportError> {
+        self.wire
+            .endpoints
+            .lock()
+            .unwrap()
+            .push((self.local.clone(), sink));
+        Ok(())
+    }
+
+    fn send(
+        &self,
+        from: u32,
+        to: Option<u32>,
+        frame: &[u8],
+    ) -> Result<(), troupe_comms::transport::TransportError> {
+        self.wire
+            .packets
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let endpoints = self.wire.endpoints.lock().unwrap().clone();
+        for (local, sink) in endpoints {
+            let addressed = to.is_none_or(|to| local.contains(&to));
+            if addressed && !local.contains(&from) {
+                sink(troupe_comms::transport::ReceivedPacket {
+                    from,
+                    to,
+                    bytes: frame,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Issue 3, item 4: three executors in one process, each running one robot of a
+/// 3-robot team with its team id (0, 1, 2), connected only through the
+/// transport hook; every robot receives the other two's plans and keyframes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn realtime_executors_of_one_robot_each_talk_through_a_transport() {
+    use crate::runtime::RealtimeExecutor;
+    let wire = Arc::new(MemWire::default());
+    type Log = Vec<(RobotId, RobotId, &'static str)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let mut handles = Vec::new();
+    for id in 0..3u32 {
+        let config = LinkConfig {
+            plan_rate_hz: 5.0,
+            ..LinkConfig::default()
+        };
+        let robot = RobotSpec::new(format!("robot{id}"))
+            .with(link(&config))
+            .with(ActorSpec::new("plans", || PlanSource {
+                period: Duration::from_millis(100),
+                count: 0,
+            }))
+            .with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 3,
+            }));
+        let mut exec = RealtimeExecutor::new(vec![robot], u64::from(id))
+            .with_robot_ids(vec![RobotId(id)])
+            .unwrap();
+        let tap_log = log.clone();
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(k) = p.get(&PEER_KEYFRAME) {
+                tap_log.lock().unwrap().push((p.robot, k.robot, "keyframe"));
+            }
+            if let Some(plan) = p.get(&PEER_PLAN) {
+                tap_log.lock().unwrap().push((p.robot, plan.robot, "plan"));
+            }
+        });
+        let transport = Arc::new(MemTransport {
+            wire: wire.clone(),
+            local: vec![id],
+        });
+        handles.push(exec.spawn_with_transport(transport).unwrap());
+    }
+    let complete = |log: &Log| {
+        (0..3).all(|me| {
+            (0..3).filter(|peer| *peer != me).all(|peer| {
+                ["plan", "keyframe"]
+                    .iter()
+                    .all(|kind| log.contains(&(RobotId(me), RobotId(peer), *kind)))
+            })
+        })
+    };
+    let start = std::time::Instant::now();
+    while !complete(&log.lock().unwrap()) {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "not every robot heard both peers: {:?}",
+            log.lock().unwrap()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    for handle in handles {
+        assert_eq!(handle.transport_errors(), 0);
+        for report in handle.shutdown().await {
+            for a in &report.actors {
+                assert_eq!(a.stats.errors, 0, "{} {}", report.name, a.name);
+            }
+        }
+    }
+    assert!(wire.packets.load(std::sync::atomic::Ordering::Relaxed) > 0);
+    // A robot never hears itself.
+    assert!(log.lock().unwrap().iter().all(|(me, peer, _)| me != peer));
+}
+
+#[test]
+fn robot_ids_must_match_the_robots_and_be_distinct() {
+    use crate::runtime::{RealtimeExecutor, RobotIdsError};
+    let team = || vec![RobotSpec::new("a"), RobotSpec::new("b")];
+    assert!(matches!(
+        RealtimeExecutor::new(team(), 0).with_robot_ids(vec![RobotId(2)]),
+        Err(RobotIdsError::CountMismatch { ids: 1, robots: 2 })
+    ));
+    assert!(matches!(
+        RealtimeExecutor::new(team(), 0).with_robot_ids(vec![RobotId(4), RobotId(4)]),
+        Err(RobotIdsError::Duplicate(RobotId(4)))
+    ));
+    assert!(
+        RealtimeExecutor::new(team(), 0)
+            .with_robot_ids(vec![RobotId(7), RobotId(3)])
+            .is_ok()
+    );
+}
