@@ -11,6 +11,9 @@
 //!   driven by explicit time.
 //! - [`simnet`]: a deterministic simulated network (latency, jitter, random and
 //!   bursty loss, reordering, duplication, range, partitions) for sim-time teams.
+//! - [`transport`]: the runtime-free [`transport::PacketTransport`] trait an
+//!   executor hands frames to; [`zenoh`] (feature `zenoh`, default on) implements
+//!   it over zenoh sessions for separate processes and hosts.
 //!
 //! ```
 //! use troupe_comms::wire::{self, Envelope, Odometry, Payload};
@@ -26,4 +29,7 @@
 
 pub mod shaping;
 pub mod simnet;
+pub mod transport;
 pub mod wire;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;

@@ -14,6 +14,7 @@
 //! with a reason and counted (as an actor error). Every second the shaper and
 //! reassembler counters are published on [`LINK_STATUS`].
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -59,6 +60,13 @@ pub struct LinkConfig {
     pub shaper: ShaperConfig,
     /// Incoming reassembly limits.
     pub reassembly: ReassemblyConfig,
+    /// Team members known in advance (robot indices; our own is ignored): they
+    /// are store-and-forward recipients from the start. Other peers become
+    /// recipients when first heard.
+    pub peers: Vec<u32>,
+    /// A store-and-forward recipient silent for longer than this is removed and
+    /// what it missed is given up (counted as `peer_removed`), seconds; 0 = never.
+    pub peer_timeout_s: f64,
     /// Peers whose world frame differs from ours (Eq. 8.1); others share our frame.
     pub peer_frames: Vec<PeerFrame>,
 }
@@ -72,6 +80,8 @@ impl Default for LinkConfig {
             priority: 0,
             shaper: ShaperConfig::default(),
             reassembly: ReassemblyConfig::default(),
+            peers: Vec::new(),
+            peer_timeout_s: 0.0,
             peer_frames: Vec::new(),
         }
     }
@@ -90,6 +100,12 @@ impl LinkConfig {
             return Err(format!(
                 "plan_rate_hz must be ≥ 0, got {}",
                 self.plan_rate_hz
+            ));
+        }
+        if !(self.peer_timeout_s.is_finite() && self.peer_timeout_s >= 0.0) {
+            return Err(format!(
+                "peer_timeout_s must be ≥ 0, got {}",
+                self.peer_timeout_s
             ));
         }
         self.shaper.validate().map_err(|e| format!("shaper.{e}"))?;
@@ -135,6 +151,8 @@ pub struct LinkActor {
     /// When the last plan went out (for the rate limit).
     plan_sent_at: Option<Time>,
     plans_sent: u32,
+    /// When each store-and-forward recipient was last heard.
+    last_heard: BTreeMap<u32, Time>,
     rejected: u64,
 }
 
@@ -155,6 +173,7 @@ impl LinkActor {
             unsent_plan: None,
             plan_sent_at: None,
             plans_sent: 0,
+            last_heard: BTreeMap::new(),
             rejected: 0,
         })
     }
@@ -199,7 +218,9 @@ impl LinkActor {
             ctx.publish(
                 &LINK_TX,
                 LinkTx {
-                    to: Destination::Broadcast,
+                    to: frame
+                        .to
+                        .map_or(Destination::Broadcast, |p| Destination::Robot(RobotId(p))),
                     bytes: Arc::from(frame.bytes),
                 },
             );
@@ -266,6 +287,45 @@ impl LinkActor {
         self.send(Payload::Plan(wire_plan), plan.stamp, ctx)
     }
 
+    /// A peer proved it is a team member (a valid message or an ack): it becomes a
+    /// recipient of store-and-forward messages (with the stored backlog) and its
+    /// silence clock restarts.
+    fn heard(&mut self, peer: RobotId, ctx: &mut Context<'_>) {
+        self.last_heard.insert(peer.0, ctx.now());
+        if self.shaper.add_peer(peer.0) {
+            tracing::debug!(robot = ctx.robot_name(), %peer, "store-and-forward peer added");
+            self.pump(ctx);
+        }
+    }
+
+    /// Removes peers silent for longer than `peer_timeout_s` from the
+    /// store-and-forward recipients (what they missed is given up and counted).
+    fn expire_peers(&mut self, ctx: &mut Context<'_>) {
+        if self.config.peer_timeout_s <= 0.0 {
+            return;
+        }
+        let timeout = Duration::from_secs_f64(self.config.peer_timeout_s);
+        let now = ctx.now();
+        let silent: Vec<u32> = self
+            .last_heard
+            .iter()
+            .filter(|(_, at)| now.saturating_since(**at) > timeout)
+            .map(|(p, _)| *p)
+            .collect();
+        for peer in silent {
+            self.last_heard.remove(&peer);
+            let given_up = self.shaper.remove_peer(peer);
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                peer,
+                given_up,
+                "peer silent for more than {} s: store-and-forward gave up its backlog",
+                self.config.peer_timeout_s
+            );
+        }
+        self.pump(ctx);
+    }
+
     fn receive_frame(&mut self, from: RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
         let now = ctx.now().as_nanos();
         let incoming = self
@@ -276,12 +336,13 @@ impl LinkActor {
             None => Ok(()),
             Some(Incoming::Message(message)) => {
                 if message.ack_requested {
-                    self.shaper.queue_ack(message.message_id);
+                    self.shaper.queue_ack(from.0, message.message_id);
                     self.pump(ctx);
                 }
                 let result = self.receive_message(from, &message.bytes, ctx);
-                if result.is_err() {
-                    self.rejected += 1;
+                match result {
+                    Ok(()) => self.heard(from, ctx),
+                    Err(_) => self.rejected += 1,
                 }
                 result
             }
@@ -291,16 +352,17 @@ impl LinkActor {
                 ..
             }) => {
                 if ack_requested {
-                    self.shaper.queue_ack(message_id);
+                    self.shaper.queue_ack(from.0, message_id);
                     self.pump(ctx);
                 }
                 Ok(())
             }
             Some(Incoming::Ack { ids, .. }) => {
-                // One shaper serves the broadcast medium: an acknowledgement from any
-                // peer releases the stored message.
+                // Acks are addressed to us; each releases our stored message for
+                // that peer only (the store keeps it until every peer has it).
+                self.heard(from, ctx);
                 for id in ids {
-                    self.shaper.acknowledge(now, MessageId(id));
+                    self.shaper.acknowledge(now, from.0, MessageId(id));
                 }
                 self.pump(ctx);
                 Ok(())
@@ -397,6 +459,11 @@ impl Actor for LinkActor {
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
         ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
         ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+        let me = ctx.robot().0;
+        for &peer in self.config.peers.iter().filter(|p| **p != me) {
+            self.shaper.add_peer(peer);
+            self.last_heard.insert(peer, ctx.now());
+        }
         if self.config.odometry_rate_hz > 0.0 {
             ctx.set_timer(
                 SEND_ODOMETRY,
@@ -416,6 +483,7 @@ impl Actor for LinkActor {
                 Ok(())
             }
             Event::Timer(_) => {
+                self.expire_peers(ctx);
                 ctx.publish(
                     &LINK_STATUS,
                     LinkStatus {

@@ -7,6 +7,7 @@ use std::time::Duration;
 use nalgebra::Point3;
 
 use super::*;
+use crate::msgs::Keyframe;
 use crate::runtime::{ActorSpec, Publication, RobotSpec, SimExecutor};
 use crate::trajectory::{Knot, Trajectory};
 
@@ -174,4 +175,283 @@ fn a_zero_plan_rate_shares_no_plans() {
     });
     exec.run_until(Time::from_secs_f64(3.0));
     assert_eq!(*received.lock().unwrap(), 0);
+}
+
+/// Publishes keyframe `n` (a 40-component mixture, about 2.4 kB on the wire) at
+/// `n + 1` seconds, `count` of them.
+struct KeyframeSource {
+    next: u32,
+    count: u32,
+}
+
+fn test_keyframe(id: u32, stamp: Time) -> Keyframe {
+    use nalgebra::{Matrix4, Vector4};
+    let n = 40;
+    let gmm = crate::mapper::sogmm::Gmm4::new(
+        vec![1.0 / n as f64; n],
+        (0..n)
+            .map(|i| Vector4::new(i as f64 * 0.1, f64::from(id), 1.0, 0.5))
+            .collect(),
+        vec![Matrix4::from_diagonal(&Vector4::new(0.01, 0.02, 0.01, 0.005)); n],
+    )
+    .unwrap();
+    Keyframe {
+        id,
+        stamp,
+        pose: nalgebra::Isometry3::translation(f64::from(id), 0.0, 1.0),
+        support_size: 1000,
+        gmm,
+    }
+}
+
+impl Actor for KeyframeSource {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(TICK, Duration::from_secs(1));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if matches!(event, Event::Timer(TICK)) && self.next < self.count {
+            ctx.publish(&KEYFRAME, test_keyframe(self.next, ctx.now()));
+            self.next += 1;
+        }
+        Ok(())
+    }
+}
+
+/// 20 ms latency; everything between robots 0 and 1 is lost from 10 s to 40 s.
+struct OnePairPartition;
+
+impl crate::runtime::SimNetwork for OnePairPartition {
+    fn route(
+        &mut self,
+        now: Time,
+        from: RobotId,
+        to: Destination,
+        _bytes: usize,
+        team_size: usize,
+        deliveries: &mut Vec<(RobotId, Time)>,
+    ) {
+        let cut = (10.0..40.0).contains(&now.as_secs_f64());
+        for r in to.recipients(from, team_size) {
+            let pair = [from.0.min(r.0), from.0.max(r.0)];
+            if !(cut && pair == [0, 1]) {
+                deliveries.push((r, now + Duration::from_millis(20)));
+            }
+        }
+    }
+}
+
+/// Issue 3, item 2 through the actor: with keyframes in store-and-forward, a
+/// partition of one pair loses nothing for that peer, which gets every keyframe
+/// once and in order after healing, while the third robot keeps receiving.
+#[test]
+fn store_and_forward_per_peer_through_the_link_actor() {
+    let mut config = LinkConfig::default();
+    config.shaper.rate_bps = Some(250_000);
+    config.shaper.burst_bytes = 4_096;
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig {
+        capacity_messages: 64,
+        ..troupe_comms::shaping::ClassConfig::store_and_forward()
+    };
+    config.peers = vec![0, 1, 2];
+    let team = vec![
+        RobotSpec::new("r0")
+            .with(link(&config))
+            .with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 50,
+            })),
+        RobotSpec::new("r1").with(link(&config)),
+        RobotSpec::new("r2").with(link(&config)),
+    ];
+    type Log = Vec<(RobotId, u32, Time)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 3).with_network(OnePairPartition);
+    let tap_log = log.clone();
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(k) = p.get(&PEER_KEYFRAME) {
+            assert_eq!(k.robot, RobotId(0));
+            tap_log
+                .lock()
+                .unwrap()
+                .push((p.robot, k.keyframe.id, p.time));
+        }
+    });
+    exec.run_until(Time::from_secs_f64(90.0));
+    let reports = exec.finish();
+    let log = log.lock().unwrap();
+    let expected: Vec<u32> = (0..50).collect();
+    for robot in [RobotId(1), RobotId(2)] {
+        let ids: Vec<u32> = log
+            .iter()
+            .filter(|(r, ..)| *r == robot)
+            .map(|(_, id, _)| *id)
+            .collect();
+        assert_eq!(ids, expected, "{robot}: every keyframe, once, in order");
+    }
+    // Robot 2 was not held back by robot 1's partition.
+    for (_, id, at) in log.iter().filter(|(r, ..)| *r == RobotId(2)) {
+        let offered = Time::from_secs_f64(f64::from(*id + 1));
+        assert!(
+            at.saturating_since(offered) < Duration::from_secs(1),
+            "keyframe {id} at {at:?}"
+        );
+    }
+    // Robot 1 got the partition's keyframes only after it healed.
+    let held = log
+        .iter()
+        .filter(|(r, id, at)| *r == RobotId(1) && (10..39).contains(id) && at.as_secs_f64() >= 40.0)
+        .count();
+    assert_eq!(held, 29);
+    for report in &reports {
+        assert!(
+            report
+                .actors
+                .iter()
+                .all(|a| a.stats.errors == 0 && a.stats.panics == 0),
+            "{report:?}"
+        );
+    }
+}
+
+/// An in-memory "network" between executors, through the transport hook.
+#[derive(Default)]
+struct MemWire {
+    endpoints: Mutex<Vec<(Vec<u32>, troupe_comms::transport::PacketSink)>>,
+    packets: std::sync::atomic::AtomicU64,
+}
+
+struct MemTransport {
+    wire: Arc<MemWire>,
+    local: Vec<u32>,
+}
+
+impl troupe_comms::transport::PacketTransport for MemTransport {
+    fn start(
+        &self,
+        sink: troupe_comms::transport::PacketSink,
+    ) -> Result<(), troupe_comms::transport::TransportError> {
+        self.wire
+            .endpoints
+            .lock()
+            .unwrap()
+            .push((self.local.clone(), sink));
+        Ok(())
+    }
+
+    fn send(
+        &self,
+        from: u32,
+        to: Option<u32>,
+        frame: &[u8],
+    ) -> Result<(), troupe_comms::transport::TransportError> {
+        self.wire
+            .packets
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let endpoints = self.wire.endpoints.lock().unwrap().clone();
+        for (local, sink) in endpoints {
+            let addressed = to.is_none_or(|to| local.contains(&to));
+            if addressed && !local.contains(&from) {
+                sink(troupe_comms::transport::ReceivedPacket {
+                    from,
+                    to,
+                    bytes: frame,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Issue 3, item 4: three executors in one process, each running one robot of a
+/// 3-robot team with its team id (0, 1, 2), connected only through the
+/// transport hook; every robot receives the other two's plans and keyframes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn realtime_executors_of_one_robot_each_talk_through_a_transport() {
+    use crate::runtime::RealtimeExecutor;
+    let wire = Arc::new(MemWire::default());
+    type Log = Vec<(RobotId, RobotId, &'static str)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let mut handles = Vec::new();
+    for id in 0..3u32 {
+        let config = LinkConfig {
+            plan_rate_hz: 5.0,
+            ..LinkConfig::default()
+        };
+        let robot = RobotSpec::new(format!("robot{id}"))
+            .with(link(&config))
+            .with(ActorSpec::new("plans", || PlanSource {
+                period: Duration::from_millis(100),
+                count: 0,
+            }))
+            .with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 3,
+            }));
+        let mut exec = RealtimeExecutor::new(vec![robot], u64::from(id))
+            .with_robot_ids(vec![RobotId(id)])
+            .unwrap();
+        let tap_log = log.clone();
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(k) = p.get(&PEER_KEYFRAME) {
+                tap_log.lock().unwrap().push((p.robot, k.robot, "keyframe"));
+            }
+            if let Some(plan) = p.get(&PEER_PLAN) {
+                tap_log.lock().unwrap().push((p.robot, plan.robot, "plan"));
+            }
+        });
+        let transport = Arc::new(MemTransport {
+            wire: wire.clone(),
+            local: vec![id],
+        });
+        handles.push(exec.spawn_with_transport(transport).unwrap());
+    }
+    let complete = |log: &Log| {
+        (0..3).all(|me| {
+            (0..3).filter(|peer| *peer != me).all(|peer| {
+                ["plan", "keyframe"]
+                    .iter()
+                    .all(|kind| log.contains(&(RobotId(me), RobotId(peer), *kind)))
+            })
+        })
+    };
+    let start = std::time::Instant::now();
+    while !complete(&log.lock().unwrap()) {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "not every robot heard both peers: {:?}",
+            log.lock().unwrap()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    for handle in handles {
+        assert_eq!(handle.transport_errors(), 0);
+        for report in handle.shutdown().await {
+            for a in &report.actors {
+                assert_eq!(a.stats.errors, 0, "{} {}", report.name, a.name);
+            }
+        }
+    }
+    assert!(wire.packets.load(std::sync::atomic::Ordering::Relaxed) > 0);
+    // A robot never hears itself.
+    assert!(log.lock().unwrap().iter().all(|(me, peer, _)| me != peer));
+}
+
+#[test]
+fn robot_ids_must_match_the_robots_and_be_distinct() {
+    use crate::runtime::{RealtimeExecutor, RobotIdsError};
+    let team = || vec![RobotSpec::new("a"), RobotSpec::new("b")];
+    assert!(matches!(
+        RealtimeExecutor::new(team(), 0).with_robot_ids(vec![RobotId(2)]),
+        Err(RobotIdsError::CountMismatch { ids: 1, robots: 2 })
+    ));
+    assert!(matches!(
+        RealtimeExecutor::new(team(), 0).with_robot_ids(vec![RobotId(4), RobotId(4)]),
+        Err(RobotIdsError::Duplicate(RobotId(4)))
+    ));
+    assert!(
+        RealtimeExecutor::new(team(), 0)
+            .with_robot_ids(vec![RobotId(7), RobotId(3)])
+            .is_ok()
+    );
 }

@@ -27,7 +27,7 @@ pub use actor::{Actor, ActorError, ActorResult, Event, TimerId};
 pub use context::{Context, RobotId};
 pub use network::{Destination, IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, SimNetwork};
 pub use queue::QueuePolicy;
-pub use realtime::{RealtimeExecutor, RealtimeHandle};
+pub use realtime::{RealtimeExecutor, RealtimeHandle, RobotIdsError};
 pub use sim::SimExecutor;
 pub use spec::{ActorFactory, ActorOptions, ActorSpec, LatencyModel, RestartPolicy, RobotSpec};
 pub use stats::{

@@ -6,8 +6,18 @@
 //! async workers (this needs the multi-threaded runtime; on a current-thread runtime
 //! they run inline and a warning says so). Packets on [`LINK_TX`] are delivered to
 //! the peers' [`LINK_RX`] at once, inside the process.
+//!
+//! **Transport hook**: a process may run some robots of a larger team
+//! ([`RealtimeExecutor::with_robot_ids`]: the process for robot 2 of a 3-robot
+//! team has `RobotId(2)`) and exchange packets with the others through a
+//! [`PacketTransport`] ([`RealtimeExecutor::spawn_with_transport`]): packets on
+//! [`LINK_TX`] for robots not in this process go to the transport, and packets
+//! it receives are published on the addressed local robots' [`LINK_RX`]. The
+//! trait is `troupe_comms::transport::PacketTransport` (comms implements it over
+//! zenoh); this crate never names zenoh.
 
 use std::any::TypeId;
+use std::sync::Weak;
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -17,10 +27,11 @@ use tokio::runtime::RuntimeFlavor;
 use tokio::sync::{Notify, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
+use troupe_comms::transport::{PacketTransport, ReceivedPacket, TransportError};
 
 use super::context::{Command, Outgoing, RobotId};
 use super::inputs::Inputs;
-use super::network::{LINK_RX, LINK_TX, LinkRx, LinkTx};
+use super::network::{Destination, LINK_RX, LINK_TX, LinkRx, LinkTx};
 use super::registry::{TopicRegistry, apply_command};
 use super::slot::{Hook, HookOutcome, Slot};
 use super::spec::RobotSpec;
@@ -82,6 +93,9 @@ struct Shared {
     arrival: AtomicU64,
     taps: Mutex<Vec<Box<dyn Tap>>>,
     has_taps: bool,
+    transport: Option<Arc<dyn PacketTransport>>,
+    /// Packets the transport refused (queue full, closed).
+    transport_errors: AtomicU64,
 }
 
 impl Shared {
@@ -166,16 +180,49 @@ impl Shared {
         }
     }
 
+    /// Delivers a packet to the local robots it is for (never back to `from`).
+    fn deliver_locally(&self, from: RobotId, to: Destination, bytes: &Arc<[u8]>) {
+        for (index, robot) in self.robots.iter().enumerate() {
+            let addressed = match to {
+                Destination::Broadcast => true,
+                Destination::Robot(r) => r == robot.id,
+            };
+            if addressed && robot.id != from {
+                let message = Arc::new(LinkRx {
+                    from,
+                    bytes: bytes.clone(),
+                });
+                let mut outputs = vec![Outgoing::new(&LINK_RX, message)];
+                self.route(index, &mut outputs);
+            }
+        }
+    }
+
     fn transmit(&self, from: usize, packet: &LinkTx) {
         let from_id = self.robots[from].id;
-        for to in packet.to.recipients(from_id, self.robots.len()) {
-            let message = Arc::new(LinkRx {
-                from: from_id,
-                bytes: packet.bytes.clone(),
-            });
-            let mut outputs = vec![Outgoing::new(&LINK_RX, message)];
-            self.route(to.0 as usize, &mut outputs);
+        self.deliver_locally(from_id, packet.to, &packet.bytes);
+        let Some(transport) = &self.transport else {
+            return;
+        };
+        let to = match packet.to {
+            Destination::Broadcast => None,
+            Destination::Robot(r) if self.robots.iter().any(|l| l.id == r) => return,
+            Destination::Robot(r) => Some(r.0),
+        };
+        if let Err(e) = transport.send(from_id.0, to, &packet.bytes) {
+            let n = self.transport_errors.fetch_add(1, Ordering::Relaxed);
+            if n.is_power_of_two() || n == 0 {
+                tracing::warn!(robot = %self.robots[from].name, "transport refused a packet ({} so far): {e}", n + 1);
+            }
         }
+    }
+
+    /// A packet from the transport: published on the addressed local robots' LINK_RX.
+    fn inject(&self, packet: ReceivedPacket<'_>) {
+        let to = packet
+            .to
+            .map_or(Destination::Broadcast, |r| Destination::Robot(RobotId(r)));
+        self.deliver_locally(RobotId(packet.from), to, &Arc::from(packet.bytes));
     }
 }
 
@@ -191,6 +238,23 @@ pub struct RealtimeExecutor {
     team: Vec<RobotSpec>,
     seed: u64,
     taps: Vec<Box<dyn Tap>>,
+    ids: Vec<RobotId>,
+}
+
+/// Why robot ids were not accepted.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum RobotIdsError {
+    /// One id per robot spec is needed.
+    #[error("{ids} robot ids for {robots} robots")]
+    CountMismatch {
+        /// Ids given.
+        ids: usize,
+        /// Robots in the executor.
+        robots: usize,
+    },
+    /// Ids must be distinct.
+    #[error("robot id {0} given twice")]
+    Duplicate(RobotId),
 }
 
 /// A running team; [`RealtimeHandle::shutdown`] stops it and returns the reports.
@@ -205,11 +269,33 @@ impl RealtimeExecutor {
     /// A team of robots; `seed` seeds every actor's generator.
     #[must_use]
     pub fn new(team: Vec<RobotSpec>, seed: u64) -> Self {
+        let ids = (0..team.len() as u32).map(RobotId).collect();
         RealtimeExecutor {
             team,
             seed,
             taps: Vec::new(),
+            ids,
         }
+    }
+
+    /// The team indices of this executor's robots, in spec order (default
+    /// `0, 1, …`). A process running robot 2 of a 3-robot team passes
+    /// `[RobotId(2)]`; the id is what actors see as [`Context::robot`](super::Context::robot)
+    /// and what the link writes as the envelope's sender.
+    pub fn with_robot_ids(mut self, ids: Vec<RobotId>) -> Result<Self, RobotIdsError> {
+        if ids.len() != self.team.len() {
+            return Err(RobotIdsError::CountMismatch {
+                ids: ids.len(),
+                robots: self.team.len(),
+            });
+        }
+        for (i, id) in ids.iter().enumerate() {
+            if ids[..i].contains(id) {
+                return Err(RobotIdsError::Duplicate(*id));
+            }
+        }
+        self.ids = ids;
+        Ok(self)
     }
 
     /// Adds an observer of every publication (called from the actor tasks, under a lock).
@@ -227,13 +313,39 @@ impl RealtimeExecutor {
     /// If called outside a tokio runtime.
     #[must_use]
     pub fn spawn(self) -> RealtimeHandle {
+        self.prepare(None).launch()
+    }
+
+    /// Like [`spawn`](Self::spawn), with packets for robots outside this process
+    /// handed to `transport` and packets it receives injected on the local
+    /// robots' [`LINK_RX`] (see the [module docs](self)). Fails, before any actor
+    /// task runs, if the transport cannot start receiving.
+    ///
+    /// # Panics
+    ///
+    /// If called outside a tokio runtime.
+    pub fn spawn_with_transport(
+        self,
+        transport: Arc<dyn PacketTransport>,
+    ) -> Result<RealtimeHandle, TransportError> {
+        let prepared = self.prepare(Some(transport.clone()));
+        let weak: Weak<Shared> = Arc::downgrade(&prepared.shared);
+        transport.start(Arc::new(move |packet: ReceivedPacket<'_>| {
+            if let Some(shared) = weak.upgrade() {
+                shared.inject(packet);
+            }
+        }))?;
+        Ok(prepared.launch())
+    }
+
+    /// Instantiates and starts every actor; nothing runs yet.
+    fn prepare(self, transport: Option<Arc<dyn PacketTransport>>) -> Prepared {
         let epoch = Instant::now();
         let mut robots = Vec::new();
         let mut slots_per_robot = Vec::new();
         let mut pending_outputs = Vec::new();
         let mut names = Vec::new();
-        for (r, spec) in self.team.into_iter().enumerate() {
-            let id = RobotId(r as u32);
+        for (r, (spec, id)) in self.team.into_iter().zip(self.ids).enumerate() {
             let mut registry = TopicRegistry::default();
             let mut slots = Vec::new();
             let mut inboxes = Vec::new();
@@ -292,7 +404,35 @@ impl RealtimeExecutor {
             arrival: AtomicU64::new(0),
             taps: Mutex::new(self.taps),
             has_taps,
+            transport,
+            transport_errors: AtomicU64::new(0),
         });
+        Prepared {
+            shared,
+            slots_per_robot,
+            pending_outputs,
+            names,
+        }
+    }
+}
+
+/// A team whose actors are started but whose tasks are not spawned yet.
+struct Prepared {
+    shared: Arc<Shared>,
+    slots_per_robot: Vec<Vec<Slot>>,
+    pending_outputs: Vec<(usize, Vec<Outgoing>)>,
+    names: Vec<Vec<Arc<str>>>,
+}
+
+impl Prepared {
+    /// Routes what the start hooks published and spawns one task per actor.
+    fn launch(self) -> RealtimeHandle {
+        let Prepared {
+            shared,
+            slots_per_robot,
+            pending_outputs,
+            names,
+        } = self;
         for (r, mut outputs) in pending_outputs {
             shared.route(r, &mut outputs);
         }
@@ -458,6 +598,12 @@ impl RealtimeHandle {
     #[must_use]
     pub fn now(&self) -> Time {
         self.shared.now()
+    }
+
+    /// Packets the transport refused so far (queue full or closed).
+    #[must_use]
+    pub fn transport_errors(&self) -> u64 {
+        self.shared.transport_errors.load(Ordering::Relaxed)
     }
 
     /// Stops every actor (each finishes its current handler, then runs its stop hook)

@@ -32,6 +32,10 @@ pub struct Frame {
     pub class: Class,
     /// What it carries.
     pub kind: FrameKind,
+    /// Recipient: `None` = every peer (broadcast), `Some(p)` = peer `p` only
+    /// (acknowledgements, and store-and-forward fragments while peers' cursors
+    /// differ). The transport must not deliver a `Some(p)` frame to anyone else.
+    pub to: Option<u32>,
     /// The bytes to send, header included.
     pub bytes: Vec<u8>,
 }

@@ -21,8 +21,11 @@
 //!   mtu_bytes = 1200` at 250 kbit/s that is 41.6 ms for odometry and 61.7 ms for
 //!   a plan, against 193 ms for one unfragmented 6 kB keyframe (tested).
 //! - **Queue policies** per class ([`QueuePolicy`]): keep-latest, drop-oldest,
-//!   store-and-forward (acknowledged, in-order go-back-N retransmission, bounded
-//!   store that refuses rather than drops).
+//!   store-and-forward (bounded store that refuses rather than drops; a message
+//!   stays until every intended peer acknowledged it; per-peer in-order go-back-N,
+//!   see [`LinkShaper::add_peer`] and the `store` module). Frames carry their
+//!   addressee ([`Frame::to`]): broadcast, or one peer (acks, and store-and-forward
+//!   fragments while peers are out of step).
 //! - **Counters** ([`ShaperStats`]): drops by reason, queue delay, completion delay
 //!   and age of information per class.
 //!
@@ -58,6 +61,7 @@ mod config;
 pub mod frame;
 mod reassembly;
 mod stats;
+mod store;
 
 use std::collections::VecDeque;
 
@@ -74,8 +78,8 @@ pub use stats::{
 };
 
 use crate::wire::Class;
-use config::s_to_ns;
 use frame::{ACK_HEADER_BYTES, DATA_HEADER_BYTES, DataHeader};
+use store::{NextFragment, Store};
 
 /// Per-link message id, increasing by one per offer (wrapping).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -154,30 +158,23 @@ impl Bucket {
     }
 }
 
-/// A message waiting in (or stored by) a class queue.
+/// A message waiting in a keep-latest or drop-oldest class queue.
 #[derive(Clone, Debug)]
 struct Pending {
     id: u32,
     bytes: Vec<u8>,
     offered_ns: u64,
     count: u16,
-    /// Transmissions started (the first counts).
-    transmissions: u32,
 }
 
-/// One class: a deque whose front part `[0, cursor)` is, for store-and-forward,
-/// sent and awaiting acknowledgement; the message at `cursor` is the next to
-/// send, `next_fragment` fragments of it already sent. For the other policies
-/// `cursor` stays 0 and fully sent messages leave the deque.
+/// A keep-latest or drop-oldest class: a deque whose front message may be partly
+/// sent (`next_fragment` fragments of it); fully sent messages leave it.
 #[derive(Clone, Debug)]
 struct ClassQueue {
     config: ClassConfig,
     messages: VecDeque<Pending>,
     bytes: usize,
-    cursor: usize,
     next_fragment: u16,
-    deadline_ns: Option<u64>,
-    timeout_ns: u64,
 }
 
 impl ClassQueue {
@@ -186,42 +183,8 @@ impl ClassQueue {
             config,
             messages: VecDeque::new(),
             bytes: 0,
-            cursor: 0,
             next_fragment: 0,
-            deadline_ns: None,
-            timeout_ns: s_to_ns(config.retransmit_timeout_s),
         }
-    }
-
-    fn saf(&self) -> bool {
-        self.config.policy == QueuePolicy::StoreAndForward
-    }
-
-    /// Store-and-forward: go back to the oldest unacknowledged message when its
-    /// acknowledgement is overdue. Returns true if it did.
-    fn run_timers(&mut self, now_ns: u64) -> bool {
-        if !self.saf() {
-            return false;
-        }
-        match self.deadline_ns {
-            Some(d) if d <= now_ns && self.cursor > 0 => {
-                self.cursor = 0;
-                self.next_fragment = 0;
-                self.deadline_ns = None;
-                let max = s_to_ns(self.config.retransmit_timeout_max_s);
-                self.timeout_ns = self.timeout_ns.saturating_mul(2).min(max);
-                true
-            }
-            _ => false,
-        }
-    }
-
-    /// The message to send a fragment of next, if the policy allows one now.
-    fn sendable(&self) -> Option<&Pending> {
-        if self.saf() && self.cursor >= self.config.window_messages {
-            return None;
-        }
-        self.messages.get(self.cursor)
     }
 
     /// Index of the first message that may be dropped (not partly sent).
@@ -237,22 +200,45 @@ impl ClassQueue {
     }
 }
 
-/// Shapes one directed link. See the [module docs](self).
+/// One traffic class: a plain queue, or a store-and-forward store.
+#[derive(Clone, Debug)]
+enum Lane {
+    Queue(ClassQueue),
+    Store(Store),
+}
+
+impl Lane {
+    fn new(config: ClassConfig) -> Self {
+        match config.policy {
+            QueuePolicy::StoreAndForward => Lane::Store(Store::new(config)),
+            QueuePolicy::KeepLatest | QueuePolicy::DropOldest => {
+                Lane::Queue(ClassQueue::new(config))
+            }
+        }
+    }
+}
+
+/// Shapes what one robot sends to its peers. See the [module docs](self).
 #[derive(Clone, Debug)]
 pub struct LinkShaper {
     config: ShaperConfig,
     chunk_bytes: usize,
     bucket: Bucket,
-    classes: [ClassQueue; 4],
+    lanes: [Lane; 4],
     next_id: u32,
-    pending_acks: VecDeque<u32>,
+    /// (peer, message id) acknowledgements to send, oldest first.
+    pending_acks: VecDeque<(u32, u32)>,
     stats: ShaperStats,
 }
 
 /// What [`LinkShaper::poll`] would send next.
 enum Next {
-    Ack(usize),
-    Data(Class, usize),
+    /// Acknowledgements for one peer: that peer and how many ids.
+    Ack(u32, usize),
+    /// A fragment of a plain queue's front message: class and frame length.
+    Queued(Class, usize),
+    /// A fragment from a store: class, frame length, and which.
+    Stored(Class, usize, NextFragment),
 }
 
 impl LinkShaper {
@@ -263,7 +249,7 @@ impl LinkShaper {
             config,
             chunk_bytes: config.mtu_bytes - DATA_HEADER_BYTES,
             bucket: Bucket::new(config.rate_bps, config.burst_bytes),
-            classes: Class::ALL.map(|c| ClassQueue::new(*config.class(c))),
+            lanes: Class::ALL.map(|c| Lane::new(*config.class(c))),
             next_id: 0,
             pending_acks: VecDeque::new(),
             stats: ShaperStats::default(),
@@ -285,13 +271,61 @@ impl LinkShaper {
     /// Messages held by a class (waiting, partly sent, or stored unacknowledged).
     #[must_use]
     pub fn queued_messages(&self, class: Class) -> usize {
-        self.classes[class.index()].messages.len()
+        match &self.lanes[class.index()] {
+            Lane::Queue(q) => q.messages.len(),
+            Lane::Store(s) => s.len(),
+        }
     }
 
     /// Bytes held by a class.
     #[must_use]
     pub fn queued_bytes(&self, class: Class) -> usize {
-        self.classes[class.index()].bytes
+        match &self.lanes[class.index()] {
+            Lane::Queue(q) => q.bytes,
+            Lane::Store(s) => s.bytes(),
+        }
+    }
+
+    /// Adds a peer as a recipient of store-and-forward messages: of every message
+    /// offered from now on, and of everything still stored (a newly heard peer
+    /// gets the backlog). Store-and-forward messages offered while no peer is
+    /// known wait for the first. Returns false if the peer was known already.
+    pub fn add_peer(&mut self, peer: u32) -> bool {
+        let mut added = false;
+        for lane in &mut self.lanes {
+            if let Lane::Store(s) = lane {
+                added |= s.add_peer(peer);
+            }
+        }
+        added
+    }
+
+    /// Removes a peer (for example one silent for too long): every stored message
+    /// it had not acknowledged is given up for it, counted once per message as
+    /// [`DropReason::PeerRemoved`]; messages no other peer misses are released.
+    /// Returns how many were given up.
+    pub fn remove_peer(&mut self, peer: u32) -> u64 {
+        let mut total = 0;
+        for (lane, stats) in self.lanes.iter_mut().zip(&mut self.stats.classes) {
+            if let Lane::Store(s) = lane {
+                let given_up = s.remove_peer(peer);
+                stats.drops.peer_removed += given_up;
+                total += given_up;
+            }
+        }
+        total
+    }
+
+    /// The peers store-and-forward messages are kept for.
+    #[must_use]
+    pub fn peers(&self) -> Vec<u32> {
+        self.lanes
+            .iter()
+            .find_map(|lane| match lane {
+                Lane::Store(s) => Some(s.peers().collect()),
+                Lane::Queue(_) => None,
+            })
+            .unwrap_or_default()
     }
 
     /// Offers an encoded message (an envelope from [`wire::encode`](crate::wire::encode)).
@@ -306,92 +340,84 @@ impl LinkShaper {
         let stats = &mut self.stats.classes[class.index()];
         stats.offered_messages += 1;
         stats.offered_bytes += len as u64;
-        let queue = &mut self.classes[class.index()];
-        let limit = queue
-            .config
-            .capacity_bytes
-            .min(chunk * usize::from(u16::MAX));
+        let config = self.config.class(class);
+        let limit = config.capacity_bytes.min(chunk * usize::from(u16::MAX));
         if len > limit {
             stats.drops.count(DropReason::TooLarge);
             return Err(Refused::TooLarge { bytes: len, limit });
         }
-        match queue.config.policy {
-            QueuePolicy::KeepLatest => {
-                while let Some(i) = queue.first_droppable() {
-                    queue.remove(i);
-                    stats.drops.count(DropReason::Superseded);
-                }
-            }
-            QueuePolicy::DropOldest => {
-                while queue.messages.len() >= queue.config.capacity_messages
-                    || queue.bytes + len > queue.config.capacity_bytes
-                {
-                    let Some(i) = queue.first_droppable() else {
-                        break; // only the message being sent is left
-                    };
-                    queue.remove(i);
-                    stats.drops.count(DropReason::Overflow);
-                }
-            }
-            QueuePolicy::StoreAndForward => {
-                if queue.messages.len() >= queue.config.capacity_messages
-                    || queue.bytes + len > queue.config.capacity_bytes
-                {
+        let count = len.div_ceil(chunk).max(1) as u16;
+        let id = self.next_id;
+        match &mut self.lanes[class.index()] {
+            Lane::Store(store) => {
+                if !store.has_room(len) {
                     stats.drops.count(DropReason::StoreFull);
                     return Err(Refused::StoreFull);
                 }
+                store.push(id, message, now_ns, count);
+            }
+            Lane::Queue(queue) => {
+                if queue.config.policy == QueuePolicy::KeepLatest {
+                    while let Some(i) = queue.first_droppable() {
+                        queue.remove(i);
+                        stats.drops.count(DropReason::Superseded);
+                    }
+                } else {
+                    while queue.messages.len() >= queue.config.capacity_messages
+                        || queue.bytes + len > queue.config.capacity_bytes
+                    {
+                        let Some(i) = queue.first_droppable() else {
+                            break; // only the message being sent is left
+                        };
+                        queue.remove(i);
+                        stats.drops.count(DropReason::Overflow);
+                    }
+                }
+                queue.bytes += len;
+                queue.messages.push_back(Pending {
+                    id,
+                    bytes: message,
+                    offered_ns: now_ns,
+                    count,
+                });
             }
         }
-        let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1);
-        let count = len.div_ceil(chunk).max(1) as u16;
-        queue.bytes += len;
-        queue.messages.push_back(Pending {
-            id,
-            bytes: message,
-            offered_ns: now_ns,
-            count,
-            transmissions: 0,
-        });
         Ok(MessageId(id))
     }
 
-    /// Records that the peer has a store-and-forward message (from an ack frame
-    /// it sent back). Returns false if no stored message has that id.
-    pub fn acknowledge(&mut self, now_ns: u64, id: MessageId) -> bool {
-        for (ci, queue) in self.classes.iter_mut().enumerate() {
-            if !queue.saf() {
-                continue;
-            }
-            let Some(i) = queue.messages.iter().position(|p| p.id == id.0) else {
+    /// Records that `peer` has a store-and-forward message (from an ack frame it
+    /// sent back). The message leaves the store once every intended recipient has
+    /// it. Returns false if no stored message with that id was missing for `peer`.
+    pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: MessageId) -> bool {
+        for (lane, stats) in self.lanes.iter_mut().zip(&mut self.stats.classes) {
+            let Lane::Store(store) = lane else {
                 continue;
             };
-            queue.remove(i);
-            if i < queue.cursor {
-                queue.cursor -= 1;
-            } else if i == queue.cursor {
-                queue.next_fragment = 0;
+            if let Some(released) = store.acknowledge(now_ns, peer, id.0) {
+                if released {
+                    stats.acknowledged_messages += 1;
+                }
+                return true;
             }
-            // Progress: back to the initial timeout, timer restarted.
-            queue.timeout_ns = s_to_ns(queue.config.retransmit_timeout_s);
-            queue.deadline_ns = (queue.cursor > 0).then(|| now_ns + queue.timeout_ns);
-            self.stats.classes[ci].acknowledged_messages += 1;
-            return true;
         }
         false
     }
 
-    /// Queues an acknowledgement for the peer (of a message it sent with the
+    /// Queues an acknowledgement for `peer` (of a message it sent with the
     /// acknowledge-me flag, see [`ReassembledMessage::ack_requested`]). Acks
-    /// travel ahead of every class, batched.
-    pub fn queue_ack(&mut self, id: u32) {
-        self.pending_acks.push_back(id);
+    /// travel ahead of every class, batched per peer, addressed to that peer
+    /// only (message ids are per sender).
+    pub fn queue_ack(&mut self, peer: u32, id: u32) {
+        self.pending_acks.push_back((peer, id));
     }
 
     fn run_timers(&mut self, now_ns: u64) {
         self.bucket.refill(now_ns);
-        for q in &mut self.classes {
-            q.run_timers(now_ns);
+        for lane in &mut self.lanes {
+            if let Lane::Store(s) = lane {
+                s.run_timers(now_ns);
+            }
         }
     }
 
@@ -399,17 +425,37 @@ impl LinkShaper {
         ((self.config.mtu_bytes - ACK_HEADER_BYTES) / 4).min(usize::from(u16::MAX))
     }
 
+    fn fragment_len(&self, bytes: usize, fragment: u16) -> usize {
+        let start = usize::from(fragment) * self.chunk_bytes;
+        DATA_HEADER_BYTES + (start + self.chunk_bytes).min(bytes) - start
+    }
+
     /// The next frame by priority, and its size.
     fn select(&self) -> Option<Next> {
-        if !self.pending_acks.is_empty() {
-            let n = self.pending_acks.len().min(self.max_acks_per_frame());
-            return Some(Next::Ack(n));
+        if let Some(&(peer, _)) = self.pending_acks.front() {
+            let n = self
+                .pending_acks
+                .iter()
+                .filter(|(p, _)| *p == peer)
+                .count()
+                .min(self.max_acks_per_frame());
+            return Some(Next::Ack(peer, n));
         }
-        for (class, queue) in Class::ALL.iter().zip(&self.classes) {
-            if let Some(p) = queue.sendable() {
-                let start = usize::from(queue.next_fragment) * self.chunk_bytes;
-                let end = (start + self.chunk_bytes).min(p.bytes.len());
-                return Some(Next::Data(*class, DATA_HEADER_BYTES + end - start));
+        for (class, lane) in Class::ALL.iter().zip(&self.lanes) {
+            match lane {
+                Lane::Queue(q) => {
+                    if let Some(p) = q.messages.front() {
+                        let len = self.fragment_len(p.bytes.len(), q.next_fragment);
+                        return Some(Next::Queued(*class, len));
+                    }
+                }
+                Lane::Store(s) => {
+                    if let Some(next) = s.next() {
+                        let len =
+                            self.fragment_len(s.message(next.index).bytes.len(), next.fragment);
+                        return Some(Next::Stored(*class, len, next));
+                    }
+                }
             }
         }
         None
@@ -417,8 +463,8 @@ impl LinkShaper {
 
     fn frame_len(next: &Next) -> usize {
         match next {
-            Next::Ack(n) => ACK_HEADER_BYTES + 4 * n,
-            Next::Data(_, len) => *len,
+            Next::Ack(_, n) => ACK_HEADER_BYTES + 4 * n,
+            Next::Queued(_, len) | Next::Stored(_, len, _) => *len,
         }
     }
 
@@ -433,10 +479,12 @@ impl LinkShaper {
             now_ns.saturating_add(self.bucket.wait_ns(cost))
         });
         let by_timer = self
-            .classes
+            .lanes
             .iter()
-            .filter(|q| q.cursor > 0)
-            .filter_map(|q| q.deadline_ns)
+            .filter_map(|lane| match lane {
+                Lane::Store(s) => s.next_deadline(),
+                Lane::Queue(_) => None,
+            })
             .min();
         match (by_bucket, by_timer) {
             (Some(a), Some(b)) => Some(a.min(b.max(now_ns))),
@@ -455,82 +503,153 @@ impl LinkShaper {
         }
         self.bucket.take(cost);
         match next {
-            Next::Ack(n) => {
-                let ids: Vec<u32> = self.pending_acks.drain(..n).collect();
+            Next::Ack(peer, n) => {
+                let mut ids = Vec::with_capacity(n);
+                self.pending_acks.retain(|&(p, id)| {
+                    if p == peer && ids.len() < n {
+                        ids.push(id);
+                        false
+                    } else {
+                        true
+                    }
+                });
                 let bytes = frame::ack_frame(&ids);
                 self.stats.ack_frames += 1;
                 self.stats.ack_bytes += bytes.len() as u64;
                 Some(Frame {
                     class: Class::Odometry,
                     kind: FrameKind::Ack { ids: n as u16 },
+                    to: Some(peer),
                     bytes,
                 })
             }
-            Next::Data(class, _) => Some(self.send_fragment(now_ns, class)),
-        }
-    }
-
-    fn send_fragment(&mut self, now_ns: u64, class: Class) -> Frame {
-        let chunk_bytes = self.chunk_bytes;
-        let queue = &mut self.classes[class.index()];
-        let stats = &mut self.stats.classes[class.index()];
-        let index = queue.next_fragment;
-        let cursor = queue.cursor;
-        let saf = queue.saf();
-        // `select` found a message at `cursor`.
-        let p = &mut queue.messages[cursor];
-        if index == 0 {
-            p.transmissions += 1;
-            if p.transmissions == 1 {
-                stats
-                    .queue_delay
-                    .record(now_ns.saturating_sub(p.offered_ns));
-            } else {
-                stats.retransmitted_messages += 1;
+            Next::Queued(class, _) => {
+                let stats = &mut self.stats.classes[class.index()];
+                match &mut self.lanes[class.index()] {
+                    Lane::Queue(q) => Some(send_queued(q, stats, self.chunk_bytes, now_ns, class)),
+                    Lane::Store(_) => None,
+                }
+            }
+            Next::Stored(class, _, next) => {
+                let stats = &mut self.stats.classes[class.index()];
+                match &mut self.lanes[class.index()] {
+                    Lane::Store(s) => Some(send_stored(
+                        s,
+                        stats,
+                        self.chunk_bytes,
+                        now_ns,
+                        class,
+                        &next,
+                    )),
+                    Lane::Queue(_) => None,
+                }
             }
         }
-        let start = usize::from(index) * chunk_bytes;
-        let end = (start + chunk_bytes).min(p.bytes.len());
-        let header = DataHeader {
-            class,
-            ack_requested: saf,
+    }
+}
+
+/// Counts a message's first complete transmission.
+fn record_first(stats: &mut ClassStats, now_ns: u64, offered_ns: u64) {
+    stats.sent_messages += 1;
+    stats
+        .completion_delay
+        .record(now_ns.saturating_sub(offered_ns));
+    stats.age.record(now_ns, offered_ns);
+}
+
+/// Sends the next fragment of a plain queue's front message (`select` found one).
+fn send_queued(
+    queue: &mut ClassQueue,
+    stats: &mut ClassStats,
+    chunk_bytes: usize,
+    now_ns: u64,
+    class: Class,
+) -> Frame {
+    let index = queue.next_fragment;
+    // `select` found a front message.
+    let p = &queue.messages[0];
+    if index == 0 {
+        stats
+            .queue_delay
+            .record(now_ns.saturating_sub(p.offered_ns));
+    }
+    let start = usize::from(index) * chunk_bytes;
+    let end = (start + chunk_bytes).min(p.bytes.len());
+    let header = DataHeader {
+        class,
+        ack_requested: false,
+        message_id: p.id,
+        index,
+        count: p.count,
+    };
+    let bytes = frame::data_frame(&header, &p.bytes[start..end]);
+    let (id, count, offered_ns) = (p.id, p.count, p.offered_ns);
+    stats.sent_frames += 1;
+    stats.sent_bytes += bytes.len() as u64;
+    if index + 1 == count {
+        queue.next_fragment = 0;
+        queue.remove(0);
+        record_first(stats, now_ns, offered_ns);
+    } else {
+        queue.next_fragment = index + 1;
+    }
+    Frame {
+        class,
+        kind: FrameKind::Data {
+            message_id: id,
+            index,
+            count,
+        },
+        to: None,
+        bytes,
+    }
+}
+
+/// Sends the store's chosen fragment (`select` found it).
+fn send_stored(
+    store: &mut Store,
+    stats: &mut ClassStats,
+    chunk_bytes: usize,
+    now_ns: u64,
+    class: Class,
+    next: &NextFragment,
+) -> Frame {
+    let transmissions = store.sent(now_ns, next);
+    let p = store.message(next.index);
+    let index = next.fragment;
+    if index == 0 {
+        if transmissions == 1 {
+            stats
+                .queue_delay
+                .record(now_ns.saturating_sub(p.offered_ns));
+        } else {
+            stats.retransmitted_messages += 1;
+        }
+    }
+    let start = usize::from(index) * chunk_bytes;
+    let end = (start + chunk_bytes).min(p.bytes.len());
+    let header = DataHeader {
+        class,
+        ack_requested: true,
+        message_id: p.id,
+        index,
+        count: p.count,
+    };
+    let bytes = frame::data_frame(&header, &p.bytes[start..end]);
+    stats.sent_frames += 1;
+    stats.sent_bytes += bytes.len() as u64;
+    if index + 1 == p.count && transmissions == 1 {
+        record_first(stats, now_ns, p.offered_ns);
+    }
+    Frame {
+        class,
+        kind: FrameKind::Data {
             message_id: p.id,
             index,
             count: p.count,
-        };
-        let bytes = frame::data_frame(&header, &p.bytes[start..end]);
-        let (id, count, offered_ns, first) = (p.id, p.count, p.offered_ns, p.transmissions == 1);
-        stats.sent_frames += 1;
-        stats.sent_bytes += bytes.len() as u64;
-        if index + 1 == count {
-            queue.next_fragment = 0;
-            if first {
-                stats.sent_messages += 1;
-                stats
-                    .completion_delay
-                    .record(now_ns.saturating_sub(offered_ns));
-                stats.age.record(now_ns, offered_ns);
-            }
-            if saf {
-                queue.cursor += 1;
-                if queue.deadline_ns.is_none() {
-                    queue.deadline_ns = Some(now_ns + queue.timeout_ns);
-                }
-            } else {
-                queue.remove(0);
-            }
-        } else {
-            queue.next_fragment = index + 1;
-        }
-        Frame {
-            class,
-            kind: FrameKind::Data {
-                message_id: id,
-                index,
-                count,
-            },
-            bytes,
-        }
+        },
+        to: next.to,
+        bytes,
     }
 }
 

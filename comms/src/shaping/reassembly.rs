@@ -17,7 +17,7 @@ pub struct ReassembledMessage {
     /// Its traffic class.
     pub class: Class,
     /// The sender keeps it until acknowledged: send
-    /// [`LinkShaper::queue_ack`](super::LinkShaper::queue_ack)`(message_id)` back.
+    /// [`LinkShaper::queue_ack`](super::LinkShaper::queue_ack)`(sender, message_id)` back.
     pub ack_requested: bool,
     /// The message (an encoded envelope).
     pub bytes: Vec<u8>,

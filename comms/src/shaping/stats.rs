@@ -16,6 +16,9 @@ pub enum DropReason {
     StoreFull,
     /// Refused: larger than the class capacity or than 65 535 fragments.
     TooLarge,
+    /// Store-and-forward: given up for one peer because that peer was removed
+    /// (counted once per message and peer; see `LinkShaper::remove_peer`).
+    PeerRemoved,
 }
 
 /// Drops of one class, by reason.
@@ -29,6 +32,8 @@ pub struct DropCounts {
     pub store_full: u64,
     /// See [`DropReason::TooLarge`].
     pub too_large: u64,
+    /// See [`DropReason::PeerRemoved`].
+    pub peer_removed: u64,
 }
 
 impl DropCounts {
@@ -38,13 +43,14 @@ impl DropCounts {
             DropReason::Overflow => self.overflow += 1,
             DropReason::StoreFull => self.store_full += 1,
             DropReason::TooLarge => self.too_large += 1,
+            DropReason::PeerRemoved => self.peer_removed += 1,
         }
     }
 
     /// All drops together.
     #[must_use]
     pub fn total(&self) -> u64 {
-        self.superseded + self.overflow + self.store_full + self.too_large
+        self.superseded + self.overflow + self.store_full + self.too_large + self.peer_removed
     }
 }
 

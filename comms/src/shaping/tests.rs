@@ -177,6 +177,8 @@ fn store_and_forward_loses_nothing_over_a_30s_partition() {
     };
     let mut a = LinkShaper::new(c).unwrap();
     let mut b = LinkShaper::new(c).unwrap();
+    a.add_peer(1);
+    b.add_peer(0);
     let mut at_b = Reassembler::default();
     let mut at_a = Reassembler::default();
     let partitioned = |t: u64| (10 * S..40 * S).contains(&t);
@@ -213,18 +215,18 @@ fn store_and_forward_loses_nothing_over_a_30s_partition() {
                     Some(Incoming::Message(m)) => {
                         received.push(m.message_id);
                         assert!(m.ack_requested);
-                        b.queue_ack(m.message_id);
+                        b.queue_ack(0, m.message_id);
                     }
                     Some(Incoming::Duplicate {
                         message_id,
                         ack_requested: true,
                         ..
-                    }) => b.queue_ack(message_id),
+                    }) => b.queue_ack(0, message_id),
                     _ => {}
                 }
             } else if let Some(Incoming::Ack { ids, .. }) = at_a.push(now, 1, &bytes).unwrap() {
                 for id in ids {
-                    a.acknowledge(now, MessageId(id));
+                    a.acknowledge(now, 1, MessageId(id));
                 }
             }
         }
@@ -259,6 +261,165 @@ fn store_and_forward_loses_nothing_over_a_30s_partition() {
     assert!(stats.retransmitted_messages > 0);
 }
 
+/// What [`three_robots`] saw: per receiver (1 and 2), the message ids it
+/// completed (first time only) with the time.
+struct TeamRun {
+    accepted: Vec<u32>,
+    received: [Vec<(u32, u64)>; 2],
+    /// Most messages robot 0 stored at any time during the run.
+    max_stored: usize,
+    sender: LinkShaper,
+}
+
+/// Robot 0 sends 60 store-and-forward keyframes (one per second) to robots 1 and
+/// 2, which acknowledge; every frame between 0 and `cut` (both ways) sent while
+/// `partitioned(t)` is lost. Frames honour their addressee (`Frame::to`).
+fn three_robots(cut: u32, partitioned: impl Fn(u64) -> bool) -> TeamRun {
+    let (rate, mtu) = (250_000, 1_200);
+    let mut c = config(rate, mtu as u64, mtu);
+    c.keyframe = ClassConfig {
+        capacity_messages: 64,
+        ..ClassConfig::store_and_forward()
+    };
+    let mut shapers: Vec<LinkShaper> = (0..3).map(|_| LinkShaper::new(c).unwrap()).collect();
+    for (me, s) in shapers.iter_mut().enumerate() {
+        for peer in 0..3u32 {
+            if peer != me as u32 {
+                s.add_peer(peer);
+            }
+        }
+    }
+    let mut receivers: Vec<Reassembler> = (0..3).map(|_| Reassembler::default()).collect();
+    let latency = 20 * MS;
+    // In flight: (arrival, from, to, bytes).
+    let mut flight: Vec<(u64, u32, u32, Vec<u8>)> = Vec::new();
+    let mut run = TeamRun {
+        accepted: Vec::new(),
+        received: [Vec::new(), Vec::new()],
+        max_stored: 0,
+        sender: LinkShaper::new(c).unwrap(),
+    };
+    let mut now = 0u64;
+    let mut next_offer = 0u64;
+    while now <= 150 * S {
+        let t_offer = (next_offer < 60).then_some(next_offer * S);
+        let t_flight = flight.iter().map(|f| f.0).min();
+        let mut candidates = vec![t_offer, t_flight];
+        candidates.extend(shapers.iter_mut().map(|s| s.next_send_time(now)));
+        let Some(t) = candidates.into_iter().flatten().min() else {
+            break;
+        };
+        now = t;
+        if t_offer == Some(now) {
+            let body = (next_offer as u32).to_le_bytes().repeat(1_500); // 6 kB
+            run.accepted
+                .push(shapers[0].offer(now, Class::Keyframe, body).unwrap().0);
+            next_offer += 1;
+        }
+        let (due, rest): (Vec<_>, Vec<_>) = flight.drain(..).partition(|f| f.0 <= now);
+        flight = rest;
+        for (_, from, to, bytes) in due {
+            match receivers[to as usize].push(now, from, &bytes).unwrap() {
+                Some(Incoming::Message(m)) => {
+                    assert_eq!(from, 0);
+                    run.received[to as usize - 1].push((m.message_id, now));
+                    shapers[to as usize].queue_ack(from, m.message_id);
+                }
+                Some(Incoming::Duplicate {
+                    message_id,
+                    ack_requested: true,
+                    ..
+                }) => shapers[to as usize].queue_ack(from, message_id),
+                Some(Incoming::Ack { ids, .. }) => {
+                    for id in ids {
+                        shapers[to as usize].acknowledge(now, from, MessageId(id));
+                    }
+                }
+                _ => {}
+            }
+        }
+        for (from, shaper) in shapers.iter_mut().enumerate() {
+            let from = from as u32;
+            while let Some(f) = shaper.poll(now) {
+                for to in 0..3u32 {
+                    let addressed = f.to.map_or(to != from, |p| p == to);
+                    let cut_off = (from, to) == (0, cut) || (from, to) == (cut, 0);
+                    if addressed && !(cut_off && partitioned(now)) {
+                        flight.push((now + latency, from, to, f.bytes.clone()));
+                    }
+                }
+            }
+        }
+        run.max_stored = run
+            .max_stored
+            .max(shapers[0].queued_messages(Class::Keyframe));
+    }
+    run.sender = shapers.swap_remove(0);
+    run
+}
+
+/// Issue 3: partition one pair only (0–1 from 10 to 40 s; 0–2 stays up). Nothing
+/// accepted is lost for robot 1, which receives every stored keyframe once and in
+/// order after healing; robot 2 is not held back meanwhile; and the store keeps
+/// each message until both peers have it.
+#[test]
+fn store_and_forward_is_per_peer_when_one_pair_is_partitioned() {
+    let run = three_robots(1, |t| (10 * S..40 * S).contains(&t));
+    assert_eq!(run.accepted.len(), 60);
+    for (peer, got) in run.received.iter().enumerate() {
+        let ids: Vec<u32> = got.iter().map(|(id, _)| *id).collect();
+        assert_eq!(
+            ids,
+            run.accepted,
+            "robot {}: every keyframe, once, in order",
+            peer + 1
+        );
+    }
+    // Robot 2 got each keyframe within a second of its offer, partition or not.
+    for (i, (_, at)) in run.received[1].iter().enumerate() {
+        assert!(
+            *at < i as u64 * S + S,
+            "keyframe {i} reached robot 2 at {at} ns"
+        );
+    }
+    // Robot 1 got nothing offered during the partition before it healed.
+    let late = run.received[0]
+        .iter()
+        .filter(|(id, at)| (10..40).contains(id) && *at >= 40 * S);
+    assert_eq!(late.count(), 30);
+    // Robot 2's acknowledgements alone released nothing: about 30 messages
+    // waited for robot 1.
+    assert!(run.max_stored >= 29, "{} stored at most", run.max_stored);
+    let stats = run.sender.stats().class(Class::Keyframe);
+    assert_eq!(stats.drops.total(), 0);
+    assert_eq!(stats.acknowledged_messages, 60);
+    assert_eq!(run.sender.queued_messages(Class::Keyframe), 0);
+}
+
+#[test]
+fn removing_a_peer_gives_its_messages_up_and_counts_them() {
+    let mut c = config(100_000, 1_200, 1_200);
+    c.keyframe = ClassConfig::store_and_forward();
+    let mut s = LinkShaper::new(c).unwrap();
+    // Offered before any peer is known: kept for the first peers.
+    s.offer(0, Class::Keyframe, vec![1; 100]).unwrap();
+    assert!(s.add_peer(1));
+    assert!(s.add_peer(2));
+    assert!(!s.add_peer(2));
+    s.offer(0, Class::Keyframe, vec![2; 100]).unwrap();
+    assert!(s.acknowledge(0, 1, MessageId(0)));
+    assert!(s.acknowledge(0, 1, MessageId(1)));
+    assert_eq!(s.queued_messages(Class::Keyframe), 2, "robot 2 misses both");
+    assert!(s.acknowledge(0, 2, MessageId(0)));
+    assert_eq!(s.queued_messages(Class::Keyframe), 1);
+    assert_eq!(s.remove_peer(2), 1);
+    assert_eq!(s.queued_messages(Class::Keyframe), 0);
+    let st = s.stats().class(Class::Keyframe);
+    assert_eq!(st.drops.peer_removed, 1);
+    assert_eq!(st.acknowledged_messages, 1);
+    assert_eq!(s.peers(), vec![1]);
+}
+
 #[test]
 fn a_full_store_refuses_and_keeps_what_it_accepted() {
     let mut c = config(100_000, 1_200, 1_200);
@@ -267,6 +428,7 @@ fn a_full_store_refuses_and_keeps_what_it_accepted() {
         ..ClassConfig::store_and_forward()
     };
     let mut s = LinkShaper::new(c).unwrap();
+    s.add_peer(1);
     for i in 0..3 {
         s.offer(0, Class::Keyframe, vec![i; 100]).unwrap();
     }
@@ -287,8 +449,8 @@ fn a_full_store_refuses_and_keeps_what_it_accepted() {
         s.offer(t, Class::Keyframe, vec![9; 100]),
         Err(Refused::StoreFull)
     );
-    assert!(s.acknowledge(t, MessageId(0)));
-    assert!(!s.acknowledge(t, MessageId(0)));
+    assert!(s.acknowledge(t, 1, MessageId(0)));
+    assert!(!s.acknowledge(t, 1, MessageId(0)));
     assert!(s.offer(t, Class::Keyframe, vec![9; 100]).is_ok());
     let st = s.stats().class(Class::Keyframe);
     assert_eq!(st.drops.store_full, 2);

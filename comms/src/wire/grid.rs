@@ -54,10 +54,14 @@ pub struct GridDims {
 }
 
 impl GridDims {
-    /// Number of cells (as `u64`, so it cannot overflow).
+    /// Number of cells, saturating at `u64::MAX` (three `u32` factors can exceed
+    /// `u64`; every `u32` cell index is below the saturated value, so validation
+    /// is unaffected).
     #[must_use]
     pub fn cells(&self) -> u64 {
-        u64::from(self.width) * u64::from(self.height) * u64::from(self.length)
+        u64::from(self.width)
+            .saturating_mul(u64::from(self.height))
+            .saturating_mul(u64::from(self.length))
     }
 }
 

@@ -79,6 +79,36 @@ fn rejects_bad_input_with_reasons() {
     ));
 }
 
+/// Found by `cargo fuzz` (fuzz/, target `envelope_decode`): a grid change set whose
+/// dimensions multiply past `u64` overflowed in `GridDims::cells` (a panic with
+/// overflow checks, a wrapped and wrong cell count without).
+#[test]
+fn fuzz_regression_grid_dims_overflow() {
+    let crash: [u8; 52] = [
+        1, 1, 2, 3, 2, 128, 148, 235, 220, 3, 4, 4, 0, 0, 167, 176, 164, 193, 218, 3, 0, 0, 0, 0,
+        0, 144, 191, 0, 0, 128, 191, 0, 0, 0, 0, 2, 1, 2, 0, 0, 205, 204, 76, 63, 7, 0, 0, 0, 205,
+        204, 204, 190,
+    ];
+    assert!(decode(&crash).is_err());
+    let huge = GridDims {
+        width: u32::MAX,
+        height: u32::MAX,
+        length: u32::MAX,
+    };
+    assert_eq!(huge.cells(), u64::MAX);
+    // A huge grid is valid, and its largest u32 index is inside it.
+    let set = GridChangeSet {
+        dims: huge,
+        origin_m: [0.0; 3],
+        changes: vec![CellChange {
+            index: u32::MAX,
+            log_odds: 0.5,
+        }],
+    };
+    let e = Envelope::new(1, 2, 3, 4, Payload::GridChanges(set));
+    assert_eq!(decode(&encode(&e).unwrap()).unwrap(), e);
+}
+
 proptest! {
     #[test]
     fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {

@@ -1,0 +1,631 @@
+//! The zenoh transport (feature `zenoh`, on by default): frames between processes
+//! and hosts (DESIGN §5, issue 3).
+//!
+//! - **Key expressions** `troupe/<team>/<robot>/<class>` with the *sending* robot's
+//!   index and the frame's class (`odometry`, `plan`, `keyframe`, `bulk`; ack
+//!   frames travel as `odometry`, like the shaper schedules them). Each process
+//!   subscribes to `troupe/<team>/*/*`.
+//! - **Addressing**: a frame for one robot (acks, store-and-forward catch-up)
+//!   carries the addressee as a 4-byte attachment; other robots drop it.
+//! - **Checks on receipt** (each counted in [`ZenohStats`]): the key expression
+//!   must parse, name our team and a known class, and agree with the frame's
+//!   class; the frame must parse. The link actor then checks that the envelope's
+//!   sender is the robot of the key expression ([`ReceivedPacket::from`]) and
+//!   rejects and counts a mismatch.
+//! - **Sessions**: peer mode with explicit listen/connect endpoints, or client
+//!   mode towards a router; multicast scouting off by default (a session with no
+//!   endpoints and no scouting opens no socket); optional TLS (root CA,
+//!   certificate, key files) and user/password authentication.
+//! - **Never blocking the robot**: [`PacketTransport::send`] puts the frame in a
+//!   bounded queue drained by a sender thread (full queue: dropped and counted).
+//!   Shaping happens above, in the link actor, so the same study runs over zenoh
+//!   and the simulated network.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use ::zenoh::Wait;
+use ::zenoh::pubsub::Subscriber;
+use ::zenoh::sample::{Locality, Sample};
+use serde::{Deserialize, Serialize};
+
+use crate::shaping::frame::{self, ParsedFrame};
+use crate::transport::{PacketSink, PacketTransport, ReceivedPacket, TransportError};
+use crate::wire::Class;
+
+/// Session mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ZenohMode {
+    /// Peer-to-peer: listen and connect to explicit endpoints.
+    #[default]
+    Peer,
+    /// Client of a zenoh router (`connect` names it).
+    Client,
+}
+
+/// TLS files (PEM). Used by `tls/` endpoints.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZenohTls {
+    /// Certificate authority that signed the peers' certificates.
+    pub root_ca_path: PathBuf,
+    /// This process's certificate.
+    pub cert_path: PathBuf,
+    /// This process's private key.
+    pub key_path: PathBuf,
+    /// Require and check a client certificate on listening endpoints (mutual TLS).
+    #[serde(default)]
+    pub mutual: bool,
+}
+
+/// User/password authentication of zenoh sessions.
+#[derive(Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZenohAuth {
+    /// This session's user name.
+    pub user: String,
+    /// This session's password.
+    pub password: String,
+    /// File of `user:password` lines accepted from peers (needed to accept
+    /// authenticated peers on a listening endpoint).
+    #[serde(default)]
+    pub dictionary_path: Option<PathBuf>,
+}
+
+impl std::fmt::Debug for ZenohAuth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZenohAuth")
+            .field("user", &self.user)
+            .field("password", &"<hidden>")
+            .field("dictionary_path", &self.dictionary_path)
+            .finish()
+    }
+}
+
+/// zenoh settings (a robot's `[link.zenoh]` table).
+///
+/// ```
+/// let config: troupe_comms::zenoh::ZenohConfig = toml::from_str(r#"
+///     mode = "peer"
+///     listen = ["tcp/127.0.0.1:7447"]
+///     connect = ["tcp/127.0.0.1:7448"]
+/// "#).unwrap();
+/// config.validate().unwrap();
+/// assert!(!config.multicast_scouting);
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZenohConfig {
+    /// Peer or client.
+    pub mode: ZenohMode,
+    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`, `tls/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (peers, or the router in client mode).
+    pub connect: Vec<String>,
+    /// Discover peers by UDP multicast (and gossip). Off by default.
+    pub multicast_scouting: bool,
+    /// TLS files; required when an endpoint uses `tls/`.
+    pub tls: Option<ZenohTls>,
+    /// User/password authentication.
+    pub auth: Option<ZenohAuth>,
+    /// Frames waiting for the sender thread before new ones are dropped.
+    pub send_queue_frames: usize,
+}
+
+const DEFAULT_SEND_QUEUE_FRAMES: usize = 4096;
+
+fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
+    TransportError::Config {
+        key: key.to_owned(),
+        reason: reason.into(),
+    }
+}
+
+impl ZenohConfig {
+    /// Checks the settings (endpoint syntax, TLS files present when needed,
+    /// client mode has a router to connect to).
+    pub fn validate(&self) -> Result<(), TransportError> {
+        for (key, endpoints) in [("listen", &self.listen), ("connect", &self.connect)] {
+            for e in endpoints {
+                let Some((protocol, address)) = e.split_once('/') else {
+                    return Err(config_error(
+                        key,
+                        format!("`{e}` is not `<protocol>/<address>`"),
+                    ));
+                };
+                if !matches!(protocol, "tcp" | "udp" | "tls") {
+                    return Err(config_error(
+                        key,
+                        format!("`{e}`: protocol must be tcp, udp or tls"),
+                    ));
+                }
+                if address.is_empty() {
+                    return Err(config_error(key, format!("`{e}` has no address")));
+                }
+                if protocol == "tls" && self.tls.is_none() {
+                    return Err(config_error(
+                        "tls",
+                        format!("endpoint `{e}` needs the tls table"),
+                    ));
+                }
+            }
+        }
+        if self.mode == ZenohMode::Client && self.connect.is_empty() {
+            return Err(config_error(
+                "connect",
+                "client mode needs the router's endpoint",
+            ));
+        }
+        if let Some(tls) = &self.tls {
+            for (key, path) in [
+                ("tls.root_ca_path", &tls.root_ca_path),
+                ("tls.cert_path", &tls.cert_path),
+                ("tls.key_path", &tls.key_path),
+            ] {
+                if !path.is_file() {
+                    return Err(config_error(
+                        key,
+                        format!("{} is not a readable file", path.display()),
+                    ));
+                }
+            }
+        }
+        if let Some(auth) = &self.auth {
+            if auth.user.is_empty() {
+                return Err(config_error("auth.user", "must not be empty"));
+            }
+            if let Some(path) = &auth.dictionary_path
+                && !path.is_file()
+            {
+                return Err(config_error(
+                    "auth.dictionary_path",
+                    format!("{} is not a readable file", path.display()),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The zenoh configuration these settings stand for.
+    pub fn to_zenoh(&self) -> Result<::zenoh::Config, TransportError> {
+        self.validate()?;
+        let mut c = ::zenoh::Config::default();
+        let json = |v: &dyn erased::Json| v.json();
+        let mode = match self.mode {
+            ZenohMode::Peer => "peer",
+            ZenohMode::Client => "client",
+        };
+        let mut set = |key: &str, value: String| {
+            c.insert_json5(key, &value)
+                .map_err(|e| TransportError::Network {
+                    context: format!("setting zenoh `{key}`"),
+                    source: e,
+                })
+        };
+        set("mode", json(&mode))?;
+        set("listen/endpoints", json(&self.listen))?;
+        set("connect/endpoints", json(&self.connect))?;
+        set("scouting/multicast/enabled", json(&self.multicast_scouting))?;
+        set("scouting/gossip/enabled", json(&self.multicast_scouting))?;
+        if let Some(tls) = &self.tls {
+            let path = |p: &PathBuf| json(&p.display().to_string());
+            set(
+                "transport/link/tls/root_ca_certificate",
+                path(&tls.root_ca_path),
+            )?;
+            set(
+                "transport/link/tls/listen_certificate",
+                path(&tls.cert_path),
+            )?;
+            set("transport/link/tls/listen_private_key", path(&tls.key_path))?;
+            set(
+                "transport/link/tls/connect_certificate",
+                path(&tls.cert_path),
+            )?;
+            set(
+                "transport/link/tls/connect_private_key",
+                path(&tls.key_path),
+            )?;
+            set("transport/link/tls/enable_mtls", json(&tls.mutual))?;
+        }
+        if let Some(auth) = &self.auth {
+            set("transport/auth/usrpwd/user", json(&auth.user))?;
+            set("transport/auth/usrpwd/password", json(&auth.password))?;
+            if let Some(path) = &auth.dictionary_path {
+                set(
+                    "transport/auth/usrpwd/dictionary_file",
+                    json(&path.display().to_string()),
+                )?;
+            }
+        }
+        Ok(c)
+    }
+}
+
+/// JSON text of config values without pulling serde_json in.
+mod erased {
+    pub trait Json {
+        fn json(&self) -> String;
+    }
+    impl Json for bool {
+        fn json(&self) -> String {
+            self.to_string()
+        }
+    }
+    impl Json for &str {
+        fn json(&self) -> String {
+            quote(self)
+        }
+    }
+    impl Json for String {
+        fn json(&self) -> String {
+            quote(self)
+        }
+    }
+    impl Json for Vec<String> {
+        fn json(&self) -> String {
+            let items: Vec<String> = self.iter().map(|s| quote(s)).collect();
+            format!("[{}]", items.join(","))
+        }
+    }
+    fn quote(s: &str) -> String {
+        let mut out = String::with_capacity(s.len() + 2);
+        out.push('"');
+        for ch in s.chars() {
+            match ch {
+                '"' => out.push_str("\\\""),
+                '\\' => out.push_str("\\\\"),
+                c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
+                c => out.push(c),
+            }
+        }
+        out.push('"');
+        out
+    }
+}
+
+/// The key-expression segment of a class.
+#[must_use]
+pub fn class_segment(class: Class) -> &'static str {
+    match class {
+        Class::Odometry => "odometry",
+        Class::Plan => "plan",
+        Class::Keyframe => "keyframe",
+        Class::Bulk => "bulk",
+    }
+}
+
+/// `troupe/<team>/<robot>/<class>`.
+#[must_use]
+pub fn key_expr(team: u32, robot: u32, class: Class) -> String {
+    format!("troupe/{team}/{robot}/{}", class_segment(class))
+}
+
+/// Why a received sample was dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyError {
+    /// Not `troupe/<team>/<robot>/<class>` with numbers and a known class.
+    Malformed,
+    /// Another team's key.
+    OtherTeam,
+}
+
+/// Parses `troupe/<team>/<robot>/<class>` for `team`: the sender and the class.
+pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
+    let mut parts = key.split('/');
+    let (Some("troupe"), Some(t), Some(r), Some(c), None) = (
+        parts.next(),
+        parts.next(),
+        parts.next(),
+        parts.next(),
+        parts.next(),
+    ) else {
+        return Err(KeyError::Malformed);
+    };
+    let t: u32 = t.parse().map_err(|_| KeyError::Malformed)?;
+    let robot: u32 = r.parse().map_err(|_| KeyError::Malformed)?;
+    let class = Class::ALL
+        .into_iter()
+        .find(|k| class_segment(*k) == c)
+        .ok_or(KeyError::Malformed)?;
+    if t != team {
+        return Err(KeyError::OtherTeam);
+    }
+    Ok((robot, class))
+}
+
+/// The class a frame travels in (acks: odometry, the shaper's first class).
+pub fn frame_class(bytes: &[u8]) -> Result<Class, TransportError> {
+    Ok(match frame::parse(bytes)? {
+        ParsedFrame::Data(header, _) => header.class,
+        ParsedFrame::Ack(_) => Class::Odometry,
+    })
+}
+
+/// Counters of a [`ZenohTransport`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct ZenohStats {
+    /// Frames handed to zenoh.
+    pub sent_frames: u64,
+    /// Bytes handed to zenoh.
+    pub sent_bytes: u64,
+    /// Frames dropped because the send queue was full.
+    pub send_queue_drops: u64,
+    /// Frames zenoh refused to publish.
+    pub send_errors: u64,
+    /// Frames delivered to the sink.
+    pub received_frames: u64,
+    /// Frames addressed to another robot (ignored, not an error).
+    pub not_for_us: u64,
+    /// Rejected: key expression not `troupe/<team>/<robot>/<class>`.
+    pub rejected_key: u64,
+    /// Rejected: another team's key expression.
+    pub rejected_team: u64,
+    /// Rejected: bytes that are not a frame, or a bad addressee attachment.
+    pub rejected_frame: u64,
+    /// Rejected: the frame's class differs from the key expression's.
+    pub rejected_class: u64,
+    /// Rejected: a key expression naming one of this process's own robots as
+    /// the sender (someone else is using its key).
+    pub rejected_sender: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    sent_frames: AtomicU64,
+    sent_bytes: AtomicU64,
+    send_queue_drops: AtomicU64,
+    send_errors: AtomicU64,
+    received_frames: AtomicU64,
+    not_for_us: AtomicU64,
+    rejected_key: AtomicU64,
+    rejected_team: AtomicU64,
+    rejected_frame: AtomicU64,
+    rejected_class: AtomicU64,
+    rejected_sender: AtomicU64,
+}
+
+fn bump(c: &AtomicU64) {
+    c.fetch_add(1, Ordering::Relaxed);
+}
+
+impl Counters {
+    fn snapshot(&self) -> ZenohStats {
+        let l = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        ZenohStats {
+            sent_frames: l(&self.sent_frames),
+            sent_bytes: l(&self.sent_bytes),
+            send_queue_drops: l(&self.send_queue_drops),
+            send_errors: l(&self.send_errors),
+            received_frames: l(&self.received_frames),
+            not_for_us: l(&self.not_for_us),
+            rejected_key: l(&self.rejected_key),
+            rejected_team: l(&self.rejected_team),
+            rejected_frame: l(&self.rejected_frame),
+            rejected_class: l(&self.rejected_class),
+            rejected_sender: l(&self.rejected_sender),
+        }
+    }
+}
+
+/// A frame waiting for the sender thread.
+struct Outgoing {
+    key: String,
+    to: Option<u32>,
+    bytes: Vec<u8>,
+}
+
+/// One zenoh session carrying the frames of the robots `local` of team `team`.
+/// See the [module docs](self).
+pub struct ZenohTransport {
+    team: u32,
+    local: Vec<u32>,
+    session: ::zenoh::Session,
+    queue: Mutex<Option<SyncSender<Outgoing>>>,
+    sender: Mutex<Option<JoinHandle<()>>>,
+    subscriber: Mutex<Option<Subscriber<()>>>,
+    counters: Arc<Counters>,
+}
+
+impl ZenohTransport {
+    /// Opens a session for the robots `local` (indices in team `team`).
+    pub fn open(config: &ZenohConfig, team: u32, local: Vec<u32>) -> Result<Self, TransportError> {
+        let zc = config.to_zenoh()?;
+        let session = ::zenoh::open(zc)
+            .wait()
+            .map_err(|e| TransportError::Network {
+                context: "opening the zenoh session".into(),
+                source: e,
+            })?;
+        let capacity = if config.send_queue_frames == 0 {
+            DEFAULT_SEND_QUEUE_FRAMES
+        } else {
+            config.send_queue_frames
+        };
+        let (tx, rx) = sync_channel::<Outgoing>(capacity);
+        let counters = Arc::new(Counters::default());
+        let thread_session = session.clone();
+        let thread_counters = counters.clone();
+        let sender = std::thread::Builder::new()
+            .name(format!("troupe-zenoh-tx-{team}"))
+            .spawn(move || send_loop(&thread_session, &rx, &thread_counters))
+            .map_err(|e| TransportError::Network {
+                context: "starting the zenoh sender thread".into(),
+                source: Box::new(e),
+            })?;
+        Ok(ZenohTransport {
+            team,
+            local,
+            session,
+            queue: Mutex::new(Some(tx)),
+            sender: Mutex::new(Some(sender)),
+            subscriber: Mutex::new(None),
+            counters,
+        })
+    }
+
+    /// Counters so far.
+    #[must_use]
+    pub fn stats(&self) -> ZenohStats {
+        self.counters.snapshot()
+    }
+
+    /// Stops the sender thread (after it sent what was queued) and closes the
+    /// session.
+    pub fn close(&self) -> Result<(), TransportError> {
+        let queue = self.queue.lock().map(|mut q| q.take());
+        drop(queue);
+        if let Ok(mut sender) = self.sender.lock()
+            && let Some(handle) = sender.take()
+        {
+            let _ = handle.join();
+        }
+        if let Ok(mut s) = self.subscriber.lock() {
+            s.take();
+        }
+        self.session
+            .close()
+            .wait()
+            .map_err(|e| TransportError::Network {
+                context: "closing the zenoh session".into(),
+                source: e,
+            })
+    }
+}
+
+impl Drop for ZenohTransport {
+    fn drop(&mut self) {
+        if let Err(e) = self.close() {
+            tracing::debug!("zenoh transport: {e}");
+        }
+    }
+}
+
+fn send_loop(session: &::zenoh::Session, rx: &Receiver<Outgoing>, counters: &Counters) {
+    let mut publishers: std::collections::HashMap<String, ::zenoh::pubsub::Publisher<'static>> =
+        std::collections::HashMap::new();
+    while let Ok(out) = rx.recv() {
+        if !publishers.contains_key(&out.key) {
+            let declared = session
+                .declare_publisher(out.key.clone())
+                .allowed_destination(Locality::Remote)
+                .wait();
+            match declared {
+                Ok(p) => {
+                    publishers.insert(out.key.clone(), p);
+                }
+                Err(e) => {
+                    bump(&counters.send_errors);
+                    tracing::warn!(key = %out.key, "zenoh: cannot declare a publisher: {e}");
+                    continue;
+                }
+            }
+        }
+        let Some(publisher) = publishers.get(&out.key) else {
+            continue;
+        };
+        let len = out.bytes.len() as u64;
+        let put = publisher.put(out.bytes);
+        let put = match out.to {
+            Some(to) => put.attachment(to.to_le_bytes().to_vec()),
+            None => put,
+        };
+        match put.wait() {
+            Ok(()) => {
+                bump(&counters.sent_frames);
+                counters.sent_bytes.fetch_add(len, Ordering::Relaxed);
+            }
+            Err(e) => {
+                bump(&counters.send_errors);
+                tracing::warn!(key = %out.key, "zenoh: put failed: {e}");
+            }
+        }
+    }
+}
+
+/// Checks one received sample and hands it to the sink.
+fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink: &PacketSink) {
+    let (from, class) = match parse_key_expr(sample.key_expr().as_str(), team) {
+        Ok(parsed) => parsed,
+        Err(KeyError::Malformed) => return bump(&counters.rejected_key),
+        Err(KeyError::OtherTeam) => return bump(&counters.rejected_team),
+    };
+    if local.contains(&from) {
+        // Our publications never come back (they are published for remote
+        // subscribers only): someone else is using a local robot's key.
+        return bump(&counters.rejected_sender);
+    }
+    let to = match sample.attachment() {
+        None => None,
+        Some(a) => {
+            let a = a.to_bytes();
+            let Ok(b) = <[u8; 4]>::try_from(a.as_ref()) else {
+                return bump(&counters.rejected_frame);
+            };
+            Some(u32::from_le_bytes(b))
+        }
+    };
+    if to.is_some_and(|to| !local.contains(&to)) {
+        return bump(&counters.not_for_us);
+    }
+    let bytes = sample.payload().to_bytes();
+    match frame_class(&bytes) {
+        Ok(c) if c == class => {}
+        Ok(_) => return bump(&counters.rejected_class),
+        Err(_) => return bump(&counters.rejected_frame),
+    }
+    bump(&counters.received_frames);
+    sink(ReceivedPacket {
+        from,
+        to,
+        bytes: &bytes,
+    });
+}
+
+impl PacketTransport for ZenohTransport {
+    fn start(&self, sink: PacketSink) -> Result<(), TransportError> {
+        let (team, local, counters) = (self.team, self.local.clone(), self.counters.clone());
+        let subscriber = self
+            .session
+            .declare_subscriber(format!("troupe/{team}/*/*"))
+            .callback(move |sample| receive(&sample, team, &local, &counters, &sink))
+            .wait()
+            .map_err(|e| TransportError::Network {
+                context: "declaring the zenoh subscriber".into(),
+                source: e,
+            })?;
+        match self.subscriber.lock() {
+            Ok(mut s) => *s = Some(subscriber),
+            Err(_) => return Err(TransportError::Closed),
+        }
+        Ok(())
+    }
+
+    fn send(&self, from: u32, to: Option<u32>, frame: &[u8]) -> Result<(), TransportError> {
+        let class = frame_class(frame)?;
+        let out = Outgoing {
+            key: key_expr(self.team, from, class),
+            to,
+            bytes: frame.to_vec(),
+        };
+        let queue = self.queue.lock().map_err(|_| TransportError::Closed)?;
+        let Some(tx) = queue.as_ref() else {
+            return Err(TransportError::Closed);
+        };
+        match tx.try_send(out) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => {
+                bump(&self.counters.send_queue_drops);
+                Err(TransportError::QueueFull)
+            }
+            Err(TrySendError::Disconnected(_)) => Err(TransportError::Closed),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
