@@ -136,7 +136,7 @@ pub fn clear_of_unsafe_space(
     })
 }
 
-/// See the [module docs](self).
+/// Commits the first candidate of each planning round that passes the checks (see `actors::collision`).
 pub struct CollisionActor<P> {
     config: CollisionActorConfig,
     body_radius_m: f64,

@@ -318,7 +318,7 @@ impl RealtimeExecutor {
 
     /// Like [`spawn`](Self::spawn), with packets for robots outside this process
     /// handed to `transport` and packets it receives injected on the local
-    /// robots' [`LINK_RX`] (see the [module docs](self)). Fails, before any actor
+    /// robots' [`LINK_RX`] (see [`RealtimeExecutor`]). Fails, before any actor
     /// task runs, if the transport cannot start receiving.
     ///
     /// # Panics
