@@ -16,6 +16,7 @@ use std::time::Duration;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use super::committed::Committed;
 use super::primitives::{FlatState, Primitive};
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
@@ -26,7 +27,6 @@ use crate::msgs::{
 use crate::runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
 };
-use crate::trajectory::{Knot, Trajectory};
 
 /// Chooses among scored candidates. Implementations live in `troupe-policies`.
 pub trait ActionSelection: Send + 'static {
@@ -101,44 +101,6 @@ impl Message for PlanningReport {}
 
 /// Planning reports.
 pub const PLANNING_REPORT: Topic<PlanningReport> = Topic::new("planner/report");
-
-/// The committed reference: a primitive until `switch_s`, then its stopping primitive.
-#[derive(Clone, Debug)]
-struct Committed {
-    start: Time,
-    primitive: Primitive,
-    switch_s: f64,
-    stopping: Primitive,
-}
-
-impl Committed {
-    fn state_at(&self, t: Time) -> FlatState {
-        let s = (t - self.start).as_secs_f64();
-        if s < self.switch_s {
-            self.primitive.state_at(s)
-        } else {
-            self.stopping.state_at(s - self.switch_s)
-        }
-    }
-
-    fn trajectory(&self, step_s: f64) -> Trajectory {
-        let end_s = self.switch_s + self.stopping.duration_s();
-        let n = (end_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
-        let knots = (0..=n)
-            .map(|i| {
-                let s = end_s * i as f64 / n as f64;
-                let state = self.state_at(self.start + Duration::from_secs_f64(s));
-                Knot {
-                    time: self.start + Duration::from_secs_f64(s),
-                    position_m: state.position_m().into(),
-                    yaw_rad: state.yaw_rad(),
-                }
-            })
-            .collect();
-        // Knots are finite and in time order by construction.
-        Trajectory::new(knots).unwrap_or_default()
-    }
-}
 
 const REPLAN: TimerId = TimerId(0);
 

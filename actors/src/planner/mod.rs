@@ -19,6 +19,7 @@
 
 mod actor;
 pub mod bounds;
+mod committed;
 pub mod csqmi;
 pub mod library;
 pub mod primitives;

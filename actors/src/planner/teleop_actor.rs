@@ -9,12 +9,12 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use super::committed::Committed;
 use super::primitives::{FlatState, Primitive};
 use super::round::RoundConfig;
 use super::teleop::{TELEOP_COMMAND, TeleopCommand, TeleopParams, closest_safe_primitive};
 use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, Plan};
-use crate::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
-use crate::trajectory::{Knot, Trajectory};
+use crate::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId};
 
 /// Teleoperation settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -42,44 +42,6 @@ impl Default for TeleopConfig {
     }
 }
 
-/// A primitive from `start` until `switch_s`, then its stopping primitive.
-#[derive(Clone, Debug)]
-struct Reference {
-    start: Time,
-    primitive: Primitive,
-    switch_s: f64,
-    stopping: Primitive,
-}
-
-impl Reference {
-    fn state_at(&self, t: Time) -> FlatState {
-        let s = (t - self.start).as_secs_f64();
-        if s < self.switch_s {
-            self.primitive.state_at(s)
-        } else {
-            self.stopping.state_at(s - self.switch_s)
-        }
-    }
-
-    fn trajectory(&self, step_s: f64) -> Trajectory {
-        let end_s = self.switch_s + self.stopping.duration_s();
-        let n = (end_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
-        let knots = (0..=n)
-            .map(|i| {
-                let time = self.start + Duration::from_secs_f64(end_s * i as f64 / n as f64);
-                let state = self.state_at(time);
-                Knot {
-                    time,
-                    position_m: state.position_m().into(),
-                    yaw_rad: state.yaw_rad(),
-                }
-            })
-            .collect();
-        // Knots are finite and in time order by construction.
-        Trajectory::new(knots).unwrap_or_default()
-    }
-}
-
 const REPLAN: TimerId = TimerId(0);
 
 /// Maps operator commands to safe primitives at a fixed rate (thesis §5.1.2) and
@@ -89,7 +51,7 @@ pub struct TeleopActor {
     snapshot: Option<Arc<GridSnapshot>>,
     odometry: Option<Arc<Odometry>>,
     command: Option<Arc<TeleopCommand>>,
-    reference: Option<Reference>,
+    reference: Option<Committed>,
 }
 
 impl TeleopActor {
@@ -131,7 +93,7 @@ impl TeleopActor {
             &root,
             command,
         ) {
-            Some(choice) => Reference {
+            Some(choice) => Committed {
                 start: now,
                 switch_s: round.planning_period_s.min(choice.primitive.duration_s()),
                 primitive: choice.primitive,
@@ -147,7 +109,7 @@ impl TeleopActor {
                     super::primitives::Action::STOP,
                     1.0,
                 );
-                Reference {
+                Committed {
                     start: now,
                     switch_s: stopping.duration_s(),
                     primitive: stopping,
