@@ -7,12 +7,13 @@
 //! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
-//! - [`scenario`], [`team`], [`monitor`], [`report`]: `troupe run`.
+//! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
 #![deny(missing_docs)]
 
 pub mod camera;
 pub mod coverage;
 pub mod faults;
+pub mod maps;
 pub mod monitor;
 pub mod network;
 pub mod plot;

@@ -1,4 +1,7 @@
-//! Writing a run's outputs: `summary.json`, `timing.json`, `timeseries.csv`.
+//! Writing a run's outputs: `summary.json`, `timing.json`, `timeseries.csv`, the
+//! plots, and — when the robots have mappers — each robot's map
+//! (`maps/robot<i>.troupe`) and the team's merged map as a point cloud
+//! (`merged_map.ply`, with a `source` property naming the robot).
 //!
 //! Files are written into a temporary directory next to the destination and moved
 //! into place at the end, so a run directory is either complete or absent.
@@ -8,6 +11,9 @@ use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
 
+use troupe_actors::mapper::mapfile::write_ply_with_source;
+
+use crate::maps::merged_points;
 use crate::plot::{Chart, Series, write_chart};
 use crate::team::{RunOutput, SeriesRow};
 
@@ -83,11 +89,35 @@ pub fn write_run(root: &Path, name: &str, output: &RunOutput) -> io::Result<Path
     for (stem, chart) in run_charts(&output.timeseries) {
         write_chart(&chart, &staging, stem)?;
     }
+    write_maps(&staging, output)?;
     if dir.exists() {
         fs::remove_dir_all(&dir)?;
     }
     fs::rename(&staging, &dir)?;
     Ok(dir)
+}
+
+/// Points in `merged_map.ply`.
+pub const MERGED_MAP_POINTS: usize = 200_000;
+
+/// Writes `maps/robot<i>.troupe` for every robot that published keyframes and
+/// `merged_map.ply` (points of all robots' maps, tagged by robot); nothing when no
+/// robot did.
+fn write_maps(dir: &Path, output: &RunOutput) -> io::Result<()> {
+    if output.maps.iter().all(|m| m.keyframes.is_empty()) {
+        return Ok(());
+    }
+    let maps_dir = dir.join("maps");
+    fs::create_dir(&maps_dir)?;
+    for (i, map) in output.maps.iter().enumerate() {
+        if !map.keyframes.is_empty() {
+            fs::write(maps_dir.join(format!("robot{i}.troupe")), map.to_bytes())?;
+        }
+    }
+    let (points, source) = merged_points(&output.maps, MERGED_MAP_POINTS, output.summary.seed)
+        .map_err(io::Error::other)?;
+    let file = io::BufWriter::new(fs::File::create(dir.join("merged_map.ply"))?);
+    write_ply_with_source(file, &points, Some(&source))
 }
 
 /// Pretty JSON with a trailing newline.

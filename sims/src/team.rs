@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use troupe_actors::mapper::mapfile::GmmMap;
 use troupe_actors::runtime::{
     ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
     Time, TopicStats,
@@ -15,6 +16,7 @@ use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
 use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_factory};
+use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
 use crate::scenario::{Fault, Scenario};
@@ -31,6 +33,7 @@ pub struct Team {
     world: Arc<dyn Site>,
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
+    maps: Arc<Mutex<Vec<GmmMap>>>,
     network_stats: Arc<Mutex<NetStats>>,
     fault_counters: Vec<Arc<FaultCounters>>,
 }
@@ -43,6 +46,8 @@ pub struct RunOutput {
     pub timing: Timing,
     /// One row per robot per sample period (`timeseries.csv`).
     pub timeseries: Vec<SeriesRow>,
+    /// Each robot's published keyframes (`maps/robot<i>.troupe`, `merged_map.ply`).
+    pub maps: Vec<GmmMap>,
 }
 
 /// One row of the time series.
@@ -144,6 +149,31 @@ pub struct Summary {
     pub per_robot: Vec<RobotSummary>,
     /// Messages and bytes per topic, summed over robots.
     pub topics: BTreeMap<String, TopicStats>,
+    /// Each robot's map as published by its mapper (empty without a mapper).
+    pub maps: Vec<MapSummary>,
+}
+
+/// One robot's published map.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct MapSummary {
+    /// Keyframes published.
+    pub keyframes: usize,
+    /// Mixture components over all keyframes.
+    pub components: usize,
+    /// Points the keyframes were fitted to.
+    pub support_points: u64,
+}
+
+impl MapSummary {
+    /// The figures of `map`.
+    #[must_use]
+    pub fn of(map: &GmmMap) -> Self {
+        MapSummary {
+            keyframes: map.keyframes.len(),
+            components: map.occupied_components(),
+            support_points: map.keyframes.iter().map(|k| k.support).sum(),
+        }
+    }
 }
 
 /// A scheduled fault and its effect.
@@ -333,11 +363,15 @@ impl Team {
         let network = network.with_loss_bursts(bursts);
         let mut executor = SimExecutor::new(team, scenario.seed).with_network(network);
         executor.add_tap(monitor);
+        let map_collector = MapCollector::new(count);
+        let maps = map_collector.maps();
+        executor.add_tap(map_collector);
         Ok(Team {
             scenario: scenario.clone(),
             world,
             executor,
             truth,
+            maps,
             network_stats,
             fault_counters,
         })
@@ -445,10 +479,18 @@ impl Team {
                 })
                 .collect(),
         };
+        let maps = std::mem::take(
+            &mut *self
+                .maps
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        );
+        summary.maps = maps.iter().map(MapSummary::of).collect();
         RunOutput {
             summary,
             timing,
             timeseries,
+            maps,
         }
     }
 }
@@ -560,5 +602,6 @@ fn summarise(
         faults: Vec::new(),
         per_robot,
         topics,
+        maps: Vec::new(),
     }
 }

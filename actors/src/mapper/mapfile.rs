@@ -551,21 +551,46 @@ pub fn sample_surface<R: Rng + ?Sized>(gmm: &Gmm4, n: usize, rng: &mut R) -> Vec
 /// Write points as a binary little-endian PLY: per vertex `float x, y, z`,
 /// `float intensity` and `uchar red, green, blue` (the intensity as grey, so common
 /// viewers show it).
-pub fn write_ply<W: Write>(mut out: W, points: &[SurfacePoint]) -> std::io::Result<()> {
+pub fn write_ply<W: Write>(out: W, points: &[SurfacePoint]) -> std::io::Result<()> {
+    write_ply_with_source(out, points, None)
+}
+
+/// [`write_ply`] with, when `source` is given, one more per-vertex property
+/// `uchar source` (for a team's merged map: the robot whose keyframe the point was
+/// drawn from). `source` must have one entry per point.
+pub fn write_ply_with_source<W: Write>(
+    mut out: W,
+    points: &[SurfacePoint],
+    source: Option<&[u8]>,
+) -> std::io::Result<()> {
+    if source.is_some_and(|s| s.len() != points.len()) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "one source tag per point is required",
+        ));
+    }
     write!(
         out,
         "ply\nformat binary_little_endian 1.0\ncomment troupe map sample\nelement vertex {}\n\
          property float x\nproperty float y\nproperty float z\nproperty float intensity\n\
-         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
-        points.len()
+         property uchar red\nproperty uchar green\nproperty uchar blue\n{}end_header\n",
+        points.len(),
+        if source.is_some() {
+            "property uchar source\n"
+        } else {
+            ""
+        }
     )?;
-    let mut buf = Vec::with_capacity(points.len() * 19);
-    for p in points {
+    let mut buf = Vec::with_capacity(points.len() * 20);
+    for (i, p) in points.iter().enumerate() {
         for v in [p.position.x, p.position.y, p.position.z, p.intensity] {
             buf.extend_from_slice(&(v as f32).to_le_bytes());
         }
         let grey = (p.intensity.clamp(0.0, 1.0) * 255.0).round() as u8;
         buf.extend_from_slice(&[grey; 3]);
+        if let Some(tags) = source {
+            buf.push(tags[i]);
+        }
     }
     out.write_all(&buf)?;
     out.flush()
@@ -726,5 +751,22 @@ mod tests {
             .sum::<f64>()
             / pts.len() as f64;
         assert!(err < 0.1, "{err}");
+    }
+
+    #[test]
+    fn ply_with_source_tags_every_vertex() {
+        let map = sample_map();
+        let gmm = map.merged_occupied().unwrap();
+        let pts = sample_surface(&gmm, 10, &mut ChaCha8Rng::seed_from_u64(2));
+        let tags: Vec<u8> = (0..10).map(|i| (i % 3) as u8).collect();
+        let mut buf = Vec::new();
+        write_ply_with_source(&mut buf, &pts, Some(&tags)).unwrap();
+        let end = buf.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+        let header = std::str::from_utf8(&buf[..end]).unwrap();
+        assert!(header.contains("property uchar source\nend_header"));
+        assert_eq!(buf.len() - end, 10 * 20);
+        let last_tags: Vec<u8> = buf[end..].chunks(20).map(|v| v[19]).collect();
+        assert_eq!(last_tags, tags);
+        assert!(write_ply_with_source(Vec::new(), &pts, Some(&tags[..3])).is_err());
     }
 }

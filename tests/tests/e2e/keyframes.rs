@@ -2,6 +2,7 @@
 
 use troupe_actors::mapper::MapperConfig;
 use troupe_robot::RobotConfig;
+use troupe_sims::report::write_run;
 use troupe_sims::scenario::Scenario;
 use troupe_sims::team::Team;
 
@@ -20,7 +21,8 @@ fn keyframes_are_fitted_shared_and_received() {
         },
         ..Scenario::default()
     };
-    let s = Team::new(&scenario).expect("assemble").run(|_| {}).summary;
+    let output = Team::new(&scenario).expect("assemble").run(|_| {});
+    let s = &output.summary;
     for (me, peer) in [(0, 1), (1, 0)] {
         let mine = &s.per_robot[me];
         let theirs = &s.per_robot[peer];
@@ -41,4 +43,56 @@ fn keyframes_are_fitted_shared_and_received() {
         );
     }
     assert_eq!(s.collisions, 0);
+
+    // The run's report holds each robot's map and the merged point cloud, with
+    // points from both robots, near the rock surface (ground truth).
+    for (map, published) in output.maps.iter().zip(&s.per_robot) {
+        let sent = published
+            .topics
+            .get("mapper/keyframe")
+            .map_or(0, |t| t.messages);
+        assert_eq!(map.keyframes.len() as u64, sent);
+    }
+    let root = tempfile::tempdir().expect("tempdir");
+    let dir = write_run(root.path(), "keyframes", &output).expect("write run");
+    for i in 0..2 {
+        assert!(dir.join(format!("maps/robot{i}.troupe")).is_file());
+    }
+    let ply = std::fs::read(dir.join("merged_map.ply")).expect("merged map");
+    let end = ply
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("PLY header")
+        + 11;
+    let vertices = &ply[end..];
+    assert_eq!(vertices.len() % 20, 0);
+    let world = scenario.world.build().expect("world");
+    let mut per_robot = [0usize; 2];
+    let mut near_surface = 0usize;
+    for v in vertices.chunks(20) {
+        per_robot[usize::from(v[19])] += 1;
+        let xyz: Vec<f64> = (0..3)
+            .map(|k| {
+                f64::from(f32::from_le_bytes([
+                    v[4 * k],
+                    v[4 * k + 1],
+                    v[4 * k + 2],
+                    v[4 * k + 3],
+                ]))
+            })
+            .collect();
+        if world
+            .sdf_m(&nalgebra::Point3::new(xyz[0], xyz[1], xyz[2]))
+            .abs()
+            < 0.1
+        {
+            near_surface += 1;
+        }
+    }
+    assert!(per_robot.iter().all(|&n| n > 1000), "{per_robot:?}");
+    let fraction = near_surface as f64 / (vertices.len() / 20) as f64;
+    assert!(
+        fraction > 0.8,
+        "{fraction} of the merged map within 0.1 m of the rock"
+    );
 }
