@@ -56,7 +56,7 @@ impl Default for ActorLatencies {
 }
 
 /// The `[robot.collision]` table: the collision actor between planning and the vehicle
-/// (thesis §7, §8.2.3). Off by default.
+/// (thesis §7, §8.2.3). On by default (part of the standard robot).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CollisionConfig {
@@ -79,7 +79,7 @@ impl Default for CollisionConfig {
     fn default() -> Self {
         let check = CollisionActorConfig::default();
         CollisionConfig {
-            enabled: false,
+            enabled: true,
             body: check.body,
             margin_m: check.margin_m,
             check_step_s: check.check_step_s,
@@ -114,9 +114,9 @@ pub struct RobotConfig {
     pub grid: GridConfig,
     /// The planner (planner behaviour).
     pub planner: PlannerConfig,
-    /// The SOGMM mapper (keyframes shared over the link); off by default.
+    /// The SOGMM mapper (keyframes shared over the link); on by default.
     pub mapper: MapperConfig,
-    /// The collision actor and inter-robot avoidance; off by default.
+    /// The collision actor and inter-robot avoidance; on by default.
     pub collision: CollisionConfig,
     /// Cruise speed, m/s.
     pub speed_mps: f64,
@@ -139,7 +139,7 @@ pub struct RobotConfig {
 impl Default for RobotConfig {
     fn default() -> Self {
         RobotConfig {
-            behaviour: "waypoint_route".into(),
+            behaviour: PLANNER.into(),
             selection: "greedy".into(),
             grid: GridConfig::default(),
             planner: PlannerConfig::default(),

@@ -1,8 +1,13 @@
 //! troupe-robot: assembles one robot's actors from configuration.
 //!
-//! [`assemble`] wires the standard actors — sensor, explorer (with the behaviour
-//! named in the config), link — around a vehicle and a frame source that the caller
-//! provides (a simulator provides simulated ones; hardware provides drivers).
+//! [`assemble`] wires the actors a [`RobotConfig`] names around a vehicle and a frame
+//! source that the caller provides (a simulator provides simulated ones; hardware
+//! provides drivers). The default configuration is the standard robot of the thesis
+//! (§8.2): sensor, SOGMM mapper, local grid, motion-primitive planner, collision
+//! actor with priority avoidance, and link. Route behaviours (`waypoint_route`) and
+//! teleoperation replace the grid + planner pair; the mapper and collision actor can
+//! be switched off (`[robot.mapper] enabled = false`, `[robot.collision] enabled =
+//! false`).
 #![deny(missing_docs)]
 
 mod config;

@@ -1,6 +1,8 @@
 //! Ground-truth metrics of a run, gathered by a [`Tap`] on every publication:
 //! explored-volume coverage from the frames, collisions and clearance from the
-//! odometry, both checked against the world (never against a robot's map).
+//! odometry, both checked against the world (never against a robot's map) with
+//! [`surface_distance_m`], the true distance to the surface (a world's SDF is only a
+//! bound).
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -15,10 +17,14 @@ use troupe_actors::runtime::{LINK_RX, Publication, Tap};
 use crate::camera::CameraParams;
 use crate::coverage::CoverageGrid;
 use crate::sim_sensor::image_of;
-use crate::world::World;
+use crate::world::{World, surface_distance_m};
 
 /// Collision checks along the path are this far apart, metres.
 const PATH_CHECK_STEP_M: f64 = 0.05;
+
+/// Clearances are measured exactly up to this much beyond the body (larger ones are
+/// reported as this), metres.
+pub const CLEARANCE_REPORTED_M: f64 = 1.0;
 
 /// Ground truth about one robot (the serialised fields are what `summary.json` reports).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -165,11 +171,16 @@ impl Tap for GroundTruthMonitor {
                 robot.link = Some(status.clone());
             }
         } else if let Some(plan) = p.get(&PLAN) {
-            let unsafe_plan = plan
+            let closest = plan
                 .trajectory
                 .knots()
                 .iter()
-                .any(|k| self.world.sdf_m(&k.position_m) < self.radius_m);
+                .map(|k| {
+                    let d = surface_distance_m(self.world.as_ref(), &k.position_m, self.radius_m);
+                    (d, k.position_m)
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let unsafe_plan = closest.is_some_and(|(d, _)| d < self.radius_m);
             let mut truth = lock_truth(&self.truth);
             let Some(robot) = truth.robots.get_mut(r) else {
                 return;
@@ -177,7 +188,10 @@ impl Tap for GroundTruthMonitor {
             robot.plans += 1;
             if unsafe_plan {
                 robot.unsafe_plans += 1;
-                tracing::warn!(robot = r, time = %p.time, "committed plan enters the rock (ground truth)");
+                if let Some((distance_m, at)) = closest {
+                    tracing::warn!(robot = r, time = %p.time, clearance_m = distance_m - self.radius_m,
+                        x = at.x, y = at.y, z = at.z, "committed plan enters the rock (ground truth)");
+                }
             }
         } else if let Some(odometry) = p.get(&ODOMETRY) {
             let position = Point3::from(odometry.pose.translation.vector);
@@ -200,7 +214,11 @@ impl Tap for GroundTruthMonitor {
             let mut colliding = robot.in_collision;
             for i in 1..=checks {
                 let q = previous + (position - previous) * (i as f64 / checks as f64);
-                let clearance = self.world.sdf_m(&q) - self.radius_m;
+                let clearance = surface_distance_m(
+                    self.world.as_ref(),
+                    &q,
+                    self.radius_m + CLEARANCE_REPORTED_M,
+                ) - self.radius_m;
                 robot.min_clearance_m = robot.min_clearance_m.min(clearance);
                 if clearance < 0.0 {
                     if !colliding {

@@ -377,6 +377,12 @@ impl Team {
         })
     }
 
+    /// Adds an observer of every publication of every robot (custom metrics,
+    /// recording); call before [`Team::run`].
+    pub fn add_tap(&mut self, tap: impl troupe_actors::runtime::Tap + 'static) {
+        self.executor.add_tap(tap);
+    }
+
     /// Runs the scenario to its end; `progress` is called after every sample period
     /// with the simulated seconds done.
     pub fn run(mut self, mut progress: impl FnMut(f64)) -> RunOutput {

@@ -111,7 +111,7 @@ pub struct MapperConfig {
 impl Default for MapperConfig {
     fn default() -> Self {
         MapperConfig {
-            enabled: false,
+            enabled: true,
             bandwidth: 0.03,
             pixel_stride: 2,
             overlap_threshold: 0.5,

@@ -5,6 +5,7 @@ use troupe_robot::RobotConfig;
 use troupe_sims::report::write_run;
 use troupe_sims::scenario::Scenario;
 use troupe_sims::team::Team;
+use troupe_sims::world::surface_distance_m;
 
 #[test]
 fn keyframes_are_fitted_shared_and_received() {
@@ -81,11 +82,8 @@ fn keyframes_are_fitted_shared_and_received() {
                 ]))
             })
             .collect();
-        if world
-            .sdf_m(&nalgebra::Point3::new(xyz[0], xyz[1], xyz[2]))
-            .abs()
-            < 0.1
-        {
+        let at = nalgebra::Point3::new(xyz[0], xyz[1], xyz[2]);
+        if surface_distance_m(world.as_ref(), &at, 0.1).abs() < 0.1 {
             near_surface += 1;
         }
     }
