@@ -21,6 +21,16 @@
 //! one, is an obstacle at its last known position inflated by its stopping envelope: the
 //! distance it may have flown since (`|v| · age`) plus its braking distance
 //! `|v|² / (2 a)`.
+//!
+//! Deviation from the thesis (on by default, [`PriorityConfig::clear_of_lower_priority`]):
+//! a robot also keeps its candidates clear of nearby peers of *lower* priority, modelled
+//! as following their committed plan until they can react to ours
+//! ([`PriorityConfig::lower_priority_react_s`]: their replanning period plus the link's
+//! delay) and braking from there ([`PeerModel::Yielding`]); without a fresh plan, their
+//! stopping envelope. In §8.2.3 a higher-priority robot ignores them, which is safe only
+//! while they can always move out of its way in time; in the safety study a robot with
+//! nothing safe to do hovered and was flown into (0.22 m between centres), and two
+//! robots that committed within one round met head on.
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
@@ -52,6 +62,11 @@ pub struct PriorityConfig {
     pub stale_plan_s: f64,
     /// Braking deceleration assumed for a peer's stopping envelope, m/s².
     pub stop_decel_mps2: f64,
+    /// Keep clear of lower-priority peers too (module docs; the thesis ignores them).
+    pub clear_of_lower_priority: bool,
+    /// How long a lower-priority peer may keep to its plan before it has seen ours and
+    /// can brake, seconds (its replanning period plus the link's delay).
+    pub lower_priority_react_s: f64,
 }
 
 impl Default for PriorityConfig {
@@ -66,6 +81,8 @@ impl Default for PriorityConfig {
             max_samples: 60,
             stale_plan_s: 2.5,
             stop_decel_mps2: 1.0,
+            clear_of_lower_priority: true,
+            lower_priority_react_s: 1.2,
         }
     }
 }
@@ -79,6 +96,7 @@ impl PriorityConfig {
             ("check_radius_m", self.check_radius_m),
             ("stale_plan_s", self.stale_plan_s),
             ("stop_decel_mps2", self.stop_decel_mps2),
+            ("lower_priority_react_s", self.lower_priority_react_s),
         ];
         for (key, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -135,6 +153,46 @@ pub enum PeerModel<'a> {
         /// Extra radius: distance flown since plus braking distance, metres.
         envelope_m: f64,
     },
+    /// A lower-priority peer: following its plan until `react_at`, then braking along
+    /// its velocity at `decel_mps2` to a stop, and holding there.
+    Yielding {
+        /// Its fresh plan.
+        plan: &'a Trajectory,
+        /// When it has seen our plan and may brake.
+        react_at: Time,
+        /// Braking deceleration, m/s².
+        decel_mps2: f64,
+    },
+}
+
+impl PeerModel<'_> {
+    /// Where the peer is taken to be at `t` (`None` for an empty plan).
+    #[must_use]
+    pub fn position_at(&self, t: Time) -> Option<nalgebra::Point3<f64>> {
+        match self {
+            PeerModel::Plan(plan) => plan.state_at(t).map(|s| s.position_m),
+            PeerModel::Envelope { position_m, .. } => Some(*position_m),
+            PeerModel::Yielding {
+                plan,
+                react_at,
+                decel_mps2,
+            } => {
+                if t <= *react_at {
+                    return plan.state_at(t).map(|s| s.position_m);
+                }
+                let s = plan.state_at(*react_at)?;
+                let speed = s.velocity_mps.norm();
+                let tau = t.saturating_since(*react_at).as_secs_f64();
+                let tau = tau.min(speed / decel_mps2);
+                let travelled = speed * tau - 0.5 * decel_mps2 * tau * tau;
+                Some(
+                    s.velocity_mps
+                        .try_normalize(1e-12)
+                        .map_or(s.position_m, |dir| s.position_m + dir * travelled.max(0.0)),
+                )
+            }
+        }
+    }
 }
 
 /// How the check models a peer at `now` (plan if fresh, else stopping envelope from the
@@ -150,6 +208,16 @@ pub fn peer_model<'a>(
     {
         return Some(PeerModel::Plan(&plan.plan.trajectory));
     }
+    peer_envelope(config, now, track)
+}
+
+/// A peer as a static obstacle at its newest known position (odometry or plan),
+/// inflated by its stopping envelope; `None` when nothing is known of its position.
+fn peer_envelope<'a>(
+    config: &PriorityConfig,
+    now: Time,
+    track: &PeerTrack,
+) -> Option<PeerModel<'a>> {
     let from_odometry = track.odometry.as_ref().map(|o| {
         (
             o.odometry.stamp,
@@ -210,31 +278,35 @@ pub fn first_overlap(
     let end = match peer {
         PeerModel::Plan(plan) => own_end.max(plan.end_time()),
         PeerModel::Envelope { .. } => own_end,
+        PeerModel::Yielding { react_at, .. } => own_end.max(*react_at),
     };
     let horizon_s = end.saturating_since(now).as_secs_f64();
     let n = config.max_samples.max(2);
     let dt_s = horizon_s / (n - 1) as f64;
     let (peer_speed, peer_extra) = match peer {
-        PeerModel::Plan(plan) => (max_speed(plan), 0.0),
+        PeerModel::Plan(plan) | PeerModel::Yielding { plan, .. } => (max_speed(plan), 0.0),
         PeerModel::Envelope { envelope_m, .. } => (0.0, *envelope_m),
     };
-    let min_horizontal = 2.0 * config.cylinder_radius_m
+    let mut min_horizontal = 2.0 * config.cylinder_radius_m
         + peer_extra
         + 0.5 * dt_s * (max_speed(candidate) + peer_speed);
     for i in 0..n {
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
-        let other = match peer {
-            PeerModel::Plan(plan) => match plan.state_at(t) {
-                Some(s) => s.position_m,
-                None => continue,
-            },
-            PeerModel::Envelope { position_m, .. } => *position_m,
+        let Some(other) = peer.position_at(t) else {
+            continue;
         };
         let d = own.position_m - other;
         let horizontal = d.xy().norm();
         if horizontal < min_horizontal && d.z.abs() < config.cylinder_height_m {
+            if i == 0 {
+                // Already too close (both committed at once, or a peer appeared): a
+                // candidate that never gets closer than now lets the pair separate;
+                // one that closes in is refused.
+                min_horizontal = horizontal;
+                continue;
+            }
             return Some((t_s, horizontal));
         }
         if horizon_s == 0.0 {
@@ -245,7 +317,9 @@ pub fn first_overlap(
 }
 
 /// The §8.2.3 check of `candidate` against every peer this robot must yield to
-/// ([`must_yield`]) that is within the check radius of `own`'s position.
+/// ([`must_yield`]) that is within the check radius of `own`'s position, and against
+/// the stopping envelopes of the other peers within it
+/// ([`PriorityConfig::clear_of_lower_priority`]).
 #[must_use]
 pub fn check_candidate(
     config: &PriorityConfig,
@@ -258,16 +332,28 @@ pub fn check_candidate(
 ) -> Option<PeerConflict> {
     let here = nalgebra::Point3::from(own.pose.translation.vector);
     for (id, track) in peers.iter() {
-        if id == me || !must_yield(me, mine, id, track.priority()) {
+        if id == me {
             continue;
         }
-        let Some(model) = peer_model(config, now, track) else {
+        let model = if must_yield(me, mine, id, track.priority()) {
+            peer_model(config, now, track)
+        } else if config.clear_of_lower_priority {
+            match peer_model(config, now, track) {
+                Some(PeerModel::Plan(plan)) => Some(PeerModel::Yielding {
+                    plan,
+                    react_at: now
+                        + std::time::Duration::from_secs_f64(config.lower_priority_react_s),
+                    decel_mps2: config.stop_decel_mps2,
+                }),
+                other => other,
+            }
+        } else {
+            None
+        };
+        let Some(model) = model else {
             continue;
         };
-        let there = match &model {
-            PeerModel::Plan(plan) => plan.state_at(now).map(|s| s.position_m),
-            PeerModel::Envelope { position_m, .. } => Some(*position_m),
-        };
+        let there = model.position_at(now);
         let near = there.is_some_and(|p| (p - here).norm() <= config.check_radius_m);
         if !near {
             continue;
@@ -479,6 +565,81 @@ mod tests {
         let own = odom(0.0, [0.0, -2.0, 1.0], [0.0, 1.0, 0.0]);
         let c = check_candidate(&config, t(0.0), RobotId(1), 1, &own, &mine, &peers).unwrap();
         assert!(c.at_s > 6.0, "{c:?}");
+    }
+
+    #[test]
+    fn a_lower_priority_peer_is_expected_to_keep_its_plan_until_it_can_react() {
+        let config = PriorityConfig::default();
+        // Peer 1 (priority 0) flies +x at 1 m/s from (-4, 0); robot 0 (priority 5)
+        // would cross its path at x = -2.5 in 1.5 s: the peer brakes from 1.2 s on
+        // (reaching -2.8 + 0.5 m), so the crossing conflicts.
+        let peer = line(10.0, [-4.0, 0.0, 1.0], [4.0, 0.0, 1.0], 1.0);
+        let peers = table_with(1, 0, Some((peer, 10.0)), None);
+        let own = odom(10.0, [-2.5, -3.0, 1.0], [0.0, 1.0, 0.0]);
+        let crossing = line(10.0, [-2.5, -3.0, 1.0], [-2.5, 3.0, 1.0], 2.0);
+        let c = check_candidate(&config, t(10.0), RobotId(0), 5, &own, &crossing, &peers);
+        assert!(c.is_some_and(|c| !c.envelope && c.peer == RobotId(1)));
+        // Crossing far ahead of where it can stop is fine: it will have seen us.
+        let own = odom(10.0, [3.0, -3.0, 1.0], [0.0, 1.0, 0.0]);
+        let ahead = line(10.0, [3.0, -3.0, 1.0], [3.0, 3.0, 1.0], 2.0);
+        assert!(check_candidate(&config, t(10.0), RobotId(0), 5, &own, &ahead, &peers).is_none());
+        let model = PeerModel::Yielding {
+            plan: &line(10.0, [-4.0, 0.0, 1.0], [4.0, 0.0, 1.0], 1.0),
+            react_at: t(11.2),
+            decel_mps2: 1.0,
+        };
+        let stop = model.position_at(t(20.0)).unwrap();
+        assert!((stop.x - (-4.0 + 1.2 + 0.5)).abs() < 1e-9, "{stop}");
+    }
+
+    #[test]
+    fn a_pair_already_too_close_may_separate_but_not_close_in() {
+        let config = PriorityConfig::default();
+        // Peer 0 (higher priority) hovers at the origin; robot 1 is 0.5 m from it.
+        let hover = line(0.0, [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 1.0);
+        let peers = table_with(0, 5, Some((hover, 9.8)), None);
+        let own = odom(10.0, [0.5, 0.0, 1.0], [0.0; 3]);
+        let away = line(10.0, [0.5, 0.0, 1.0], [3.0, 0.0, 1.0], 0.5);
+        assert!(check_candidate(&config, t(10.0), RobotId(1), 0, &own, &away, &peers).is_none());
+        let closer = line(10.0, [0.5, 0.0, 1.0], [0.3, 0.0, 1.0], 0.5);
+        assert!(check_candidate(&config, t(10.0), RobotId(1), 0, &own, &closer, &peers).is_some());
+        let past = line(10.0, [0.5, 0.0, 1.0], [-3.0, 0.0, 1.0], 0.5);
+        assert!(check_candidate(&config, t(10.0), RobotId(1), 0, &own, &past, &peers).is_some());
+    }
+
+    #[test]
+    fn a_hovering_lower_priority_peer_is_kept_clear_of() {
+        // Peer 1 (priority 0) hovers at the origin with a fresh plan; robot 0 (priority
+        // 5) would fly through it.
+        let hover = line(0.0, [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 1.0);
+        let peers = table_with(
+            1,
+            0,
+            Some((hover, 9.8)),
+            Some(odom(10.0, [0.0, 0.0, 1.0], [0.0; 3])),
+        );
+        let own = odom(10.0, [-3.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
+        let through = line(10.0, [-3.0, 0.0, 1.0], [3.0, 0.0, 1.0], 1.0);
+        let c = check_candidate(
+            &PriorityConfig::default(),
+            t(10.0),
+            RobotId(0),
+            5,
+            &own,
+            &through,
+            &peers,
+        );
+        assert!(c.is_some_and(|c| c.peer == RobotId(1)));
+        // Going elsewhere is fine.
+        let away = line(10.0, [-3.0, 0.0, 1.0], [-3.0, 3.0, 1.0], 1.0);
+        let config = PriorityConfig::default();
+        assert!(check_candidate(&config, t(10.0), RobotId(0), 5, &own, &away, &peers).is_none());
+        // The thesis rule ignores lower-priority robots.
+        let thesis = PriorityConfig {
+            clear_of_lower_priority: false,
+            ..config
+        };
+        assert!(check_candidate(&thesis, t(10.0), RobotId(0), 5, &own, &through, &peers).is_none());
     }
 
     #[test]

@@ -103,6 +103,20 @@ impl Message for PlanningReport {}
 pub const PLANNING_REPORT: Topic<PlanningReport> = Topic::new("planner/report");
 
 const REPLAN: TimerId = TimerId(0);
+/// One-shot delay before the first round (see [`round_phase_s`]).
+const PHASE: TimerId = TimerId(1);
+
+/// Delay of robot `robot`'s planning rounds within the replanning period: the
+/// fractional part of `robot · φ` (golden ratio) times the period, so that teammates do
+/// not commit at the same instant. A robot that commits while a peer commits cannot
+/// know the peer's new plan (§8.2.3 checks against received plans); with staggered
+/// rounds each plan is checked against the peer's latest one whenever the link
+/// delivers within the offset (0.38 of the period between robots 0 and 1).
+#[must_use]
+pub fn round_phase_s(robot: u32, period_s: f64) -> f64 {
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    (f64::from(robot) * golden).fract() * period_s
+}
 
 /// Replans at a fixed rate: scores the primitive library from the committed reference
 /// state against the latest grid snapshot, lets the [`ActionSelection`] policy choose,
@@ -295,10 +309,13 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         if self.deferred {
             ctx.subscribe(&PLAN_DECISION, QueuePolicy::LATEST);
         }
-        ctx.set_timer(
-            REPLAN,
-            Duration::from_secs_f64(1.0 / self.config.rate_hz.max(1e-3)),
-        );
+        let period_s = 1.0 / self.config.rate_hz.max(1e-3);
+        let phase_s = round_phase_s(ctx.robot().0, period_s);
+        if phase_s > 0.0 {
+            ctx.set_timer(PHASE, Duration::from_secs_f64(phase_s));
+        } else {
+            ctx.set_timer(REPLAN, Duration::from_secs_f64(period_s));
+        }
         Ok(())
     }
 
@@ -321,6 +338,11 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                         self.pending = Some((round, ranked, stop));
                     }
                 }
+            }
+            Event::Timer(PHASE) => {
+                ctx.cancel_timer(PHASE);
+                let period_s = 1.0 / self.config.rate_hz.max(1e-3);
+                ctx.set_timer(REPLAN, Duration::from_secs_f64(period_s));
             }
             Event::Timer(_) => self.plan(ctx),
         }
