@@ -12,6 +12,8 @@
 //! | `peer/plan` | [`PeerPlan`] | link → collision |
 //! | `plan/candidates` | [`PlanCandidates`] | planner → collision |
 //! | `plan/decision` | [`PlanDecision`] | collision → planner |
+//! | `grid/changes` | [`GridChanges`] | local grid → link (occupancy-grid map sharing) |
+//! | `peer/grid_changes` | [`PeerGridChanges`] | link → local grid |
 //! | `link/tx`, `link/rx` | [`LinkTx`](crate::runtime::LinkTx), [`LinkRx`](crate::runtime::LinkRx) | link ↔ network |
 
 use nalgebra::{Isometry3, Vector3};
@@ -216,6 +218,46 @@ pub const PEER_PLAN: Topic<PeerPlan> = Topic::new("peer/plan");
 pub const PLAN_CANDIDATES: Topic<PlanCandidates> = Topic::new("plan/candidates");
 /// The collision actor's verdict on a planning round.
 pub const PLAN_DECISION: Topic<PlanDecision> = Topic::new("plan/decision");
+
+/// Changed cells of this robot's own occupancy observations since the last set: the
+/// occupancy-grid map sharing the thesis compares GMM keyframes with (§8.2.5, "OG").
+/// Values are the robot's own-evidence log-odds, not including what peers shared.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridChanges {
+    /// When the set was taken.
+    pub stamp: Time,
+    /// The cells, indexed in the grid window given with them.
+    pub set: troupe_comms::wire::GridChangeSet,
+}
+impl Message for GridChanges {
+    fn payload_bytes(&self) -> usize {
+        self.set.thesis_bytes()
+    }
+}
+
+/// A peer's [`GridChanges`], as received over the link.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerGridChanges {
+    /// The peer.
+    pub robot: RobotId,
+    /// Its changed cells, in its world frame.
+    pub set: troupe_comms::wire::GridChangeSet,
+    /// The transform from the peer's world frame into ours (Eq. 8.1), if they differ:
+    /// cell centres are moved with it and land in our nearest cell.
+    pub frame: Option<Isometry3<f64>>,
+    /// When it arrived here.
+    pub received_at: Time,
+}
+impl Message for PeerGridChanges {
+    fn payload_bytes(&self) -> usize {
+        self.set.thesis_bytes()
+    }
+}
+
+/// This robot's occupancy change sets (when it shares its map as a grid).
+pub const GRID_CHANGES: Topic<GridChanges> = Topic::new("grid/changes");
+/// Peers' occupancy change sets from the link.
+pub const PEER_GRID_CHANGES: Topic<PeerGridChanges> = Topic::new("peer/grid_changes");
 
 /// Another robot's committed plan, as received over the link (thesis §8.2.3: plans at
 /// 1 Hz with the sender's priority).

@@ -100,6 +100,21 @@ impl CollisionConfig {
     }
 }
 
+/// How a robot shares its map with its peers (thesis §8.2.5–§8.2.7 compares the
+/// first two under the same planning).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MapSharing {
+    /// The mapper's keyframe GMMs (§8.2.2).
+    #[default]
+    Gmm,
+    /// Occupancy-grid change sets: the cells each own depth frame changed (the "OG"
+    /// baseline, §8.2.5); keyframes stay local.
+    Grid,
+    /// Nothing: each robot maps alone (plans and odometry are still shared).
+    None,
+}
+
 /// Everything that shapes one robot.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -118,6 +133,9 @@ pub struct RobotConfig {
     pub mapper: MapperConfig,
     /// The collision actor and inter-robot avoidance; on by default.
     pub collision: CollisionConfig,
+    /// What the link shares of the map: `"gmm"` (keyframes, the default), `"grid"`
+    /// (occupancy change sets) or `"none"`.
+    pub map_sharing: MapSharing,
     /// Cruise speed, m/s.
     pub speed_mps: f64,
     /// Turn-in-place rate, rad/s.
@@ -145,6 +163,7 @@ impl Default for RobotConfig {
             planner: PlannerConfig::default(),
             mapper: MapperConfig::default(),
             collision: CollisionConfig::default(),
+            map_sharing: MapSharing::default(),
             speed_mps: 1.0,
             yaw_rate_rad_s: 1.0,
             replan_rate_hz: 1.0,
@@ -235,6 +254,13 @@ impl RobotConfig {
                 key: "mapper".into(),
                 rule: "must be valid",
                 value: reason,
+            });
+        }
+        if self.map_sharing == MapSharing::Grid && !self.grid.trace_depth_frames {
+            return Err(ConfigError {
+                key: "map_sharing".into(),
+                rule: "\"grid\" needs grid.trace_depth_frames = true (change sets are the cells own frames changed)",
+                value: "\"grid\"".into(),
             });
         }
         if let Err(reason) = self.grid.validate() {

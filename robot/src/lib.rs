@@ -25,7 +25,9 @@ use troupe_actors::sensor::{FrameSource, SensorActor};
 use troupe_policies::priority::PriorityAvoidance;
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
 
-pub use config::{ActorLatencies, CollisionConfig, ConfigError, PLANNER, RobotConfig, TELEOP};
+pub use config::{
+    ActorLatencies, CollisionConfig, ConfigError, MapSharing, PLANNER, RobotConfig, TELEOP,
+};
 
 /// Builds a frame source (called at start and on every sensor restart).
 pub type FrameSourceFactory = Box<dyn FnMut() -> Box<dyn FrameSource> + Send>;
@@ -95,6 +97,16 @@ pub fn assemble(
     if collision {
         link.priority = config.collision.peers.priority;
     }
+    let sharing = config.map_sharing;
+    let grid = config.grid;
+    let grid_actor = move || {
+        let actor = GridActor::new(grid);
+        if sharing == MapSharing::Grid {
+            actor.sharing_changes()
+        } else {
+            actor
+        }
+    };
     let mut robot = RobotSpec::new(name);
     robot.add(parts.vehicle).add(
         ActorSpec::new("sensor", move || {
@@ -110,7 +122,6 @@ pub fn assemble(
         );
     }
     if config.behaviour == TELEOP {
-        let grid = config.grid;
         let teleop = TeleopConfig {
             rate_hz: config.planner.rate_hz,
             round: config.planner.round,
@@ -118,24 +129,17 @@ pub fn assemble(
             ..TeleopConfig::default()
         };
         robot
-            .add(
-                ActorSpec::new("grid", move || GridActor::new(grid))
-                    .with_options(heavy(config.latency_s.grid)),
-            )
+            .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
             .add(
                 ActorSpec::new("teleop", move || TeleopActor::new(teleop))
                     .with_options(heavy(config.latency_s.planner)),
             );
     } else if config.behaviour == PLANNER {
         let selection = selection_by_name(&config.selection)?;
-        let grid = config.grid;
         let planner = config.planner;
         let camera = parts.camera;
         robot
-            .add(
-                ActorSpec::new("grid", move || GridActor::new(grid))
-                    .with_options(heavy(config.latency_s.grid)),
-            )
+            .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
             .add(
                 ActorSpec::new("planner", move || {
                     let actor = PlannerActor::new(planner, camera, selection());
@@ -181,8 +185,15 @@ pub fn assemble(
         );
     }
     robot.add(
-        ActorSpec::new("link", move || LinkActor::new(link.clone()))
-            .with_options(options(config.latency_s.link)),
+        ActorSpec::new("link", move || {
+            let actor = LinkActor::new(link.clone())?;
+            Ok(if sharing == MapSharing::Gmm {
+                actor
+            } else {
+                actor.without_keyframes()
+            })
+        })
+        .with_options(options(config.latency_s.link)),
     );
     Ok(robot)
 }

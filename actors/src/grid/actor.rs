@@ -6,7 +6,9 @@
 //! their sensor origins; when the window moves, the novel boxes are rebuilt from the
 //! stored components that can reach them (thesis §3.2.3, Fig. 3.2). The robot's own
 //! depth frames can also be ray-traced directly (the occupancy-grid baseline of
-//! §8.2.5; on by default so that the grid works without the mapper).
+//! §8.2.5; on by default so that the grid works without the mapper). With
+//! [`GridActor::sharing_changes`] the cells those frames changed go to peers as
+//! change sets ([`super::changeset`]); peers' change sets are always fused.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -14,6 +16,7 @@ use std::time::Duration;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::changeset::{OwnChanges, PeerCells};
 use super::distance::unsafe_distance;
 use super::frontier::frontier_distance;
 use super::hca::{HcaConfig, KeyframePair, hca_round, regenerate, straight_path_in_collision};
@@ -21,8 +24,8 @@ use super::{
     CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch, UpdateRule,
 };
 use crate::msgs::{
-    DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, GridSnapshot, KEYFRAME, Keyframe, ODOMETRY, Odometry,
-    PEER_KEYFRAME,
+    DEPTH_FRAME, DepthFrame, GRID_CHANGES, GRID_SNAPSHOT, GridChanges, GridSnapshot, KEYFRAME,
+    Keyframe, ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME,
 };
 use crate::runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
 
@@ -235,6 +238,10 @@ pub struct GridActor {
     pair: KeyframePair,
     /// HCA level of the last round (`α_prev`).
     hca_level: u32,
+    /// Occupancy-grid map sharing: a change set after every own frame.
+    share_changes: bool,
+    own_changes: OwnChanges,
+    peer_cells: PeerCells,
 }
 
 impl GridActor {
@@ -255,7 +262,21 @@ impl GridActor {
             scratch: ScanScratch::default(),
             pair: KeyframePair::default(),
             hca_level: config.hca.top_level(),
+            share_changes: false,
+            own_changes: OwnChanges::default(),
+            peer_cells: PeerCells::default(),
         }
+    }
+
+    /// Shares the map as occupancy-grid change sets, as the thesis' OG baseline does
+    /// (§8.2.5–8.2.6: "updating the map using the depth information for the current
+    /// image and publishing the change set"): after every own depth frame the cells
+    /// it changed go out on `grid/changes`. Peers' sets (`peer/grid_changes`) are
+    /// fused whether or not this is on.
+    #[must_use]
+    pub fn sharing_changes(mut self) -> Self {
+        self.share_changes = true;
+        self
     }
 
     /// Stores a keyframe's components and ray-traces them into the grid (if there is
@@ -312,6 +333,7 @@ impl GridActor {
         // keyframe components that can reach them (Fig. 3.2).
         let novel = grid.shift_to(&position);
         store.rebuild(grid, &novel);
+        self.peer_cells.restore(grid, &novel);
         grid.clear_unknown_sphere(&position, if first { start.max(body) } else { body });
         self.position = Some(position);
     }
@@ -365,6 +387,7 @@ impl Actor for GridActor {
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::KeepLatest { depth: 2 });
         ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
         ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(32));
+        ctx.subscribe(&PEER_GRID_CHANGES, QueuePolicy::fifo(64));
         ctx.set_timer(
             PUBLISH,
             Duration::from_secs_f64(1.0 / self.config.publish_rate_hz),
@@ -391,10 +414,38 @@ impl Actor for GridActor {
                         return Err(ActorError::msg("depth frame with a non-finite pose"));
                     }
                     let (stride, rule) = (self.config.pixel_stride, self.config.update_rule);
+                    let sharing = self.share_changes;
                     self.grid_at(position);
                     if let Some(grid) = self.grid.as_mut() {
+                        if sharing {
+                            self.own_changes.begin(grid);
+                        }
                         insert_frame_with(grid, frame, stride, rule, &mut self.scratch);
+                        if sharing {
+                            self.own_changes.end(grid);
+                            for set in self.own_changes.take_sets(grid) {
+                                ctx.publish(
+                                    &GRID_CHANGES,
+                                    GridChanges {
+                                        stamp: frame.stamp,
+                                        set,
+                                    },
+                                );
+                            }
+                        }
                     }
+                } else if let Some(peer) = m.get(&PEER_GRID_CHANGES) {
+                    let Some(grid) = self.grid.as_mut() else {
+                        return Ok(());
+                    };
+                    self.peer_cells
+                        .apply(peer.robot, &peer.set, peer.frame.as_ref(), grid)
+                        .map_err(|e| {
+                            ActorError::with_source(
+                                format!("rejected a change set from {}", peer.robot),
+                                e,
+                            )
+                        })?;
                 }
             }
             Event::Timer(_) => {

@@ -192,6 +192,34 @@ impl LocalGrid {
         &self.params
     }
 
+    /// The world-fixed lattice coordinates of a local cell (the same for every grid
+    /// of this resolution, wherever its window is).
+    #[must_use]
+    pub fn lattice_cell(&self, local: [usize; 3]) -> [usize; 3] {
+        [0, 1, 2].map(|i| self.corner[i] + local[i])
+    }
+
+    /// The local cell at lattice coordinates `cell`, if the window holds it.
+    #[must_use]
+    pub fn local_of_lattice(&self, cell: [usize; 3]) -> Option<[usize; 3]> {
+        let local = [0, 1, 2].map(|i| cell[i].checked_sub(self.corner[i]));
+        let local = [local[0]?, local[1]?, local[2]?];
+        (0..3).all(|i| local[i] < self.dims[i]).then_some(local)
+    }
+
+    /// Lattice coordinates of the cell holding the world point `p`.
+    #[must_use]
+    pub fn lattice_cell_of(&self, p: &Point3<f64>) -> Option<[usize; 3]> {
+        self.lattice.cell_of(p)
+    }
+
+    /// The local cell of a row-major index (inverse of [`LocalGrid::index`]).
+    #[must_use]
+    pub fn cell_at(&self, index: usize) -> [usize; 3] {
+        let (nx, ny) = (self.dims[0], self.dims[1]);
+        [index % nx, (index / nx) % ny, index / (nx * ny)]
+    }
+
     /// Row-major index (x fastest) of a local cell.
     #[must_use]
     pub fn index(&self, c: [usize; 3]) -> usize {

@@ -13,8 +13,10 @@
 //! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
+//! - [`changeset`]: occupancy-grid map sharing (the thesis' OG baseline, §8.2.5).
 
 mod actor;
+pub mod changeset;
 pub mod distance;
 pub mod frontier;
 pub mod hca;

@@ -27,8 +27,8 @@ use troupe_comms::shaping::{
 use troupe_comms::wire::{self, Envelope, Payload};
 
 use crate::msgs::{
-    KEYFRAME, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN, PeerKeyframe,
-    PeerOdometry, PeerPlan, Plan,
+    GRID_CHANGES, KEYFRAME, ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_ODOMETRY,
+    PEER_PLAN, PLAN, PeerGridChanges, PeerKeyframe, PeerOdometry, PeerPlan, Plan,
 };
 
 mod convert;
@@ -154,6 +154,8 @@ pub struct LinkActor {
     /// When each store-and-forward recipient was last heard.
     last_heard: BTreeMap<u32, Time>,
     rejected: u64,
+    /// Whether this robot's keyframes go to peers ([`LinkActor::without_keyframes`]).
+    share_keyframes: bool,
 }
 
 impl LinkActor {
@@ -175,7 +177,16 @@ impl LinkActor {
             plans_sent: 0,
             last_heard: BTreeMap::new(),
             rejected: 0,
+            share_keyframes: true,
         })
+    }
+
+    /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
+    /// sets instead, §8.2.5; change sets on `grid/changes` are always sent).
+    #[must_use]
+    pub fn without_keyframes(mut self) -> Self {
+        self.share_keyframes = false;
+        self
     }
 
     /// The transform from a peer's world frame into ours, if it differs.
@@ -427,7 +438,19 @@ impl LinkActor {
             );
             return Ok(());
         }
-        // Heartbeats only prove liveness; grid change sets are not consumed yet.
+        if let Payload::GridChanges(set) = envelope.payload {
+            ctx.publish(
+                &PEER_GRID_CHANGES,
+                PeerGridChanges {
+                    robot: from,
+                    set,
+                    frame,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        // Heartbeats only prove liveness.
         if let Payload::Odometry(o) = envelope.payload {
             let [x, y, z, w] = o.orientation_xyzw;
             let pose = Isometry3::from_parts(
@@ -457,7 +480,10 @@ impl Actor for LinkActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
-        ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
+        if self.share_keyframes {
+            ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
+        }
+        ctx.subscribe(&GRID_CHANGES, QueuePolicy::fifo(64));
         ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         let me = ctx.robot().0;
         for &peer in self.config.peers.iter().filter(|p| **p != me) {
@@ -506,6 +532,12 @@ impl Actor for LinkActor {
                     self.send(
                         Payload::Keyframe(keyframe_to_wire(keyframe)),
                         keyframe.stamp,
+                        ctx,
+                    )
+                } else if let Some(changes) = m.get(&GRID_CHANGES) {
+                    self.send(
+                        Payload::GridChanges(changes.set.clone()),
+                        changes.stamp,
                         ctx,
                     )
                 } else if let Some(rx) = m.get(&LINK_RX) {

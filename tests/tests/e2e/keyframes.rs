@@ -94,3 +94,76 @@ fn keyframes_are_fitted_shared_and_received() {
         "{fraction} of the merged map within 0.1 m of the rock"
     );
 }
+
+/// Known (not unknown) cells in each robot's latest grid snapshot after a short run.
+fn known_cells(scenario: &Scenario) -> (troupe_sims::team::Summary, Vec<usize>) {
+    use std::sync::{Arc, Mutex};
+    use troupe_actors::grid::CellState;
+    use troupe_actors::msgs::GRID_SNAPSHOT;
+    use troupe_actors::runtime::Publication;
+
+    let known = Arc::new(Mutex::new(vec![0usize; scenario.robots as usize]));
+    let seen = known.clone();
+    let mut team = Team::new(scenario).expect("assemble");
+    team.add_tap(move |p: &Publication<'_>| {
+        if let Some(snapshot) = p.get(&GRID_SNAPSHOT) {
+            let g = &snapshot.grid;
+            let n = g
+                .values()
+                .iter()
+                .filter(|v| g.classify(**v) != CellState::Unknown)
+                .count();
+            seen.lock().expect("lock")[p.robot.0 as usize] = n;
+        }
+    });
+    let summary = team.run(|_| {}).summary;
+    let known = known.lock().expect("lock").clone();
+    (summary, known)
+}
+
+#[test]
+fn occupancy_change_sets_are_shared_and_fused_instead_of_keyframes() {
+    use troupe_robot::MapSharing;
+    let base = Scenario {
+        name: "changes".into(),
+        duration_s: 15.0,
+        robot: RobotConfig {
+            mapper: MapperConfig {
+                enabled: false,
+                ..MapperConfig::default()
+            },
+            map_sharing: MapSharing::Grid,
+            ..RobotConfig::default()
+        },
+        ..Scenario::default()
+    };
+    let (s, shared) = known_cells(&base);
+    let mut alone = base.clone();
+    alone.robot.map_sharing = MapSharing::None;
+    let (_, solo) = known_cells(&alone);
+    for (me, peer) in [(0, 1), (1, 0)] {
+        let mine = &s.per_robot[me];
+        let sent = mine.topics["grid/changes"].messages;
+        let received = s.per_robot[peer].topics["peer/grid_changes"].messages;
+        // One set per frame (5 Hz); each arrives (the last may be in flight).
+        assert!(sent >= 70, "robot{me} sent {sent} change sets");
+        assert!(
+            received + 1 >= sent && received <= sent,
+            "{sent} → {received}"
+        );
+        assert_eq!(
+            mine.topics.get("peer/keyframe").map_or(0, |t| t.messages),
+            0
+        );
+        let link = mine.truth.link.as_ref().expect("link status");
+        assert_eq!(link.rejected_messages, 0);
+        assert!(mine.actors.iter().all(|a| a.errors == 0 && a.panics == 0));
+        // The peer's observations are in this robot's grid.
+        assert!(
+            shared[me] > solo[me] + 1000,
+            "robot{me}: {} known cells with the peer's change sets, {} alone",
+            shared[me],
+            solo[me]
+        );
+    }
+}
