@@ -146,8 +146,31 @@ impl GridConfig {
     }
 }
 
+/// Whether a pixel without a return may be taken as free space up to the sensor's
+/// range: only when none of its eight neighbours has a return either. A lone
+/// no-return pixel is a dropout (or a sphere-traced ray that gave up at a grazing
+/// surface) and says nothing; taking it as free would clear a ray straight through
+/// the wall it belongs to (the safety study found robots flying into boxes that such
+/// rays had cleared).
+#[must_use]
+pub fn is_open_sky(frame: &DepthFrame, row: usize, col: usize) -> bool {
+    let (w, h) = (
+        frame.intrinsics.width as usize,
+        frame.intrinsics.height as usize,
+    );
+    if frame.depth_m.get(row * w + col).is_none_or(|d| *d > 0.0) {
+        return false;
+    }
+    let rows = row.saturating_sub(1)..=(row + 1).min(h.saturating_sub(1));
+    rows.flat_map(|r| {
+        (col.saturating_sub(1)..=(col + 1).min(w.saturating_sub(1))).map(move |c| r * w + c)
+    })
+    .all(|i| frame.depth_m.get(i).is_none_or(|d| *d <= 0.0))
+}
+
 /// Ray-traces a depth frame into a grid: a hit at every valid pixel (every
-/// `stride`-th in u and v), free space up to the range where a pixel has no return.
+/// `stride`-th in u and v), free space up to the range where a pixel and its
+/// neighbours have no return ([`is_open_sky`]); other pixels are skipped.
 pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     let k = &frame.intrinsics;
     let origin = Point3::from(frame.pose.translation.vector);
@@ -161,8 +184,10 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
             let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
             let (z, hit) = if depth > 0.0 {
                 (f64::from(depth), true)
-            } else {
+            } else if is_open_sky(frame, row, col) {
                 (k.max_depth_m, false)
+            } else {
+                continue;
             };
             let end = origin + frame.pose.rotation * (ray * z);
             grid.insert_ray(&origin, &end, hit, None);
@@ -196,7 +221,7 @@ pub fn insert_frame_with(
             let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
             if depth > 0.0 {
                 hits.push(origin + frame.pose.rotation * (ray * f64::from(depth)));
-            } else {
+            } else if is_open_sky(frame, row, col) {
                 misses.push(origin + frame.pose.rotation * (ray * k.max_depth_m));
             }
         }

@@ -24,7 +24,9 @@ mod local;
 mod scan;
 mod store;
 
-pub use actor::{GridActor, GridConfig, insert_frame, insert_frame_with, insert_keyframe};
+pub use actor::{
+    GridActor, GridConfig, insert_frame, insert_frame_with, insert_keyframe, is_open_sky,
+};
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 pub use scan::{ScanScratch, UpdateRule};
 pub use store::{ComponentStore, KeyframeSource, RebuildStats};

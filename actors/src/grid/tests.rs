@@ -476,3 +476,42 @@ fn scan_marks_survive_their_counter_wrapping() {
         assert!(fast.values() == slow.values(), "scan {scan}");
     }
 }
+
+#[test]
+fn a_dropout_in_a_wall_clears_nothing_behind_it() {
+    use crate::grid::{insert_frame, is_open_sky};
+    use crate::mapper::sogmm::synthetic::intrinsics;
+    use crate::msgs::DepthFrame;
+    use crate::runtime::Time;
+
+    // A wall 2 m ahead fills the view but for one dropout pixel, and the top rows see
+    // nothing within range (open sky).
+    let k = intrinsics(40, 30);
+    let mut depth_m = vec![2.0f32; 40 * 30];
+    for d in &mut depth_m[..40 * 4] {
+        *d = 0.0;
+    }
+    depth_m[15 * 40 + 20] = 0.0;
+    let frame = DepthFrame {
+        stamp: Time::ZERO,
+        pose: nalgebra::Isometry3::identity(),
+        intrinsics: k,
+        depth_m,
+        intensity: vec![0.5; 40 * 30],
+    };
+    assert!(!is_open_sky(&frame, 15, 20));
+    assert!(is_open_sky(&frame, 1, 20));
+    assert!(!is_open_sky(&frame, 3, 20)); // next to the wall's first row
+    let mut grid = LocalGrid::centred(
+        &Point3::origin(),
+        &Vector3::new(12.0, 12.0, 8.0),
+        0.2,
+        LogOddsParams::default(),
+    );
+    insert_frame(&mut grid, &frame, 1);
+    // Behind the wall along the dropout's ray: unknown, not free.
+    let behind = grid.cell_of(&Point3::new(3.0, 0.0, 0.0)).unwrap();
+    assert_eq!(grid.state(behind), CellState::Unknown);
+    let wall = grid.cell_of(&Point3::new(2.0, 0.0, 0.0)).unwrap();
+    assert_eq!(grid.state(wall), CellState::Occupied);
+}
