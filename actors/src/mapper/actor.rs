@@ -30,6 +30,9 @@ pub struct MapStats {
     pub keyframe_components: usize,
     /// Wall-clock seconds of the keyframe fit.
     pub keyframe_fit_s: f64,
+    /// Frames skipped so far for having fewer than [`MIN_KEYFRAME_POINTS`] valid
+    /// pixels after decimation.
+    pub sparse_frames: u64,
     /// Components of the global map `|K|` (0 when it is disabled).
     pub components: usize,
     /// Points represented by the global map (`Σ n_k`).
@@ -211,8 +214,12 @@ pub struct MapperActor {
     config: MapperConfig,
     selector: KeyframeSelector,
     keyframes: u32,
+    sparse_frames: u64,
     global: Option<GlobalMap>,
 }
+
+/// Fewest valid pixels (after decimation) a frame needs to become a keyframe.
+pub const MIN_KEYFRAME_POINTS: usize = 100;
 
 impl MapperActor {
     /// A mapper with the given settings.
@@ -222,6 +229,7 @@ impl MapperActor {
             config,
             selector: KeyframeSelector::new(config.overlap_threshold, config.remembered_keyframes),
             keyframes: 0,
+            sparse_frames: 0,
             global: None,
         }
     }
@@ -271,14 +279,20 @@ impl Actor for MapperActor {
         let Some(frame) = event.message().and_then(|m| m.get(&DEPTH_FRAME)) else {
             return Ok(());
         };
+        let small = decimate(frame, self.config.pixel_stride);
+        let support = small.valid_pixels();
+        if support < MIN_KEYFRAME_POINTS {
+            // Sky, a dropout-riddled or an empty frame: nothing to map, and its view
+            // must not count as covered for the keyframe choice.
+            self.sparse_frames += 1;
+            return Ok(());
+        }
         if !self
             .selector
             .offer(Frustum::new(frame.pose, &frame.intrinsics))
         {
             return Ok(());
         }
-        let small = decimate(frame, self.config.pixel_stride);
-        let support = small.valid_pixels();
         let config = SogmmConfig {
             bandwidth: self.config.bandwidth,
             seed: u64::from(self.keyframes) ^ (u64::from(ctx.robot().0) << 32),
@@ -309,6 +323,7 @@ impl Actor for MapperActor {
                 keyframes: self.keyframes,
                 keyframe_components,
                 keyframe_fit_s,
+                sparse_frames: self.sparse_frames,
                 components: map.map_or(0, GlobalMap::len),
                 support_points: map.map_or(0.0, GlobalMap::total_support),
                 bytes: map.map_or(0, GlobalMap::parameter_bytes),
@@ -338,6 +353,8 @@ mod tests {
     /// Publishes the frames of a synthetic corridor flight, one per tick.
     struct Frames {
         next: usize,
+        /// The first frames see nothing (sky).
+        blank: usize,
     }
 
     impl Actor for Frames {
@@ -349,8 +366,11 @@ mod tests {
             if matches!(event, Event::Timer(TICK)) && self.next < FLIGHT {
                 let intrinsics = synthetic::intrinsics(48, 36);
                 let pose = synthetic::flight_pose(self.next * 8, FLIGHT * 8, 30.0);
-                let (depth_m, intensity) =
+                let (mut depth_m, intensity) =
                     synthetic::Scene::corridor(30.0).render(&intrinsics, &pose);
+                if self.next < self.blank {
+                    depth_m.fill(0.0);
+                }
                 ctx.publish(
                     &DEPTH_FRAME,
                     DepthFrame {
@@ -395,20 +415,43 @@ mod tests {
     }
 
     fn run(config: MapperConfig) -> (Vec<u32>, Vec<MapStats>) {
+        run_with(config, 0).0
+    }
+
+    /// Also returns the mapper's error count.
+    fn run_with(config: MapperConfig, blank: usize) -> ((Vec<u32>, Vec<MapStats>), u64) {
         let seen: Seen = Arc::default();
         let sink = seen.clone();
         let robot = RobotSpec::new("r0")
-            .with(ActorSpec::new("frames", || Frames { next: 0 }))
+            .with(ActorSpec::new("frames", move || Frames { next: 0, blank }))
             .with(ActorSpec::new("mapper", move || MapperActor::new(config)))
             .with(ActorSpec::new("recorder", move || Recorder {
                 seen: sink.clone(),
             }));
         let mut sim = SimExecutor::new(vec![robot], 1);
         sim.run_until(Time::from_secs_f64(0.5 * FLIGHT as f64 + 1.0));
+        let errors = sim.finish()[0]
+            .actors
+            .iter()
+            .find(|a| a.name == "mapper")
+            .map_or(0, |a| a.stats.errors);
         let seen = seen.lock().unwrap();
         let ids = seen.iter().filter_map(|e| e.0).collect();
         let stats = seen.iter().filter_map(|e| e.1.clone()).collect();
-        (ids, stats)
+        ((ids, stats), errors)
+    }
+
+    #[test]
+    fn frames_that_see_nothing_are_skipped_not_errors() {
+        let config = MapperConfig {
+            enabled: true,
+            pixel_stride: 1,
+            ..MapperConfig::default()
+        };
+        let ((ids, stats), errors) = run_with(config, 4);
+        assert_eq!(errors, 0);
+        assert!(!ids.is_empty());
+        assert_eq!(stats[0].sparse_frames, 4);
     }
 
     #[test]
