@@ -8,6 +8,7 @@
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
+//! - [`process`]: one robot per process over zenoh (`troupe-robot`, `troupe launch`).
 #![deny(missing_docs)]
 
 pub mod camera;
@@ -17,6 +18,7 @@ pub mod maps;
 pub mod monitor;
 pub mod network;
 pub mod plot;
+pub mod process;
 pub mod report;
 pub mod scenario;
 pub mod sequence;

@@ -264,45 +264,7 @@ impl Team {
             scenario.faults.iter().map(|_| Arc::default()).collect();
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
-            let start = world.start_position(i, count);
-            let route = world.route(i, count);
-            let heading = route
-                .iter()
-                .find(|p| (p.xy() - start.xy()).norm() > 0.1)
-                .map_or(0.0, |p| (p.y - start.y).atan2(p.x - start.x));
-            let pose = Isometry3::from_parts(
-                Translation3::from(start.coords),
-                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading),
-            );
-            let body = new_body(pose);
-            let camera_world = shared_world.clone();
-            let camera = scenario.camera.clone();
-            let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
-            let vehicle_config = scenario.vehicle.clone();
-            let vehicle = ActorSpec::new("vehicle", move || {
-                SimVehicle::new(body.clone(), vehicle_config.clone())
-            })
-            .with_options(ActorOptions {
-                latency: LatencyModel::fixed(scenario.robot.latency_s.vehicle),
-                restart: scenario.robot.restart,
-                blocking: false,
-            });
-            let parts = RobotParts {
-                frame_source: Box::new(move || {
-                    Box::new(SimCameraSource::new(
-                        camera_world.clone(),
-                        camera.clone(),
-                        noise_seed,
-                    ))
-                }),
-                vehicle,
-                route,
-                // The robot furthest into the tunnel leaves first; the others follow
-                // at intervals so that robots sharing the first tunnel stay apart.
-                depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
-                camera: intrinsics_of(&scenario.camera),
-            };
-            let mut robot = assemble(&format!("robot{i}"), &scenario.robot, parts)?;
+            let mut robot = simulated_robot(scenario, &world, i)?;
             for (fault, counters) in scenario.faults.iter().zip(&fault_counters) {
                 robot = inject_fault(robot, i, fault, counters);
             }
@@ -499,6 +461,56 @@ impl Team {
             maps,
         }
     }
+}
+
+/// Robot `i` of a scenario's team, as the simulation builds it: the standard robot of
+/// `scenario.robot` with a simulated vehicle at the world's start position `i` and a
+/// simulated camera (used by [`Team`] and by the per-robot `troupe-robot` process).
+pub fn simulated_robot(
+    scenario: &Scenario,
+    world: &Arc<dyn Site>,
+    i: usize,
+) -> Result<RobotSpec, AssembleError> {
+    let count = scenario.robots as usize;
+    let start = world.start_position(i, count);
+    let route = world.route(i, count);
+    let heading = route
+        .iter()
+        .find(|p| (p.xy() - start.xy()).norm() > 0.1)
+        .map_or(0.0, |p| (p.y - start.y).atan2(p.x - start.x));
+    let pose = Isometry3::from_parts(
+        Translation3::from(start.coords),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading),
+    );
+    let body = new_body(pose);
+    let camera_world: Arc<dyn World> = world.clone();
+    let camera = scenario.camera.clone();
+    let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
+    let vehicle_config = scenario.vehicle.clone();
+    let vehicle = ActorSpec::new("vehicle", move || {
+        SimVehicle::new(body.clone(), vehicle_config.clone())
+    })
+    .with_options(ActorOptions {
+        latency: LatencyModel::fixed(scenario.robot.latency_s.vehicle),
+        restart: scenario.robot.restart,
+        blocking: false,
+    });
+    let parts = RobotParts {
+        frame_source: Box::new(move || {
+            Box::new(SimCameraSource::new(
+                camera_world.clone(),
+                camera.clone(),
+                noise_seed,
+            ))
+        }),
+        vehicle,
+        route,
+        // The robot furthest into the tunnel leaves first; the others follow
+        // at intervals so that robots sharing the first tunnel stay apart.
+        depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
+        camera: intrinsics_of(&scenario.camera),
+    };
+    assemble(&format!("robot{i}"), &scenario.robot, parts)
 }
 
 /// Applies one scheduled fault to robot `index` (faults aimed elsewhere, and network

@@ -1,0 +1,327 @@
+//! One robot per process (`troupe-robot --config robot.toml`): the robot of a
+//! scenario's team with its own simulated vehicle and camera in the scenario's world
+//! (the same world seed gives the same world in every process), the standard actors on
+//! the real-time executor, and the link over zenoh.
+//!
+//! A robot file names the scenario and which robot of its team this process is:
+//!
+//! ```toml
+//! robot = 0                                # index in the team: start position, robot id
+//! scenario = "../scenarios/default.toml"   # relative to this file
+//! duration_s = 60.0                        # wall seconds; absent: until Ctrl-C
+//! out = "runs/processes/robot0"            # relative to this file; default: next to it
+//!
+//! [zenoh]                                  # troupe_comms::zenoh::ZenohConfig
+//! mode = "peer"
+//! listen = ["tcp/0.0.0.0:7447"]
+//! connect = ["tcp/10.0.0.2:7447", "tcp/10.0.0.3:7447"]  # every other robot: zenoh
+//!                                                       # peers do not forward
+//! ```
+//!
+//! On exit (the duration, SIGINT or SIGTERM) the process writes `summary.json`
+//! ([`ProcessSummary`]) and `trajectory.csv` (`unix_time_s,x_m,y_m,z_m`, the ground
+//! truth at every odometry message) into `out`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+use troupe_actors::link::{LINK_STATUS, LinkStatus};
+use troupe_actors::msgs::ODOMETRY;
+use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
+use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
+
+use crate::scenario::Scenario;
+use crate::team::simulated_robot;
+
+/// A robot file as written (see the module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessConfig {
+    /// This robot's index in the scenario's team (its id on the link).
+    pub robot: u32,
+    /// The scenario file, relative to the robot file.
+    pub scenario: PathBuf,
+    /// Wall seconds to run; absent: until interrupted.
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// Output directory, relative to the robot file; default `robot<i>/` next to it.
+    #[serde(default)]
+    pub out: Option<PathBuf>,
+    /// The zenoh session.
+    #[serde(default)]
+    pub zenoh: ZenohConfig,
+}
+
+/// A robot file with its paths resolved and its scenario loaded.
+#[derive(Clone, Debug)]
+pub struct RobotProcess {
+    /// The file's settings.
+    pub config: ProcessConfig,
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Where the outputs go.
+    pub out: PathBuf,
+}
+
+/// Why a robot file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessError {
+    /// Unreadable or invalid file (the message names the file and the key).
+    #[error("{0}")]
+    Config(String),
+    /// The robot could not be built, started or reported.
+    #[error("{0}")]
+    Run(String),
+}
+
+impl RobotProcess {
+    /// Reads and checks a robot file and its scenario.
+    pub fn load(path: &Path) -> Result<Self, ProcessError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ProcessError::Config(format!("{}: {e}", path.display())))?;
+        let de = toml::Deserializer::parse(&text)
+            .map_err(|e| ProcessError::Config(format!("{}: {e}", path.display())))?;
+        let config: ProcessConfig = serde_path_to_error::deserialize(de).map_err(|e| {
+            ProcessError::Config(format!("{}: `{}`: {}", path.display(), e.path(), e.inner()))
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let scenario = Scenario::load(&base.join(&config.scenario))
+            .map_err(|e| ProcessError::Config(e.to_string()))?;
+        if config.robot >= scenario.robots {
+            return Err(ProcessError::Config(format!(
+                "{}: `robot` must be below the scenario's {} robots, got {}",
+                path.display(),
+                scenario.robots,
+                config.robot
+            )));
+        }
+        if config
+            .duration_s
+            .is_some_and(|d| !(d.is_finite() && d > 0.0))
+        {
+            return Err(ProcessError::Config(format!(
+                "{}: `duration_s` must be a finite number > 0",
+                path.display()
+            )));
+        }
+        config
+            .zenoh
+            .validate()
+            .map_err(|e| ProcessError::Config(format!("{}: `zenoh`: {e}", path.display())))?;
+        let out = base.join(
+            config
+                .out
+                .clone()
+                .unwrap_or_else(|| PathBuf::from(format!("robot{}", config.robot))),
+        );
+        Ok(RobotProcess {
+            config,
+            scenario,
+            out,
+        })
+    }
+}
+
+/// What one robot process did (`summary.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct ProcessSummary {
+    /// Robot id.
+    pub robot: u32,
+    /// Wall seconds it ran.
+    pub wall_s: f64,
+    /// Messages and bytes per topic (`peer/*` counts what arrived from the others).
+    pub topics: BTreeMap<String, TopicStats>,
+    /// Per actor: errors, panics, restarts.
+    pub actors: Vec<ProcessActor>,
+    /// The link's last counters.
+    pub link: Option<LinkStatus>,
+    /// The zenoh session's counters.
+    pub zenoh: ZenohStats,
+    /// Packets the executor could not hand to the transport.
+    pub transport_errors: u64,
+    /// Odometry samples in `trajectory.csv`.
+    pub trajectory_samples: usize,
+}
+
+/// One actor's health.
+#[derive(Clone, Debug, Serialize)]
+pub struct ProcessActor {
+    /// Name.
+    pub name: String,
+    /// Events handled.
+    pub handled: u64,
+    /// Hooks that returned an error.
+    pub errors: u64,
+    /// Panics.
+    pub panics: u64,
+}
+
+/// Runs the robot until its duration is over or `stop` resolves, then writes the
+/// outputs; must be called inside a multi-threaded tokio runtime.
+pub async fn run(
+    process: &RobotProcess,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<ProcessSummary, ProcessError> {
+    let scenario = &process.scenario;
+    let id = process.config.robot;
+    let world = scenario
+        .world
+        .build()
+        .map_err(|e| ProcessError::Run(format!("building the world: {e}")))?;
+    let robot = simulated_robot(scenario, &world, id as usize)
+        .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {e}")))?;
+    let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
+    let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());
+    let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
+        .with_robot_ids(vec![RobotId(id)])
+        .map_err(|e| ProcessError::Run(e.to_string()))?;
+    executor.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&ODOMETRY) {
+            let t = SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64());
+            let v = o.pose.translation.vector;
+            if let Ok(mut samples) = trajectory_tap.lock() {
+                samples.push([t, v.x, v.y, v.z]);
+            }
+        } else if let Some(status) = p.get(&LINK_STATUS)
+            && let Ok(mut last) = link_tap.lock()
+        {
+            *last = Some(status.clone());
+        }
+    });
+    let transport = Arc::new(
+        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
+            .map_err(|e| ProcessError::Run(format!("opening zenoh: {e}")))?,
+    );
+    let started = Instant::now();
+    let handle = executor
+        .spawn_with_transport(transport.clone())
+        .map_err(|e| ProcessError::Run(format!("starting the transport: {e}")))?;
+    tracing::info!(robot = id, "running");
+    match process.config.duration_s {
+        Some(d) => {
+            tokio::select! {
+                () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
+                () = stop => {}
+            }
+        }
+        None => stop.await,
+    }
+    let transport_errors = handle.transport_errors();
+    let reports = handle.shutdown().await;
+    let zenoh = transport.stats();
+    if let Err(e) = transport.close() {
+        tracing::warn!(robot = id, "closing zenoh: {e}");
+    }
+    let report = reports
+        .into_iter()
+        .next()
+        .ok_or_else(|| ProcessError::Run("the executor reported no robot".into()))?;
+    let trajectory = std::mem::take(
+        &mut *trajectory
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner),
+    );
+    let summary = ProcessSummary {
+        robot: id,
+        wall_s: started.elapsed().as_secs_f64(),
+        topics: report.topics.clone(),
+        actors: report
+            .actors
+            .iter()
+            .map(|a| ProcessActor {
+                name: a.name.clone(),
+                handled: a.stats.handled,
+                errors: a.stats.errors,
+                panics: a.stats.panics,
+            })
+            .collect(),
+        link: link
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone(),
+        zenoh,
+        transport_errors,
+        trajectory_samples: trajectory.len(),
+    };
+    write_outputs(&process.out, &summary, &trajectory)
+        .map_err(|e| ProcessError::Run(format!("writing {}: {e}", process.out.display())))?;
+    Ok(summary)
+}
+
+fn write_outputs(
+    dir: &Path,
+    summary: &ProcessSummary,
+    trajectory: &[[f64; 4]],
+) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    std::fs::create_dir_all(dir)?;
+    let mut json = serde_json::to_string_pretty(summary).map_err(std::io::Error::other)?;
+    json.push('\n');
+    std::fs::write(dir.join("summary.json"), json)?;
+    let mut csv = String::from("unix_time_s,x_m,y_m,z_m\n");
+    for [t, x, y, z] in trajectory {
+        let _ = writeln!(csv, "{t:.6},{x},{y},{z}");
+    }
+    std::fs::write(dir.join("trajectory.csv"), csv)
+}
+
+/// Reads a `trajectory.csv` written by [`run`].
+pub fn read_trajectory(path: &Path) -> std::io::Result<Vec<[f64; 4]>> {
+    let text = std::fs::read_to_string(path)?;
+    text.lines()
+        .skip(1)
+        .map(|line| {
+            let v: Vec<f64> = line
+                .split(',')
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .map_err(std::io::Error::other)?;
+            match v.as_slice() {
+                [t, x, y, z] => Ok([*t, *x, *y, *z]),
+                _ => Err(std::io::Error::other(format!("bad line `{line}`"))),
+            }
+        })
+        .collect()
+}
+
+/// Smallest distance between the robots of several trajectories at common times
+/// (each sample against the other robot's position interpolated at that time), metres;
+/// `None` with fewer than two overlapping trajectories.
+#[must_use]
+pub fn min_distance_between(trajectories: &[Vec<[f64; 4]>]) -> Option<f64> {
+    let at = |samples: &[[f64; 4]], t: f64| -> Option<[f64; 3]> {
+        let i = samples.partition_point(|s| s[0] <= t);
+        if i == 0 || i == samples.len() {
+            return None;
+        }
+        let (a, b) = (samples[i - 1], samples[i]);
+        let f = if b[0] > a[0] {
+            (t - a[0]) / (b[0] - a[0])
+        } else {
+            0.0
+        };
+        Some([0, 1, 2].map(|k| a[k + 1] + f * (b[k + 1] - a[k + 1])))
+    };
+    let mut best: Option<f64> = None;
+    for (i, mine) in trajectories.iter().enumerate() {
+        for (j, theirs) in trajectories.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            for s in mine {
+                if let Some(q) = at(theirs, s[0]) {
+                    let d = ((s[1] - q[0]).powi(2) + (s[2] - q[1]).powi(2) + (s[3] - q[2]).powi(2))
+                        .sqrt();
+                    best = Some(best.map_or(d, |b: f64| b.min(d)));
+                }
+            }
+        }
+    }
+    best
+}
