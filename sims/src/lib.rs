@@ -8,12 +8,14 @@
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
-//! - [`process`]: one robot per process over zenoh (`troupe-robot`, `troupe launch`).
+//! - [`process`], [`launch`]: one robot per process over zenoh (`troupe-robot`,
+//!   `troupe launch`).
 #![deny(missing_docs)]
 
 pub mod camera;
 pub mod coverage;
 pub mod faults;
+pub mod launch;
 pub mod maps;
 pub mod monitor;
 pub mod network;

@@ -36,6 +36,27 @@ enum Command {
     /// keyframe mixtures) and `map.ply` (points sampled from it, with intensity) to
     /// OUT, and print one JSON line of statistics.
     Map(MapArgs),
+    /// Run a scenario's team as separate `troupe-robot` processes on this machine,
+    /// talking over zenoh on loopback (robot i listens on BASE_PORT + i and connects
+    /// to the others); writes the robot files, each robot's `summary.json` and
+    /// `trajectory.csv`, and `launch.json` (exit codes, closest approach) to
+    /// `OUT/<scenario name>/`. Ctrl-C stops every robot cleanly.
+    Launch(LaunchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct LaunchArgs {
+    /// Scenario file (TOML): world, robots, robot configuration.
+    scenario: PathBuf,
+    /// Wall seconds each robot runs; without it, until Ctrl-C.
+    #[arg(long, value_name = "SECONDS")]
+    duration_s: Option<f64>,
+    /// Port of robot 0; robot i uses BASE_PORT + i.
+    #[arg(long, default_value_t = 7447)]
+    base_port: u16,
+    /// Directory that receives the launch directory.
+    #[arg(long, default_value = "runs/launch")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -113,6 +134,45 @@ struct RunArgs {
     no_progress: bool,
 }
 
+fn launch(args: LaunchArgs) -> anyhow::Result<()> {
+    if args.duration_s.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+        anyhow::bail!("--duration-s must be a finite number > 0");
+    }
+    let scenario = Scenario::load(&args.scenario)?;
+    let dir = args.out.join(&scenario.name);
+    let exe = std::env::current_exe()
+        .context("locating troupe")?
+        .with_file_name(format!("troupe-robot{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        anyhow::bail!(
+            "{} not found: build it with `cargo build --release -p troupe-sims --bins`",
+            exe.display()
+        );
+    }
+    println!(
+        "launching {} robots of {} as processes (ports {}..), outputs in {}",
+        scenario.robots,
+        args.scenario.display(),
+        args.base_port,
+        dir.display()
+    );
+    let report =
+        troupe_sims::launch::launch(&args.scenario, &dir, args.base_port, args.duration_s, &exe)?;
+    let failed = report.exit_codes.iter().filter(|c| **c != Some(0)).count();
+    println!(
+        "{} robots finished ({} failed); closest approach {}",
+        report.exit_codes.len(),
+        failed,
+        report
+            .min_inter_robot_distance_m
+            .map_or("n/a".into(), |d| format!("{d:.2} m"))
+    );
+    if failed > 0 {
+        anyhow::bail!("{failed} robot processes failed");
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -126,6 +186,7 @@ fn main() -> ExitCode {
         Command::Run(args) => run(args),
         Command::Sweep(args) => sweep(args),
         Command::Map(args) => map(args),
+        Command::Launch(args) => launch(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

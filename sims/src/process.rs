@@ -271,6 +271,44 @@ fn write_outputs(
     std::fs::write(dir.join("trajectory.csv"), csv)
 }
 
+/// Writes one robot file per robot into `dir` for a team on this machine: robot `i`
+/// listens on `127.0.0.1:ports[i]` and connects to every other robot (zenoh peers do
+/// not forward); `scenario` is written as given (use an absolute path, or one relative
+/// to `dir`). For a team across hosts, change the addresses. Returns the files.
+pub fn write_loopback_team(
+    dir: &Path,
+    scenario: &Path,
+    ports: &[u16],
+    duration_s: Option<f64>,
+) -> std::io::Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)?;
+    (0..ports.len())
+        .map(|i| {
+            let endpoint = |p: u16| format!("tcp/127.0.0.1:{p}");
+            let config = ProcessConfig {
+                robot: u32::try_from(i).map_err(std::io::Error::other)?,
+                scenario: scenario.to_path_buf(),
+                duration_s,
+                out: Some(PathBuf::from(format!("robot{i}"))),
+                zenoh: ZenohConfig {
+                    listen: vec![endpoint(ports[i])],
+                    connect: ports
+                        .iter()
+                        .enumerate()
+                        .filter(|(j, _)| *j != i)
+                        .map(|(_, p)| endpoint(*p))
+                        .collect(),
+                    ..ZenohConfig::default()
+                },
+            };
+            let file = dir.join(format!("robot{i}.toml"));
+            let text = toml::to_string(&config).map_err(std::io::Error::other)?;
+            std::fs::write(&file, text)?;
+            Ok(file)
+        })
+        .collect()
+}
+
 /// Reads a `trajectory.csv` written by [`run`].
 pub fn read_trajectory(path: &Path) -> std::io::Result<Vec<[f64; 4]>> {
     let text = std::fs::read_to_string(path)?;

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use troupe_sims::process::{min_distance_between, read_trajectory};
+use troupe_sims::process::{min_distance_between, read_trajectory, write_loopback_team};
 
 /// Free TCP ports on loopback (bound and released; a tiny race is acceptable).
 fn free_ports(n: usize) -> Vec<u16> {
@@ -20,43 +20,18 @@ fn free_ports(n: usize) -> Vec<u16> {
         .collect()
 }
 
-/// Writes the scenario and the robot files; returns the robot files.
-fn write_team(dir: &Path, ports: &[u16], duration_s: f64) -> Vec<std::path::PathBuf> {
-    std::fs::write(
-        dir.join("team.toml"),
-        format!("name = \"processes\"\nrobots = {}\n", ports.len()),
-    )
-    .expect("scenario");
-    (0..ports.len())
-        .map(|i| {
-            let connect: Vec<String> = ports
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, p)| format!("\"tcp/127.0.0.1:{p}\""))
-                .collect();
-            let file = dir.join(format!("robot{i}.toml"));
-            std::fs::write(
-                &file,
-                format!(
-                    "robot = {i}\nscenario = \"team.toml\"\nduration_s = {duration_s}\n\
-                     [zenoh]\nmode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{}\"]\nconnect = [{}]\n",
-                    ports[i],
-                    connect.join(", ")
-                ),
-            )
-            .expect("robot file");
-            file
-        })
-        .collect()
-}
-
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = tempfile::tempdir().expect("tempdir");
     let ports = free_ports(3);
     let duration_s = 20.0;
-    let files = write_team(dir.path(), &ports, duration_s);
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"processes\"\nrobots = 3\n",
+    )
+    .expect("scenario");
+    let files = write_loopback_team(dir.path(), Path::new("team.toml"), &ports, Some(duration_s))
+        .expect("robot files");
     let mut children: Vec<_> = files
         .iter()
         .map(|f| {

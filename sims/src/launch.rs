@@ -1,0 +1,92 @@
+//! `troupe launch SCENARIO.toml`: the scenario's team as separate `troupe-robot`
+//! processes on this machine, talking over zenoh on loopback; the same robot files
+//! work across hosts with other addresses ([`crate::process`]).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+
+use serde::Serialize;
+
+use crate::process::{min_distance_between, read_trajectory, write_loopback_team};
+use crate::scenario::Scenario;
+
+/// What a launch did (`launch.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct LaunchReport {
+    /// Robot files, one per process.
+    pub robot_files: Vec<PathBuf>,
+    /// Exit code of each process (`None`: killed by a signal).
+    pub exit_codes: Vec<Option<i32>>,
+    /// Smallest distance between two robots, from their trajectories aligned in
+    /// wall time, metres.
+    pub min_inter_robot_distance_m: Option<f64>,
+}
+
+/// Why a launch failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchError {
+    /// The scenario could not be read.
+    #[error(transparent)]
+    Scenario(#[from] crate::scenario::ScenarioError),
+    /// Files could not be written or read, or a process not started.
+    #[error("{0}")]
+    Io(String),
+}
+
+/// Writes robot files for `scenario_path`'s team into `dir` (robot `i` on port
+/// `base_port + i`), starts one `robot_exe` per robot, waits for all of them, and
+/// writes `dir/launch.json`.
+pub fn launch(
+    scenario_path: &Path,
+    dir: &Path,
+    base_port: u16,
+    duration_s: Option<f64>,
+    robot_exe: &Path,
+) -> Result<LaunchReport, LaunchError> {
+    let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
+    let scenario = Scenario::load(scenario_path)?;
+    let scenario_abs = std::fs::canonicalize(scenario_path)
+        .map_err(|e| io(&scenario_path.display().to_string(), e))?;
+    let ports: Vec<u16> = (0..scenario.robots)
+        .map(|i| {
+            u16::try_from(i)
+                .ok()
+                .and_then(|i| base_port.checked_add(i))
+                .ok_or_else(|| LaunchError::Io("ports beyond 65535".into()))
+        })
+        .collect::<Result<_, _>>()?;
+    let files = write_loopback_team(dir, &scenario_abs, &ports, duration_s)
+        .map_err(|e| io(&dir.display().to_string(), e))?;
+    let mut children: Vec<Child> = Vec::new();
+    for file in &files {
+        match Command::new(robot_exe).arg("--config").arg(file).spawn() {
+            Ok(child) => children.push(child),
+            Err(e) => {
+                for mut c in children {
+                    let _ = c.kill();
+                }
+                return Err(io(&robot_exe.display().to_string(), e));
+            }
+        }
+    }
+    // Ctrl-C in the terminal reaches the whole process group: each robot writes its
+    // outputs and exits, and this waits for them.
+    let exit_codes = children
+        .iter_mut()
+        .map(|c| c.wait().map(|s| s.code()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| io("waiting for troupe-robot", e))?;
+    let trajectories: Vec<_> = (0..files.len())
+        .filter_map(|i| read_trajectory(&dir.join(format!("robot{i}/trajectory.csv"))).ok())
+        .collect();
+    let report = LaunchReport {
+        robot_files: files,
+        exit_codes,
+        min_inter_robot_distance_m: min_distance_between(&trajectories),
+    };
+    let mut json = serde_json::to_string_pretty(&report)
+        .map_err(|e| LaunchError::Io(format!("launch.json: {e}")))?;
+    json.push('\n');
+    std::fs::write(dir.join("launch.json"), json).map_err(|e| io("launch.json", e))?;
+    Ok(report)
+}
