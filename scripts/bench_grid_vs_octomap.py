@@ -21,8 +21,10 @@ Ratios are given against each, as `<name>_ratio` (plain) and
 Needs `pip install pyoctomap numpy`.
 
 Usage: python3 scripts/bench_grid_vs_octomap.py
+(set GRID_INSERTION_BIN to a prebuilt `grid_insertion` example to skip `cargo run`).
 """
 import json
+import os
 import pathlib
 import struct
 import subprocess
@@ -68,9 +70,12 @@ def octomap_frame_times(frames, resolution_m, discretize):
 def main():
     with tempfile.TemporaryDirectory() as tmp:
         points_file = pathlib.Path(tmp) / "points.bin"
+        prebuilt = os.environ.get("GRID_INSERTION_BIN")
+        command = ([prebuilt] if prebuilt else
+                   ["cargo", "run", "--quiet", "--release", "-p", "troupe-sims",
+                    "--example", "grid_insertion", "--"])
         out = subprocess.run(
-            ["cargo", "run", "--quiet", "--release", "-p", "troupe-sims", "--example",
-             "grid_insertion", "--", str(points_file)],
+            command + [str(points_file)],
             cwd=ROOT, check=True, capture_output=True, text=True)
         troupe = json.loads(out.stdout.strip().splitlines()[-1])
         frames = read_frames(points_file)
