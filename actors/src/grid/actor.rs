@@ -146,34 +146,44 @@ impl GridConfig {
     }
 }
 
-/// Whether a pixel without a return may be taken as free space up to the sensor's
-/// range: only when none of its eight neighbours has a return either. A lone
-/// no-return pixel is a dropout (or a sphere-traced ray that gave up at a grazing
-/// surface) and says nothing; taking it as free would clear a ray straight through
-/// the wall it belongs to (the safety study found robots flying into boxes that such
-/// rays had cleared).
+/// How far a pixel without a return may be taken as free space, metres: the sensor's
+/// range when none of its eight neighbours has a return either (open space), else the
+/// nearest neighbouring return less `margin_m` (a dropout, or a sphere-traced ray that
+/// gave up at a grazing surface, inside a surface the neighbours did see: the ray
+/// certainly crosses free space that far, and taking it to the range would clear a
+/// ray straight through that surface — the safety study found robots flying into
+/// boxes that such rays had cleared). `None` for a pixel with a return.
 #[must_use]
-pub fn is_open_sky(frame: &DepthFrame, row: usize, col: usize) -> bool {
+pub fn free_range_m(frame: &DepthFrame, row: usize, col: usize, margin_m: f64) -> Option<f64> {
     let (w, h) = (
         frame.intrinsics.width as usize,
         frame.intrinsics.height as usize,
     );
     if frame.depth_m.get(row * w + col).is_none_or(|d| *d > 0.0) {
-        return false;
+        return None;
     }
     let rows = row.saturating_sub(1)..=(row + 1).min(h.saturating_sub(1));
-    rows.flat_map(|r| {
-        (col.saturating_sub(1)..=(col + 1).min(w.saturating_sub(1))).map(move |c| r * w + c)
-    })
-    .all(|i| frame.depth_m.get(i).is_none_or(|d| *d <= 0.0))
+    let nearest = rows
+        .flat_map(|r| {
+            (col.saturating_sub(1)..=(col + 1).min(w.saturating_sub(1))).map(move |c| r * w + c)
+        })
+        .filter_map(|i| frame.depth_m.get(i).copied())
+        .filter(|d| *d > 0.0)
+        .fold(f32::INFINITY, f32::min);
+    if nearest.is_finite() {
+        Some(f64::from(nearest) - margin_m).filter(|r| *r > 0.0)
+    } else {
+        Some(frame.intrinsics.max_depth_m)
+    }
 }
 
 /// Ray-traces a depth frame into a grid: a hit at every valid pixel (every
-/// `stride`-th in u and v), free space up to the range where a pixel and its
-/// neighbours have no return ([`is_open_sky`]); other pixels are skipped.
+/// `stride`-th in u and v), free space as far as [`free_range_m`] allows (two cells
+/// short of a neighbouring return) where a pixel has none.
 pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     let k = &frame.intrinsics;
     let origin = Point3::from(frame.pose.translation.vector);
+    let margin_m = 2.0 * grid.resolution_m();
     let stride = stride.max(1) as usize;
     for row in (0..k.height as usize).step_by(stride) {
         for col in (0..k.width as usize).step_by(stride) {
@@ -184,8 +194,8 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
             let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
             let (z, hit) = if depth > 0.0 {
                 (f64::from(depth), true)
-            } else if is_open_sky(frame, row, col) {
-                (k.max_depth_m, false)
+            } else if let Some(range_m) = free_range_m(frame, row, col, margin_m) {
+                (range_m, false)
             } else {
                 continue;
             };
@@ -210,6 +220,7 @@ pub fn insert_frame_with(
     }
     let k = &frame.intrinsics;
     let origin = Point3::from(frame.pose.translation.vector);
+    let margin_m = 2.0 * grid.resolution_m();
     let stride = stride.max(1) as usize;
     let (mut hits, mut misses) = (Vec::new(), Vec::new());
     for row in (0..k.height as usize).step_by(stride) {
@@ -221,8 +232,8 @@ pub fn insert_frame_with(
             let ray = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
             if depth > 0.0 {
                 hits.push(origin + frame.pose.rotation * (ray * f64::from(depth)));
-            } else if is_open_sky(frame, row, col) {
-                misses.push(origin + frame.pose.rotation * (ray * k.max_depth_m));
+            } else if let Some(range_m) = free_range_m(frame, row, col, margin_m) {
+                misses.push(origin + frame.pose.rotation * (ray * range_m));
             }
         }
     }

@@ -25,7 +25,7 @@ mod scan;
 mod store;
 
 pub use actor::{
-    GridActor, GridConfig, insert_frame, insert_frame_with, insert_keyframe, is_open_sky,
+    GridActor, GridConfig, free_range_m, insert_frame, insert_frame_with, insert_keyframe,
 };
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 pub use scan::{ScanScratch, UpdateRule};

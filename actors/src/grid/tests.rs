@@ -479,7 +479,7 @@ fn scan_marks_survive_their_counter_wrapping() {
 
 #[test]
 fn a_dropout_in_a_wall_clears_nothing_behind_it() {
-    use crate::grid::{insert_frame, is_open_sky};
+    use crate::grid::{free_range_m, insert_frame};
     use crate::mapper::sogmm::synthetic::intrinsics;
     use crate::msgs::DepthFrame;
     use crate::runtime::Time;
@@ -499,9 +499,11 @@ fn a_dropout_in_a_wall_clears_nothing_behind_it() {
         depth_m,
         intensity: vec![0.5; 40 * 30],
     };
-    assert!(!is_open_sky(&frame, 15, 20));
-    assert!(is_open_sky(&frame, 1, 20));
-    assert!(!is_open_sky(&frame, 3, 20)); // next to the wall's first row
+    // The dropout is free only up to its neighbours' wall, two cells short.
+    assert_eq!(free_range_m(&frame, 15, 20, 0.4), Some(2.0 - 0.4));
+    assert_eq!(free_range_m(&frame, 1, 20, 0.4), Some(k.max_depth_m));
+    assert_eq!(free_range_m(&frame, 3, 20, 0.4), Some(2.0 - 0.4)); // next to the wall
+    assert_eq!(free_range_m(&frame, 10, 20, 0.4), None); // a return
     let mut grid = LocalGrid::centred(
         &Point3::origin(),
         &Vector3::new(12.0, 12.0, 8.0),
