@@ -22,5 +22,8 @@ pub mod model;
 pub mod sogmm;
 pub mod windowed;
 
-pub use actor::{MAPPER_STATS, MapStats, MapUpdateStats, MapperActor, MapperConfig, decimate};
+pub use actor::{
+    MAPPER_STATS, MIN_KEYFRAME_POINTS, MapStats, MapUpdateStats, MapperActor, MapperConfig,
+    decimate,
+};
 pub use model::{KeyframeFit, MapModel, fit_keyframe};
