@@ -4,7 +4,7 @@
 
 use std::net::TcpListener;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use troupe_sims::process::{min_distance_between, read_trajectory, write_loopback_team};
@@ -18,6 +18,24 @@ fn free_ports(n: usize) -> Vec<u16> {
         .iter()
         .map(|l| l.local_addr().expect("addr").port())
         .collect()
+}
+
+/// Waits for every process; each must exit successfully soon after its duration.
+fn wait_all(children: &mut [Child], duration_s: f64) {
+    let started = Instant::now();
+    for child in children {
+        loop {
+            if let Some(status) = child.try_wait().expect("wait") {
+                assert!(status.success(), "troupe-robot exited with {status}");
+                break;
+            }
+            if started.elapsed() > Duration::from_secs_f64(duration_s + 60.0) {
+                let _ = child.kill();
+                panic!("troupe-robot did not stop after its duration");
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
 }
 
 #[test]
@@ -43,20 +61,7 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
                 .expect("spawn troupe-robot")
         })
         .collect();
-    let started = Instant::now();
-    for child in &mut children {
-        loop {
-            if let Some(status) = child.try_wait().expect("wait") {
-                assert!(status.success(), "troupe-robot exited with {status}");
-                break;
-            }
-            if started.elapsed() > Duration::from_secs_f64(duration_s + 60.0) {
-                let _ = child.kill();
-                panic!("troupe-robot did not stop after its duration");
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    }
+    wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
     for i in 0..3 {
         let out = dir.path().join(format!("robot{i}"));
@@ -209,20 +214,7 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
                 .expect("spawn"),
         );
     }
-    let started = Instant::now();
-    for child in &mut children {
-        loop {
-            if let Some(status) = child.try_wait().expect("wait") {
-                assert!(status.success(), "troupe-robot exited with {status}");
-                break;
-            }
-            if started.elapsed() > Duration::from_secs_f64(duration_s + 60.0) {
-                let _ = child.kill();
-                panic!("troupe-robot did not stop after its duration");
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    }
+    wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
     for i in 0..3 {
         let out = dir.path().join(format!("robot{i}"));
