@@ -102,7 +102,8 @@ fn sh(args: &[&str]) -> Result<(), String> {
     }
 }
 
-/// Network namespaces, veth pairs and a bridge made for one test, removed on drop.
+/// Network namespaces (one per robot and a hub with the bridge) and veth pairs made
+/// for one test, removed on drop.
 struct Namespaces {
     prefix: String,
     count: usize,
@@ -113,29 +114,47 @@ impl Namespaces {
         format!("{}n{i}", self.prefix)
     }
 
-    /// `count` namespaces on one bridge, robot `i` at `10.77.<net>.<i + 1>`, each link
-    /// shaped by a token bucket both ways.
+    /// `count` namespaces joined by a bridge in a hub namespace of their own (so
+    /// that the host's firewall rules never see the traffic), robot `i` at
+    /// `10.77.<net>.<i + 1>`, each link shaped by a token bucket both ways.
     fn create(prefix: &str, count: usize, net: u8, rate: &str) -> Result<Self, String> {
         let me = Namespaces {
             prefix: prefix.to_owned(),
             count,
         };
+        let hub = format!("{prefix}hub");
         let bridge = format!("{prefix}br");
-        sh(&["ip", "link", "add", &bridge, "type", "bridge"])?;
-        sh(&["ip", "link", "set", &bridge, "up"])?;
+        let in_hub = ["ip", "netns", "exec", &hub];
+        sh(&["ip", "netns", "add", &hub])?;
+        sh(&[
+            &in_hub[..],
+            &["ip", "link", "add", &bridge, "type", "bridge"][..],
+        ]
+        .concat())?;
+        sh(&[&in_hub[..], &["ip", "link", "set", &bridge, "up"][..]].concat())?;
         for i in 0..count {
             let (ns, a, b) = (me.ns(i), format!("{prefix}a{i}"), format!("{prefix}b{i}"));
             let address = format!("10.77.{net}.{}/24", i + 1);
-            sh(&["ip", "netns", "add", &ns])?;
-            sh(&["ip", "link", "add", &a, "type", "veth", "peer", "name", &b])?;
-            sh(&["ip", "link", "set", &b, "netns", &ns])?;
-            sh(&["ip", "link", "set", &a, "master", &bridge])?;
-            sh(&["ip", "link", "set", &a, "up"])?;
             let tbf = [
                 "root", "tbf", "rate", rate, "burst", "32kbit", "latency", "400ms",
             ];
-            sh(&[&["tc", "qdisc", "add", "dev", &a][..], &tbf[..]].concat())?;
             let exec = ["ip", "netns", "exec", &ns];
+            sh(&["ip", "netns", "add", &ns])?;
+            sh(&["ip", "link", "add", &a, "type", "veth", "peer", "name", &b])?;
+            sh(&["ip", "link", "set", &a, "netns", &hub])?;
+            sh(&["ip", "link", "set", &b, "netns", &ns])?;
+            sh(&[
+                &in_hub[..],
+                &["ip", "link", "set", &a, "master", &bridge][..],
+            ]
+            .concat())?;
+            sh(&[&in_hub[..], &["ip", "link", "set", &a, "up"][..]].concat())?;
+            sh(&[
+                &in_hub[..],
+                &["tc", "qdisc", "add", "dev", &a][..],
+                &tbf[..],
+            ]
+            .concat())?;
             sh(&[&exec[..], &["ip", "addr", "add", &address, "dev", &b][..]].concat())?;
             sh(&[&exec[..], &["ip", "link", "set", &b, "up"][..]].concat())?;
             sh(&[&exec[..], &["ip", "link", "set", "lo", "up"][..]].concat())?;
@@ -147,11 +166,12 @@ impl Namespaces {
 
 impl Drop for Namespaces {
     fn drop(&mut self) {
+        // Deleting a namespace deletes its ends of the veth pairs (and the bridge).
         for i in 0..self.count {
             let _ = sh(&["ip", "netns", "del", &self.ns(i)]);
             let _ = sh(&["ip", "link", "del", &format!("{}a{i}", self.prefix)]);
         }
-        let _ = sh(&["ip", "link", "del", &format!("{}br", self.prefix)]);
+        let _ = sh(&["ip", "netns", "del", &format!("{}hub", self.prefix)]);
     }
 }
 
