@@ -16,7 +16,7 @@
 use std::collections::{BTreeSet, HashMap};
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use troupe_comms::wire::{CellChange, GridChangeSet, GridDims};
+use troupe_comms::wire::{CellChange, ContentError, GridChangeSet, GridDims};
 
 use super::local::{CellBox, LocalGrid};
 use crate::runtime::RobotId;
@@ -103,10 +103,9 @@ impl OwnChanges {
 /// Why a peer's set was not applied.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ChangeSetError {
-    /// The set's grid has a zero dimension, a non-finite origin, an index outside
-    /// its grid or a non-finite value (the decoder checks these too).
+    /// The set fails [`GridChangeSet::validate`] (the decoder's own check).
     #[error("invalid change set: {0}")]
-    Invalid(&'static str),
+    Invalid(#[from] ContentError),
 }
 
 /// The receiver's side (module docs).
@@ -130,23 +129,8 @@ impl PeerCells {
         frame: Option<&Isometry3<f64>>,
         grid: &mut LocalGrid,
     ) -> Result<usize, ChangeSetError> {
-        let [w, h, l] = [set.dims.width, set.dims.height, set.dims.length].map(|v| v as usize);
-        if w == 0 || h == 0 || l == 0 {
-            return Err(ChangeSetError::Invalid("zero grid dimension"));
-        }
-        if !set.origin_m.iter().all(|v| v.is_finite()) {
-            return Err(ChangeSetError::Invalid("non-finite origin"));
-        }
-        let cells = (w as u64) * (h as u64) * (l as u64);
-        if set
-            .changes
-            .iter()
-            .any(|c| u64::from(c.index) >= cells || !c.log_odds.is_finite())
-        {
-            return Err(ChangeSetError::Invalid(
-                "index outside the grid or non-finite value",
-            ));
-        }
+        set.validate()?;
+        let [w, h] = [set.dims.width, set.dims.height].map(|v| v as usize);
         let res = grid.resolution_m();
         let origin = Vector3::from(set.origin_m.map(f64::from));
         let mut applied = 0;

@@ -87,7 +87,9 @@ impl GridChangeSet {
         self.changes = out;
     }
 
-    pub(super) fn validate(&self) -> Result<(), ContentError> {
+    /// Checks the values: no zero dimension, a finite origin, indices inside the grid
+    /// and strictly increasing, finite log-odds (what [`super::decode`] checks).
+    pub fn validate(&self) -> Result<(), ContentError> {
         if self.dims.cells() == 0 {
             return Err(ContentError::Message("grid has a zero dimension"));
         }
