@@ -211,6 +211,15 @@ mod tests {
         own.end(grid);
     }
 
+    /// Every cell of `set` (indexed in `a`'s window) has the same value in `b`.
+    fn assert_same_cells(a: &LocalGrid, b: &LocalGrid, set: &GridChangeSet) {
+        for c in &set.changes {
+            let la = a.cell_at(c.index as usize);
+            let lb = b.local_of_lattice(a.lattice_cell(la)).unwrap();
+            assert_eq!(a.value(la), b.value(lb));
+        }
+    }
+
     #[test]
     fn a_peers_observations_reach_our_grid_exactly_once() {
         let (mut a, mut b) = (grid_at(0.0), grid_at(1.0));
@@ -224,11 +233,7 @@ mod tests {
         let n = peers.apply(RobotId(0), &sets[0], None, &mut b).unwrap();
         assert_eq!(n, sets[0].changes.len());
         // Every cell the ray touched in `a` has the same state in `b`.
-        for c in &sets[0].changes {
-            let la = a.cell_at(c.index as usize);
-            let lb = b.local_of_lattice(a.lattice_cell(la)).unwrap();
-            assert_eq!(a.value(la), b.value(lb));
-        }
+        assert_same_cells(&a, &b, &sets[0]);
         let end = b.lattice_cell_of(&Point3::new(2.0, 0.3, 0.1)).unwrap();
         assert_eq!(
             b.state(b.local_of_lattice(end).unwrap()),
@@ -241,11 +246,7 @@ mod tests {
         observe(&mut a, &mut own, [0.0, 0.0, 0.0], [2.0, 0.3, 0.1]);
         let again = own.take_sets(&a);
         peers.apply(RobotId(0), &again[0], None, &mut b).unwrap();
-        for c in &again[0].changes {
-            let la = a.cell_at(c.index as usize);
-            let lb = b.local_of_lattice(a.lattice_cell(la)).unwrap();
-            assert_eq!(a.value(la), b.value(lb));
-        }
+        assert_same_cells(&a, &b, &again[0]);
     }
 
     #[test]
@@ -260,11 +261,7 @@ mod tests {
         assert_eq!(peers.apply(RobotId(3), &set, None, &mut b).unwrap(), 0);
         let novel = b.shift_to(&Point3::new(0.0, 0.0, 0.0));
         peers.restore(&mut b, &novel);
-        for c in &set.changes {
-            let la = a.cell_at(c.index as usize);
-            let lb = b.local_of_lattice(a.lattice_cell(la)).unwrap();
-            assert_eq!(a.value(la), b.value(lb));
-        }
+        assert_same_cells(&a, &b, &set);
     }
 
     #[test]
