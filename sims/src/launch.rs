@@ -7,7 +7,7 @@ use std::process::{Child, Command};
 
 use serde::Serialize;
 
-use crate::process::{min_distance_between, read_trajectory, write_loopback_team};
+use crate::process::{loopback_endpoints, min_distance_between, read_trajectory, write_team};
 use crate::scenario::Scenario;
 
 /// What a launch did (`launch.json`).
@@ -55,7 +55,7 @@ pub fn launch(
                 .ok_or_else(|| LaunchError::Io("ports beyond 65535".into()))
         })
         .collect::<Result<_, _>>()?;
-    let files = write_loopback_team(dir, &scenario_abs, &ports, duration_s)
+    let files = write_team(dir, &scenario_abs, &loopback_endpoints(&ports), duration_s)
         .map_err(|e| io(&dir.display().to_string(), e))?;
     let mut children: Vec<Child> = Vec::new();
     for file in &files {

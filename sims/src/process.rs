@@ -271,32 +271,32 @@ fn write_outputs(
     std::fs::write(dir.join("trajectory.csv"), csv)
 }
 
-/// Writes one robot file per robot into `dir` for a team on this machine: robot `i`
-/// listens on `127.0.0.1:ports[i]` and connects to every other robot (zenoh peers do
-/// not forward); `scenario` is written as given (use an absolute path, or one relative
-/// to `dir`). For a team across hosts, change the addresses. Returns the files.
-pub fn write_loopback_team(
+/// Writes one robot file per robot into `dir`: robot `i` listens on `endpoints[i]`
+/// (e.g. `tcp/127.0.0.1:7447`) and connects to every other robot's endpoint (zenoh
+/// peers do not forward); `scenario` is written as given (use an absolute path, or
+/// one relative to `dir`). The same files work across hosts with the hosts'
+/// addresses. Returns the files.
+pub fn write_team(
     dir: &Path,
     scenario: &Path,
-    ports: &[u16],
+    endpoints: &[String],
     duration_s: Option<f64>,
 ) -> std::io::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
-    (0..ports.len())
+    (0..endpoints.len())
         .map(|i| {
-            let endpoint = |p: u16| format!("tcp/127.0.0.1:{p}");
             let config = ProcessConfig {
                 robot: u32::try_from(i).map_err(std::io::Error::other)?,
                 scenario: scenario.to_path_buf(),
                 duration_s,
                 out: Some(PathBuf::from(format!("robot{i}"))),
                 zenoh: ZenohConfig {
-                    listen: vec![endpoint(ports[i])],
-                    connect: ports
+                    listen: vec![endpoints[i].clone()],
+                    connect: endpoints
                         .iter()
                         .enumerate()
                         .filter(|(j, _)| *j != i)
-                        .map(|(_, p)| endpoint(*p))
+                        .map(|(_, e)| e.clone())
                         .collect(),
                     ..ZenohConfig::default()
                 },
@@ -307,6 +307,12 @@ pub fn write_loopback_team(
             Ok(file)
         })
         .collect()
+}
+
+/// TCP endpoints on this machine's loopback, one per port.
+#[must_use]
+pub fn loopback_endpoints(ports: &[u16]) -> Vec<String> {
+    ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect()
 }
 
 /// Reads a `trajectory.csv` written by [`run`].

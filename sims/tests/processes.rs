@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use troupe_sims::process::{min_distance_between, read_trajectory, write_loopback_team};
+use troupe_sims::process::{loopback_endpoints, min_distance_between, read_trajectory, write_team};
 
 /// Free TCP ports on loopback (bound and released; a tiny race is acceptable).
 fn free_ports(n: usize) -> Vec<u16> {
@@ -38,6 +38,45 @@ fn wait_all(children: &mut [Child], duration_s: f64) {
     }
 }
 
+/// Starts `troupe-robot` on a robot file, inside network namespace `netns` if given.
+fn spawn_robot(file: &Path, netns: Option<&str>) -> Child {
+    let exe = env!("CARGO_BIN_EXE_troupe-robot");
+    let mut command = match netns {
+        Some(ns) => {
+            let mut c = Command::new("ip");
+            c.args(["netns", "exec", ns]).arg(exe);
+            c
+        }
+        None => Command::new(exe),
+    };
+    command
+        .arg("--config")
+        .arg(file)
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn troupe-robot")
+}
+
+/// Each robot's `summary.json` and `trajectory.csv` under `dir/robot<i>/`.
+fn outputs(dir: &Path, robots: usize) -> Vec<(serde_json::Value, Vec<[f64; 4]>)> {
+    (0..robots)
+        .map(|i| {
+            let out = dir.join(format!("robot{i}"));
+            let summary = serde_json::from_str(
+                &std::fs::read_to_string(out.join("summary.json")).expect("summary.json"),
+            )
+            .expect("json");
+            let trajectory = read_trajectory(&out.join("trajectory.csv")).expect("trajectory");
+            (summary, trajectory)
+        })
+        .collect()
+}
+
+/// Messages a robot's summary counts on `topic`.
+fn messages(summary: &serde_json::Value, topic: &str) -> u64 {
+    summary["topics"][topic]["messages"].as_u64().unwrap_or(0)
+}
+
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -48,38 +87,33 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
         "name = \"processes\"\nrobots = 3\n",
     )
     .expect("scenario");
-    let files = write_loopback_team(dir.path(), Path::new("team.toml"), &ports, Some(duration_s))
-        .expect("robot files");
-    let mut children: Vec<_> = files
-        .iter()
-        .map(|f| {
-            Command::new(env!("CARGO_BIN_EXE_troupe-robot"))
-                .arg("--config")
-                .arg(f)
-                .stdout(Stdio::null())
-                .spawn()
-                .expect("spawn troupe-robot")
-        })
-        .collect();
+    let files = write_team(
+        dir.path(),
+        Path::new("team.toml"),
+        &loopback_endpoints(&ports),
+        Some(duration_s),
+    )
+    .expect("robot files");
+    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
     wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
-    for i in 0..3 {
-        let out = dir.path().join(format!("robot{i}"));
-        let summary: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(out.join("summary.json")).expect("summary.json"),
-        )
-        .expect("json");
-        let messages = |topic: &str| summary["topics"][topic]["messages"].as_u64().unwrap_or(0);
+    for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
         // Two peers at 10 Hz; allow for start-up and a busy machine.
-        assert!(messages("peer/odometry") > 100, "robot{i}: {summary}");
-        assert!(messages("peer/keyframe") >= 2, "robot{i}: {summary}");
-        assert!(messages("peer/plan") >= 4, "robot{i}: {summary}");
+        assert!(
+            messages(&summary, "peer/odometry") > 100,
+            "robot{i}: {summary}"
+        );
+        assert!(
+            messages(&summary, "peer/keyframe") >= 2,
+            "robot{i}: {summary}"
+        );
+        assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
         assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
         for actor in summary["actors"].as_array().expect("actors") {
             assert_eq!(actor["panics"].as_u64(), Some(0), "robot{i}: {actor}");
         }
-        trajectories.push(read_trajectory(&out.join("trajectory.csv")).expect("trajectory"));
+        trajectories.push(trajectory);
     }
     let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
     assert!(closest > 0.6, "robots came within {closest} m");
@@ -208,44 +242,33 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     )
     .expect("scenario");
     let duration_s = 20.0;
-    let mut children = Vec::new();
-    for i in 0..3 {
-        let endpoint = |j: usize| format!("\"tcp/10.77.{net}.{}:7447\"", j + 1);
-        let connect: Vec<String> = (0..3).filter(|j| *j != i).map(endpoint).collect();
-        let file = dir.path().join(format!("robot{i}.toml"));
-        std::fs::write(
-            &file,
-            format!(
-                "robot = {i}\nscenario = \"team.toml\"\nduration_s = {duration_s}\n\
-                 [zenoh]\nlisten = [{}]\nconnect = [{}]\n",
-                endpoint(i),
-                connect.join(", ")
-            ),
-        )
-        .expect("robot file");
-        children.push(
-            Command::new("ip")
-                .args(["netns", "exec", &namespaces.ns(i)])
-                .arg(env!("CARGO_BIN_EXE_troupe-robot"))
-                .arg("--config")
-                .arg(&file)
-                .stdout(Stdio::null())
-                .spawn()
-                .expect("spawn"),
-        );
-    }
+    let endpoints: Vec<String> = (1..=3)
+        .map(|host| format!("tcp/10.77.{net}.{host}:7447"))
+        .collect();
+    let files = write_team(
+        dir.path(),
+        Path::new("team.toml"),
+        &endpoints,
+        Some(duration_s),
+    )
+    .expect("robot files");
+    let mut children: Vec<_> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| spawn_robot(f, Some(&namespaces.ns(i))))
+        .collect();
     wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
-    for i in 0..3 {
-        let out = dir.path().join(format!("robot{i}"));
-        let summary: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(out.join("summary.json")).expect("summary.json"),
-        )
-        .expect("json");
-        let messages = |topic: &str| summary["topics"][topic]["messages"].as_u64().unwrap_or(0);
-        assert!(messages("peer/odometry") > 100, "robot{i}: {summary}");
-        assert!(messages("peer/keyframe") >= 2, "robot{i}: {summary}");
-        trajectories.push(read_trajectory(&out.join("trajectory.csv")).expect("trajectory"));
+    for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
+        assert!(
+            messages(&summary, "peer/odometry") > 100,
+            "robot{i}: {summary}"
+        );
+        assert!(
+            messages(&summary, "peer/keyframe") >= 2,
+            "robot{i}: {summary}"
+        );
+        trajectories.push(trajectory);
     }
     let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
     assert!(closest > 0.6, "robots came within {closest} m");
