@@ -29,3 +29,15 @@ pub mod study;
 pub mod team;
 pub mod vehicle;
 pub mod world;
+
+/// Logs to stderr, filtered by `RUST_LOG` (default `warn`); for the `troupe` and
+/// `troupe-robot` binaries.
+pub fn init_logging() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+}

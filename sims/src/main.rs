@@ -174,13 +174,7 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    troupe_sims::init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),

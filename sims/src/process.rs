@@ -33,7 +33,7 @@ use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, describe};
 use crate::team::simulated_robot;
 
 /// A robot file as written (see the module docs).
@@ -82,10 +82,16 @@ impl RobotProcess {
     pub fn load(path: &Path) -> Result<Self, ProcessError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| ProcessError::Config(format!("{}: {e}", path.display())))?;
-        let de = toml::Deserializer::parse(&text)
-            .map_err(|e| ProcessError::Config(format!("{}: {e}", path.display())))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| {
+            ProcessError::Config(format!("{}: {}", path.display(), describe(&e, &text)))
+        })?;
         let config: ProcessConfig = serde_path_to_error::deserialize(de).map_err(|e| {
-            ProcessError::Config(format!("{}: `{}`: {}", path.display(), e.path(), e.inner()))
+            ProcessError::Config(format!(
+                "{}: `{}`: {}",
+                path.display(),
+                e.path(),
+                describe(e.inner(), &text)
+            ))
         })?;
         let base = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&base.join(&config.scenario))

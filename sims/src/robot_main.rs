@@ -22,13 +22,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    troupe_sims::init_logging();
     let args = Args::parse();
     let mut process = match RobotProcess::load(&args.config) {
         Ok(p) => p,

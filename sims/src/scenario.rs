@@ -243,7 +243,7 @@ impl Scenario {
 }
 
 /// A TOML error as one line: "line L, column C: message".
-fn describe(error: &toml::de::Error, text: &str) -> String {
+pub(crate) fn describe(error: &toml::de::Error, text: &str) -> String {
     let message = error.message().trim_end();
     match error.span() {
         Some(span) => {
