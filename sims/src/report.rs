@@ -111,7 +111,8 @@ fn write_maps(dir: &Path, output: &RunOutput) -> io::Result<()> {
     fs::create_dir(&maps_dir)?;
     for (i, map) in output.maps.iter().enumerate() {
         if !map.keyframes.is_empty() {
-            fs::write(maps_dir.join(format!("robot{i}.troupe")), map.to_bytes())?;
+            map.save(&maps_dir.join(format!("robot{i}.troupe")))
+                .map_err(io::Error::other)?;
         }
     }
     let (points, source) = merged_points(&output.maps, MERGED_MAP_POINTS, output.summary.seed)

@@ -136,6 +136,11 @@ pub struct PlannerActor<S> {
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
+    /// Time between planning rounds (`1 / rate_hz`).
+    fn replan_period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.config.rate_hz.max(1e-3))
+    }
+
     /// A planner scoring views of `camera`, choosing with `selection`.
     #[must_use]
     pub fn new(config: PlannerConfig, camera: PinholeIntrinsics, selection: S) -> Self {
@@ -309,12 +314,12 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         if self.deferred {
             ctx.subscribe(&PLAN_DECISION, QueuePolicy::LATEST);
         }
-        let period_s = 1.0 / self.config.rate_hz.max(1e-3);
+        let period_s = self.replan_period().as_secs_f64();
         let phase_s = round_phase_s(ctx.robot().0, period_s);
         if phase_s > 0.0 {
             ctx.set_timer(PHASE, Duration::from_secs_f64(phase_s));
         } else {
-            ctx.set_timer(REPLAN, Duration::from_secs_f64(period_s));
+            ctx.set_timer(REPLAN, self.replan_period());
         }
         Ok(())
     }
@@ -341,8 +346,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
             }
             Event::Timer(PHASE) => {
                 ctx.cancel_timer(PHASE);
-                let period_s = 1.0 / self.config.rate_hz.max(1e-3);
-                ctx.set_timer(REPLAN, Duration::from_secs_f64(period_s));
+                ctx.set_timer(REPLAN, self.replan_period());
             }
             Event::Timer(_) => self.plan(ctx),
         }
