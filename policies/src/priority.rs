@@ -208,16 +208,6 @@ pub fn peer_model<'a>(
     {
         return Some(PeerModel::Plan(&plan.plan.trajectory));
     }
-    peer_envelope(config, now, track)
-}
-
-/// A peer as a static obstacle at its newest known position (odometry or plan),
-/// inflated by its stopping envelope; `None` when nothing is known of its position.
-fn peer_envelope<'a>(
-    config: &PriorityConfig,
-    now: Time,
-    track: &PeerTrack,
-) -> Option<PeerModel<'a>> {
     let from_odometry = track.odometry.as_ref().map(|o| {
         (
             o.odometry.stamp,
