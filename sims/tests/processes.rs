@@ -9,15 +9,22 @@ use std::time::{Duration, Instant};
 
 use troupe_sims::process::{loopback_endpoints, min_distance_between, read_trajectory, write_team};
 
-/// Free TCP ports on loopback (bound and released; a tiny race is acceptable).
+/// `n` consecutive free TCP ports on loopback, below the kernel's ephemeral range
+/// (32768 and up by default): a port picked from that range could be handed to one
+/// robot's outgoing connection before the robot meant to listen on it has bound it.
 fn free_ports(n: usize) -> Vec<u16> {
-    let listeners: Vec<TcpListener> = (0..n)
-        .map(|_| TcpListener::bind("127.0.0.1:0").expect("bind"))
-        .collect();
-    listeners
-        .iter()
-        .map(|l| l.local_addr().expect("addr").port())
-        .collect()
+    let start = 10_000 + (std::process::id() % 3_000) as u16 * 3;
+    (0..3_000u16)
+        .map(|k| 10_000 + (start - 10_000 + k * 3) % 9_000)
+        .find_map(|base| {
+            let ports: Vec<u16> = (0..n as u16).map(|i| base + i).collect();
+            let bound: Result<Vec<TcpListener>, _> = ports
+                .iter()
+                .map(|p| TcpListener::bind(("127.0.0.1", *p)))
+                .collect();
+            bound.ok().map(|_| ports)
+        })
+        .expect("free ports below 19000")
 }
 
 /// Waits for every process; each must exit successfully soon after its duration.
