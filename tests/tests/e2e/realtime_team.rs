@@ -67,24 +67,37 @@ fn standard_robots_run_on_the_wall_clock() {
         .enable_all()
         .build()
         .unwrap();
+    // A robot moved (the planner committed plans through the collision actor, the
+    // vehicle followed); whether both do soon is the planner's choice.
+    let moved = |positions: &[Vec<Point3<f64>>]| {
+        positions
+            .iter()
+            .filter(|p| p.len() >= 2 && (p[p.len() - 1] - p[0]).norm() > 0.3)
+            .count()
+    };
+    // Wall-clock time on a busy machine varies: run until the checks hold (about
+    // 3 s when the machine is idle), at most a minute.
+    let done = |(frames, peers, positions): &(usize, usize, Vec<Vec<Point3<f64>>>)| {
+        *frames >= 10 && *peers >= 10 && moved(positions) >= 1
+    };
     let reports = runtime.block_on(async {
         let handle = executor.spawn();
-        tokio::time::sleep(Duration::from_millis(6000)).await;
+        let started = std::time::Instant::now();
+        while !done(&seen.lock().unwrap()) && started.elapsed() < Duration::from_secs(60) {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
         handle.shutdown().await
     });
     let (frames, peer_messages, peer_positions) = seen.lock().unwrap().clone();
-    assert!(frames >= 10, "only {frames} frames in 6 s");
+    assert!(frames >= 10, "only {frames} frames");
     assert!(
         peer_messages >= 10,
         "only {peer_messages} peer odometry messages"
     );
-    // A robot moved (the planner committed plans through the collision actor, the
-    // vehicle followed); whether both do within 6 s is the planner's choice.
-    let moved = peer_positions
-        .iter()
-        .filter(|p| p.len() >= 2 && (p[p.len() - 1] - p[0]).norm() > 0.3)
-        .count();
-    assert!(moved >= 1, "no robot moved: {peer_positions:?}");
+    assert!(
+        moved(&peer_positions) >= 1,
+        "no robot moved: {peer_positions:?}"
+    );
     for robot in &reports {
         assert!(
             robot
