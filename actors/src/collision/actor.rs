@@ -7,7 +7,9 @@
 //! 1. the distance-field check: every sample of the candidate (primitive and stopping
 //!    primitive, every `check_step_s`) keeps the body's bounding radius plus the
 //!    field's discretisation slack from unsafe space in the latest [`GridSnapshot`]
-//!    (skipped when the robot has no local grid, e.g. route-following robots);
+//!    — or, when the candidate starts inside that clearance, never comes closer to
+//!    unsafe space than its start ([`required_clearance_m`]) — (skipped when the robot
+//!    has no local grid, e.g. route-following robots);
 //! 2. the inter-robot check of a [`PeerAvoidance`] policy against peers' odometry and
 //!    plans (priority-based, §8.2.3);
 //!
@@ -26,6 +28,7 @@ use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision,
 };
+use crate::planner::round::required_clearance_m;
 use crate::runtime::{Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, Topic};
 use crate::trajectory::Trajectory;
 
@@ -117,7 +120,9 @@ impl Message for CollisionStatus {}
 pub const COLLISION_STATUS: Topic<CollisionStatus> = Topic::new("collision/status");
 
 /// Whether every sample of `trajectory` from `from` to its end (every `step_s`) has at
-/// least `clearance_m` in `snapshot`'s distance field to unsafe space.
+/// least `clearance_m` in `snapshot`'s distance field to unsafe space — or, when its
+/// state at `from` is already closer than that, at least that state's own clearance
+/// ([`required_clearance_m`]).
 #[must_use]
 pub fn clear_of_unsafe_space(
     trajectory: &Trajectory,
@@ -126,6 +131,14 @@ pub fn clear_of_unsafe_space(
     clearance_m: f64,
     step_s: f64,
 ) -> bool {
+    let Some(start) = trajectory.state_at(from) else {
+        return false;
+    };
+    let Some(clearance_m) =
+        required_clearance_m(clearance_m, snapshot.clearance_m(&start.position_m))
+    else {
+        return false;
+    };
     let span_s = trajectory.end_time().saturating_since(from).as_secs_f64();
     let n = (span_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
     (0..=n).all(|i| {

@@ -258,6 +258,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             robot = ctx.robot_name(),
             time = %now,
             candidates = candidates.len(),
+            clearance_m = snapshot.clearance_m(&nalgebra::Point3::from(root.position_m())),
             reward = choice.map(|i| candidates[i].reward),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );

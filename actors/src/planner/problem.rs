@@ -232,4 +232,48 @@ mod tests {
         // Out-of-range actions have no child.
         assert!(problem.child(&root, problem.actions().len()).is_none());
     }
+
+    #[test]
+    fn inside_the_margin_children_never_come_closer_and_some_back_away() {
+        // A corridor 3 m wide and 2 m high; the robot hovers 0.55 m from its left wall,
+        // inside the 0.67 m margin (as when new cells close in on a hovering robot).
+        let snapshot = scenes::corridor(8.0, 1.5, 1.0);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let margin = config.margin_m(snapshot.grid.resolution_m());
+        let root = FlatState::at_rest(Vector3::new(2.0, 0.95, 0.0), 0.0);
+        let start = snapshot.clearance_m(&Point3::from(root.position_m()));
+        assert!(start > 0.0 && start < margin, "start clearance {start}");
+        let children = problem.children(&root);
+        assert!(
+            !children.is_empty(),
+            "a robot inside the margin must not stall"
+        );
+        let mut backed_away = false;
+        for child in &children {
+            let switch_s = config.planning_period_s.min(child.primitive.duration_s());
+            let samples =
+                (0..=50).map(|i| child.primitive.state_at(switch_s * f64::from(i) / 50.0));
+            let stops = (0..=50).map(|i| {
+                child
+                    .stopping
+                    .state_at(child.stopping.duration_s() * f64::from(i) / 50.0)
+            });
+            for state in samples.chain(stops) {
+                let c = snapshot.clearance_m(&Point3::from(state.position_m()));
+                assert!(c >= start - 1e-9, "{child:?} comes closer: {c} < {start}");
+            }
+            let end = child.stopping.end_state();
+            backed_away |= snapshot.clearance_m(&Point3::from(end.position_m())) >= margin;
+        }
+        assert!(backed_away, "some child must get back out of the margin");
+        // In unsafe space itself nothing may leave.
+        let buried = FlatState::at_rest(Vector3::new(2.0, 1.6, 0.0), 0.0);
+        assert_eq!(
+            snapshot.clearance_m(&Point3::from(buried.position_m())),
+            0.0
+        );
+        assert!(problem.children(&buried).is_empty());
+    }
 }

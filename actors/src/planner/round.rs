@@ -119,6 +119,26 @@ pub fn pose_of(state: &FlatState) -> Isometry3<f64> {
     )
 }
 
+/// The clearance every sample of a trajectory starting `start_clearance_m` from
+/// unsafe space must keep, for a required `margin_m`: the margin itself, or — when the
+/// start is already inside the margin — the start's own clearance, so that a robot the
+/// map has closed in on (new occupied or unknown cells within the margin) may turn in
+/// place or back away but never come closer than where it hovers; a trajectory that
+/// keeps this is no less safe than hovering. The thesis sends the stopping trajectory
+/// whenever nothing keeps the margin (§4.1.3); from inside the margin that would stop
+/// the robot for good, since every candidate starts there. `None` when the start is in
+/// unsafe space itself (clearance 0): nothing may leave.
+#[must_use]
+pub fn required_clearance_m(margin_m: f64, start_clearance_m: f64) -> Option<f64> {
+    if start_clearance_m >= margin_m {
+        Some(margin_m)
+    } else if start_clearance_m > 0.0 {
+        Some(start_clearance_m)
+    } else {
+        None
+    }
+}
+
 /// Whether every sample of `primitive` on `[0, until_s]` keeps `margin_m` from unsafe space.
 pub(super) fn safe(
     primitive: &Primitive,
@@ -165,13 +185,21 @@ impl RoundConfig {
 
     /// Checks a primitive and its stopping primitive against the snapshot; returns
     /// the stopping primitive when both are safe.
+    ///
+    /// Both must keep [`Self::margin_m`] from unsafe space, or — when the primitive
+    /// starts inside that margin — never come closer to unsafe space than its start
+    /// ([`required_clearance_m`]).
     #[must_use]
     pub fn safe_with_stop(
         &self,
         primitive: &Primitive,
         snapshot: &GridSnapshot,
     ) -> Option<Primitive> {
-        let margin = self.margin_m(snapshot.grid.resolution_m());
+        let start = Point3::from(primitive.state_at(0.0).position_m());
+        let margin = required_clearance_m(
+            self.margin_m(snapshot.grid.resolution_m()),
+            snapshot.clearance_m(&start),
+        )?;
         let switch = self.planning_period_s.min(primitive.duration_s());
         if !safe(primitive, switch, snapshot, margin, self.check_step_s) {
             return None;
@@ -197,5 +225,18 @@ impl RoundConfig {
         camera: &PinholeIntrinsics,
     ) -> Vec<Candidate> {
         PlanningProblem::new(self, snapshot, camera).children(from)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::required_clearance_m;
+
+    #[test]
+    fn required_clearance_is_the_margin_or_the_start_inside_it() {
+        assert_eq!(required_clearance_m(0.6, 1.2), Some(0.6));
+        assert_eq!(required_clearance_m(0.6, 0.6), Some(0.6));
+        assert_eq!(required_clearance_m(0.6, 0.4), Some(0.4));
+        assert_eq!(required_clearance_m(0.6, 0.0), None);
     }
 }
