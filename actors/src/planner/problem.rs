@@ -145,18 +145,26 @@ impl<'a> PlanningProblem<'a> {
         let config = self.config;
         let end = primitive.end_state();
         let samples = config.information_samples.max(1);
-        let information = (1..=samples)
-            .map(|k| {
-                let t = primitive.duration_s() * k as f64 / samples as f64;
-                view_information(
-                    &self.snapshot.grid,
-                    &pose_of(&primitive.state_at(t)),
-                    self.camera,
-                    &config.view,
-                )
-            })
-            .sum::<f64>()
-            / samples as f64;
+        // Hovering in place shows the sensor the view it has been seeing all along:
+        // what CSQMI still promises there (cells it cannot resolve, e.g. behind pixels
+        // with no return) will not be gained by staying, and would otherwise keep a
+        // robot hovering forever whenever it beats every move.
+        let information = if stays_put(from, &end) {
+            0.0
+        } else {
+            (1..=samples)
+                .map(|k| {
+                    let t = primitive.duration_s() * k as f64 / samples as f64;
+                    view_information(
+                        &self.snapshot.grid,
+                        &pose_of(&primitive.state_at(t)),
+                        self.camera,
+                        &config.view,
+                    )
+                })
+                .sum::<f64>()
+                / samples as f64
+        };
         let start_frontier = self
             .snapshot
             .frontier_distance(&Point3::from(from.position_m()));
@@ -181,6 +189,14 @@ impl<'a> PlanningProblem<'a> {
             reward,
         }
     }
+}
+
+/// Whether a primitive from `from` (at rest) ends where it started: same position
+/// within a millimetre and same heading within a milliradian.
+fn stays_put(from: &FlatState, end: &FlatState) -> bool {
+    from.velocity_mps().norm() < 1e-6
+        && (end.position_m() - from.position_m()).norm() < 1e-3
+        && (end.yaw_rad() - from.yaw_rad()).abs() < 1e-3
 }
 
 #[cfg(test)]
@@ -209,7 +225,11 @@ mod tests {
         for child in &children {
             // The end-pose information of thesis §4.1.3, plus α V.
             let end = child.primitive.end_state();
-            let info = view_information(&snapshot.grid, &pose_of(&end), &camera, &config.view);
+            let info = if stays_put(&root, &end) {
+                0.0
+            } else {
+                view_information(&snapshot.grid, &pose_of(&end), &camera, &config.view)
+            };
             assert!((child.information - info).abs() < 1e-12);
             assert!(
                 (child.reward - (info + config.frontier_weight * child.frontier_gain_m)).abs()
@@ -231,6 +251,30 @@ mod tests {
         assert!(continued > 0);
         // Out-of-range actions have no child.
         assert!(problem.child(&root, problem.actions().len()).is_none());
+    }
+
+    #[test]
+    fn hovering_in_place_promises_no_information() {
+        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        // Facing the doorway: the view from here still holds unknown cells.
+        let root = FlatState::at_rest(Vector3::zeros(), 0.0);
+        let here = view_information(&snapshot.grid, &pose_of(&root), &camera, &config.view);
+        assert!(here > 1.0, "{here}");
+        let children = problem.children(&root);
+        let hover: Vec<_> = children
+            .iter()
+            .filter(|c| c.primitive.action() == crate::planner::primitives::Action::STOP)
+            .collect();
+        assert_eq!(
+            hover.len(),
+            1,
+            "the minimal library hovers once (vertical, v_z = 0)"
+        );
+        assert_eq!(hover[0].information, 0.0);
+        assert!(children.iter().any(|c| c.information > 1.0));
     }
 
     #[test]
