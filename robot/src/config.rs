@@ -6,7 +6,8 @@ use troupe_actors::collision::body::BodyConfig;
 use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
 use troupe_actors::mapper::MapperConfig;
-use troupe_actors::planner::PlannerConfig;
+use troupe_actors::planner::teleop::TeleopParams;
+use troupe_actors::planner::{PlannerConfig, ScriptedCommand};
 use troupe_actors::runtime::RestartPolicy;
 use troupe_policies::priority::PriorityConfig;
 
@@ -115,6 +116,30 @@ pub enum MapSharing {
     None,
 }
 
+/// Teleoperation settings (`behaviour = "teleop"`, thesis §5.1.2). Commands arrive
+/// on `teleop/command` from a joystick driver or another actor; a non-empty `script`
+/// adds a `joystick` actor that plays it, so a scenario file alone can fly the robot.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TeleopSettings {
+    /// Command library and Eq. 5.1 speed adaptation.
+    pub params: TeleopParams,
+    /// Scripted commands (v_x, v_z, ω from `from_s` on); empty: none.
+    pub script: Vec<ScriptedCommand>,
+    /// Rate at which the script publishes its command in force, Hz.
+    pub command_rate_hz: f64,
+}
+
+impl Default for TeleopSettings {
+    fn default() -> Self {
+        TeleopSettings {
+            params: TeleopParams::default(),
+            script: Vec::new(),
+            command_rate_hz: 5.0,
+        }
+    }
+}
+
 /// Everything that shapes one robot.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -129,6 +154,9 @@ pub struct RobotConfig {
     pub grid: GridConfig,
     /// The planner (planner behaviour).
     pub planner: PlannerConfig,
+    /// Teleoperation (teleop behaviour): the command library and, optionally, a
+    /// scripted operator.
+    pub teleop: TeleopSettings,
     /// The SOGMM mapper (keyframes shared over the link); on by default.
     pub mapper: MapperConfig,
     /// The collision actor and inter-robot avoidance; on by default.
@@ -161,6 +189,7 @@ impl Default for RobotConfig {
             selection: "greedy".into(),
             grid: GridConfig::default(),
             planner: PlannerConfig::default(),
+            teleop: TeleopSettings::default(),
             mapper: MapperConfig::default(),
             collision: CollisionConfig::default(),
             map_sharing: MapSharing::default(),
@@ -286,6 +315,23 @@ impl RobotConfig {
                 rule: "must name a known action selection (greedy, random)",
                 value: format!("{:?}", self.selection),
             });
+        }
+        positive("teleop.command_rate_hz", self.teleop.command_rate_hz)?;
+        positive(
+            "teleop.params.max_speed_mps",
+            self.teleop.params.max_speed_mps,
+        )?;
+        positive("teleop.params.decel_mps2", self.teleop.params.decel_mps2)?;
+        non_negative("teleop.params.latency_s", self.teleop.params.latency_s)?;
+        for (i, c) in self.teleop.script.iter().enumerate() {
+            let values = [c.from_s, c.vx_mps, c.vz_mps, c.yaw_rate_rad_s];
+            if values.iter().any(|v| !v.is_finite()) || c.from_s < 0.0 {
+                return Err(ConfigError {
+                    key: format!("teleop.script[{i}]"),
+                    rule: "must have finite speeds and from_s >= 0",
+                    value: format!("{c:?}"),
+                });
+            }
         }
         non_negative("restart.window_s", self.restart.window_s)?;
         if self.behaviour != PLANNER

@@ -19,7 +19,7 @@ use troupe_actors::grid::GridActor;
 use troupe_actors::link::LinkActor;
 use troupe_actors::mapper::MapperActor;
 use troupe_actors::msgs::PinholeIntrinsics;
-use troupe_actors::planner::{PlannerActor, TeleopActor, TeleopConfig};
+use troupe_actors::planner::{PlannerActor, ScriptedTeleop, TeleopActor, TeleopConfig};
 use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
 use troupe_policies::priority::PriorityAvoidance;
@@ -27,6 +27,7 @@ use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection
 
 pub use config::{
     ActorLatencies, CollisionConfig, ConfigError, MapSharing, PLANNER, RobotConfig, TELEOP,
+    TeleopSettings,
 };
 
 /// Builds a frame source (called at start and on every sensor restart).
@@ -126,7 +127,7 @@ pub fn assemble(
             rate_hz: config.planner.rate_hz,
             round: config.planner.round,
             knot_step_s: config.planner.knot_step_s,
-            ..TeleopConfig::default()
+            params: config.teleop.params,
         };
         robot
             .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
@@ -134,6 +135,12 @@ pub fn assemble(
                 ActorSpec::new("teleop", move || TeleopActor::new(teleop))
                     .with_options(heavy(config.latency_s.planner)),
             );
+        if !config.teleop.script.is_empty() {
+            let (script, rate_hz) = (config.teleop.script.clone(), config.teleop.command_rate_hz);
+            robot.add(ActorSpec::new("joystick", move || {
+                ScriptedTeleop::new(script.clone(), rate_hz)
+            }));
+        }
     } else if config.behaviour == PLANNER {
         let selection = selection_by_name(&config.selection)?;
         let planner = config.planner;

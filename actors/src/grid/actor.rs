@@ -392,10 +392,18 @@ impl GridActor {
             self.config.update_rule,
         );
         let (logodds, heading) = (self.config.logodds, self.heading);
+        let body_radius_m = self.config.body_radius_m;
         let round = hca_round(
             &hca,
             self.hca_level,
-            |alpha| regenerate(&hca, logodds, &position, alpha, &mut store),
+            |alpha| {
+                // Two keyframes of a forward camera do not show the space the body
+                // occupies: free it as the moving window does, or the robot would
+                // start every check in unknown space.
+                let mut grid = regenerate(&hca, logodds, &position, alpha, &mut store);
+                grid.clear_unknown_sphere(&position, body_radius_m);
+                grid
+            },
             |grid, distance| {
                 straight_path_in_collision(
                     grid,

@@ -88,3 +88,39 @@ fn teleoperated_flight_moves_forward_safely() {
     );
     assert!(robot.actors.iter().all(|a| a.panics == 0 && a.errors == 0));
 }
+
+/// Thesis §5.2.1 from the shipped scenario file alone: a scripted operator holds full
+/// speed ahead; the teleop actor slows down at the 0.9 m window 10 m ahead (Eq. 5.1),
+/// flies through it without touching the wall and speeds up behind it.
+#[test]
+fn scripted_teleoperation_passes_the_window_slowing_down_at_it() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sims/scenarios/window_teleop.toml"
+    );
+    let scenario = Scenario::load(std::path::Path::new(path)).expect("scenario");
+    let output = Team::new(&scenario).expect("assemble").run(|_| {});
+    let s = &output.summary;
+    assert_eq!(s.collisions, 0);
+    assert_eq!(s.per_robot[0].truth.unsafe_plans, 0);
+    let rows = &output.timeseries;
+    let last = rows.last().expect("rows");
+    assert!(
+        last.x_m > 11.0,
+        "did not pass the window: x = {} m",
+        last.x_m
+    );
+    // Speed while crossing the wall (x within 0.5 m of it) against the speed on the
+    // open approach (x in 2..6 m).
+    let max_speed = |lo: f64, hi: f64| {
+        rows.iter()
+            .filter(|r| r.x_m > lo && r.x_m < hi)
+            .map(|r| r.speed_mps)
+            .fold(0.0, f64::max)
+    };
+    let (approach, crossing) = (max_speed(2.0, 6.0), max_speed(9.5, 10.5));
+    assert!(
+        crossing < 0.5 * approach,
+        "crossing at {crossing} m/s, approach at {approach} m/s"
+    );
+}
