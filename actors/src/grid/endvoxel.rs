@@ -15,9 +15,10 @@
 //!
 //! Each cell changes at most once per scan, and hits win over misses as in
 //! [`UpdateRule::PerScan`]. The only difference from `PerScan` is which cells are
-//! free: a ray to the voxel centre can cross other cells than the rays to the points
-//! themselves, which shows in the last few cells before the end voxel (where the
-//! points of one voxel fan out) — occupied cells are the same. The result does not
+//! free (occupied cells are the same): the segment to a voxel centre stays within
+//! half a cell per axis of the segments to the voxel's points (closest near the
+//! origin, furthest at the end voxel), yet it can clip other cells at the edges of
+//! the swept volume, mostly in the last cells before the end voxel. The result does not
 //! depend on the order of the points, and a window anywhere on the lattice gets the
 //! same cells for what it holds, because the traced segments are fixed by the
 //! lattice.
