@@ -103,8 +103,9 @@ impl EndVoxelScratch {
             let Some(g) = grid.lattice_coords(end) else {
                 continue;
             };
-            // In [0, 2²¹): the lattice check above bounds it.
-            let cell = [0, 1, 2].map(|a| g[a].floor() as usize);
+            // `g` lies in [0, 2²¹) (the lattice check above), where truncation is
+            // `floor` without the libm call.
+            let cell = [0, 1, 2].map(|a| g[a] as usize);
             let local = [0, 1, 2].map(|a| cell[a].wrapping_sub(corner[a]));
             if (0..3).all(|a| local[a] < dims[a]) {
                 let i = local[0] + stride[1] * local[1] + stride[2] * local[2];
