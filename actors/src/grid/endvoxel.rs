@@ -120,23 +120,26 @@ impl EndVoxelScratch {
         self.ends_outside.sort_unstable();
         self.ends_outside.dedup();
         // 2. One segment per end voxel, to its centre.
-        let marks = &mut self.marks;
-        let crossed = &mut self.crossed;
-        let mut visit = |i: usize, _: [usize; 3], is_end: bool| {
-            if !is_end && marks[i] == 0 {
-                marks[i] = CROSSED;
-                crossed.push(i as u32);
-            }
-        };
-        for &i in &self.ends_inside {
+        let inside_centres = self.ends_inside.iter().map(|&i| {
             let i = i as usize;
             let local = [i % dims[0], (i / dims[0]) % dims[1], i / stride[2]];
-            let centre = Vector3::from([0, 1, 2].map(|a| (corner[a] + local[a]) as f64 + 0.5));
-            grid.walk_lattice(&g0, &centre).for_each_inside(&mut visit);
-        }
-        for cell in &self.ends_outside {
-            let centre = Vector3::from(cell.map(|v| f64::from(v) + 0.5));
-            grid.walk_lattice(&g0, &centre).for_each_inside(&mut visit);
+            Vector3::from([0, 1, 2].map(|a| (corner[a] + local[a]) as f64 + 0.5))
+        });
+        let outside_centres = self
+            .ends_outside
+            .iter()
+            .map(|cell| Vector3::from(cell.map(|v| f64::from(v) + 0.5)));
+        let (marks, crossed) = (&mut self.marks, &mut self.crossed);
+        for centre in inside_centres.chain(outside_centres) {
+            // The visit is written out here (not a shared `&mut` closure) so that it
+            // inlines into the walk.
+            grid.walk_lattice(&g0, &centre)
+                .for_each_inside(|i, _, is_end| {
+                    if !is_end && marks[i] == 0 {
+                        marks[i] = CROSSED;
+                        crossed.push(i as u32);
+                    }
+                });
         }
         let traced = self.ends_inside.len() + self.ends_outside.len();
         // 3. Each touched cell once, then the marks back to zero.
