@@ -567,17 +567,33 @@ impl RayWalk {
         // cell from their bounding box), and no step needs the bounds check.
         let interior = |c: &[i64; 3]| (0..3).all(|a| c[a] >= 2 && c[a] + 2 < self.dims[a]);
         if interior(&self.local) && interior(&self.end_local) {
-            let mut local = self.local;
+            // The walk state in scalars (not arrays indexed by the axis), so that it
+            // stays in registers; the same comparisons and sums as the slow path.
+            let [mut lx, mut ly, mut lz] = self.local;
+            let [mut tx, mut ty, mut tz] = self.t_next;
+            let [dx, dy, dz] = self.t_delta;
+            let [sx, sy, sz] = self.step;
+            let [ix, iy, iz] = [0, 1, 2].map(|a| self.step[a] * self.stride[a]);
             let mut index = self.index;
-            let mut t_next = self.t_next;
             for _ in 0..self.remaining {
-                visit(index as usize, local.map(|v| v as usize), false);
-                let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
-                let y_not_z = t_next[1] <= t_next[2];
-                let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
-                local[axis] += self.step[axis];
-                index += self.step[axis] * self.stride[axis];
-                t_next[axis] += self.t_delta[axis];
+                visit(
+                    index as usize,
+                    [lx as usize, ly as usize, lz as usize],
+                    false,
+                );
+                if tx <= ty && tx <= tz {
+                    lx += sx;
+                    index += ix;
+                    tx += dx;
+                } else if ty <= tz {
+                    ly += sy;
+                    index += iy;
+                    ty += dy;
+                } else {
+                    lz += sz;
+                    index += iz;
+                    tz += dz;
+                }
             }
             let c = self.end_local;
             let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
