@@ -14,14 +14,15 @@
 //! 4. Every other window cell that one of those segments crosses gets one miss.
 //!
 //! Each cell changes at most once per scan, and hits win over misses as in
-//! [`UpdateRule::PerScan`]. The only difference from `PerScan` is which cells are
-//! free (occupied cells are the same): the segment to a voxel centre stays within
-//! half a cell per axis of the segments to the voxel's points (closest near the
-//! origin, furthest at the end voxel), yet it can clip other cells at the edges of
-//! the swept volume, mostly in the last cells before the end voxel. The result does not
-//! depend on the order of the points, and a window anywhere on the lattice gets the
-//! same cells for what it holds, because the traced segments are fixed by the
-//! lattice.
+//! [`UpdateRule::PerScan`] — unlike [`UpdateRule::PerRay`], where a cell crossed by
+//! `k` rays of the scan gets `k` misses and a hit cell can also get misses. The only
+//! difference from `PerScan` is which cells are free (occupied cells are the same):
+//! the segment to a voxel centre stays within half a cell per axis of the segments to
+//! the voxel's points (closest near the origin, furthest at the end voxel), yet it can
+//! clip other cells at the edges of the swept volume, mostly in the last cells before
+//! the end voxel. The result does not depend on the order of the points, and a window
+//! anywhere on the lattice gets the same cells for what it holds, because the traced
+//! segments are fixed by the lattice.
 //!
 //! With a box filter (the novel boxes of a window move), a component the store skips
 //! stays skippable: the segment to a voxel centre lies within half a cell per axis of
