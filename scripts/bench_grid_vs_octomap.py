@@ -17,7 +17,8 @@ the same run:
 
 OctoMap is timed both ways: plain insertPointCloud (one ray per point, the same work
 as troupe's per-scan rule) and with discretize=True (end points first merged per
-voxel, one ray per occupied voxel: fewer rays, slightly different free space).
+voxel, one ray per occupied voxel: fewer rays, slightly different free space — the
+counterpart of troupe's per_end_voxel).
 Ratios are given against each, as `<name>_ratio` (plain) and
 `<name>_ratio_discretize`; every rate counts the input points, not traced rays.
 
