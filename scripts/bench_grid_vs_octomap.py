@@ -10,11 +10,15 @@ the same run:
 - baseline: the first LocalGrid insertion (RayWalk iterator, per ray) — "before";
 - per_ray: LocalGrid::insert_ray (same semantics, tight loop);
 - per_scan: ScanScratch::insert_scan (OctoMap's semantics, rayon over rays; the
-  thread count is printed).
+  thread count is printed);
+- per_end_voxel: EndVoxelScratch::insert_scan (UpdateRule::PerEndVoxel: one ray per
+  distinct end voxel, to its centre — the same idea as OctoMap's discretize=True; one
+  thread). `end_voxels` is the number of rays it traced.
 
 OctoMap is timed both ways: plain insertPointCloud (one ray per point, the same work
 as troupe's per-scan rule) and with discretize=True (end points first merged per
-voxel, one ray per occupied voxel: fewer rays, slightly different free space).
+voxel, one ray per occupied voxel: fewer rays, slightly different free space — the
+counterpart of troupe's per_end_voxel).
 Ratios are given against each, as `<name>_ratio` (plain) and
 `<name>_ratio_discretize`; every rate counts the input points, not traced rays.
 
@@ -89,13 +93,14 @@ def main():
         "rays": rays,
         "resolution_m": troupe["resolution_m"],
         "threads": troupe["threads"],
+        "end_voxels": troupe["end_voxels"],
         "octomap_rays_per_s": round(octomap_rate),
         "octomap_median_frame_s": round(sorted(per_frame)[len(per_frame) // 2], 6),
         "octomap_discretize_rays_per_s": round(octomap_rate_d),
         "octomap_discretize_median_frame_s": round(
             sorted(per_frame_d)[len(per_frame_d) // 2], 6),
     }
-    for name in ("baseline", "per_ray", "per_scan"):
+    for name in ("baseline", "per_ray", "per_scan", "per_end_voxel"):
         rate = troupe[f"{name}_rays_per_s"]
         result[f"{name}_rays_per_s"] = rate
         result[f"{name}_median_frame_s"] = troupe[f"{name}_median_frame_s"]

@@ -4,6 +4,8 @@
 //! - `insert/per_ray`: every ray updates every cell it crosses (one thread);
 //! - `insert/per_scan_1_thread` and `insert/per_scan`: each cell once per scan
 //!   (OctoMap's `insertPointCloud` semantics), on one thread and on rayon's pool;
+//! - `insert/per_end_voxel`: each cell once per scan, one ray per distinct end voxel
+//!   to its centre (`UpdateRule::PerEndVoxel`, OctoMap's `discretize`; one thread);
 //! - `window_move/rebuild_{rule}_{size}`: move the window 1 m along x, 0.4 m along
 //!   y and 0.2 m along z and rebuild the novel boxes from the stored components of
 //!   four SOGMM keyframes fitted to 160×120 frames, for the default 20 m window and
@@ -18,7 +20,8 @@ use std::time::Duration;
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use troupe_actors::grid::{
-    ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch, UpdateRule,
+    ComponentStore, EndVoxelScratch, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch,
+    UpdateRule,
 };
 use troupe_actors::mapper::sogmm::points::pixel_to_body;
 use troupe_actors::mapper::sogmm::synthetic::{Scene, intrinsics, room_pose};
@@ -109,6 +112,14 @@ fn insert(c: &mut Criterion) {
             BatchSize::LargeInput,
         );
     });
+    let mut voxels = EndVoxelScratch::default();
+    group.bench_function("per_end_voxel", |b| {
+        b.iter_batched_ref(
+            || empty.clone(),
+            |grid| black_box(voxels.insert_scan(grid, &origin, &ends, true, None)),
+            BatchSize::LargeInput,
+        );
+    });
     group.finish();
 }
 
@@ -145,6 +156,7 @@ fn window_move(c: &mut Criterion) {
         for (rule_name, rule) in [
             ("per_ray", UpdateRule::PerRay),
             ("per_scan", UpdateRule::PerScan),
+            ("per_end_voxel", UpdateRule::PerEndVoxel),
         ] {
             let name = format!("rebuild_{rule_name}_{size}");
             let mut store = ComponentStore::new(19_200, 16, 4.0).with_rule(rule);

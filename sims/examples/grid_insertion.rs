@@ -1,12 +1,17 @@
 //! Rays per second into the local occupancy grid, on simulated 160×120 frames of the
 //! default cave — one side of `scripts/bench_grid_vs_octomap.py`, which times
-//! OctoMap on the very same points. Three ways, each the median of repeats per frame:
+//! OctoMap on the very same points. Four ways, each the median of repeats per frame:
 //!
 //! - `baseline`: the first implementation (the `RayWalk` iterator, one update per ray
 //!   and cell), kept here as the "before" of the speed work;
 //! - `per_ray`: `LocalGrid::insert_ray` (same semantics, tight walk loop);
 //! - `per_scan`: `ScanScratch::insert_scan` (each cell once per frame, hits first —
-//!   OctoMap's own semantics — rays walked in parallel on rayon's pool).
+//!   OctoMap's own semantics — rays walked in parallel on rayon's pool);
+//! - `per_end_voxel`: `EndVoxelScratch::insert_scan` (`UpdateRule::PerEndVoxel`: as
+//!   `per_scan`, one ray per distinct end voxel to its centre — OctoMap's
+//!   `discretize` — on one thread); `end_voxels` counts the rays it traced.
+//!
+//! Every rate counts the input points (pixels with a return), not traced rays.
 //!
 //! Run: `cargo run --release -p troupe-sims --example grid_insertion -- OUT.bin`
 //! (writes the points it used to OUT.bin: per frame a u32 point count, the sensor
@@ -16,7 +21,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use troupe_actors::grid::{LocalGrid, LogOddsParams, ScanScratch};
+use troupe_actors::grid::{EndVoxelScratch, LocalGrid, LogOddsParams, ScanScratch};
 use troupe_sims::camera::CameraParams;
 use troupe_sims::world::{CaveParams, CaveWorld};
 
@@ -31,6 +36,7 @@ fn main() -> anyhow::Result<()> {
     let mut file = Vec::new();
     let mut per_frame = Vec::new();
     let mut rays_total = 0usize;
+    let mut end_voxels_total = 0usize;
     for (i, pair) in route.windows(2).step_by(7).take(10).enumerate() {
         let yaw = (pair[1].y - pair[0].y).atan2(pair[1].x - pair[0].x);
         let pose = Isometry3::from_parts(
@@ -56,6 +62,7 @@ fn main() -> anyhow::Result<()> {
             LogOddsParams::default(),
         );
         let mut scratch = ScanScratch::default();
+        let mut voxel_scratch = EndVoxelScratch::default();
         let time = |insert: &mut dyn FnMut(&mut LocalGrid)| -> f64 {
             let mut times = Vec::with_capacity(REPEATS);
             for _ in 0..REPEATS {
@@ -79,7 +86,12 @@ fn main() -> anyhow::Result<()> {
             }
         });
         let per_scan = time(&mut |grid| scratch.insert_scan(grid, &origin, &ends, true, None));
-        per_frame.push([baseline, per_ray, per_scan]);
+        let mut end_voxels = 0;
+        let per_end_voxel = time(&mut |grid| {
+            end_voxels = voxel_scratch.insert_scan(grid, &origin, &ends, true, None);
+        });
+        end_voxels_total += end_voxels;
+        per_frame.push([baseline, per_ray, per_scan, per_end_voxel]);
         rays_total += ends.len();
         file.extend_from_slice(&(ends.len() as u32).to_le_bytes());
         for v in origin.coords.iter() {
@@ -96,8 +108,10 @@ fn main() -> anyhow::Result<()> {
         format!("\"rays\": {rays_total}"),
         format!("\"resolution_m\": {RESOLUTION_M}"),
         format!("\"threads\": {}", rayon::current_num_threads()),
+        format!("\"end_voxels\": {end_voxels_total}"),
     ];
-    for (i, name) in ["baseline", "per_ray", "per_scan"].iter().enumerate() {
+    let names = ["baseline", "per_ray", "per_scan", "per_end_voxel"];
+    for (i, name) in names.iter().enumerate() {
         let mut frames: Vec<f64> = per_frame.iter().map(|f| f[i]).collect();
         let seconds: f64 = frames.iter().sum();
         frames.sort_by(f64::total_cmp);

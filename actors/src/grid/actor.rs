@@ -58,8 +58,10 @@ pub struct GridConfig {
     /// Bucket edge of the spatial index over component means, metres.
     pub index_cell_m: f64,
     /// How the rays of one frame or keyframe update the grid: `per_ray` (every ray
-    /// updates every cell it crosses) or `per_scan` (each cell once per scan, hits
-    /// first, as OctoMap's `insertPointCloud`; parallel over rays).
+    /// updates every cell it crosses), `per_scan` (each cell once per scan, hits
+    /// first, as OctoMap's `insertPointCloud`; parallel over rays) or `per_end_voxel`
+    /// (as `per_scan` with one ray per distinct end voxel, to its centre, as OctoMap's
+    /// `discretize`; one thread).
     pub update_rule: UpdateRule,
     /// Variable resolution and Hierarchical Collision Avoidance (thesis §5.1); off by
     /// default.
@@ -205,8 +207,9 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     }
 }
 
-/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] the frame's
-/// returns form one scan and its no-return pixels (free up to the range) a second.
+/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] or
+/// [`UpdateRule::PerEndVoxel`] the frame's returns form one scan and its no-return
+/// pixels (free up to the range) a second.
 pub fn insert_frame_with(
     grid: &mut LocalGrid,
     frame: &DepthFrame,
@@ -237,8 +240,8 @@ pub fn insert_frame_with(
             }
         }
     }
-    scratch.insert_scan(grid, &origin, &hits, true, None);
-    scratch.insert_scan(grid, &origin, &misses, false, None);
+    scratch.insert_by(rule, grid, &origin, &hits, true, None);
+    scratch.insert_by(rule, grid, &origin, &misses, false, None);
 }
 
 /// Ray-traces a keyframe GMM into a grid (§8.2.2): `min(support, max_samples)`

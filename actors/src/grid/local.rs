@@ -289,22 +289,28 @@ impl LocalGrid {
     /// come with `index: None`.
     #[must_use]
     pub fn walk(&self, origin: &Point3<f64>, end: &Point3<f64>) -> Option<RayWalk> {
-        if !(origin
-            .coords
-            .iter()
-            .chain(end.coords.iter())
-            .all(|v| v.is_finite()))
-        {
-            return None;
-        }
-        let lattice_origin = self.lattice.origin.coords;
-        let inv_cell = 1.0 / self.lattice.cell_m;
-        let g0 = (origin.coords - lattice_origin) * inv_cell;
-        let g1 = (end.coords - lattice_origin) * inv_cell;
+        let g0 = self.lattice_coords(origin)?;
+        let g1 = self.lattice_coords(end)?;
+        Some(self.walk_lattice(&g0, &g1))
+    }
+
+    /// `p` in world-lattice cell units (cell `c` spans `[c, c + 1)` along each axis),
+    /// as [`LocalGrid::walk`] sees it; `None` if not finite or outside the lattice.
+    pub(super) fn lattice_coords(&self, p: &Point3<f64>) -> Option<Vector3<f64>> {
+        let g = (p.coords - self.lattice.origin.coords) * (1.0 / self.lattice.cell_m);
         let span = 2.0 * LATTICE_HALF as f64;
-        if (0..3).any(|i| !(0.0..span).contains(&g0[i]) || !(0.0..span).contains(&g1[i])) {
-            return None;
-        }
+        // `contains` is false for NaN, so this also rejects non-finite points.
+        (0..3).all(|i| (0.0..span).contains(&g[i])).then_some(g)
+    }
+
+    /// Lattice index of local cell `[0, 0, 0]`.
+    pub(super) fn corner(&self) -> [usize; 3] {
+        self.corner
+    }
+
+    /// [`LocalGrid::walk`] between two points already in lattice cell units (from
+    /// [`LocalGrid::lattice_coords`], or a cell centre `c + 0.5`).
+    pub(super) fn walk_lattice(&self, g0: &Vector3<f64>, g1: &Vector3<f64>) -> RayWalk {
         let dir = g1 - g0;
         let cell = [0, 1, 2].map(|i| g0[i].floor() as i64);
         let end_cell = [0, 1, 2].map(|i| g1[i].floor() as i64);
@@ -325,7 +331,7 @@ impl LocalGrid {
         let dims = self.dims.map(|d| d as i64);
         let stride = [1, dims[0], dims[0] * dims[1]];
         let local = [0, 1, 2].map(|i| cell[i] - self.corner[i] as i64);
-        Some(RayWalk {
+        RayWalk {
             index: local[0] + stride[1] * local[1] + stride[2] * local[2],
             local,
             end_local: [0, 1, 2].map(|i| end_cell[i] - self.corner[i] as i64),
@@ -340,7 +346,7 @@ impl LocalGrid {
             // it past a neighbour of the end cell (the end cell comes last either way).
             remaining: (0..3).map(|i| (end_cell[i] - cell[i]).abs()).sum(),
             finished: false,
-        })
+        }
     }
 
     /// Inserts a ray from `origin` to `end`: every cell it crosses before the end cell
@@ -561,17 +567,33 @@ impl RayWalk {
         // cell from their bounding box), and no step needs the bounds check.
         let interior = |c: &[i64; 3]| (0..3).all(|a| c[a] >= 2 && c[a] + 2 < self.dims[a]);
         if interior(&self.local) && interior(&self.end_local) {
-            let mut local = self.local;
+            // The walk state in scalars (not arrays indexed by the axis), so that it
+            // stays in registers; the same comparisons and sums as the slow path.
+            let [mut lx, mut ly, mut lz] = self.local;
+            let [mut tx, mut ty, mut tz] = self.t_next;
+            let [dx, dy, dz] = self.t_delta;
+            let [sx, sy, sz] = self.step;
+            let [ix, iy, iz] = [0, 1, 2].map(|a| self.step[a] * self.stride[a]);
             let mut index = self.index;
-            let mut t_next = self.t_next;
             for _ in 0..self.remaining {
-                visit(index as usize, local.map(|v| v as usize), false);
-                let x_first = t_next[0] <= t_next[1] && t_next[0] <= t_next[2];
-                let y_not_z = t_next[1] <= t_next[2];
-                let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
-                local[axis] += self.step[axis];
-                index += self.step[axis] * self.stride[axis];
-                t_next[axis] += self.t_delta[axis];
+                visit(
+                    index as usize,
+                    [lx as usize, ly as usize, lz as usize],
+                    false,
+                );
+                if tx <= ty && tx <= tz {
+                    lx += sx;
+                    index += ix;
+                    tx += dx;
+                } else if ty <= tz {
+                    ly += sy;
+                    index += iy;
+                    ty += dy;
+                } else {
+                    lz += sz;
+                    index += iz;
+                    tz += dz;
+                }
             }
             let c = self.end_local;
             let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];

@@ -10,6 +10,8 @@
 //!   from, sampled deterministically, with a spatial index over their means.
 //! - [`ScanScratch`]: a whole scan inserted at once, each cell updated once (OctoMap's
 //!   semantics, [`UpdateRule::PerScan`]), rays walked in parallel.
+//! - [`EndVoxelScratch`]: a whole scan with one ray per distinct end voxel, to its
+//!   centre ([`UpdateRule::PerEndVoxel`], OctoMap's `discretize`), on one thread.
 //! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
@@ -18,6 +20,7 @@
 mod actor;
 pub mod changeset;
 pub mod distance;
+mod endvoxel;
 pub mod frontier;
 pub mod hca;
 mod local;
@@ -27,10 +30,13 @@ mod store;
 pub use actor::{
     GridActor, GridConfig, free_range_m, insert_frame, insert_frame_with, insert_keyframe,
 };
+pub use endvoxel::EndVoxelScratch;
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};
 pub use scan::{ScanScratch, UpdateRule};
 pub use store::{ComponentStore, KeyframeSource, RebuildStats};
 
+#[cfg(test)]
+mod endvoxel_tests;
 #[cfg(test)]
 mod hca_tests;
 #[cfg(test)]

@@ -16,6 +16,7 @@ use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::endvoxel::EndVoxelScratch;
 use super::{CellBox, LocalGrid};
 
 /// How the rays of one scan (a depth frame, or the samples of one keyframe) update the
@@ -29,6 +30,9 @@ pub enum UpdateRule {
     /// Every cell the scan touches is updated once, hits first (OctoMap's
     /// `insertPointCloud`); see [`ScanScratch::insert_scan`].
     PerScan,
+    /// As [`UpdateRule::PerScan`], but one ray per distinct end voxel, traced to the
+    /// voxel's centre (OctoMap's `discretize`); see [`EndVoxelScratch::insert_scan`].
+    PerEndVoxel,
 }
 
 /// Rays per rayon task.
@@ -50,6 +54,8 @@ pub struct ScanScratch {
     /// Scan counter: cells marked `2g` this scan are crossed, `2g + 1` hit; the marks
     /// are cleared when it wraps.
     generation: u8,
+    /// The scratch of [`UpdateRule::PerEndVoxel`].
+    end_voxels: EndVoxelScratch,
 }
 
 impl Clone for ScanScratch {
@@ -79,6 +85,34 @@ fn brick_index(c: [usize; 3], bricks: [usize; 2]) -> usize {
 }
 
 impl ScanScratch {
+    /// Inserts one scan (rays from `origin` to each of `ends`, surface points if
+    /// `hit`) by `rule`, only into `boxes` if given: [`LocalGrid::insert_ray`] for
+    /// each point, [`ScanScratch::insert_scan`] or [`EndVoxelScratch::insert_scan`].
+    pub fn insert_by(
+        &mut self,
+        rule: UpdateRule,
+        grid: &mut LocalGrid,
+        origin: &Point3<f64>,
+        ends: &[Point3<f64>],
+        hit: bool,
+        boxes: Option<&[CellBox]>,
+    ) {
+        match rule {
+            UpdateRule::PerRay => {
+                for end in ends {
+                    match boxes {
+                        None => grid.insert_ray(origin, end, hit, None),
+                        Some(b) => grid.insert_ray_boxes(origin, end, hit, b),
+                    }
+                }
+            }
+            UpdateRule::PerScan => self.insert_scan(grid, origin, ends, hit, boxes),
+            UpdateRule::PerEndVoxel => {
+                self.end_voxels.insert_scan(grid, origin, ends, hit, boxes);
+            }
+        }
+    }
+
     /// Inserts one scan: rays from `origin` to each of `ends`. Every cell in which a
     /// ray ends gets one hit if `hit` (surface points); every other cell a ray crosses
     /// (and, if not `hit`, the end cells too) gets one miss. Only cells inside one of

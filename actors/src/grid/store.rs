@@ -143,8 +143,8 @@ impl ComponentStore {
         }
     }
 
-    /// The same store updating the grid by `rule`: with [`UpdateRule::PerScan`] the
-    /// samples of one keyframe form one scan.
+    /// The same store updating the grid by `rule`: with [`UpdateRule::PerScan`] or
+    /// [`UpdateRule::PerEndVoxel`] the samples of one keyframe form one scan.
     #[must_use]
     pub fn with_rule(mut self, rule: UpdateRule) -> Self {
         self.rule = rule;
@@ -295,7 +295,9 @@ impl ComponentStore {
                 let component = &self.components[components[at] as usize];
                 component.sample_into(&mut points);
                 match self.rule {
-                    UpdateRule::PerScan => scan.extend_from_slice(&points),
+                    UpdateRule::PerScan | UpdateRule::PerEndVoxel => {
+                        scan.extend_from_slice(&points);
+                    }
                     UpdateRule::PerRay => {
                         for p in &points {
                             match boxes {
@@ -308,8 +310,9 @@ impl ComponentStore {
                 rays += points.len();
                 at += 1;
             }
-            if self.rule == UpdateRule::PerScan {
-                self.scratch.insert_scan(grid, &origin, &scan, true, boxes);
+            if self.rule != UpdateRule::PerRay {
+                self.scratch
+                    .insert_by(self.rule, grid, &origin, &scan, true, boxes);
             }
         }
         rays

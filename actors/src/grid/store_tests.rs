@@ -182,9 +182,15 @@ fn the_oldest_keyframe_is_evicted_and_the_index_follows() {
 
 #[test]
 fn incremental_moves_equal_a_rebuild_from_scratch_per_scan() {
+    for rule in [UpdateRule::PerScan, UpdateRule::PerEndVoxel] {
+        incremental_moves_equal_a_rebuild_from_scratch_by(rule);
+    }
+}
+
+fn incremental_moves_equal_a_rebuild_from_scratch_by(rule: UpdateRule) {
     let mut rng = ChaCha8Rng::seed_from_u64(22);
     let keyframes: Vec<Keyframe> = (0..4).map(|i| random_keyframe(&mut rng, i, 60)).collect();
-    let mut store = ComponentStore::new(3000, 64, 2.0).with_rule(UpdateRule::PerScan);
+    let mut store = ComponentStore::new(3000, 64, 2.0).with_rule(rule);
     let (from, to) = (Point3::new(-1.0, 0.5, 0.0), Point3::new(1.7, -1.1, 0.6));
     let mut moved = empty_grid(&from);
     for kf in &keyframes[..2] {
@@ -200,7 +206,7 @@ fn incremental_moves_equal_a_rebuild_from_scratch_per_scan() {
     let mut rebuilt = empty_grid(&to);
     let all = whole(&rebuilt);
     store.rebuild(&mut rebuilt, &[all]);
-    assert!(moved.values() == rebuilt.values());
+    assert!(moved.values() == rebuilt.values(), "{rule:?}");
     // Per scan differs from per ray (cells crossed by several rays of a keyframe).
     let mut per_ray = ComponentStore::new(3000, 64, 2.0);
     let mut other = empty_grid(&to);

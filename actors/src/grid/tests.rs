@@ -235,7 +235,7 @@ fn unsafe_distance_frontiers_and_entropy() {
 }
 
 /// Area under the ROC curve of `scores` for binary `labels` (Mann–Whitney, ties half).
-fn roc_auc(labels: &[bool], scores: &[f64]) -> f64 {
+pub(super) fn roc_auc(labels: &[bool], scores: &[f64]) -> f64 {
     let mut pairs: Vec<(f64, bool)> = scores.iter().copied().zip(labels.iter().copied()).collect();
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
     let positives = labels.iter().filter(|l| **l).count() as f64;
