@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
-use super::gpu::{GpuCamera, GpuError};
+use super::gpu::{GpuCamera, GpuContext, GpuError};
 use super::{CameraParams, DepthImage};
 use crate::world::World;
 
@@ -20,8 +20,10 @@ pub enum CameraBackend {
     /// The wgpu compute shader; the camera fails if there is no Vulkan adapter or the
     /// world has no GPU description.
     Gpu,
-    /// The GPU when an adapter is found and the world has a GPU description, else the
-    /// CPU; the choice and its reason are logged once.
+    /// The GPU when a hardware adapter is found and the world has a GPU description,
+    /// else the CPU; the choice and its reason are logged once. A software adapter
+    /// (lavapipe) is passed over: it renders the same images several times slower than
+    /// the CPU path.
     #[default]
     Auto,
 }
@@ -58,10 +60,23 @@ fn log_once(message: &str) {
     }
 }
 
-fn open_gpu(world: &dyn World, params: &CameraParams) -> Result<GpuCamera, String> {
+/// The GPU camera for `world`, or why not; a software adapter only if `allow_software`.
+fn open_gpu(
+    world: &dyn World,
+    params: &CameraParams,
+    allow_software: bool,
+) -> Result<GpuCamera, String> {
     let scene = world
         .gpu_scene()
-        .ok_or_else(|| "the world has no GPU description (mesh worlds render on the CPU)")?;
+        .ok_or("the world has no GPU description (mesh worlds render on the CPU)")?;
+    let ctx = GpuContext::shared().map_err(|e| e.to_string())?;
+    if ctx.is_software() && !allow_software {
+        return Err(format!(
+            "the only Vulkan adapter, {}, is a software rasteriser, slower than the CPU path \
+             (camera.backend = \"gpu\" uses it anyway)",
+            ctx.adapter_name()
+        ));
+    }
     GpuCamera::new(params, &scene).map_err(|e| e.to_string())
 }
 
@@ -75,12 +90,12 @@ impl CameraRenderer {
         let (gpu, choice) = match params.backend {
             CameraBackend::Cpu => (None, Choice::Cpu("camera.backend = \"cpu\"".to_owned())),
             CameraBackend::Gpu => {
-                let gpu = open_gpu(world.as_ref(), &params)
+                let gpu = open_gpu(world.as_ref(), &params, true)
                     .map_err(|e| format!("camera.backend = \"gpu\": {e}"))?;
                 let name = gpu.context().adapter_name();
                 (Some(gpu), Choice::Gpu(name))
             }
-            CameraBackend::Auto => match open_gpu(world.as_ref(), &params) {
+            CameraBackend::Auto => match open_gpu(world.as_ref(), &params, false) {
                 Ok(gpu) => {
                     let name = gpu.context().adapter_name();
                     (Some(gpu), Choice::Gpu(name))

@@ -88,6 +88,13 @@ impl GpuContext {
         })
     }
 
+    /// Whether the adapter is a software rasteriser (Mesa's lavapipe/llvmpipe): correct,
+    /// but slower than the CPU path (see the `camera` bench), so `auto` passes it over.
+    #[must_use]
+    pub fn is_software(&self) -> bool {
+        self.adapter.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// The adapter in words, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Cpu, Vulkan)"`.
     #[must_use]
     pub fn adapter_name(&self) -> String {

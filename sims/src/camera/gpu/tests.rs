@@ -311,7 +311,7 @@ fn auto_falls_back_to_the_cpu_for_a_mesh_world_and_gpu_refuses_it() {
 }
 
 #[test]
-fn auto_picks_the_gpu_when_there_is_one_and_cpu_when_asked() {
+fn auto_picks_a_hardware_gpu_gpu_takes_any_and_cpu_stays_on_the_cpu() {
     let room: Arc<dyn World> = Arc::new(BoxRoom::new(Aabb::new(
         Point3::new(-1.0, -2.0, -1.5),
         Point3::new(4.0, 2.0, 1.5),
@@ -322,9 +322,31 @@ fn auto_picks_the_gpu_when_there_is_one_and_cpu_when_asked() {
     };
     let renderer = CameraRenderer::new(room.clone(), cpu).expect("cpu");
     assert!(matches!(renderer.choice(), Choice::Cpu(_)));
-    let auto = CameraRenderer::new(room, small_camera()).expect("auto");
-    match (GpuContext::shared(), auto.choice()) {
-        (Ok(_), Choice::Gpu(_)) | (Err(_), Choice::Cpu(_)) => {}
-        (ctx, choice) => panic!("auto chose {choice:?} with {ctx:?}"),
+    let auto = CameraRenderer::new(room.clone(), small_camera()).expect("auto");
+    let hardware = GpuContext::shared().is_ok_and(|ctx| !ctx.is_software());
+    match auto.choice() {
+        Choice::Gpu(_) => assert!(hardware, "auto chose a software adapter"),
+        Choice::Cpu(reason) => assert!(!hardware, "auto passed over a GPU: {reason}"),
+    }
+    // Forced, any adapter will do; on a software one it renders what the CPU renders.
+    let forced = CameraParams {
+        backend: CameraBackend::Gpu,
+        ..small_camera()
+    };
+    match (
+        GpuContext::shared(),
+        CameraRenderer::new(room.clone(), forced.clone()),
+    ) {
+        (Ok(_), Ok(mut gpu)) => {
+            assert!(matches!(gpu.choice(), Choice::Gpu(_)));
+            let pose = Isometry3::translation(1.0, 0.3, 0.2);
+            let img = gpu.render(&pose, 1).expect("frame");
+            assert_eq!(
+                img.valid_count(),
+                forced.render(room.as_ref(), &pose, 1).valid_count()
+            );
+        }
+        (Err(_), Err(reason)) => assert!(reason.contains("no Vulkan adapter"), "{reason}"),
+        (ctx, renderer) => panic!("{ctx:?} but {:?}", renderer.map(|r| r.choice().clone())),
     }
 }
