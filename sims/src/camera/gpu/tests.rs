@@ -162,6 +162,19 @@ fn compare(what: &str, world: Arc<dyn World>, poses: &[Isometry3<f64>], params: 
     agreement.check(what);
 }
 
+#[test]
+fn the_shader_parses_and_validates_without_an_adapter() {
+    let module = naga::front::wgsl::parse_str(&shader_source())
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&shader_source())));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .expect("the shader validates");
+    assert!(module.entry_points.iter().any(|e| e.name == "main"));
+}
+
 fn small_camera() -> CameraParams {
     CameraParams {
         width: 80,
