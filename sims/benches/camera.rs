@@ -1,12 +1,14 @@
-//! Rendering and coverage costs of one 160x120 frame in the default cave.
+//! Rendering and coverage costs of one 160x120 frame in the default cave, on the CPU and
+//! (when a Vulkan adapter is found, e.g. Mesa's lavapipe) on the GPU camera.
 // criterion_group! and criterion_main! generate undocumented functions.
 #![allow(missing_docs)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use std::hint::black_box;
-use troupe_sims::camera::CameraParams;
+use troupe_sims::camera::{CameraParams, GpuCamera};
 use troupe_sims::coverage::CoverageGrid;
+use troupe_sims::world::World;
 use troupe_sims::world::{CaveParams, CaveWorld};
 
 fn start_pose(cave: &CaveWorld) -> Isometry3<f64> {
@@ -26,6 +28,17 @@ fn bench_camera(c: &mut Criterion) {
     c.bench_function("render_160x120_cave", |b| {
         b.iter(|| cam.render(black_box(&cave), black_box(&pose), 0));
     });
+    let scene = cave.gpu_scene();
+    match scene.map(|s| GpuCamera::new(&cam, &s)) {
+        Some(Ok(mut gpu)) => {
+            eprintln!("GPU camera on {}", gpu.context().adapter_name());
+            c.bench_function("render_160x120_cave_gpu", |b| {
+                b.iter(|| gpu.render(black_box(&pose), 0));
+            });
+        }
+        Some(Err(e)) => eprintln!("render_160x120_cave_gpu skipped: {e}"),
+        None => eprintln!("render_160x120_cave_gpu skipped: the cave has no GPU scene"),
+    }
     let img = cam.render(&cave, &pose, 0);
     let fresh = CoverageGrid::new(&cave, 0.25);
     c.bench_function("coverage_observe_160x120_stride1_cell0.25", |b| {

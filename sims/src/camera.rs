@@ -5,11 +5,21 @@
 //! `(col, row)` has its centre at `(u, v) = (col + 0.5, row + 0.5)`. Depth is the z-depth
 //! along the optical axis, as a depth camera reports it, not the ray length.
 //!
-//! [`CameraParams::render`] sphere-traces a [`World`]; see `render` for the exact rules.
+//! [`CameraParams::render`] sphere-traces a [`World`] on the CPU; see `render` for the
+//! exact rules. [`CameraRenderer`] renders on the backend named by
+//! [`CameraParams::backend`]: the CPU, or the wgpu compute shader of `gpu` (same rules
+//! in `f32`) for worlds that describe themselves with [`World::gpu_scene`].
 
+mod backend;
+mod gpu;
 mod image;
 mod render;
 
+pub use backend::{CameraBackend, CameraRenderer, Choice};
+pub use gpu::{
+    GpuAlbedo, GpuCamera, GpuCaveField, GpuContext, GpuError, GpuGeometry, GpuNoise, GpuPrimitive,
+    GpuScene,
+};
 pub use image::DepthImage;
 pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
 
@@ -36,6 +46,9 @@ pub struct CameraParams {
     pub depth_noise_std_m: f64,
     /// Probability that a pixel returns nothing, independently per pixel.
     pub dropout_prob: f64,
+    /// Where frames are rendered: `"cpu"`, `"gpu"` or `"auto"` (the GPU when a Vulkan
+    /// adapter is found and the world has a GPU description, else the CPU).
+    pub backend: CameraBackend,
 }
 
 impl Default for CameraParams {
@@ -48,6 +61,7 @@ impl Default for CameraParams {
             range_m: 5.0,
             depth_noise_std_m: 0.0,
             dropout_prob: 0.0,
+            backend: CameraBackend::Auto,
         }
     }
 }
@@ -145,7 +159,8 @@ impl CameraParams {
         body_pose * Point3::from(self.pixel_ray_body_unit_depth(u, v) * depth_m)
     }
 
-    /// Render a depth + intensity image of `world` from `body_pose` (body to world).
+    /// Render a depth + intensity image of `world` from `body_pose` (body to world) on
+    /// the CPU, whatever [`CameraParams::backend`] says (see [`CameraRenderer`]).
     ///
     /// Noise and dropouts derive from `(noise_seed, pixel index)` only, so the image is
     /// bit-identical for any thread count; pass a different `noise_seed` per frame (for

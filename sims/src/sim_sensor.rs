@@ -6,13 +6,16 @@ use troupe_actors::msgs::{DepthFrame, Odometry, PinholeIntrinsics};
 use troupe_actors::runtime::{ActorError, Time};
 use troupe_actors::sensor::FrameSource;
 
-use crate::camera::{CameraParams, DepthImage};
+use crate::camera::{CameraParams, CameraRenderer, DepthImage};
 use crate::world::World;
 
-/// Renders the world from the robot's latest odometry pose.
+/// Renders the world from the robot's latest odometry pose, on the backend named by
+/// `camera.backend` (see [`CameraRenderer`]).
 pub struct SimCameraSource {
-    world: Arc<dyn World>,
     camera: CameraParams,
+    /// The renderer, or why backend `"gpu"` could not be had (reported by every
+    /// capture, so the sensor actor fails loudly instead of seeing nothing).
+    renderer: Result<CameraRenderer, String>,
     noise_seed: u64,
     frames: u64,
 }
@@ -22,7 +25,7 @@ impl SimCameraSource {
     #[must_use]
     pub fn new(world: Arc<dyn World>, camera: CameraParams, noise_seed: u64) -> Self {
         SimCameraSource {
-            world,
+            renderer: CameraRenderer::new(world, camera.clone()),
             camera,
             noise_seed,
             frames: 0,
@@ -65,11 +68,15 @@ impl FrameSource for SimCameraSource {
         let Some(odometry) = odometry else {
             return Ok(None);
         };
+        let renderer = self
+            .renderer
+            .as_mut()
+            .map_err(|reason| ActorError::msg(reason.clone()))?;
         let seed = self.noise_seed ^ self.frames.wrapping_mul(0x9e37_79b9_7f4a_7c15);
         self.frames += 1;
-        let image = self
-            .camera
-            .render(self.world.as_ref(), &odometry.pose, seed);
+        let image = renderer
+            .render(&odometry.pose, seed)
+            .map_err(|e| ActorError::with_source("rendering a camera frame", e))?;
         Ok(Some(DepthFrame {
             stamp: now,
             pose: odometry.pose,

@@ -32,7 +32,7 @@ pub const LIGHT_HALF_DISTANCE_M: f64 = 2.5;
 /// Over-relaxation factor of the sphere-tracing steps (1 = plain sphere tracing).
 pub const OVER_RELAXATION: f64 = 1.2;
 /// Smallest incidence cosine used by the refinement step.
-const MIN_REFINE_COS: f64 = 0.25;
+pub(super) const MIN_REFINE_COS: f64 = 0.25;
 
 /// A surface hit along a ray.
 struct Hit {
@@ -108,6 +108,21 @@ impl PixelRng {
     }
 }
 
+/// Step 5 of the module doc for the pixel with row-major `index` and noise-free z-depth
+/// `depth_m`: the reported depth, or `None` for a dropout or a depth `<= 0`. Shared by
+/// the CPU and GPU paths, so both draw the same noise.
+pub(super) fn noisy_depth_m(
+    cam: &CameraParams,
+    noise_seed: u64,
+    index: u64,
+    depth_m: f64,
+) -> Option<f64> {
+    let mut rng = PixelRng::new(noise_seed, index);
+    let dropped = rng.next_unit() < cam.dropout_prob;
+    let depth = depth_m + rng.next_gaussian() * cam.depth_noise_std_m;
+    (!dropped && depth > 0.0).then_some(depth)
+}
+
 pub(super) fn render(
     cam: &CameraParams,
     world: &dyn World,
@@ -135,13 +150,10 @@ pub(super) fn render(
                 let Some(hit) = trace(world, &origin, &dir, range_m / cos_axis) else {
                     continue;
                 };
-                let mut rng = PixelRng::new(noise_seed, (row * w + col) as u64);
-                let dropped = rng.next_unit() < cam.dropout_prob;
-                let noise = rng.next_gaussian() * cam.depth_noise_std_m;
-                let depth = hit.t_m * cos_axis + noise;
-                if dropped || depth <= 0.0 {
+                let index = (row * w + col) as u64;
+                let Some(depth) = noisy_depth_m(cam, noise_seed, index, hit.t_m * cos_axis) else {
                     continue;
-                }
+                };
                 let lambert = (-hit.normal.dot(&dir)).max(0.0);
                 let falloff = 1.0 / (1.0 + (hit.t_m / LIGHT_HALF_DISTANCE_M).powi(2));
                 let intensity = (world.albedo(&hit.point) * lambert * falloff).clamp(0.0, 1.0);

@@ -63,6 +63,21 @@ fn defaults_validate_and_give_expected_intrinsics() {
 }
 
 #[test]
+fn the_backend_is_read_from_the_camera_table() {
+    assert_eq!(CameraParams::default().backend, CameraBackend::Auto);
+    for (text, backend) in [
+        ("cpu", CameraBackend::Cpu),
+        ("gpu", CameraBackend::Gpu),
+        ("auto", CameraBackend::Auto),
+    ] {
+        let cam: CameraParams = toml::from_str(&format!("backend = \"{text}\"")).unwrap();
+        assert_eq!(cam.backend, backend);
+    }
+    let err = toml::from_str::<CameraParams>("backend = \"tpu\"").unwrap_err();
+    assert!(err.to_string().contains("tpu"), "{err}");
+}
+
+#[test]
 fn pixel_rays_follow_body_axes() {
     let cam = CameraParams::default();
     let centre = cam.pixel_ray_body(80.0, 60.0);

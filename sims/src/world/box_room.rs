@@ -3,6 +3,7 @@
 use nalgebra::Point3;
 
 use super::{Aabb, World};
+use crate::camera::{GpuAlbedo, GpuGeometry, GpuScene};
 
 /// Free space inside an axis-aligned box, rock everywhere outside it.
 ///
@@ -16,6 +17,10 @@ pub struct BoxRoom {
 
 /// Checker square size of [`BoxRoom`]'s texture, in metres.
 pub const BOX_ROOM_CHECKER_M: f64 = 0.5;
+
+/// Reflectance of the checker squares whose index sum is even / odd.
+const CHECKER_EVEN: f64 = 0.3;
+const CHECKER_ODD: f64 = 0.8;
 
 impl BoxRoom {
     /// A room with the given free interior.
@@ -42,11 +47,29 @@ impl World for BoxRoom {
             .map(|i| (p[i] / BOX_ROOM_CHECKER_M).floor() as i64)
             .sum::<i64>()
             .rem_euclid(2);
-        if parity == 0 { 0.3 } else { 0.8 }
+        if parity == 0 {
+            CHECKER_EVEN
+        } else {
+            CHECKER_ODD
+        }
     }
 
     fn bounds(&self) -> Aabb {
         self.interior
+    }
+
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        Some(GpuScene {
+            geometry: GpuGeometry::Boxes {
+                interior: self.interior,
+                solids: Vec::new(),
+            },
+            albedo: GpuAlbedo::Checker {
+                square_m: BOX_ROOM_CHECKER_M,
+                even: CHECKER_EVEN,
+                odd: CHECKER_ODD,
+            },
+        })
     }
 }
 

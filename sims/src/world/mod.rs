@@ -35,6 +35,8 @@ pub use warehouse::{Warehouse, WarehouseParams};
 
 use nalgebra::{Point3, Vector3};
 
+use crate::camera::GpuScene;
+
 /// Step used by the default [`World::normal`] for its central differences, in metres.
 pub const NORMAL_STEP_M: f64 = 1e-3;
 
@@ -123,6 +125,13 @@ pub trait World: Send + Sync {
         let d = |axis: Vector3<f64>| self.sdf_m(&(p + axis * h)) - self.sdf_m(&(p - axis * h));
         let g = Vector3::new(d(Vector3::x()), d(Vector3::y()), d(Vector3::z()));
         g.try_normalize(1e-12).unwrap_or_else(Vector3::z)
+    }
+
+    /// The world's field and texture as tables for the GPU camera, or `None` when the
+    /// world has no GPU description (the camera then renders on the CPU). Worlds that
+    /// return one must keep it in step with [`World::sdf_m`] and [`World::albedo`].
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        None
     }
 }
 

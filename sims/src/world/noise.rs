@@ -58,6 +58,13 @@ impl ValueNoise {
         Self { perm, values }
     }
 
+    /// The doubled permutation table (`2 * PERIOD` entries) and the `PERIOD` lattice
+    /// values, for ports of [`ValueNoise::value`] (the GPU camera).
+    #[must_use]
+    pub fn tables(&self) -> (&[u8], &[f64]) {
+        (&self.perm, &self.values)
+    }
+
     /// Noise value at `p` (lattice units), in `[-1, 1]`; continuous with gradient norm at
     /// most [`GRADIENT_BOUND`].
     #[must_use]

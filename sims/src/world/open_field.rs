@@ -10,6 +10,7 @@ use super::noise::{ValueNoise, mix64, unit_f64};
 use super::solids::BoxSolids;
 use super::warehouse::polyline_length_m;
 use super::{Aabb, Site, World};
+use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// Shape of an [`OpenField`]; lengths in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -183,6 +184,15 @@ impl World for OpenField {
 
     fn bounds(&self) -> Aabb {
         self.solids.interior()
+    }
+
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        Some(GpuScene {
+            geometry: self.solids.gpu_geometry(),
+            albedo: GpuAlbedo::OpenField {
+                texture: GpuNoise::from(&self.texture),
+            },
+        })
     }
 }
 

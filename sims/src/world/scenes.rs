@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::noise::ValueNoise;
 use super::solids::BoxSolids;
 use super::{Aabb, Site, World};
+use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// The window scene: a 0.9 m × 0.9 m window in a wall 10 m ahead (thesis §5.2.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -265,6 +266,15 @@ impl World for OpeningScene {
 
     fn bounds(&self) -> Aabb {
         self.solids.interior()
+    }
+
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        Some(GpuScene {
+            geometry: self.solids.gpu_geometry(),
+            albedo: GpuAlbedo::Bricks {
+                texture: GpuNoise::from(&self.texture),
+            },
+        })
     }
 }
 

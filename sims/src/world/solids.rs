@@ -9,6 +9,7 @@
 use nalgebra::Point3;
 
 use super::Aabb;
+use crate::camera::GpuGeometry;
 
 /// Solid boxes inside a free interior; everything outside the interior is rock.
 #[derive(Clone, Debug)]
@@ -68,6 +69,16 @@ impl BoxSolids {
     #[must_use]
     pub fn solids(&self) -> &[Aabb] {
         &self.solids
+    }
+
+    /// The room and its boxes for the GPU camera (which uses the exact distance, without
+    /// the index).
+    #[must_use]
+    pub fn gpu_geometry(&self) -> GpuGeometry {
+        GpuGeometry::Boxes {
+            interior: self.interior,
+            solids: self.solids.clone(),
+        }
     }
 
     /// Signed distance: positive in free space, negative in a solid or outside the room.

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use super::noise::{ValueNoise, mix64, unit_f64};
 use super::solids::BoxSolids;
 use super::{Aabb, Site, World};
+use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// Shape of a [`Warehouse`]; lengths in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -207,6 +208,15 @@ impl World for Warehouse {
 
     fn bounds(&self) -> Aabb {
         self.solids.interior()
+    }
+
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        Some(GpuScene {
+            geometry: self.solids.gpu_geometry(),
+            albedo: GpuAlbedo::Warehouse {
+                texture: GpuNoise::from(&self.texture),
+            },
+        })
     }
 }
 

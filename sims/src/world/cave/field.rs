@@ -9,6 +9,7 @@
 
 use nalgebra::{Point3, Vector3};
 
+use crate::camera::{GpuCaveField, GpuNoise, GpuPrimitive};
 use crate::world::Aabb;
 
 /// Depth below which rock distances are clamped (a conservative rock distance).
@@ -179,6 +180,56 @@ impl Field {
             best = best.max(self.prims[i as usize].free_m(p));
         }
         best
+    }
+
+    /// The field, index included, as tables for the GPU camera, with the cave's wall
+    /// roughness `amplitude_m * wall_noise(p / wavelength_m)` and Lipschitz bound.
+    pub(super) fn to_gpu(
+        &self,
+        wall_noise: GpuNoise,
+        amplitude_m: f64,
+        wavelength_m: f64,
+        lipschitz: f64,
+    ) -> GpuCaveField {
+        let primitives = self
+            .prims
+            .iter()
+            .map(|p| match *p {
+                Primitive::Capsule {
+                    a,
+                    ab,
+                    inv_len2,
+                    radius,
+                } => GpuPrimitive::Capsule {
+                    a,
+                    ab,
+                    inv_len2,
+                    radius_m: radius,
+                },
+                Primitive::Chamber {
+                    centre,
+                    radius,
+                    floor_z,
+                } => GpuPrimitive::Chamber {
+                    centre,
+                    radius_m: radius,
+                    floor_z_m: floor_z,
+                },
+            })
+            .collect();
+        GpuCaveField {
+            primitives,
+            grid_origin: self.origin,
+            cell_m: INDEX_CELL_M,
+            dims: self.dims.map(|d| u32::try_from(d).unwrap_or(u32::MAX)),
+            cell_start: self.cell_start.clone(),
+            cell_items: self.cell_items.clone(),
+            rock_clamp_m: ROCK_CLAMP_M,
+            wall_noise,
+            amplitude_m,
+            wavelength_m,
+            lipschitz,
+        }
     }
 
     /// The same field without the index (slow reference for tests).

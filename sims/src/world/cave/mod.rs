@@ -28,6 +28,7 @@ use rand_chacha::ChaCha8Rng;
 use self::field::{Field, Primitive};
 use super::noise::{self, ValueNoise};
 use super::{Aabb, World};
+use crate::camera::{GpuAlbedo, GpuGeometry, GpuNoise, GpuScene};
 
 /// How far below the node a chamber's flat floor lies, as a fraction of its radius.
 const CHAMBER_FLOOR_FRACTION: f64 = 0.6;
@@ -191,6 +192,22 @@ impl World for CaveWorld {
         .map(|k| k * self.sdf_m(&(p + k * h)))
         .sum::<Vector3<f64>>();
         g.try_normalize(1e-12).unwrap_or_else(Vector3::z)
+    }
+
+    fn gpu_scene(&self) -> Option<GpuScene> {
+        let field = self.field.to_gpu(
+            GpuNoise::from(&self.wall_noise),
+            self.params.wall_noise_amplitude_m,
+            self.params.wall_noise_wavelength_m,
+            self.lipschitz,
+        );
+        Some(GpuScene {
+            geometry: GpuGeometry::Cave(field),
+            albedo: GpuAlbedo::CaveRock {
+                texture: GpuNoise::from(&self.texture),
+                strata: GpuNoise::from(&self.strata),
+            },
+        })
     }
 }
 

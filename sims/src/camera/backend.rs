@@ -1,0 +1,157 @@
+//! Choosing between the CPU and the GPU camera ([`CameraBackend`]) and rendering with
+//! the choice ([`CameraRenderer`]).
+
+use std::collections::HashSet;
+use std::sync::{Arc, Mutex};
+
+use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+use super::gpu::{GpuCamera, GpuContext, GpuError};
+use super::{CameraParams, DepthImage};
+use crate::world::World;
+
+/// Where the camera renders: `[camera] backend = "cpu" | "gpu" | "auto"`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraBackend {
+    /// Sphere tracing on the CPU threads (`render.rs`).
+    Cpu,
+    /// The wgpu compute shader; the camera fails if there is no Vulkan adapter or the
+    /// world has no GPU description.
+    Gpu,
+    /// The GPU when a hardware adapter is found and the world has a GPU description,
+    /// else the CPU; the choice and its reason are logged once. A software adapter
+    /// (lavapipe) is passed over: it renders the same images several times slower than
+    /// the CPU path.
+    #[default]
+    Auto,
+}
+
+/// Why a backend ended up as it did (for logs and tests).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Choice {
+    /// Rendering on the CPU, with the reason.
+    Cpu(String),
+    /// Rendering on the named GPU adapter.
+    Gpu(String),
+}
+
+/// A camera bound to one world, rendering on the backend chosen at creation.
+pub struct CameraRenderer {
+    world: Arc<dyn World>,
+    params: CameraParams,
+    gpu: Option<GpuCamera>,
+    choice: Choice,
+}
+
+/// Logs `message` at info level the first time it is seen in this process.
+fn log_once(message: &str) {
+    static SEEN: Mutex<Option<HashSet<String>>> = Mutex::new(None);
+    let first = SEEN
+        .lock()
+        .map(|mut seen| {
+            seen.get_or_insert_with(HashSet::new)
+                .insert(message.to_owned())
+        })
+        .unwrap_or(true);
+    if first {
+        tracing::info!("{message}");
+    }
+}
+
+/// The GPU camera for `world`, or why not; a software adapter only if `allow_software`.
+fn open_gpu(
+    world: &dyn World,
+    params: &CameraParams,
+    allow_software: bool,
+) -> Result<GpuCamera, String> {
+    let scene = world
+        .gpu_scene()
+        .ok_or("the world has no GPU description (mesh worlds render on the CPU)")?;
+    let ctx = GpuContext::shared().map_err(|e| e.to_string())?;
+    if ctx.is_software() && !allow_software {
+        return Err(format!(
+            "the only Vulkan adapter, {}, is a software rasteriser, slower than the CPU path \
+             (camera.backend = \"gpu\" uses it anyway)",
+            ctx.adapter_name()
+        ));
+    }
+    GpuCamera::new(params, &scene).map_err(|e| e.to_string())
+}
+
+impl CameraRenderer {
+    /// A camera for `world` on `params.backend`.
+    ///
+    /// # Errors
+    ///
+    /// Only for [`CameraBackend::Gpu`]: why the GPU camera is unavailable.
+    pub fn new(world: Arc<dyn World>, params: CameraParams) -> Result<CameraRenderer, String> {
+        let (gpu, choice) = match params.backend {
+            CameraBackend::Cpu => (None, Choice::Cpu("camera.backend = \"cpu\"".to_owned())),
+            CameraBackend::Gpu => {
+                let gpu = open_gpu(world.as_ref(), &params, true)
+                    .map_err(|e| format!("camera.backend = \"gpu\": {e}"))?;
+                let name = gpu.context().adapter_name();
+                (Some(gpu), Choice::Gpu(name))
+            }
+            CameraBackend::Auto => match open_gpu(world.as_ref(), &params, false) {
+                Ok(gpu) => {
+                    let name = gpu.context().adapter_name();
+                    (Some(gpu), Choice::Gpu(name))
+                }
+                Err(reason) => (None, Choice::Cpu(reason)),
+            },
+        };
+        match &choice {
+            Choice::Cpu(reason) => log_once(&format!("camera renders on the CPU: {reason}")),
+            Choice::Gpu(name) => log_once(&format!("camera renders on the GPU: {name}")),
+        }
+        Ok(CameraRenderer {
+            world,
+            params,
+            gpu,
+            choice,
+        })
+    }
+
+    /// The backend in use and why.
+    #[must_use]
+    pub fn choice(&self) -> &Choice {
+        &self.choice
+    }
+
+    /// The camera parameters.
+    #[must_use]
+    pub fn params(&self) -> &CameraParams {
+        &self.params
+    }
+
+    /// Renders from `body_pose` (body to world); see [`CameraParams::render`]. With
+    /// `auto`, a failing GPU frame is rendered on the CPU instead and the camera stays
+    /// on the CPU from then on.
+    ///
+    /// # Errors
+    ///
+    /// A failing GPU frame with backend `gpu`.
+    pub fn render(
+        &mut self,
+        body_pose: &Isometry3<f64>,
+        noise_seed: u64,
+    ) -> Result<DepthImage, GpuError> {
+        if let Some(gpu) = &mut self.gpu {
+            match gpu.render(body_pose, noise_seed) {
+                Ok(img) => return Ok(img),
+                Err(e) if self.params.backend == CameraBackend::Gpu => return Err(e),
+                Err(e) => {
+                    tracing::warn!("GPU camera failed ({e}); rendering on the CPU from now on");
+                    self.gpu = None;
+                    self.choice = Choice::Cpu(e.to_string());
+                }
+            }
+        }
+        Ok(self
+            .params
+            .render(self.world.as_ref(), body_pose, noise_seed))
+    }
+}
