@@ -61,6 +61,23 @@ pub enum TransportError {
     Closed,
 }
 
+/// Counters every transport can report (a network-independent summary; a concrete
+/// transport may keep more, e.g. [`ZenohStats`](crate::zenoh::ZenohStats)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TransportStats {
+    /// Frames handed to the network.
+    pub sent_frames: u64,
+    /// Bytes handed to the network.
+    pub sent_bytes: u64,
+    /// Frames not sent: the send queue was full or the network refused them.
+    pub send_failures: u64,
+    /// Frames received and handed on.
+    pub received_frames: u64,
+    /// Frames received and rejected (malformed, wrong team, wrong class, spoofed
+    /// sender).
+    pub rejected_frames: u64,
+}
+
 /// Carries a robot's frames to its peers and theirs to it. Implementations never
 /// block the caller on the network: [`send`](Self::send) queues and returns.
 pub trait PacketTransport: Send + Sync {
@@ -71,4 +88,9 @@ pub trait PacketTransport: Send + Sync {
     /// Hands one frame sent by local robot `from` to the network, for robot `to`
     /// or (`None`) every peer.
     fn send(&self, from: u32, to: Option<u32>, frame: &[u8]) -> Result<(), TransportError>;
+
+    /// Counters so far (all zero for a transport that keeps none).
+    fn stats(&self) -> TransportStats {
+        TransportStats::default()
+    }
 }

@@ -33,7 +33,9 @@ use ::zenoh::sample::{Locality, Sample};
 use serde::{Deserialize, Serialize};
 
 use crate::shaping::frame::{self, ParsedFrame};
-use crate::transport::{PacketSink, PacketTransport, ReceivedPacket, TransportError};
+use crate::transport::{
+    PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
+};
 use crate::wire::Class;
 
 /// Session mode.
@@ -603,6 +605,21 @@ impl PacketTransport for ZenohTransport {
             Err(_) => return Err(TransportError::Closed),
         }
         Ok(())
+    }
+
+    fn stats(&self) -> TransportStats {
+        let z = self.counters.snapshot();
+        TransportStats {
+            sent_frames: z.sent_frames,
+            sent_bytes: z.sent_bytes,
+            send_failures: z.send_queue_drops + z.send_errors,
+            received_frames: z.received_frames,
+            rejected_frames: z.rejected_key
+                + z.rejected_team
+                + z.rejected_frame
+                + z.rejected_class
+                + z.rejected_sender,
+        }
     }
 
     fn send(&self, from: u32, to: Option<u32>, frame: &[u8]) -> Result<(), TransportError> {

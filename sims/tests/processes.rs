@@ -117,6 +117,17 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
         assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
+        // The link's own status carries the transport's counters (link/transport).
+        let transport = &summary["link"]["transport"];
+        assert!(
+            transport["received_frames"].as_u64() > Some(100),
+            "robot{i}: {transport}"
+        );
+        assert!(
+            transport["sent_frames"].as_u64() > Some(50),
+            "robot{i}: {transport}"
+        );
+        assert_eq!(transport["rejected_frames"].as_u64(), Some(0));
         for actor in summary["actors"].as_array().expect("actors") {
             assert_eq!(actor["panics"].as_u64(), Some(0), "robot{i}: {actor}");
         }

@@ -24,6 +24,7 @@ use troupe_comms::shaping::{
     Incoming, LinkShaper, MessageId, Reassembler, ReassemblyConfig, ReassemblyStats, ShaperConfig,
     ShaperStats,
 };
+use troupe_comms::transport::TransportStats;
 use troupe_comms::wire::{self, Envelope, Payload};
 
 use crate::msgs::{
@@ -38,8 +39,8 @@ pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
 
 use crate::runtime::{
-    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TX, LinkTx, Message,
-    QueuePolicy, RobotId, Time, TimerId, Topic,
+    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TRANSPORT, LINK_TX,
+    LinkTx, Message, QueuePolicy, RobotId, Time, TimerId, Topic,
 };
 
 /// Link settings.
@@ -127,6 +128,9 @@ pub struct LinkStatus {
     pub reassembly: ReassemblyStats,
     /// Messages rejected after reassembly (decode errors, wrong team or sender).
     pub rejected_messages: u64,
+    /// The process's network transport counters, when it has one (robot processes
+    /// over zenoh; `None` in simulation), as last published on `link/transport`.
+    pub transport: Option<TransportStats>,
 }
 impl Message for LinkStatus {}
 
@@ -154,6 +158,8 @@ pub struct LinkActor {
     /// When each store-and-forward recipient was last heard.
     last_heard: BTreeMap<u32, Time>,
     rejected: u64,
+    /// The latest transport counters from the executor (`link/transport`).
+    transport: Option<TransportStats>,
     /// Whether this robot's keyframes go to peers ([`LinkActor::without_keyframes`]).
     share_keyframes: bool,
 }
@@ -177,6 +183,7 @@ impl LinkActor {
             plans_sent: 0,
             last_heard: BTreeMap::new(),
             rejected: 0,
+            transport: None,
             share_keyframes: true,
         })
     }
@@ -480,6 +487,7 @@ impl Actor for LinkActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
+        ctx.subscribe(&LINK_TRANSPORT, QueuePolicy::LATEST);
         if self.share_keyframes {
             ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
         }
@@ -517,6 +525,7 @@ impl Actor for LinkActor {
                         shaper: *self.shaper.stats(),
                         reassembly: *self.reassembler.stats(),
                         rejected_messages: self.rejected,
+                        transport: self.transport,
                     },
                 );
                 Ok(())
@@ -524,6 +533,9 @@ impl Actor for LinkActor {
             Event::Message(m) => {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.latest = Some(odometry);
+                    Ok(())
+                } else if let Some(stats) = m.get(&LINK_TRANSPORT) {
+                    self.transport = Some(*stats);
                     Ok(())
                 } else if let Some(plan) = m.get_arc(&PLAN) {
                     self.unsent_plan = Some(plan);

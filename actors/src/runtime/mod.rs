@@ -25,7 +25,9 @@ mod time;
 
 pub use actor::{Actor, ActorError, ActorResult, Event, TimerId};
 pub use context::{Context, RobotId};
-pub use network::{Destination, IdealNetwork, LINK_RX, LINK_TX, LinkRx, LinkTx, SimNetwork};
+pub use network::{
+    Destination, IdealNetwork, LINK_RX, LINK_TRANSPORT, LINK_TX, LinkRx, LinkTx, SimNetwork,
+};
 pub use queue::QueuePolicy;
 pub use realtime::{RealtimeExecutor, RealtimeHandle, RobotIdsError};
 pub use sim::SimExecutor;

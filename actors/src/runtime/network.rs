@@ -8,6 +8,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use troupe_comms::transport::TransportStats;
+
 use super::context::RobotId;
 use super::time::Time;
 use super::topic::{Message, Topic};
@@ -69,6 +71,14 @@ impl Message for LinkRx {
 pub const LINK_TX: Topic<LinkTx> = Topic::new("link/tx");
 /// Packets received.
 pub const LINK_RX: Topic<LinkRx> = Topic::new("link/rx");
+
+impl Message for TransportStats {}
+
+/// The counters of the process's network transport, published about once a second
+/// on each local robot by an executor that has one (the real-time executor with
+/// [`spawn_with_transport`](super::RealtimeExecutor::spawn_with_transport)); the link
+/// actor adds the latest to its [`LinkStatus`](crate::link::LinkStatus).
+pub const LINK_TRANSPORT: Topic<TransportStats> = Topic::new("link/transport");
 
 /// A deterministic network model for the sim-time executor: decides when (if ever)
 /// each packet reaches each recipient.

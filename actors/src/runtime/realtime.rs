@@ -31,7 +31,7 @@ use troupe_comms::transport::{PacketTransport, ReceivedPacket, TransportError};
 
 use super::context::{Command, Outgoing, RobotId};
 use super::inputs::Inputs;
-use super::network::{Destination, LINK_RX, LINK_TX, LinkRx, LinkTx};
+use super::network::{Destination, LINK_RX, LINK_TRANSPORT, LINK_TX, LinkRx, LinkTx};
 use super::registry::{TopicRegistry, apply_command};
 use super::slot::{Hook, HookOutcome, Slot};
 use super::spec::RobotSpec;
@@ -39,6 +39,9 @@ use super::stats::{RobotReport, TopicStats};
 use super::tap::{Publication, Tap};
 use super::time::Time;
 use super::topic::Received;
+
+/// How often the transport's counters go out on [`LINK_TRANSPORT`], milliseconds.
+const TRANSPORT_STATS_PERIOD_MS: u64 = 1000;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // A panic while holding an input lock cannot leave the queues inconsistent
@@ -96,6 +99,9 @@ struct Shared {
     transport: Option<Arc<dyn PacketTransport>>,
     /// Packets the transport refused (queue full, closed).
     transport_errors: AtomicU64,
+    /// Per robot: when its transport counters were last published, ms since epoch
+    /// plus one (0: never).
+    transport_published_ms: Vec<AtomicU64>,
 }
 
 impl Shared {
@@ -215,6 +221,33 @@ impl Shared {
                 tracing::warn!(robot = %self.robots[from].name, "transport refused a packet ({} so far): {e}", n + 1);
             }
         }
+        self.publish_transport_stats(from, transport.as_ref());
+    }
+
+    /// Publishes the transport's counters on robot `from`'s [`LINK_TRANSPORT`] if
+    /// a second has passed since the last time (checked as it sends, so a robot
+    /// that sends nothing publishes nothing new).
+    fn publish_transport_stats(&self, from: usize, transport: &dyn PacketTransport) {
+        let Some(last) = self.transport_published_ms.get(from) else {
+            return;
+        };
+        let now_ms = u64::try_from(self.epoch.elapsed().as_millis()).unwrap_or(u64::MAX - 1) + 1;
+        let previous = last.load(Ordering::Relaxed);
+        if previous != 0 && now_ms < previous + TRANSPORT_STATS_PERIOD_MS {
+            return;
+        }
+        if last
+            .compare_exchange(previous, now_ms, Ordering::Relaxed, Ordering::Relaxed)
+            .is_err()
+        {
+            return;
+        }
+        let mut stats = transport.stats();
+        stats.send_failures = stats
+            .send_failures
+            .max(self.transport_errors.load(Ordering::Relaxed));
+        let mut outputs = vec![Outgoing::new(&LINK_TRANSPORT, Arc::new(stats))];
+        self.route(from, &mut outputs);
     }
 
     /// A packet from the transport: published on the addressed local robots' LINK_RX.
@@ -398,6 +431,7 @@ impl RealtimeExecutor {
             slots_per_robot.push(slots);
         }
         let has_taps = !self.taps.is_empty();
+        let transport_published_ms = (0..robots.len()).map(|_| AtomicU64::new(0)).collect();
         let shared = Arc::new(Shared {
             robots,
             epoch,
@@ -406,6 +440,7 @@ impl RealtimeExecutor {
             has_taps,
             transport,
             transport_errors: AtomicU64::new(0),
+            transport_published_ms,
         });
         Prepared {
             shared,
