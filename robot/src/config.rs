@@ -377,6 +377,22 @@ mod tests {
     }
 
     #[test]
+    fn teleop_scripts_parse_and_bad_commands_name_their_entry() {
+        let c: RobotConfig = toml::from_str(
+            "behaviour = \"teleop\"\n[teleop]\nscript = [{ from_s = 0.0, vx_mps = 1.0, vz_mps = 0.0, yaw_rate_rad_s = 0.1 }]\n",
+        )
+        .unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.teleop.script.len(), 1);
+        let mut bad = c.clone();
+        bad.teleop.script[0].vx_mps = f64::NAN;
+        assert_eq!(bad.validate().unwrap_err().key, "teleop.script[0]");
+        bad.teleop.script[0].vx_mps = 1.0;
+        bad.teleop.script[0].from_s = -1.0;
+        assert_eq!(bad.validate().unwrap_err().key, "teleop.script[0]");
+    }
+
+    #[test]
     fn collision_table_parses_with_defaults() {
         let c: RobotConfig = toml::from_str(
             "[collision]\nenabled = true\n[collision.peers]\npriority = 3\ncylinder_radius_m = 0.5\n",

@@ -5,9 +5,10 @@
 //! the free space ahead (Eq. 5.1).
 //!
 //! Eq. 5.1 bounds the forward speed by the map information ahead, z_eq, minus the
-//! robot radius and collision tolerance. Here the grid has a fixed resolution (the
-//! variable-resolution HCA loop of Alg. 1 is not built), so z_eq − (r_robot + r_coll)
-//! is measured directly: the distance the robot centre can travel along its heading
+//! robot radius and collision tolerance. Here z_eq − (r_robot + r_coll) is measured
+//! directly in the grid snapshot (the fixed-resolution window, or the
+//! variable-resolution HCA map of Alg. 1 when the grid actor has it on, whose extent
+//! ahead then limits it): the distance the robot centre can travel along its heading
 //! while keeping the round's clearance margin from unsafe (occupied or unknown)
 //! space. The speed therefore drops as the robot nears walls ahead or the edge of
 //! what it has seen.
