@@ -8,6 +8,7 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::tests::{auc_against_raw, grid_at, room_corner_frame};
 use super::*;
 
 /// The rule the slow way: the set of distinct end voxels (lattice cells), one walk
@@ -51,16 +52,6 @@ fn reference(grid: &mut LocalGrid, origin: &Point3<f64>, ends: &[Point3<f64>], h
         values[i] = (values[i] + p.miss).clamp(p.min, p.max);
     }
     grid.set_values_for_test(values);
-}
-
-/// A 4 m × 3 m × 2 m grid at 0.2 m centred on `(x, 0, 0)`.
-fn grid_at(x: f64) -> LocalGrid {
-    LocalGrid::centred(
-        &Point3::new(x, 0.0, 0.0),
-        &Vector3::new(4.0, 3.0, 2.0),
-        0.2,
-        LogOddsParams::default(),
-    )
 }
 
 /// `n` end points around `origin`, 0.2–`reach_m` away (many leave the window), plus a
@@ -289,22 +280,10 @@ fn moving_the_window_equals_a_rebuild_per_end_voxel() {
 #[test]
 fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame_per_end_voxel() {
     use crate::grid::insert_frame_with;
-    use crate::mapper::sogmm::synthetic::{Scene, intrinsics, room_pose};
     use crate::mapper::sogmm::{SogmmConfig, fit_depth_frame};
-    use crate::msgs::DepthFrame;
-    use crate::runtime::Time;
 
-    let k = intrinsics(80, 60);
-    let pose = room_pose();
-    let (depth_m, intensity) = Scene::room_corner().render(&k, &pose);
-    let frame = DepthFrame {
-        stamp: Time::ZERO,
-        pose,
-        intrinsics: k,
-        depth_m,
-        intensity,
-    };
-    let origin = Point3::from(pose.translation.vector);
+    let frame = room_corner_frame();
+    let origin = Point3::from(frame.pose.translation.vector);
     let size = Vector3::new(16.0, 16.0, 8.0);
     let rule = UpdateRule::PerEndVoxel;
     let mut scratch = ScanScratch::default();
@@ -324,17 +303,6 @@ fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame_per_end_voxel() {
         .collect();
     let mut from_gmm = LocalGrid::centred(&origin, &size, 0.2, LogOddsParams::default());
     scratch.insert_by(rule, &mut from_gmm, &origin, &samples, true, None);
-    // Cells the raw frame observed are the ground truth (paper Fig. 6).
-    let (mut labels, mut scores) = (Vec::new(), Vec::new());
-    for (i, v) in raw.values().iter().enumerate() {
-        match raw.classify(*v) {
-            CellState::Occupied => labels.push(true),
-            CellState::Free => labels.push(false),
-            CellState::Unknown => continue,
-        }
-        scores.push(1.0 / (1.0 + (-f64::from(from_gmm.values()[i])).exp()));
-    }
-    assert!(labels.iter().filter(|l| **l).count() > 50);
-    let auc = super::tests::roc_auc(&labels, &scores);
+    let auc = auc_against_raw(&raw, &from_gmm);
     assert!(auc >= 0.9, "AUC {auc}");
 }

@@ -52,7 +52,8 @@ fn distance_transform_equals_brute_force_on_random_grids() {
     }
 }
 
-fn grid_at(x: f64) -> LocalGrid {
+/// A 4 m × 3 m × 2 m grid at 0.2 m centred on `(x, 0, 0)`.
+pub(super) fn grid_at(x: f64) -> LocalGrid {
     LocalGrid::centred(
         &Point3::new(x, 0.0, 0.0),
         &Vector3::new(4.0, 3.0, 2.0),
@@ -235,7 +236,7 @@ fn unsafe_distance_frontiers_and_entropy() {
 }
 
 /// Area under the ROC curve of `scores` for binary `labels` (Mann–Whitney, ties half).
-pub(super) fn roc_auc(labels: &[bool], scores: &[f64]) -> f64 {
+fn roc_auc(labels: &[bool], scores: &[f64]) -> f64 {
     let mut pairs: Vec<(f64, bool)> = scores.iter().copied().zip(labels.iter().copied()).collect();
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
     let positives = labels.iter().filter(|l| **l).count() as f64;
@@ -253,24 +254,47 @@ pub(super) fn roc_auc(labels: &[bool], scores: &[f64]) -> f64 {
     (rank_sum - positives * (positives + 1.0) / 2.0) / (positives * negatives)
 }
 
-#[test]
-fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame() {
-    use crate::grid::{insert_frame, insert_keyframe};
+/// The synthetic room-corner depth frame (80 × 60) the occupancy-agreement tests use.
+pub(super) fn room_corner_frame() -> crate::msgs::DepthFrame {
     use crate::mapper::sogmm::synthetic::{Scene, intrinsics, room_pose};
-    use crate::mapper::sogmm::{SogmmConfig, fit_depth_frame};
-    use crate::msgs::{DepthFrame, Keyframe};
-    use crate::runtime::Time;
-
     let k = intrinsics(80, 60);
     let pose = room_pose();
     let (depth_m, intensity) = Scene::room_corner().render(&k, &pose);
-    let frame = DepthFrame {
-        stamp: Time::ZERO,
+    crate::msgs::DepthFrame {
+        stamp: crate::runtime::Time::ZERO,
         pose,
         intrinsics: k,
         depth_m,
         intensity,
-    };
+    }
+}
+
+/// Area under the ROC curve of `from_gmm`'s occupancy probability against the cells
+/// `raw` observed (paper Fig. 6: occupancy from ray-tracing the sensor data is the
+/// ground truth); requires more than 50 occupied cells in `raw`.
+pub(super) fn auc_against_raw(raw: &LocalGrid, from_gmm: &LocalGrid) -> f64 {
+    let (mut labels, mut scores) = (Vec::new(), Vec::new());
+    for (i, v) in raw.values().iter().enumerate() {
+        match raw.classify(*v) {
+            CellState::Occupied => labels.push(true),
+            CellState::Free => labels.push(false),
+            CellState::Unknown => continue,
+        }
+        scores.push(1.0 / (1.0 + (-f64::from(from_gmm.values()[i])).exp()));
+    }
+    assert!(labels.iter().filter(|l| **l).count() > 50);
+    roc_auc(&labels, &scores)
+}
+
+#[test]
+fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame() {
+    use crate::grid::{insert_frame, insert_keyframe};
+    use crate::mapper::sogmm::{SogmmConfig, fit_depth_frame};
+    use crate::msgs::Keyframe;
+    use crate::runtime::Time;
+
+    let frame = room_corner_frame();
+    let pose = frame.pose;
     let origin = Point3::from(pose.translation.vector);
     let size = Vector3::new(16.0, 16.0, 8.0);
     let mut raw = LocalGrid::centred(&origin, &size, 0.2, LogOddsParams::default());
@@ -297,19 +321,7 @@ fn occupancy_from_a_keyframe_gmm_agrees_with_the_raw_frame() {
         usize::MAX,
         &mut ChaCha8Rng::seed_from_u64(1),
     );
-    // Cells the raw frame observed are the ground truth (paper Fig. 6: occupancy from
-    // ray-tracing the sensor data); the GMM grid's probability is the score.
-    let (mut labels, mut scores) = (Vec::new(), Vec::new());
-    for (i, v) in raw.values().iter().enumerate() {
-        match raw.classify(*v) {
-            CellState::Occupied => labels.push(true),
-            CellState::Free => labels.push(false),
-            CellState::Unknown => continue,
-        }
-        scores.push(1.0 / (1.0 + (-f64::from(from_gmm.values()[i])).exp()));
-    }
-    assert!(labels.iter().filter(|l| **l).count() > 50);
-    let auc = roc_auc(&labels, &scores);
+    let auc = auc_against_raw(&raw, &from_gmm);
     // Paper Fig. 6: AUC ≈ 0.9 at 0.2 m for GMM-reconstructed occupancy.
     assert!(auc >= 0.9, "AUC {auc}");
 }
