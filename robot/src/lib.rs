@@ -16,7 +16,7 @@ use nalgebra::Point3;
 use troupe_actors::collision::CollisionActor;
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
-use troupe_actors::link::LinkActor;
+use troupe_actors::link::{LinkActor, LinkJournal};
 use troupe_actors::mapper::MapperActor;
 use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_actors::planner::{PlannerActor, ScriptedTeleop, TeleopActor, TeleopConfig};
@@ -45,6 +45,12 @@ pub struct RobotParts {
     pub depart_at_s: f64,
     /// The camera's intrinsics (the planner scores views with them).
     pub camera: PinholeIntrinsics,
+    /// The link's non-volatile storage: it outlives restarts of the link actor and
+    /// reboots of the robot, so that nothing accepted into a store-and-forward class
+    /// is lost and message ids are never reused. `LinkJournal::default()` in
+    /// simulation; a process that may be restarted without its journal starts it
+    /// at a fresh id ([`LinkJournal::starting_at`]).
+    pub link_journal: LinkJournal,
 }
 
 /// Why a robot could not be assembled.
@@ -191,9 +197,10 @@ pub fn assemble(
             .with_options(options(config.latency_s.collision)),
         );
     }
+    let journal = parts.link_journal;
     robot.add(
         ActorSpec::new("link", move || {
-            let actor = LinkActor::new(link.clone())?;
+            let actor = LinkActor::new(link.clone())?.journaled(journal.clone())?;
             Ok(if sharing == MapSharing::Gmm {
                 actor
             } else {

@@ -28,7 +28,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
-use troupe_actors::link::{LINK_STATUS, LinkStatus};
+use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
@@ -177,8 +177,19 @@ pub async fn run(
         .world
         .build()
         .map_err(|e| ProcessError::Run(format!("building the world: {e}")))?;
-    let robot = simulated_robot(scenario, &world, id as usize)
-        .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {e}")))?;
+    // Nothing of the link outlives the process: start the message ids somewhere
+    // new, so that peers who remember a previous run's ids (their duplicate filter)
+    // do not drop this run's first messages as repeats.
+    let first_id = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u32);
+    let robot = simulated_robot(
+        scenario,
+        &world,
+        id as usize,
+        LinkJournal::starting_at(first_id),
+    )
+    .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {e}")))?;
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());

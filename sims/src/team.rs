@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use troupe_actors::link::LinkJournal;
 use troupe_actors::mapper::mapfile::GmmMap;
 use troupe_actors::runtime::{
     ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
@@ -264,7 +265,7 @@ impl Team {
             scenario.faults.iter().map(|_| Arc::default()).collect();
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
-            let mut robot = simulated_robot(scenario, &world, i)?;
+            let mut robot = simulated_robot(scenario, &world, i, LinkJournal::default())?;
             for (fault, counters) in scenario.faults.iter().zip(&fault_counters) {
                 robot = inject_fault(robot, i, fault, counters);
             }
@@ -465,11 +466,13 @@ impl Team {
 
 /// Robot `i` of a scenario's team, as the simulation builds it: the standard robot of
 /// `scenario.robot` with a simulated vehicle at the world's start position `i` and a
-/// simulated camera (used by [`Team`] and by the per-robot `troupe-robot` process).
+/// simulated camera (used by [`Team`] and by the per-robot `troupe-robot` process),
+/// keeping its link's durable state in `link_journal`.
 pub fn simulated_robot(
     scenario: &Scenario,
     world: &Arc<dyn Site>,
     i: usize,
+    link_journal: LinkJournal,
 ) -> Result<RobotSpec, AssembleError> {
     let count = scenario.robots as usize;
     let start = world.start_position(i, count);
@@ -509,6 +512,7 @@ pub fn simulated_robot(
         // at intervals so that robots sharing the first tunnel stay apart.
         depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
         camera: intrinsics_of(&scenario.camera),
+        link_journal,
     };
     assemble(&format!("robot{i}"), &scenario.robot, parts)
 }

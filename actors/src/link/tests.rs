@@ -314,6 +314,157 @@ fn store_and_forward_per_peer_through_the_link_actor() {
     }
 }
 
+/// Keyframes go out compact by default (44 instead of 60 bytes per component) and
+/// arrive with the same density up to the encoding's rounding.
+#[test]
+fn compact_keyframes_are_smaller_and_keep_the_density() {
+    let offered_bytes = |encoding: KeyframeEncoding| {
+        let config = LinkConfig {
+            keyframe_encoding: encoding,
+            ..LinkConfig::default()
+        };
+        let team = vec![
+            RobotSpec::new("r0")
+                .with(link(&config))
+                .with(ActorSpec::new("keyframes", || KeyframeSource {
+                    next: 0,
+                    count: 3,
+                })),
+            RobotSpec::new("r1").with(link(&config)),
+        ];
+        let received: Arc<Mutex<Vec<Keyframe>>> = Arc::default();
+        let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+        let mut exec = SimExecutor::new(team, 1);
+        let (tap_received, tap_status) = (received.clone(), status.clone());
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(k) = p.get(&PEER_KEYFRAME) {
+                tap_received.lock().unwrap().push(k.keyframe.clone());
+            } else if let Some(s) = p.get(&LINK_STATUS)
+                && p.robot == RobotId(0)
+            {
+                *tap_status.lock().unwrap() = Some(s.clone());
+            }
+        });
+        exec.run_until(Time::from_secs_f64(5.0));
+        let received = received.lock().unwrap().clone();
+        assert_eq!(received.len(), 3);
+        for k in &received {
+            let sent = test_keyframe(k.id, k.stamp);
+            for i in 0..sent.gmm.len() {
+                let x = sent.gmm.means()[i] + nalgebra::Vector4::new(0.02, -0.01, 0.03, 0.01);
+                let (a, b) = (sent.gmm.log_likelihood(&x), k.gmm.log_likelihood(&x));
+                assert!((a - b).abs() < 1e-3, "{encoding:?}: {a} vs {b}");
+            }
+        }
+        let status = status.lock().unwrap().clone().unwrap();
+        status
+            .shaper
+            .class(troupe_comms::wire::Class::Keyframe)
+            .offered_bytes
+    };
+    let exact = offered_bytes(KeyframeEncoding::Exact);
+    let compact = offered_bytes(KeyframeEncoding::Compact);
+    // 3 keyframes of 40 components: 16 bytes per component saved.
+    assert!(
+        exact - compact >= 3 * 40 * 15,
+        "exact {exact} B, compact {compact} B"
+    );
+    assert_eq!(KeyframeEncoding::default(), KeyframeEncoding::Compact);
+}
+
+/// Wraps the first link actor a factory builds: it panics on the first event at or
+/// after `at` (later incarnations do not).
+struct PanicsOnceAt {
+    inner: LinkActor,
+    at: Time,
+    armed: Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Actor for PanicsOnceAt {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        self.inner.start(ctx)
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if ctx.now() >= self.at && self.armed.swap(false, std::sync::atomic::Ordering::SeqCst) {
+            panic!("injected link panic");
+        }
+        self.inner.handle(event, ctx)
+    }
+}
+
+/// The link actor panics (and is rebuilt by its supervisor) at 25 s, in the middle
+/// of robot 1's partition (10–40 s) while ~15 keyframes wait for it. Journaled, the
+/// new link resumes them: robots 1 and 2 still get every keyframe once, in order,
+/// and robot 2 keeps hearing odometry (the ids continue, so its duplicate filter
+/// passes them). Without the journal robot 1 never gets the stored keyframes.
+#[test]
+fn a_journaled_link_restarted_after_a_panic_loses_nothing_it_stored() {
+    let mut config = LinkConfig::default();
+    config.shaper.rate_bps = Some(250_000);
+    config.shaper.burst_bytes = 4_096;
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig::store_and_forward();
+    config.peers = vec![0, 1, 2];
+    let run = |journaled: bool| {
+        let armed = Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let journal = LinkJournal::default();
+        let sender_config = config.clone();
+        let sender = ActorSpec::new("link", move || {
+            let link = LinkActor::new(sender_config.clone())?;
+            let inner = if journaled {
+                link.journaled(journal.clone())?
+            } else {
+                link
+            };
+            Ok(PanicsOnceAt {
+                inner,
+                at: Time::from_secs_f64(25.0),
+                armed: armed.clone(),
+            })
+        });
+        let team = vec![
+            RobotSpec::new("r0")
+                .with(sender)
+                .with(ActorSpec::new("keyframes", || KeyframeSource {
+                    next: 0,
+                    count: 50,
+                })),
+            RobotSpec::new("r1").with(link(&config)),
+            RobotSpec::new("r2").with(link(&config)),
+        ];
+        let log: Arc<Mutex<Vec<(RobotId, u32)>>> = Arc::default();
+        let mut exec = SimExecutor::new(team, 3).with_network(OnePairPartition);
+        let tap_log = log.clone();
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(k) = p.get(&PEER_KEYFRAME) {
+                tap_log.lock().unwrap().push((p.robot, k.keyframe.id));
+            }
+        });
+        exec.run_until(Time::from_secs_f64(90.0));
+        let reports = exec.finish();
+        let restarts: u64 = reports[0].actors.iter().map(|a| a.stats.restarts).sum();
+        assert_eq!(restarts, 1, "the link was rebuilt once");
+        let log = log.lock().unwrap();
+        let ids_at = |robot: RobotId| -> Vec<u32> {
+            log.iter()
+                .filter(|(r, _)| *r == robot)
+                .map(|(_, id)| *id)
+                .collect()
+        };
+        (ids_at(RobotId(1)), ids_at(RobotId(2)))
+    };
+    let expected: Vec<u32> = (0..50).collect();
+    let (one, two) = run(true);
+    assert_eq!(one, expected, "robot 1: every keyframe, once, in order");
+    assert_eq!(two, expected, "robot 2: every keyframe, once, in order");
+    let (one, two) = run(false);
+    assert!(
+        one.len() < 50 && two.len() < 50,
+        "without the journal keyframes are lost: robot 1 got {}, robot 2 got {}",
+        one.len(),
+        two.len()
+    );
+}
+
 /// An in-memory "network" between executors, through the transport hook.
 #[derive(Default)]
 struct MemWire {

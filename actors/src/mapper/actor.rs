@@ -95,7 +95,7 @@ pub struct MapperConfig {
     /// Fit every n-th pixel in u and v (the thesis fits 128×96 images).
     pub pixel_stride: u32,
     /// Overlap threshold λ: an observation is a keyframe when less than this fraction
-    /// of its view is covered by an earlier keyframe.
+    /// of its view is covered by earlier keyframes (their union, §8.2.2).
     pub overlap_threshold: f64,
     /// Earlier keyframes compared against.
     pub remembered_keyframes: usize,
@@ -118,7 +118,7 @@ impl Default for MapperConfig {
             bandwidth: 0.03,
             pixel_stride: 2,
             overlap_threshold: 0.5,
-            remembered_keyframes: 16,
+            remembered_keyframes: 1024,
             global_map: true,
             hash_cell_m: 0.2,
             relevance_threshold: 4.0,

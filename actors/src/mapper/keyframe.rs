@@ -1,7 +1,7 @@
 //! Keyframe selection by frustum overlap (thesis §8.2.2): the field of view of an
 //! observation is approximated by a rectangular pyramid; an observation is a keyframe
-//! when the fraction of its pyramid's volume that earlier keyframes already cover is
-//! below the threshold λ.
+//! when the fraction of its pyramid's volume that earlier keyframes' pyramids already
+//! cover (together: a point inside any of them counts) is below the threshold λ.
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -97,15 +97,35 @@ impl KeyframeSelector {
         }
     }
 
-    /// Whether `frustum` is a keyframe: the largest fraction of it covered by one
-    /// earlier keyframe is below λ. A keyframe is remembered.
-    pub fn offer(&mut self, frustum: Frustum) -> bool {
-        let covered = self
+    /// Fraction of `frustum`'s volume inside the union of the remembered keyframes'
+    /// pyramids, estimated on `samples_per_axis`³ points. Only keyframes whose apex
+    /// is within reach (the sum of both ranges) can hold any of it.
+    #[must_use]
+    pub fn covered_fraction(&self, frustum: &Frustum) -> f64 {
+        let apex = Point3::from(frustum.pose.translation.vector);
+        let near: Vec<&Frustum> = self
             .keyframes
             .iter()
-            .map(|k| frustum.overlap_with(k, self.samples_per_axis))
-            .fold(0.0, f64::max);
-        if covered >= self.threshold && !self.keyframes.is_empty() {
+            .filter(|k| {
+                let reach = k.range_m + frustum.range_m;
+                (Point3::from(k.pose.translation.vector) - apex).norm_squared() <= reach * reach
+            })
+            .collect();
+        if near.is_empty() {
+            return 0.0;
+        }
+        let samples = frustum.samples(self.samples_per_axis);
+        let inside = samples
+            .iter()
+            .filter(|p| near.iter().any(|k| k.contains(p)))
+            .count();
+        inside as f64 / samples.len() as f64
+    }
+
+    /// Whether `frustum` is a keyframe: less than λ of it is covered by earlier
+    /// keyframes (the first view always is). A keyframe is remembered.
+    pub fn offer(&mut self, frustum: Frustum) -> bool {
+        if !self.keyframes.is_empty() && self.covered_fraction(&frustum) >= self.threshold {
             return false;
         }
         if self.keyframes.len() == self.keep {
@@ -161,5 +181,33 @@ mod tests {
         assert!(!s.offer(at(0.2, 0.0)), "almost the same view");
         assert!(s.offer(at(0.0, std::f64::consts::PI)), "looking back");
         assert!(s.offer(at(6.0, 0.0)), "moved past the range");
+    }
+
+    /// Coverage counts the union of earlier views: a view that two keyframes cover
+    /// together (each less than λ of it) is not a keyframe, and the fraction equals a
+    /// direct count of samples inside either pyramid.
+    #[test]
+    fn coverage_is_of_the_union_of_earlier_keyframes() {
+        let left = at(0.0, 0.6);
+        let right = at(0.0, -0.6);
+        let ahead = at(0.0, 0.0);
+        let mut s = KeyframeSelector::new(0.6, 8);
+        assert!(s.offer(left));
+        assert!(s.offer(right), "looking the other way");
+        let one = ahead
+            .overlap_with(&left, 10)
+            .max(ahead.overlap_with(&right, 10));
+        let both = s.covered_fraction(&ahead);
+        let samples = ahead.samples(10);
+        let direct = samples
+            .iter()
+            .filter(|p| left.contains(p) || right.contains(p))
+            .count() as f64
+            / samples.len() as f64;
+        assert!((both - direct).abs() < 1e-12);
+        assert!(one < 0.6 && both >= 0.6, "one {one}, both {both}");
+        assert!(!s.offer(ahead), "covered by the two together");
+        // Far-away keyframes are not consulted (and cover nothing).
+        assert_eq!(s.covered_fraction(&at(100.0, 0.0)), 0.0);
     }
 }

@@ -64,6 +64,7 @@ mod stats;
 mod store;
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 use thiserror::Error;
 
@@ -84,6 +85,39 @@ use store::{NextFragment, Store};
 /// Per-link message id, increasing by one per offer (wrapping).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct MessageId(pub u32);
+
+/// A store-and-forward message as kept across a restart of the link
+/// ([`DurableState`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DurableMessage {
+    /// Its class (a store-and-forward class when it was accepted).
+    pub class: Class,
+    /// Its message id (kept, so that a peer that has it already recognises a resend).
+    pub id: MessageId,
+    /// The encoded envelope.
+    pub bytes: Arc<[u8]>,
+    /// When it was offered, nanoseconds on the shaper's clock.
+    pub offered_ns: u64,
+    /// Intended recipients that have not acknowledged it.
+    pub missing: Vec<u32>,
+}
+
+/// What a link must not forget when it restarts — what a robot would keep in
+/// non-volatile storage: the next message id (peers remember the ids they completed
+/// and drop repeats, so a restarted link that counted from 0 again would have its
+/// first messages discarded as duplicates) and every store-and-forward message some
+/// recipient has not acknowledged, with the known peers. Queued keep-latest and
+/// drop-oldest messages, the token bucket and the counters start afresh.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DurableState {
+    /// The id the next offered message gets.
+    pub next_id: u32,
+    /// Store-and-forward recipients.
+    pub peers: Vec<u32>,
+    /// Accepted store-and-forward messages not yet acknowledged by every recipient,
+    /// oldest first per class.
+    pub stored: Vec<DurableMessage>,
+}
 
 /// Why an offer was not accepted (also counted in [`ClassStats::drops`]).
 #[derive(Clone, Copy, Debug, Error, PartialEq, Eq)]
@@ -256,6 +290,86 @@ impl LinkShaper {
         })
     }
 
+    /// A shaper that resumes from `state` (see [`DurableState`]): message ids go on
+    /// from `state.next_id`, every stored message is kept for the recipients still
+    /// missing it, even beyond the class capacity (what was accepted is never
+    /// dropped), and is sent again as if new. A stored message whose class is no
+    /// longer store-and-forward in `config` joins that class's queue.
+    pub fn restore(config: ShaperConfig, state: &DurableState) -> Result<Self, ConfigError> {
+        let mut shaper = LinkShaper::new(config)?;
+        shaper.next_id = state.next_id;
+        for &peer in &state.peers {
+            shaper.add_peer(peer);
+        }
+        let chunk = shaper.chunk_bytes;
+        for m in &state.stored {
+            let count = u16::try_from(m.bytes.len().div_ceil(chunk).max(1)).unwrap_or(u16::MAX);
+            match &mut shaper.lanes[m.class.index()] {
+                Lane::Store(store) => store.push_for(
+                    m.id.0,
+                    m.bytes.clone(),
+                    m.offered_ns,
+                    count,
+                    m.missing.iter().copied().collect(),
+                ),
+                Lane::Queue(queue) => {
+                    queue.bytes += m.bytes.len();
+                    queue.messages.push_back(Pending {
+                        id: m.id.0,
+                        bytes: m.bytes.to_vec(),
+                        offered_ns: m.offered_ns,
+                        count,
+                    });
+                }
+            }
+        }
+        Ok(shaper)
+    }
+
+    /// What must survive a restart ([`DurableState`]); cheap (message bytes are shared).
+    #[must_use]
+    pub fn durable_state(&self) -> DurableState {
+        let mut stored = Vec::new();
+        for (class, lane) in Class::ALL.iter().zip(&self.lanes) {
+            if let Lane::Store(s) = lane {
+                stored.extend(s.snapshot().map(|(id, bytes, offered_ns, missing)| {
+                    DurableMessage {
+                        class: *class,
+                        id: MessageId(id),
+                        bytes,
+                        offered_ns,
+                        missing,
+                    }
+                }));
+            }
+        }
+        DurableState {
+            next_id: self.next_id,
+            peers: self.peers(),
+            stored,
+        }
+    }
+
+    /// Changes whenever [`durable_state`](Self::durable_state)'s peers or stored
+    /// messages do (not with `next_id`): a caller keeping a journal copies the
+    /// stored messages only when it moved.
+    #[must_use]
+    pub fn store_generation(&self) -> u64 {
+        self.lanes
+            .iter()
+            .map(|lane| match lane {
+                Lane::Store(s) => s.generation(),
+                Lane::Queue(_) => 0,
+            })
+            .sum()
+    }
+
+    /// The id the next offered message gets.
+    #[must_use]
+    pub fn next_id(&self) -> MessageId {
+        MessageId(self.next_id)
+    }
+
     /// The settings.
     #[must_use]
     pub fn config(&self) -> &ShaperConfig {
@@ -354,7 +468,7 @@ impl LinkShaper {
                     stats.drops.count(DropReason::StoreFull);
                     return Err(Refused::StoreFull);
                 }
-                store.push(id, message, now_ns, count);
+                store.push(id, message.into(), now_ns, count);
             }
             Lane::Queue(queue) => {
                 if queue.config.policy == QueuePolicy::KeepLatest {

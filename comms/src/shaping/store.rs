@@ -21,6 +21,7 @@
 //! lagging peer never hears a newer message before an older one it still misses.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::Arc;
 
 use super::config::{ClassConfig, s_to_ns};
 
@@ -31,7 +32,8 @@ pub(super) struct Stored {
     pub seq: u64,
     /// Per-link message id.
     pub id: u32,
-    pub bytes: Vec<u8>,
+    /// Shared, so that a [durable snapshot](super::LinkShaper::durable_state) costs no copy.
+    pub bytes: Arc<[u8]>,
     pub offered_ns: u64,
     pub count: u16,
     /// Fragment-0 transmissions so far (the first counts).
@@ -53,6 +55,18 @@ struct Cursor {
     timeout_ns: u64,
 }
 
+impl Cursor {
+    /// A peer's cursor before anything was sent to it.
+    fn new(config: &ClassConfig) -> Self {
+        Cursor {
+            next_seq: 0,
+            next_fragment: 0,
+            deadline_ns: None,
+            timeout_ns: s_to_ns(config.retransmit_timeout_s),
+        }
+    }
+}
+
 /// The next fragment the store wants to send.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) struct NextFragment {
@@ -72,6 +86,9 @@ pub(super) struct Store {
     bytes: usize,
     next_seq: u64,
     peers: BTreeMap<u32, Cursor>,
+    /// Bumped whenever the stored messages, their recipients or the peers change
+    /// (what a durable snapshot holds).
+    generation: u64,
 }
 
 impl Store {
@@ -82,7 +99,25 @@ impl Store {
             bytes: 0,
             next_seq: 0,
             peers: BTreeMap::new(),
+            generation: 0,
         }
+    }
+
+    /// Changes whenever [`snapshot`](Self::snapshot) would.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Every stored message (id, bytes, offered at, recipients still missing it).
+    pub fn snapshot(&self) -> impl Iterator<Item = (u32, Arc<[u8]>, u64, Vec<u32>)> + '_ {
+        self.messages.iter().map(|m| {
+            (
+                m.id,
+                m.bytes.clone(),
+                m.offered_ns,
+                m.missing.iter().copied().collect(),
+            )
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -100,7 +135,28 @@ impl Store {
     }
 
     /// Stores a message for every known peer (call [`has_room`](Self::has_room) first).
-    pub fn push(&mut self, id: u32, bytes: Vec<u8>, offered_ns: u64, count: u16) {
+    pub fn push(&mut self, id: u32, bytes: Arc<[u8]>, offered_ns: u64, count: u16) {
+        let missing = self.peers.keys().copied().collect();
+        self.push_for(id, bytes, offered_ns, count, missing);
+    }
+
+    /// Stores a message for the given recipients (a restored one, see
+    /// [`LinkShaper::restore`](super::LinkShaper::restore)); recipients not yet known
+    /// become peers (without becoming recipients of other stored messages). Capacity
+    /// is not checked: what was accepted stays.
+    pub fn push_for(
+        &mut self,
+        id: u32,
+        bytes: Arc<[u8]>,
+        offered_ns: u64,
+        count: u16,
+        missing: BTreeSet<u32>,
+    ) {
+        for &peer in &missing {
+            self.peers
+                .entry(peer)
+                .or_insert_with(|| Cursor::new(&self.config));
+        }
         self.bytes += bytes.len();
         self.messages.push_back(Stored {
             seq: self.next_seq,
@@ -110,9 +166,10 @@ impl Store {
             count,
             transmissions: 0,
             sent_once: false,
-            missing: self.peers.keys().copied().collect(),
+            missing,
         });
         self.next_seq += 1;
+        self.generation += 1;
     }
 
     /// Adds a recipient: it becomes an intended recipient of everything still
@@ -121,18 +178,11 @@ impl Store {
         if self.peers.contains_key(&peer) {
             return false;
         }
-        self.peers.insert(
-            peer,
-            Cursor {
-                next_seq: 0,
-                next_fragment: 0,
-                deadline_ns: None,
-                timeout_ns: s_to_ns(self.config.retransmit_timeout_s),
-            },
-        );
+        self.peers.insert(peer, Cursor::new(&self.config));
         for m in &mut self.messages {
             m.missing.insert(peer);
         }
+        self.generation += 1;
         true
     }
 
@@ -147,6 +197,7 @@ impl Store {
             given_up += u64::from(m.missing.remove(&peer));
         }
         self.release_complete();
+        self.generation += 1;
         given_up
     }
 
@@ -163,6 +214,7 @@ impl Store {
         if !self.messages[index].missing.remove(&peer) {
             return None;
         }
+        self.generation += 1;
         let initial = s_to_ns(self.config.retransmit_timeout_s);
         let in_flight = self.in_flight(peer);
         if let Some(c) = self.peers.get_mut(&peer) {

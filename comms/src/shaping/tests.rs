@@ -713,3 +713,143 @@ proptest! {
         prop_assert_eq!(out, messages);
     }
 }
+
+/// Runs `sender` against two peers with their own reassemblers until nothing is
+/// left to send (or 60 s), acknowledging what they complete. Returns the ids each
+/// peer completed and the ids it saw again as duplicates.
+fn deliver_to_two_peers(
+    sender: &mut LinkShaper,
+    receivers: &mut [Reassembler; 2],
+    mut now: u64,
+) -> [(Vec<u32>, Vec<u32>); 2] {
+    let mut out: [(Vec<u32>, Vec<u32>); 2] = Default::default();
+    let end = now + 60 * S;
+    while let Some(t) = sender.next_send_time(now) {
+        if t > end {
+            break;
+        }
+        now = t;
+        while let Some(frame) = sender.poll(now) {
+            for (peer, receiver) in [1u32, 2].into_iter().zip(receivers.iter_mut()) {
+                if frame.to.is_some_and(|to| to != peer) {
+                    continue;
+                }
+                let got = &mut out[peer as usize - 1];
+                match receiver.push(now, 0, &frame.bytes).unwrap() {
+                    Some(Incoming::Message(m)) => {
+                        got.0.push(m.message_id);
+                        sender.acknowledge(now, peer, MessageId(m.message_id));
+                    }
+                    Some(Incoming::Duplicate { message_id, .. }) => {
+                        got.1.push(message_id);
+                        sender.acknowledge(now, peer, MessageId(message_id));
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A link that restarts from its durable state loses nothing it accepted: every
+/// stored message reaches each recipient that had not acknowledged it, under its
+/// old id (a peer that had it already sees a duplicate, not a new message), and new
+/// messages continue the id sequence instead of colliding with ids peers remember.
+#[test]
+fn a_restored_shaper_delivers_what_was_stored_and_continues_the_ids() {
+    let mut c = config(100_000, 1_200, 1_200);
+    c.keyframe = ClassConfig::store_and_forward();
+    let mut before = LinkShaper::new(c).unwrap();
+    before.add_peer(1);
+    before.add_peer(2);
+    let mut receivers = [Reassembler::default(), Reassembler::default()];
+    let generation = before.store_generation();
+    before.offer(0, Class::Odometry, vec![1; 40]).unwrap();
+    assert_eq!(
+        before.store_generation(),
+        generation,
+        "odometry is not stored"
+    );
+    for i in 0..4 {
+        before.offer(0, Class::Keyframe, vec![i; 3_000]).unwrap();
+    }
+    assert_ne!(before.store_generation(), generation);
+    // Both robots acknowledge the first keyframe; robot 1 also receives the second
+    // but its acknowledgement is lost; then the link restarts.
+    before.acknowledge(0, 1, MessageId(1));
+    before.acknowledge(0, 2, MessageId(1));
+    let state = before.durable_state();
+    assert_eq!(state.next_id, 5);
+    assert_eq!(state.peers, vec![1, 2]);
+    let missing: Vec<(u32, Vec<u32>)> = state
+        .stored
+        .iter()
+        .map(|m| (m.id.0, m.missing.clone()))
+        .collect();
+    assert_eq!(
+        missing,
+        vec![(2, vec![1, 2]), (3, vec![1, 2]), (4, vec![1, 2])],
+        "message 1 left the store; each keeps who still misses it"
+    );
+    // Robot 1 did complete messages 0–2 earlier: its reassembler remembers them.
+    let mut earlier = LinkShaper::new(c).unwrap();
+    earlier.add_peer(1);
+    for i in 0..3 {
+        earlier.offer(0, Class::Keyframe, vec![i; 3_000]).unwrap();
+    }
+    let mut warm = [Reassembler::default(), Reassembler::default()];
+    let got = deliver_to_two_peers(&mut earlier, &mut warm, 0);
+    assert_eq!(got[0].0, vec![0, 1, 2]);
+    receivers[0] = warm[0].clone();
+
+    let mut after = LinkShaper::restore(c, &state).unwrap();
+    assert_eq!(after.next_id(), MessageId(5));
+    assert_eq!(after.queued_messages(Class::Keyframe), 3);
+    let id = after.offer(S, Class::Keyframe, vec![9; 3_000]).unwrap();
+    assert_eq!(id, MessageId(5), "ids go on");
+    let got = deliver_to_two_peers(&mut after, &mut receivers, S);
+    assert_eq!(
+        got[0].0,
+        vec![3, 4, 5],
+        "robot 1: what it missed, and the new one"
+    );
+    assert_eq!(
+        got[0].1,
+        vec![2],
+        "robot 1 had message 2: a duplicate, acknowledged"
+    );
+    assert_eq!(
+        got[1].0,
+        vec![2, 3, 4, 5],
+        "robot 2: what it missed, and the new one"
+    );
+    assert_eq!(
+        after.queued_messages(Class::Keyframe),
+        0,
+        "all acknowledged"
+    );
+    assert_eq!(after.stats().class(Class::Keyframe).drops.total(), 0);
+}
+
+#[test]
+fn restoring_keeps_stored_messages_beyond_a_smaller_capacity() {
+    let mut c = config(100_000, 1_200, 1_200);
+    c.keyframe = ClassConfig::store_and_forward();
+    let mut s = LinkShaper::new(c).unwrap();
+    s.add_peer(1);
+    for i in 0..5 {
+        s.offer(0, Class::Keyframe, vec![i; 100]).unwrap();
+    }
+    c.keyframe.capacity_messages = 2;
+    let mut restored = LinkShaper::restore(c, &s.durable_state()).unwrap();
+    assert_eq!(restored.queued_messages(Class::Keyframe), 5);
+    assert_eq!(
+        restored.offer(0, Class::Keyframe, vec![9; 100]),
+        Err(Refused::StoreFull)
+    );
+    // A class that is no longer store-and-forward sends them once from its queue.
+    c.keyframe = ClassConfig::default();
+    let queued = LinkShaper::restore(c, &s.durable_state()).unwrap();
+    assert_eq!(queued.queued_messages(Class::Keyframe), 5);
+}

@@ -36,7 +36,7 @@ pub struct MapBuildOptions {
 }
 
 impl Default for MapBuildOptions {
-    /// SOGMM at σ = 0.02, every frame, pixel stride 2, λ = 0.5 over 16 keyframes
+    /// SOGMM at σ = 0.02, every frame, pixel stride 2, λ = 0.5 over 1024 keyframes
     /// (the mapper actor's defaults), seed 0, default windowed settings.
     fn default() -> Self {
         MapBuildOptions {
@@ -45,7 +45,7 @@ impl Default for MapBuildOptions {
             frame_stride: 1,
             pixel_stride: 2,
             overlap_threshold: 0.5,
-            remembered_keyframes: 16,
+            remembered_keyframes: 1024,
             seed: 0,
             windowed: WindowedConfig::default(),
         }

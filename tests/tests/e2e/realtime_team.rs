@@ -4,6 +4,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Point3};
+use troupe_actors::link::LinkJournal;
 use troupe_actors::msgs::{DEPTH_FRAME, PEER_ODOMETRY};
 use troupe_actors::runtime::{ActorSpec, Publication, RealtimeExecutor};
 use troupe_robot::{RobotConfig, RobotParts, assemble};
@@ -39,6 +40,7 @@ fn standard_robots_run_on_the_wall_clock() {
                 route: world.centreline_route(i, 2),
                 depart_at_s: 0.0,
                 camera: intrinsics_of(&CameraParams::default()),
+                link_journal: LinkJournal::default(),
             };
             assemble(&format!("robot{i}"), &config, parts).unwrap()
         })
