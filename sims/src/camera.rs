@@ -15,7 +15,7 @@ mod gpu;
 mod image;
 mod render;
 
-pub use backend::{CameraBackend, CameraRenderer, Choice};
+pub use backend::{CameraBackend, CameraRenderer, Choice, resolve_backend};
 pub use gpu::{
     GpuAlbedo, GpuCamera, GpuCaveField, GpuContext, GpuError, GpuGeometry, GpuNoise, GpuPrimitive,
     GpuScene,

@@ -346,10 +346,11 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
                 write_errors.push(format!("{}: {e}", variant.name));
             }
             eprintln!(
-                "[{finished}/{total}] {}: coverage {:.1}%, collisions {}, map bytes {}, {:.0} wall s",
+                "[{finished}/{total}] {}: coverage {:.1}%, collisions {}, map bytes offered {} sent {}, {:.0} wall s",
                 variant.name,
                 100.0 * row.final_coverage,
                 row.collisions,
+                row.map_bytes_offered,
                 row.map_bytes_sent,
                 row.wall_s
             );

@@ -425,6 +425,9 @@ pub struct RunRow {
     pub unsafe_plans: u64,
     /// Distance flown by all robots, metres.
     pub distance_m: f64,
+    /// Map bytes offered to the link (keyframe and bulk classes), all robots: what
+    /// the map sharing asked to send, whether or not the link could carry it.
+    pub map_bytes_offered: u64,
     /// Map bytes sent over the link (keyframe and bulk classes), all robots.
     pub map_bytes_sent: u64,
     /// All bytes sent over the link, all robots.
@@ -441,18 +444,26 @@ impl RunRow {
     pub fn from_output(variant: &Variant, output: &RunOutput, levels: &[f64]) -> Self {
         let s: &Summary = &output.summary;
         let over_time = &s.coverage.over_time;
-        let link_bytes = |classes: &[Class]| -> u64 {
+        let link_bytes = |classes: &[Class], offered: bool| -> u64 {
             s.per_robot
                 .iter()
                 .filter_map(|r| r.truth.link.as_ref())
                 .map(|l| {
                     classes
                         .iter()
-                        .map(|&c| l.shaper.class(c).sent_bytes)
+                        .map(|&c| {
+                            let c = l.shaper.class(c);
+                            if offered {
+                                c.offered_bytes
+                            } else {
+                                c.sent_bytes
+                            }
+                        })
                         .sum::<u64>()
                 })
                 .sum()
         };
+        let map = [Class::Keyframe, Class::Bulk];
         RunRow {
             run: variant.name.clone(),
             labels: variant.labels.clone(),
@@ -467,8 +478,9 @@ impl RunRow {
             min_inter_robot_distance_m: s.min_inter_robot_distance_m,
             unsafe_plans: s.per_robot.iter().map(|r| r.truth.unsafe_plans).sum(),
             distance_m: s.per_robot.iter().map(|r| r.truth.distance_m).sum(),
-            map_bytes_sent: link_bytes(&[Class::Keyframe, Class::Bulk]),
-            link_bytes_sent: link_bytes(&Class::ALL),
+            map_bytes_offered: link_bytes(&map, true),
+            map_bytes_sent: link_bytes(&map, false),
+            link_bytes_sent: link_bytes(&Class::ALL, false),
             coverage_over_time: over_time.clone(),
             wall_s: output.timing.wall_s,
         }
@@ -498,6 +510,7 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             "min_inter_robot_distance_m",
             "unsafe_plans",
             "distance_m",
+            "map_bytes_offered",
             "map_bytes_sent",
             "link_bytes_sent",
             "wall_s",
@@ -517,6 +530,7 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             opt(r.min_inter_robot_distance_m),
             r.unsafe_plans.to_string(),
             r.distance_m.to_string(),
+            r.map_bytes_offered.to_string(),
             r.map_bytes_sent.to_string(),
             r.link_bytes_sent.to_string(),
             format!("{:.3}", r.wall_s),
@@ -581,6 +595,7 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
             "runs",
             "final_coverage_mean",
             "final_coverage_ci95",
+            "map_bytes_offered_mean",
             "map_bytes_sent_mean",
             "map_bytes_sent_ci95",
             "collisions_total",
@@ -599,12 +614,14 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
         let mut cells = labels.clone();
         let cov: Vec<f64> = group.iter().map(|r| r.final_coverage).collect();
         let bytes: Vec<f64> = group.iter().map(|r| r.map_bytes_sent as f64).collect();
+        let offered: Vec<f64> = group.iter().map(|r| r.map_bytes_offered as f64).collect();
         let (cm, cc) = mean_ci95(&cov);
         let (bm, bc) = mean_ci95(&bytes);
         cells.extend([
             group.len().to_string(),
             cm.to_string(),
             cc.to_string(),
+            mean_ci95(&offered).0.to_string(),
             bm.to_string(),
             bc.to_string(),
             group.iter().map(|r| r.collisions).sum::<u64>().to_string(),

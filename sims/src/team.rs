@@ -16,6 +16,7 @@ use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
+use crate::camera::{CameraBackend, resolve_backend};
 use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_factory};
 use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
@@ -130,6 +131,9 @@ pub struct Summary {
     pub duration_s: f64,
     /// Number of robots.
     pub robots: usize,
+    /// The camera backend the robots render on (`auto` resolved on this machine):
+    /// `f32` GPU images differ from CPU images in rounding, which changes flights.
+    pub camera_backend: CameraBackend,
     /// The world.
     pub world: WorldSummary,
     /// Coverage of the free volume by the team's cameras.
@@ -260,6 +264,9 @@ impl Team {
             })
         })?;
         let shared_world: Arc<dyn World> = world.clone();
+        // Reported in the summary; the robots' cameras resolve `auto` the same way.
+        let mut resolved = scenario.clone();
+        resolved.camera.backend = resolve_backend(shared_world.as_ref(), scenario.camera.backend);
         let count = scenario.robots as usize;
         let fault_counters: Vec<Arc<FaultCounters>> =
             scenario.faults.iter().map(|_| Arc::default()).collect();
@@ -330,7 +337,7 @@ impl Team {
         let maps = map_collector.maps();
         executor.add_tap(map_collector);
         Ok(Team {
-            scenario: scenario.clone(),
+            scenario: resolved,
             world,
             executor,
             truth,
@@ -601,6 +608,7 @@ fn summarise(
         seed: scenario.seed,
         duration_s: scenario.duration_s,
         robots: reports.len(),
+        camera_backend: scenario.camera.backend,
         world: WorldSummary {
             kind: scenario.world.kind,
             seed: scenario.world.seed,

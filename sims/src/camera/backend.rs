@@ -60,15 +60,11 @@ fn log_once(message: &str) {
     }
 }
 
-/// The GPU camera for `world`, or why not; a software adapter only if `allow_software`.
-fn open_gpu(
-    world: &dyn World,
-    params: &CameraParams,
-    allow_software: bool,
-) -> Result<GpuCamera, String> {
-    let scene = world
-        .gpu_scene()
-        .ok_or("the world has no GPU description (mesh worlds render on the CPU)")?;
+const NO_GPU_SCENE: &str = "the world has no GPU description (mesh worlds render on the CPU)";
+
+/// Why this process's GPU adapter will not do (`Ok`: it will); a software adapter
+/// counts only if `allow_software`.
+fn check_adapter(allow_software: bool) -> Result<(), String> {
     let ctx = GpuContext::shared().map_err(|e| e.to_string())?;
     if ctx.is_software() && !allow_software {
         return Err(format!(
@@ -77,6 +73,40 @@ fn open_gpu(
             ctx.adapter_name()
         ));
     }
+    Ok(())
+}
+
+/// What `backend` comes to for `world` in this process: `Auto` becomes `Gpu` when a
+/// hardware adapter is found and the world has a GPU description, else `Cpu` (the
+/// choice and its reason are logged once); `Cpu` and `Gpu` stay. A team resolves it
+/// once for all its robots and reports it, since GPU (`f32`) images change flights.
+#[must_use]
+pub fn resolve_backend(world: &dyn World, backend: CameraBackend) -> CameraBackend {
+    if backend != CameraBackend::Auto {
+        return backend;
+    }
+    let usable = if world.gpu_scene().is_some() {
+        check_adapter(false)
+    } else {
+        Err(NO_GPU_SCENE.to_owned())
+    };
+    match usable {
+        Ok(()) => CameraBackend::Gpu,
+        Err(reason) => {
+            log_once(&format!("camera renders on the CPU: {reason}"));
+            CameraBackend::Cpu
+        }
+    }
+}
+
+/// The GPU camera for `world`, or why not; a software adapter only if `allow_software`.
+fn open_gpu(
+    world: &dyn World,
+    params: &CameraParams,
+    allow_software: bool,
+) -> Result<GpuCamera, String> {
+    let scene = world.gpu_scene().ok_or(NO_GPU_SCENE)?;
+    check_adapter(allow_software)?;
     GpuCamera::new(params, &scene).map_err(|e| e.to_string())
 }
 

@@ -1,6 +1,12 @@
 //! The default team under the sim-time executor: determinism, coverage, safety,
 //! supervision.
 
+use std::sync::{Arc, Mutex};
+
+use troupe_actors::msgs::{KEYFRAME, PEER_KEYFRAME};
+use troupe_actors::runtime::Publication;
+use troupe_comms::shaping::ClassConfig;
+use troupe_comms::wire::Class;
 use troupe_sims::report::{timeseries_csv, write_run};
 use troupe_sims::scenario::{Fault, Scenario};
 use troupe_sims::team::{RunOutput, Team};
@@ -167,10 +173,18 @@ fn injected_panics_are_restarted_counted_and_the_run_completes() {
     );
 }
 
+/// Faults of every kind in one run, with keyframes in store-and-forward: each
+/// strikes and is reported, every robot finishes (no actor stopped, sensor and
+/// planner back after the crash), and nothing accepted into store-and-forward is
+/// lost: every keyframe a robot's link took (all but those published while that
+/// robot was down, or the one its link may have been handling when it panicked)
+/// reaches the other robot, through a link panic on the sender (its journal keeps
+/// the stored messages and the message ids), a reboot of the receiver, a partition
+/// and a loss burst.
 #[test]
-fn crash_partition_and_loss_burst_strike_are_reported_and_the_team_keeps_exploring() {
-    let scenario = Scenario {
-        duration_s: 60.0,
+fn faults_strike_are_reported_and_lose_nothing_accepted_into_store_and_forward() {
+    let mut scenario = Scenario {
+        duration_s: 70.0,
         faults: vec![
             Fault::RobotCrash {
                 robot: 1,
@@ -185,15 +199,41 @@ fn crash_partition_and_loss_burst_strike_are_reported_and_the_team_keeps_explori
             Fault::LossBurst {
                 robots: Vec::new(),
                 at_s: 45.0,
-                until_s: 55.0,
+                until_s: 50.0,
                 loss_probability: 0.5,
+            },
+            Fault::ActorPanic {
+                robot: 0,
+                actor: "link".into(),
+                at_s: 35.0,
             },
         ],
         ..Scenario::default()
     };
-    let output = run(&scenario);
+    scenario.robot.link.shaper.keyframe = ClassConfig::store_and_forward();
+    scenario.robot.link.peers = vec![0, 1];
+    // (robot, stamp) of every keyframe published, and of every one received.
+    type Seen = Arc<Mutex<Vec<(u32, u64)>>>;
+    let (published, received): (Seen, Seen) = Default::default();
+    let mut team = Team::new(&scenario).expect("assemble");
+    let (tap_published, tap_received) = (published.clone(), received.clone());
+    team.add_tap(move |p: &Publication<'_>| {
+        if let Some(k) = p.get(&KEYFRAME) {
+            tap_published
+                .lock()
+                .unwrap()
+                .push((p.robot.0, k.stamp.as_nanos()));
+        } else if let Some(k) = p.get(&PEER_KEYFRAME) {
+            assert_ne!(k.robot, p.robot);
+            tap_received
+                .lock()
+                .unwrap()
+                .push((k.robot.0, k.keyframe.stamp.as_nanos()));
+        }
+    });
+    let output = team.run(|_| {});
     let s = &output.summary;
-    assert_eq!(s.faults.len(), 3);
+    assert_eq!(s.faults.len(), 4);
     assert!(s.faults.iter().all(|f| f.effect.struck), "{:?}", s.faults);
     assert!(s.faults[0].effect.dropped_events > 0);
     assert!(s.faults[2].effect.dropped_packets > 0);
@@ -202,11 +242,56 @@ fn crash_partition_and_loss_burst_strike_are_reported_and_the_team_keeps_explori
     // Robot 1 lost ten seconds of frames (5 Hz) and nothing else: it rebooted, its
     // sensor came back.
     let frames = s.per_robot[1].truth.frames;
-    assert!((230..=260).contains(&frames), "{frames} frames");
+    assert!((280..=310).contains(&frames), "{frames} frames");
     // Its planner came back with it and committed plans again (1 Hz, 10 s down).
     let plans = s.per_robot[1].truth.plans;
-    assert!(plans >= 40, "robot 1 committed {plans} plans");
+    assert!(plans >= 50, "robot 1 committed {plans} plans");
     for robot in &s.per_robot {
         assert!(robot.actors.iter().all(|a| !a.stopped), "{}", robot.name);
     }
+    let link = s.per_robot[0]
+        .actors
+        .iter()
+        .find(|a| a.name == "link")
+        .unwrap();
+    assert_eq!((link.panics, link.restarts), (1, 1));
+
+    // Store-and-forward: what each link accepted reached the other robot.
+    let secs = |t: u64| t as f64 * 1e-9;
+    let not_accepted = |robot: u32, t: f64| match robot {
+        1 => (14.5..25.5).contains(&t), // robot 1 was down
+        _ => (34.5..36.0).contains(&t), // robot 0's link panicked at 35 s
+    };
+    let received = received.lock().unwrap();
+    let published = published.lock().unwrap();
+    let mut lost_to_the_panic = 0;
+    for robot in [0, 1] {
+        let mine: Vec<u64> = published
+            .iter()
+            .filter(|(r, t)| *r == robot && secs(*t) < 60.0)
+            .map(|(_, t)| *t)
+            .collect();
+        assert!(mine.len() >= 8, "robot {robot}: {} keyframes", mine.len());
+        let missing: Vec<f64> = mine
+            .iter()
+            .filter(|t| !received.contains(&(robot, **t)))
+            .map(|t| secs(*t))
+            .collect();
+        for t in &missing {
+            assert!(
+                not_accepted(robot, *t),
+                "robot {robot}'s keyframe of {t:.2} s never reached its peer"
+            );
+        }
+        if robot == 0 {
+            lost_to_the_panic = missing.len();
+        }
+        let keyframe_class = s.per_robot[robot as usize]
+            .truth
+            .link
+            .as_ref()
+            .map(|l| l.shaper.class(Class::Keyframe).drops.total());
+        assert_eq!(keyframe_class, Some(0), "robot {robot} refused keyframes");
+    }
+    assert!(lost_to_the_panic <= 1, "{lost_to_the_panic}");
 }
