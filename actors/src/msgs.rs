@@ -123,10 +123,6 @@ pub struct GridSnapshot {
     pub unsafe_distance_m: Vec<f64>,
     /// Distance from each cell to the nearest frontier, metres (∞ without one).
     pub frontier_distance_m: Vec<f64>,
-    /// Frontiers seen earlier and now outside the window
-    /// ([`FrontierMemory`](crate::grid::frontier::FrontierMemory); empty unless it is
-    /// on).
-    pub remembered_frontiers_m: Vec<nalgebra::Point3<f64>>,
 }
 
 impl Message for GridSnapshot {
@@ -153,26 +149,12 @@ impl GridSnapshot {
             .map_or(0.0, |c| self.unsafe_distance_m[self.grid.index(c)])
     }
 
-    /// Distance to the nearest frontier at a world point: through the window's field
-    /// when the window holds a frontier; else the straight-line distance to the
-    /// nearest remembered one; ∞ when there is neither (or the point is outside the
-    /// grid and nothing is remembered).
+    /// Distance to the nearest frontier at a world point (∞ outside the grid).
     #[must_use]
     pub fn frontier_distance(&self, p: &nalgebra::Point3<f64>) -> f64 {
-        // With a frontier anywhere in the window, the field is finite in every cell.
-        if self
-            .frontier_distance_m
-            .first()
-            .is_some_and(|d| d.is_finite())
-        {
-            return self.grid.cell_of(p).map_or(f64::INFINITY, |c| {
-                self.frontier_distance_m[self.grid.index(c)]
-            });
-        }
-        self.remembered_frontiers_m
-            .iter()
-            .map(|f| (f - p).norm())
-            .fold(f64::INFINITY, f64::min)
+        self.grid.cell_of(p).map_or(f64::INFINITY, |c| {
+            self.frontier_distance_m[self.grid.index(c)]
+        })
     }
 }
 

@@ -18,9 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::changeset::{OwnChanges, PeerCells};
 use super::distance::unsafe_distance;
-use super::frontier::{
-    FrontierMemory, FrontierMemoryConfig, frontier_distance, frontier_distance_of, frontier_mask,
-};
+use super::frontier::frontier_distance;
 use super::hca::{HcaConfig, KeyframePair, hca_round, regenerate, straight_path_in_collision};
 use super::{
     CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch, UpdateRule,
@@ -68,9 +66,6 @@ pub struct GridConfig {
     /// Variable resolution and Hierarchical Collision Avoidance (thesis §5.1); off by
     /// default.
     pub hca: HcaConfig,
-    /// Remember frontiers that leave the window and steer by them when the window
-    /// holds none ([`FrontierMemory`]; off by default).
-    pub frontier_memory: FrontierMemoryConfig,
     /// Unknown cells within this distance of the first pose become free: the robot
     /// starts in a clear spot (without it, nothing would be safe before the first look
     /// around).
@@ -93,7 +88,6 @@ impl Default for GridConfig {
             index_cell_m: 4.0,
             update_rule: UpdateRule::PerRay,
             hca: HcaConfig::default(),
-            frontier_memory: FrontierMemoryConfig::default(),
         }
     }
 }
@@ -150,7 +144,6 @@ impl GridConfig {
             }
         }
         self.hca.validate().map_err(|e| format!("hca: {e}"))?;
-        self.frontier_memory.validate()?;
         self.logodds.validate().map_err(|e| format!("logodds: {e}"))
     }
 }
@@ -288,8 +281,6 @@ pub struct GridActor {
     share_changes: bool,
     own_changes: OwnChanges,
     peer_cells: PeerCells,
-    /// Frontiers left behind (when [`GridConfig::frontier_memory`] is on).
-    frontier_memory: Option<FrontierMemory>,
 }
 
 impl GridActor {
@@ -313,10 +304,6 @@ impl GridActor {
             share_changes: false,
             own_changes: OwnChanges::default(),
             peer_cells: PeerCells::default(),
-            frontier_memory: config
-                .frontier_memory
-                .enabled
-                .then(|| FrontierMemory::new(config.frontier_memory)),
         }
     }
 
@@ -435,7 +422,6 @@ impl GridActor {
         Some(GridSnapshot {
             stamp,
             frontier_distance_m: frontier_distance(&round.grid),
-            remembered_frontiers_m: Vec::new(),
             unsafe_distance_m: round.unsafe_distance_m,
             grid: round.grid,
         })
@@ -513,19 +499,10 @@ impl Actor for GridActor {
                 if let Some(snapshot) = self.hca_snapshot(ctx.now()) {
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
                 } else if let Some(grid) = &self.grid {
-                    let mask = frontier_mask(grid);
-                    let remembered_frontiers_m = match &mut self.frontier_memory {
-                        Some(memory) => {
-                            memory.update(grid, &mask);
-                            memory.outside(grid)
-                        }
-                        None => Vec::new(),
-                    };
                     let snapshot = GridSnapshot {
                         stamp: ctx.now(),
                         unsafe_distance_m: unsafe_distance(grid),
-                        frontier_distance_m: frontier_distance_of(&mask, grid),
-                        remembered_frontiers_m,
+                        frontier_distance_m: frontier_distance(grid),
                         grid: grid.clone(),
                     };
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));

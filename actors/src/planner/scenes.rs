@@ -34,7 +34,6 @@ pub fn snapshot_of(grid: LocalGrid) -> GridSnapshot {
         stamp: Time::ZERO,
         unsafe_distance_m: unsafe_distance(&grid),
         frontier_distance_m: frontier_distance(&grid),
-        remembered_frontiers_m: Vec::new(),
         grid,
     }
 }
