@@ -226,13 +226,61 @@ fn unsafe_distance_frontiers_and_entropy() {
     );
     let free = grid.cell_of(&Point3::new(0.0, -0.1, 0.1)).unwrap();
     assert_eq!(grid.state(free), CellState::Free);
+    let edge = grid.cell_of(&Point3::new(0.0, -0.3, 0.1)).unwrap();
     let frontiers = frontier_mask(&grid);
     assert!(
-        frontiers[grid.index(free)],
-        "a free cell next to unknown is a frontier"
+        frontiers[grid.index(edge)],
+        "a free cell with unknown space beside it is a frontier"
     );
     let distance = unsafe_distance(&grid);
     assert!((distance[grid.index(free)] - 0.2).abs() < 1e-12);
+}
+
+/// A gap in a wall's occupied layer (unknown behind it) is no frontier; the edge of
+/// what was seen in open space is.
+#[test]
+fn frontiers_are_openings_not_gaps_in_a_wall() {
+    let mut grid = LocalGrid::centred(
+        &Point3::origin(),
+        &Vector3::new(4.0, 4.0, 2.0),
+        0.2,
+        LogOddsParams::default(),
+    );
+    let origin = Point3::new(-1.9, 0.1, 0.1);
+    // A fan of rays: most end on a wall at x = 1 (hits), one short ray stops in open
+    // space at x = -1 (a no-return pixel, free up to there).
+    for k in -6..=6 {
+        let y = 0.1 + 0.2 * f64::from(k);
+        grid.insert_ray(&origin, &Point3::new(1.0, y, 0.1), k != 0, None);
+    }
+    grid.insert_ray(&origin, &Point3::new(-1.0, -1.5, 0.1), false, None);
+    let mask = frontier_mask(&grid);
+    // The gap in the wall (the ray at y = 0.1 gave no hit): its last free cell has
+    // unknown space behind it, but touches the wall's occupied cells.
+    let gap = (0..12)
+        .map(|i| 0.5 + 0.1 * f64::from(i))
+        .map(|x| grid.cell_of(&Point3::new(x, 0.1, 0.1)).unwrap())
+        .take_while(|c| grid.state(*c) == CellState::Free)
+        .last()
+        .unwrap();
+    let behind = [gap[0] + 1, gap[1], gap[2]];
+    assert_eq!(grid.state(behind), CellState::Unknown);
+    assert!(!mask[grid.index(gap)], "a gap in the wall");
+    // The end of the short ray in open space borders unknown space away from walls.
+    let open_end = grid.cell_of(&Point3::new(-1.05, -1.45, 0.1)).unwrap();
+    assert!(mask[grid.index(open_end)], "the open end is a frontier");
+    // Free cells with unknown space only above and below (the fan is one layer
+    // thick): floor and ceiling, not openings.
+    let inside_fan = grid.cell_of(&Point3::new(0.0, 0.5, 0.1)).unwrap();
+    assert_eq!(grid.state(inside_fan), CellState::Free);
+    assert_eq!(
+        grid.state([inside_fan[0], inside_fan[1], inside_fan[2] + 1]),
+        CellState::Unknown
+    );
+    assert!(
+        !mask[grid.index(inside_fan)],
+        "unknown only above and below"
+    );
 }
 
 /// Area under the ROC curve of `scores` for binary `labels` (Mann–Whitney, ties half).
