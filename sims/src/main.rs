@@ -10,7 +10,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use troupe_actors::mapper::MapModel;
 use troupe_sims::report::write_run;
 use troupe_sims::scenario::Scenario;
-use troupe_sims::study::{Study, run_variants, write_study};
+use troupe_sims::study::{
+    RunRow, Study, Variant, finished_run, run_variants, save_finished_run, write_study,
+};
 use troupe_sims::team::Team;
 
 /// troupe: teams of robots that explore and map unknown places over weak links.
@@ -72,6 +74,10 @@ struct SweepArgs {
     /// List the runs and exit without running them.
     #[arg(long)]
     dry_run: bool,
+    /// Reuse runs that an earlier sweep into the same directory finished with the
+    /// same scenario (their `runs/<run>/study_row.json`); fly only the rest.
+    #[arg(long)]
+    resume: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -333,16 +339,39 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
         study.name,
         study.seeds.len()
     );
+    let mut rows: Vec<Option<RunRow>> = variants
+        .iter()
+        .map(|v| {
+            args.resume
+                .then(|| finished_run(&runs_dir.join(&v.name), v, &study.coverage_levels))
+                .flatten()
+        })
+        .collect();
+    let to_fly: Vec<Variant> = variants
+        .iter()
+        .zip(&rows)
+        .filter(|(_, row)| row.is_none())
+        .map(|(v, _)| v.clone())
+        .collect();
+    let reused = total - to_fly.len();
+    if args.resume {
+        eprintln!(
+            "resuming: {reused} of {total} runs reused from {}",
+            runs_dir.display()
+        );
+    }
     let started = std::time::Instant::now();
-    let mut finished = 0usize;
+    let mut finished = reused;
     let mut write_errors = Vec::new();
-    let rows = run_variants(
-        &variants,
+    let flown = run_variants(
+        &to_fly,
         &study.coverage_levels,
         jobs,
         |variant, output, row| {
             finished += 1;
-            if let Err(e) = write_run(&runs_dir, &variant.name, output) {
+            let saved = write_run(&runs_dir, &variant.name, output)
+                .and_then(|dir| save_finished_run(&dir, variant, row));
+            if let Err(e) = saved {
                 write_errors.push(format!("{}: {e}", variant.name));
             }
             eprintln!(
@@ -356,6 +385,13 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
             );
         },
     )?;
+    let mut flown = flown.into_iter();
+    for row in &mut rows {
+        if row.is_none() {
+            *row = flown.next();
+        }
+    }
+    let rows: Vec<RunRow> = rows.into_iter().flatten().collect();
     if let Some(e) = write_errors.first() {
         anyhow::bail!("writing a run report under {}: {e}", runs_dir.display());
     }

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 use troupe_comms::wire::Class;
 
@@ -403,7 +403,7 @@ fn unset_dotted(table: &mut Table, key: &str) {
 }
 
 /// The numbers of one run that a study compares.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRow {
     /// Run name.
     pub run: String,
@@ -469,10 +469,7 @@ impl RunRow {
             labels: variant.labels.clone(),
             seed: variant.seed,
             final_coverage: s.coverage.final_fraction,
-            time_to_coverage_s: levels
-                .iter()
-                .map(|&l| over_time.iter().find(|[_, c]| *c >= l).map(|[t, _]| *t))
-                .collect(),
+            time_to_coverage_s: times_to_coverage(over_time, levels),
             collisions: s.collisions,
             robot_contacts: s.robot_contacts,
             min_inter_robot_distance_m: s.min_inter_robot_distance_m,
@@ -485,6 +482,61 @@ impl RunRow {
             wall_s: output.timing.wall_s,
         }
     }
+}
+
+/// The file in a run's report directory that lets `troupe sweep --resume` reuse the run
+/// instead of flying it again: the scenario the run flew and its row.
+pub const FINISHED_RUN_FILE: &str = "study_row.json";
+
+/// The scenario as JSON, read back once, so that a scenario compares equal to the same
+/// scenario read from a file (float parsing need not round-trip every last bit).
+fn scenario_json(scenario: &Scenario) -> serde_json::Result<serde_json::Value> {
+    serde_json::from_str(&serde_json::to_string(scenario)?)
+}
+
+/// Records a finished run in `run_dir` (its report directory) for `--resume`.
+///
+/// # Errors
+///
+/// Any I/O error.
+pub fn save_finished_run(run_dir: &Path, variant: &Variant, row: &RunRow) -> std::io::Result<()> {
+    let record = serde_json::json!({
+        "scenario": scenario_json(&variant.scenario)?,
+        "row": row,
+    });
+    let partial = run_dir.join(format!(".{FINISHED_RUN_FILE}.partial"));
+    std::fs::write(&partial, serde_json::to_vec_pretty(&record)?)?;
+    std::fs::rename(&partial, run_dir.join(FINISHED_RUN_FILE))
+}
+
+/// The row of a run that an earlier sweep finished in `run_dir`, if it flew exactly
+/// this variant's scenario, with the times to `levels` taken from its coverage curve;
+/// `None` when there is no record, it cannot be read, or the scenario differs (the
+/// study or its base scenario changed since).
+#[must_use]
+pub fn finished_run(run_dir: &Path, variant: &Variant, levels: &[f64]) -> Option<RunRow> {
+    #[derive(Deserialize)]
+    struct Record {
+        scenario: serde_json::Value,
+        row: RunRow,
+    }
+    let bytes = std::fs::read(run_dir.join(FINISHED_RUN_FILE)).ok()?;
+    let record: Record = serde_json::from_slice(&bytes).ok()?;
+    let same = scenario_json(&variant.scenario).ok()? == record.scenario
+        && record.row.run == variant.name
+        && record.row.seed == variant.seed;
+    same.then(|| RunRow {
+        time_to_coverage_s: times_to_coverage(&record.row.coverage_over_time, levels),
+        ..record.row
+    })
+}
+
+/// The first time each coverage level was reached (`None`: never).
+fn times_to_coverage(over_time: &[[f64; 2]], levels: &[f64]) -> Vec<Option<f64>> {
+    levels
+        .iter()
+        .map(|&l| over_time.iter().find(|[_, c]| *c >= l).map(|[t, _]| *t))
+        .collect()
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -838,6 +890,72 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
                 "{message:?} should mention {needle}"
             );
         }
+    }
+
+    #[test]
+    fn a_finished_run_is_reused_only_for_the_same_scenario() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(
+            dir.path(),
+            "study.toml",
+            "name = \"s\"\nseeds = [1]\nduration_s = 5.0\n[[axes]]\nkey = \"robots\"\nvalues = [1, 2]\n",
+        );
+        let variants = Study::load(&path)
+            .and_then(|s| s.variants())
+            .expect("variants");
+        let variant = &variants[0];
+        let row = RunRow {
+            run: variant.name.clone(),
+            labels: variant.labels.clone(),
+            seed: variant.seed,
+            final_coverage: 0.5,
+            time_to_coverage_s: vec![Some(2.0)],
+            collisions: 0,
+            robot_contacts: 0,
+            min_inter_robot_distance_m: None,
+            unsafe_plans: 0,
+            distance_m: 3.25,
+            map_bytes_offered: 10,
+            map_bytes_sent: 9,
+            link_bytes_sent: 20,
+            coverage_over_time: vec![[1.0, 0.1], [2.0, 0.3], [3.0, 0.5]],
+            wall_s: 1.5,
+        };
+        let run_dir = dir.path().join(&variant.name);
+        assert_eq!(
+            finished_run(&run_dir, variant, &[0.3]),
+            None,
+            "no record yet"
+        );
+        std::fs::create_dir(&run_dir).expect("run dir");
+        save_finished_run(&run_dir, variant, &row).expect("save");
+
+        assert_eq!(finished_run(&run_dir, variant, &[0.3]), Some(row.clone()));
+        let other_levels = finished_run(&run_dir, variant, &[0.1, 0.4, 0.9]).expect("reused");
+        assert_eq!(
+            other_levels.time_to_coverage_s,
+            vec![Some(1.0), Some(3.0), None]
+        );
+
+        let mut changed = variant.clone();
+        changed.scenario.duration_s = 6.0;
+        assert_eq!(
+            finished_run(&run_dir, &changed, &[0.3]),
+            None,
+            "scenario changed"
+        );
+        assert_eq!(
+            finished_run(&run_dir, &variants[1], &[0.3]),
+            None,
+            "another run"
+        );
+
+        std::fs::write(run_dir.join(FINISHED_RUN_FILE), b"{\"row\": tru").expect("corrupt");
+        assert_eq!(
+            finished_run(&run_dir, variant, &[0.3]),
+            None,
+            "corrupt record"
+        );
     }
 
     #[test]

@@ -130,6 +130,37 @@ values = [0.5, 1.0]
     ] {
         assert!(root.join(file).exists(), "{file} missing");
     }
+    // An interrupted sweep resumes: finished runs are reused, the missing one flies
+    // again and (deterministic, same seed) gives the same row but for its wall time.
+    std::fs::remove_dir_all(root.join("runs/tiny-1.0-s1")).unwrap();
+    let out = troupe(
+        &[
+            "sweep",
+            "study.toml",
+            "--jobs",
+            "2",
+            "--out",
+            "runs",
+            "--resume",
+        ],
+        dir.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("3 of 4 runs reused"), "{stderr}");
+    assert!(stderr.contains("[4/4] tiny-1.0-s1"), "{stderr}");
+    let resumed = std::fs::read_to_string(root.join("results.csv")).unwrap();
+    let without_wall_s = |csv: &str| -> Vec<String> {
+        csv.lines()
+            .map(|l| l.rsplit_once(',').map_or(l, |(rest, _)| rest).to_owned())
+            .collect()
+    };
+    assert_eq!(without_wall_s(&resumed), without_wall_s(&results));
+    assert_eq!(
+        resumed.lines().nth(1),
+        lines.get(1).copied(),
+        "reused row unchanged"
+    );
     // A bad study is one clear error and writes nothing.
     std::fs::write(dir.path().join("bad.toml"), "name = \"x\"\nseeds = []\n").unwrap();
     let out = troupe(&["sweep", "bad.toml", "--out", "bad_runs"], dir.path());
