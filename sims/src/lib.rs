@@ -9,7 +9,7 @@
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
 //! - [`process`], [`launch`]: one robot per process over zenoh (`troupe-robot`,
-//!   `troupe launch`).
+//!   `troupe launch`); [`replay`]: a robot process replaying a recorded sequence.
 #![deny(missing_docs)]
 
 pub mod camera;
@@ -21,6 +21,7 @@ pub mod monitor;
 pub mod network;
 pub mod plot;
 pub mod process;
+pub mod replay;
 pub mod report;
 pub mod scenario;
 pub mod sequence;

@@ -1,6 +1,7 @@
 //! One robot per process (`troupe-robot --config robot.toml`): the robot of a
 //! scenario's team with its own simulated vehicle and camera in the scenario's world
-//! (the same world seed gives the same world in every process), the standard actors on
+//! (the same world seed gives the same world in every process), or with a recorded
+//! sequence as its sensor (`sequence`, see [`crate::replay`]), the standard actors on
 //! the real-time executor, and the link over zenoh.
 //!
 //! A robot file names the scenario and which robot of its team this process is:
@@ -10,6 +11,8 @@
 //! scenario = "../scenarios/default.toml"   # relative to this file
 //! duration_s = 60.0                        # wall seconds; absent: until Ctrl-C
 //! out = "runs/processes/robot0"            # relative to this file; default: next to it
+//! # sequence = "recordings/tunnel"         # replay a recorded sequence (TUM RGB-D
+//! #                                        # layout) instead of the simulated camera
 //!
 //! [zenoh]                                  # troupe_comms::zenoh::ZenohConfig
 //! mode = "peer"
@@ -33,7 +36,9 @@ use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 
+use crate::replay::replaying_robot;
 use crate::scenario::{Scenario, describe};
+use crate::sequence::Sequence;
 use crate::team::simulated_robot;
 
 /// A robot file as written (see the module docs).
@@ -50,6 +55,11 @@ pub struct ProcessConfig {
     /// Output directory, relative to the robot file; default `robot<i>/` next to it.
     #[serde(default)]
     pub out: Option<PathBuf>,
+    /// A recorded sequence directory (TUM RGB-D layout, [`crate::sequence`]),
+    /// relative to the robot file: the robot replays it as its sensor instead of
+    /// flying the simulated vehicle and camera ([`crate::replay`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<PathBuf>,
     /// The zenoh session.
     #[serde(default)]
     pub zenoh: ZenohConfig,
@@ -64,6 +74,8 @@ pub struct RobotProcess {
     pub scenario: Scenario,
     /// Where the outputs go.
     pub out: PathBuf,
+    /// The recorded sequence the robot replays, if the file names one.
+    pub sequence: Option<Sequence>,
 }
 
 /// Why a robot file cannot be used.
@@ -123,10 +135,17 @@ impl RobotProcess {
                 .clone()
                 .unwrap_or_else(|| PathBuf::from(format!("robot{}", config.robot))),
         );
+        let sequence = config
+            .sequence
+            .as_ref()
+            .map(|dir| Sequence::open(&base.join(dir)))
+            .transpose()
+            .map_err(|e| ProcessError::Config(format!("{}: `sequence`: {e}", path.display())))?;
         Ok(RobotProcess {
             config,
             scenario,
             out,
+            sequence,
         })
     }
 }
@@ -173,22 +192,37 @@ pub async fn run(
 ) -> Result<ProcessSummary, ProcessError> {
     let scenario = &process.scenario;
     let id = process.config.robot;
-    let world = scenario
-        .world
-        .build()
-        .map_err(|e| ProcessError::Run(format!("building the world: {e}")))?;
     // Nothing of the link outlives the process: start the message ids somewhere
     // new, so that peers who remember a previous run's ids (their duplicate filter)
     // do not drop this run's first messages as repeats.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u32);
-    let robot = simulated_robot(
-        scenario,
-        &world,
-        id as usize,
-        LinkJournal::starting_at(first_id),
-    )
+    let journal = LinkJournal::starting_at(first_id);
+    let robot = match &process.sequence {
+        Some(sequence) => {
+            tracing::info!(
+                robot = id,
+                frames = sequence.len(),
+                "replaying {}",
+                sequence.dir().display()
+            );
+            replaying_robot(
+                &format!("robot{id}"),
+                &scenario.robot,
+                sequence.clone(),
+                scenario.vehicle.odometry_rate_hz,
+                journal,
+            )
+        }
+        None => {
+            let world = scenario
+                .world
+                .build()
+                .map_err(|e| ProcessError::Run(format!("building the world: {e}")))?;
+            simulated_robot(scenario, &world, id as usize, journal)
+        }
+    }
     .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {e}")))?;
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
@@ -307,6 +341,7 @@ pub fn write_team(
                 scenario: scenario.to_path_buf(),
                 duration_s,
                 out: Some(PathBuf::from(format!("robot{i}"))),
+                sequence: None,
                 zenoh: ZenohConfig {
                     listen: vec![endpoints[i].clone()],
                     connect: endpoints

@@ -7,13 +7,15 @@ use std::process::ExitCode;
 use clap::Parser;
 use troupe_sims::process::{RobotProcess, run};
 
-/// Run one robot: its simulated vehicle and camera in the scenario's world, the
+/// Run one robot: its simulated vehicle and camera in the scenario's world (or, with
+/// `sequence` in the robot file, a recorded sequence replayed as its sensor), the
 /// standard actors on the wall clock, the link over zenoh. Writes `summary.json` and
 /// `trajectory.csv` on exit (end of `duration_s`, Ctrl-C or SIGTERM).
 #[derive(Debug, Parser)]
 #[command(name = "troupe-robot", version, about, long_about = None)]
 struct Args {
-    /// The robot file (TOML): `robot`, `scenario`, `duration_s`, `out`, `[zenoh]`.
+    /// The robot file (TOML): `robot`, `scenario`, `duration_s`, `out`, `sequence`,
+    /// `[zenoh]`.
     #[arg(long)]
     config: PathBuf,
     /// Override the file's `duration_s` (wall seconds).

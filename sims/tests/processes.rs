@@ -297,3 +297,94 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
         .expect("ip netns list");
     assert!(!String::from_utf8_lossy(&leftover.stdout).contains(&prefix));
 }
+
+/// A robot process can replay a recorded sequence as its sensor (issue 8 item 7):
+/// robot 1 of a two-robot cave team replays frames recorded in the same cave while
+/// robot 0 flies; robot 0 gets robot 1's keyframes and odometry, and robot 1 keeps
+/// only the actors that do not move it, with the recorded poses as its odometry.
+#[test]
+fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+    use troupe_sims::replay::REPLAY_ACTORS;
+    use troupe_sims::scenario::Scenario;
+    use troupe_sims::sequence::record_camera;
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scenario_file = dir.path().join("team.toml");
+    std::fs::write(&scenario_file, "name = \"replay\"\nrobots = 2\n").expect("scenario");
+    let scenario = Scenario::load(&scenario_file).expect("scenario loads");
+    let world = scenario.world.build().expect("world");
+    // Robot 1 turns on the spot at its start, a frame every 0.2 s for 8 s.
+    let start = world.start_position(1, 2);
+    let path: Vec<(f64, Isometry3<f64>)> = (0..40)
+        .map(|k| {
+            let k = f64::from(k);
+            (
+                0.2 * k,
+                Isometry3::from_parts(
+                    Translation3::from(start.coords),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, 0.16 * k),
+                ),
+            )
+        })
+        .collect();
+    record_camera(
+        &dir.path().join("recording"),
+        &*world,
+        &scenario.camera,
+        &path,
+        7,
+    )
+    .expect("recorded sequence");
+
+    let ports = free_ports(2);
+    let duration_s = 20.0;
+    let files = write_team(
+        dir.path(),
+        Path::new("team.toml"),
+        &loopback_endpoints(&ports),
+        Some(duration_s),
+    )
+    .expect("robot files");
+    let replay_file = &files[1];
+    let text = std::fs::read_to_string(replay_file).expect("robot1.toml");
+    std::fs::write(replay_file, format!("sequence = \"recording\"\n{text}")).expect("robot1.toml");
+    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
+    wait_all(&mut children, duration_s);
+    let outputs = outputs(dir.path(), 2);
+
+    let (flying, _) = &outputs[0];
+    assert!(messages(flying, "peer/odometry") > 50, "robot0: {flying}");
+    assert!(messages(flying, "peer/keyframe") >= 1, "robot0: {flying}");
+    assert_eq!(flying["link"]["rejected_messages"].as_u64(), Some(0));
+
+    let (replaying, trajectory) = &outputs[1];
+    let actors: Vec<&str> = replaying["actors"]
+        .as_array()
+        .expect("actors")
+        .iter()
+        .filter_map(|a| a["name"].as_str())
+        .collect();
+    assert!(
+        actors.iter().all(|a| REPLAY_ACTORS.contains(a)) && actors.contains(&"mapper"),
+        "robot1 runs {actors:?}"
+    );
+    for actor in replaying["actors"].as_array().expect("actors") {
+        assert_eq!(actor["errors"].as_u64(), Some(0), "robot1: {actor}");
+        assert_eq!(actor["panics"].as_u64(), Some(0), "robot1: {actor}");
+    }
+    assert!(
+        messages(replaying, "sensor/frame") >= 30,
+        "robot1: {replaying}"
+    );
+    assert!(
+        messages(replaying, "peer/odometry") > 50,
+        "robot1: {replaying}"
+    );
+    // Its odometry is the recording: it never left the recorded spot.
+    assert!(!trajectory.is_empty());
+    for [_, x, y, z] in trajectory {
+        let moved = ((x - start.x).powi(2) + (y - start.y).powi(2) + (z - start.z).powi(2)).sqrt();
+        assert!(moved < 1e-3, "robot1 at {x} {y} {z}, recorded at {start}");
+    }
+}
