@@ -771,7 +771,8 @@ pub fn write_study(root: &Path, study: &Study, rows: &[RunRow]) -> std::io::Resu
     Ok(written)
 }
 
-/// Mean team coverage over time per combination of levels, with 95% bands over seeds.
+/// Mean team coverage over time per combination of levels, with 95% bands over seeds
+/// (clipped to the 0–100 % a coverage can take).
 #[must_use]
 pub fn coverage_chart(study: &Study, rows: &[RunRow]) -> Chart {
     let series = groups(rows)
@@ -792,7 +793,8 @@ pub fn coverage_chart(study: &Study, rows: &[RunRow]) -> Chart {
                     .collect();
                 let (mean, half) = mean_ci95(&values);
                 points.push((t, mean));
-                band.push((t, mean - half, mean + half));
+                // Coverage lies in [0, 100] %: a wide interval over few seeds is cut there.
+                band.push((t, (mean - half).max(0.0), (mean + half).min(100.0)));
             }
             Series {
                 label: if labels.is_empty() {
@@ -956,6 +958,43 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             None,
             "corrupt record"
         );
+    }
+
+    #[test]
+    fn coverage_bands_stay_within_0_and_100_percent() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(
+            dir.path(),
+            "study.toml",
+            "name = \"s\"\nseeds = [1, 2, 3]\nduration_s = 5.0\n",
+        );
+        let study = Study::load(&path).expect("study");
+        // Three seeds far apart: the 95% interval alone would reach below 0 and above 100 %.
+        let rows: Vec<RunRow> = [0.02, 0.5, 0.98]
+            .iter()
+            .zip(1..)
+            .map(|(&c, seed)| RunRow {
+                run: format!("s-s{seed}"),
+                labels: Vec::new(),
+                seed,
+                final_coverage: c,
+                time_to_coverage_s: Vec::new(),
+                collisions: 0,
+                robot_contacts: 0,
+                min_inter_robot_distance_m: None,
+                unsafe_plans: 0,
+                distance_m: 0.0,
+                map_bytes_offered: 0,
+                map_bytes_sent: 0,
+                link_bytes_sent: 0,
+                coverage_over_time: vec![[1.0, c]],
+                wall_s: 0.0,
+            })
+            .collect();
+        let chart = coverage_chart(&study, &rows);
+        let (t, low, high) = chart.series[0].band[0];
+        assert_eq!((t, low, high), (1.0, 0.0, 100.0));
+        assert!((chart.series[0].points[0].1 - 50.0).abs() < 1e-9);
     }
 
     #[test]
