@@ -19,6 +19,7 @@ pub mod launch;
 pub mod maps;
 pub mod monitor;
 pub mod network;
+pub mod og_meter;
 pub mod plot;
 pub mod process;
 pub mod replay;

@@ -25,6 +25,11 @@ pub struct MetricsConfig {
     pub coverage_pixel_stride: usize,
     /// Period of the time series, seconds.
     pub sample_period_s: f64,
+    /// Cell edges at which to count what the occupancy-grid baseline would send for
+    /// each robot's own depth frames, whatever the robot shares (thesis §8.2.6,
+    /// Table 8.1: 0.1, 0.05, 0.025 m); reported in `summary.json` as `og_change_sets`.
+    /// Empty (the default): not counted. Memory grows with the cells observed.
+    pub og_change_set_resolutions_m: Vec<f64>,
 }
 
 impl Default for MetricsConfig {
@@ -33,6 +38,7 @@ impl Default for MetricsConfig {
             coverage_cell_m: 0.4,
             coverage_pixel_stride: 4,
             sample_period_s: 1.0,
+            og_change_set_resolutions_m: Vec::new(),
         }
     }
 }
@@ -232,6 +238,14 @@ impl Scenario {
                 "metrics.sample_period_s",
                 format!("must be ≥ 0.01 s, got {}", m.sample_period_s),
             ));
+        }
+        for (i, r) in m.og_change_set_resolutions_m.iter().enumerate() {
+            if !(r.is_finite() && *r >= 0.01) {
+                return Err(invalid(
+                    &format!("metrics.og_change_set_resolutions_m[{i}]"),
+                    format!("must be ≥ 0.01 m, got {r}"),
+                ));
+            }
         }
         for (i, fault) in self.faults.iter().enumerate() {
             fault

@@ -436,6 +436,12 @@ pub struct RunRow {
     pub coverage_over_time: Vec<[f64; 2]>,
     /// Wall seconds.
     pub wall_s: f64,
+    /// What the robots' own frames would have cost as occupancy-grid change sets,
+    /// `[resolution_m, bytes]` summed over robots, per resolution of
+    /// `metrics.og_change_set_resolutions_m` (empty when none; see
+    /// [`crate::og_meter`]).
+    #[serde(default)]
+    pub og_change_set_bytes: Vec<[f64; 2]>,
 }
 
 impl RunRow {
@@ -480,6 +486,21 @@ impl RunRow {
             link_bytes_sent: link_bytes(&Class::ALL, false),
             coverage_over_time: over_time.clone(),
             wall_s: output.timing.wall_s,
+            og_change_set_bytes: variant
+                .scenario
+                .metrics
+                .og_change_set_resolutions_m
+                .iter()
+                .map(|&r| {
+                    let bytes: u64 = s
+                        .og_change_sets
+                        .iter()
+                        .filter(|o| o.totals.resolution_m == r)
+                        .map(|o| o.totals.bytes)
+                        .sum();
+                    [r, bytes as f64]
+                })
+                .collect(),
         }
     }
 }
@@ -569,6 +590,14 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
         ]
         .map(String::from),
     );
+    // One column per resolution at which any run counted the baseline's bytes.
+    let mut og_resolutions: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| r.og_change_set_bytes.iter().map(|[res, _]| *res))
+        .collect();
+    og_resolutions.sort_by(f64::total_cmp);
+    og_resolutions.dedup();
+    header.extend(og_resolutions.iter().map(|r| format!("og_bytes_{r}m")));
     let mut out = header.join(",");
     out.push('\n');
     for r in rows {
@@ -587,6 +616,12 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             r.link_bytes_sent.to_string(),
             format!("{:.3}", r.wall_s),
         ]);
+        cells.extend(og_resolutions.iter().map(|res| {
+            r.og_change_set_bytes
+                .iter()
+                .find(|[x, _]| x == res)
+                .map_or(String::new(), |[_, bytes]| bytes.to_string())
+        }));
         out.push_str(&cells.join(","));
         out.push('\n');
     }
@@ -922,6 +957,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             link_bytes_sent: 20,
             coverage_over_time: vec![[1.0, 0.1], [2.0, 0.3], [3.0, 0.5]],
             wall_s: 1.5,
+            og_change_set_bytes: vec![[0.1, 1000.0]],
         };
         let run_dir = dir.path().join(&variant.name);
         assert_eq!(
@@ -973,28 +1009,50 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         let rows: Vec<RunRow> = [0.02, 0.5, 0.98]
             .iter()
             .zip(1..)
-            .map(|(&c, seed)| RunRow {
-                run: format!("s-s{seed}"),
-                labels: Vec::new(),
-                seed,
-                final_coverage: c,
-                time_to_coverage_s: Vec::new(),
-                collisions: 0,
-                robot_contacts: 0,
-                min_inter_robot_distance_m: None,
-                unsafe_plans: 0,
-                distance_m: 0.0,
-                map_bytes_offered: 0,
-                map_bytes_sent: 0,
-                link_bytes_sent: 0,
-                coverage_over_time: vec![[1.0, c]],
-                wall_s: 0.0,
-            })
+            .map(|(&c, seed)| row_with_coverage(seed, c))
             .collect();
         let chart = coverage_chart(&study, &rows);
         let (t, low, high) = chart.series[0].band[0];
         assert_eq!((t, low, high), (1.0, 0.0, 100.0));
         assert!((chart.series[0].points[0].1 - 50.0).abs() < 1e-9);
+    }
+
+    /// A row of run `s-s<seed>` that reached `coverage` at 1 s.
+    fn row_with_coverage(seed: u64, coverage: f64) -> RunRow {
+        RunRow {
+            run: format!("s-s{seed}"),
+            labels: Vec::new(),
+            seed,
+            final_coverage: coverage,
+            time_to_coverage_s: Vec::new(),
+            collisions: 0,
+            robot_contacts: 0,
+            min_inter_robot_distance_m: None,
+            unsafe_plans: 0,
+            distance_m: 0.0,
+            map_bytes_offered: 0,
+            map_bytes_sent: 0,
+            link_bytes_sent: 0,
+            coverage_over_time: vec![[1.0, coverage]],
+            wall_s: 0.0,
+            og_change_set_bytes: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn results_have_one_og_bytes_column_per_resolution_counted() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(dir.path(), "study.toml", "name = \"s\"\nseeds = [1, 2]\n");
+        let study = Study::load(&path).expect("study");
+        let mut counted = row_with_coverage(1, 0.5);
+        counted.og_change_set_bytes = vec![[0.1, 800.0], [0.05, 6400.0]];
+        let csv = results_csv(&study, &[counted, row_with_coverage(2, 0.5)]);
+        let lines: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+        let n = lines[0].len();
+        assert_eq!(lines[0][n - 2..], ["og_bytes_0.05m", "og_bytes_0.1m"]);
+        assert_eq!(lines[1][n - 2..], ["6400", "800"]);
+        assert_eq!(lines[2][n - 2..], ["", ""], "a run that counted nothing");
+        assert!(lines.iter().all(|l| l.len() == n));
     }
 
     #[test]

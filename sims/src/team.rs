@@ -21,6 +21,7 @@ use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_f
 use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
+use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::{SimCameraSource, intrinsics_of};
 use crate::vehicle::{SimVehicle, new_body};
@@ -36,6 +37,7 @@ pub struct Team {
     executor: SimExecutor,
     truth: Arc<Mutex<Truth>>,
     maps: Arc<Mutex<Vec<GmmMap>>>,
+    og_meters: Option<OgMeters>,
     network_stats: Arc<Mutex<NetStats>>,
     fault_counters: Vec<Arc<FaultCounters>>,
 }
@@ -156,6 +158,10 @@ pub struct Summary {
     pub topics: BTreeMap<String, TopicStats>,
     /// Each robot's map as published by its mapper (empty without a mapper).
     pub maps: Vec<MapSummary>,
+    /// What each robot's own frames would have cost as occupancy-grid change sets at
+    /// each of `metrics.og_change_set_resolutions_m` (absent when none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub og_change_sets: Vec<OgChangeSets>,
 }
 
 /// One robot's published map.
@@ -336,12 +342,20 @@ impl Team {
         let map_collector = MapCollector::new(count);
         let maps = map_collector.maps();
         executor.add_tap(map_collector);
+        let resolutions_m = &scenario.metrics.og_change_set_resolutions_m;
+        let og_meters = (!resolutions_m.is_empty()).then(|| {
+            let tap = OgMeterTap::new(count, resolutions_m, &scenario.robot.grid);
+            let handle = tap.handle();
+            executor.add_tap(tap);
+            handle
+        });
         Ok(Team {
             scenario: resolved,
             world,
             executor,
             truth,
             maps,
+            og_meters,
             network_stats,
             fault_counters,
         })
@@ -462,6 +476,7 @@ impl Team {
                 .unwrap_or_else(std::sync::PoisonError::into_inner),
         );
         summary.maps = maps.iter().map(MapSummary::of).collect();
+        summary.og_change_sets = self.og_meters.map(|m| m.totals()).unwrap_or_default();
         RunOutput {
             summary,
             timing,
@@ -633,5 +648,6 @@ fn summarise(
         per_robot,
         topics,
         maps: Vec::new(),
+        og_change_sets: Vec::new(),
     }
 }

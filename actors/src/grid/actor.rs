@@ -207,23 +207,13 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
     }
 }
 
-/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] or
-/// [`UpdateRule::PerEndVoxel`] the frame's returns form one scan and its no-return
-/// pixels (free up to the range) a second.
-pub fn insert_frame_with(
-    grid: &mut LocalGrid,
-    frame: &DepthFrame,
-    stride: u32,
-    rule: UpdateRule,
-    scratch: &mut ScanScratch,
-) {
-    if rule == UpdateRule::PerRay {
-        insert_frame(grid, frame, stride);
-        return;
-    }
+/// The two scans a depth frame makes under the per-scan rules, as world points: its
+/// returns (`hits`) and its no-return pixels, free as far as [`free_range_m`] allows
+/// with `margin_m` (`misses`); every `stride`-th pixel in u and v.
+#[must_use]
+pub fn frame_scans(frame: &DepthFrame, stride: u32, margin_m: f64) -> FrameScans {
     let k = &frame.intrinsics;
     let origin = Point3::from(frame.pose.translation.vector);
-    let margin_m = 2.0 * grid.resolution_m();
     let stride = stride.max(1) as usize;
     let (mut hits, mut misses) = (Vec::new(), Vec::new());
     for row in (0..k.height as usize).step_by(stride) {
@@ -240,8 +230,41 @@ pub fn insert_frame_with(
             }
         }
     }
-    scratch.insert_by(rule, grid, &origin, &hits, true, None);
-    scratch.insert_by(rule, grid, &origin, &misses, false, None);
+    FrameScans {
+        origin,
+        hits,
+        misses,
+    }
+}
+
+/// A depth frame as two scans from its sensor position ([`frame_scans`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameScans {
+    /// The sensor position, where every ray starts.
+    pub origin: Point3<f64>,
+    /// Ends of the rays that hit a surface.
+    pub hits: Vec<Point3<f64>>,
+    /// Ends of the free-space rays of pixels without a return.
+    pub misses: Vec<Point3<f64>>,
+}
+
+/// [`insert_frame`] under an [`UpdateRule`]: with [`UpdateRule::PerScan`] or
+/// [`UpdateRule::PerEndVoxel`] the frame's returns form one scan and its no-return
+/// pixels (free up to the range) a second ([`frame_scans`]).
+pub fn insert_frame_with(
+    grid: &mut LocalGrid,
+    frame: &DepthFrame,
+    stride: u32,
+    rule: UpdateRule,
+    scratch: &mut ScanScratch,
+) {
+    if rule == UpdateRule::PerRay {
+        insert_frame(grid, frame, stride);
+        return;
+    }
+    let scans = frame_scans(frame, stride, 2.0 * grid.resolution_m());
+    scratch.insert_by(rule, grid, &scans.origin, &scans.hits, true, None);
+    scratch.insert_by(rule, grid, &scans.origin, &scans.misses, false, None);
 }
 
 /// Ray-traces a keyframe GMM into a grid (§8.2.2): `min(support, max_samples)`

@@ -294,6 +294,27 @@ impl LocalGrid {
         Some(self.walk_lattice(&g0, &g1))
     }
 
+    /// The world-lattice cells ([`LocalGrid::lattice_cell`]) that a segment crosses at
+    /// `resolution_m`, with no window: the walk of [`LocalGrid::walk`] with every
+    /// step's `cell` a lattice cell (and `index` meaningless). `None` for non-finite
+    /// input or points outside the lattice.
+    #[must_use]
+    pub fn lattice_walk(
+        resolution_m: f64,
+        origin: &Point3<f64>,
+        end: &Point3<f64>,
+    ) -> Option<RayWalk> {
+        let lattice_corner = Point3::from(Vector3::repeat(-(LATTICE_HALF as f64) * resolution_m));
+        // One cell at the lattice's corner: local coordinates are lattice coordinates.
+        let unit = LocalGrid::centred(
+            &lattice_corner,
+            &Vector3::repeat(resolution_m),
+            resolution_m,
+            LogOddsParams::default(),
+        );
+        unit.walk(origin, end)
+    }
+
     /// `p` in world-lattice cell units (cell `c` spans `[c, c + 1)` along each axis),
     /// as [`LocalGrid::walk`] sees it; `None` if not finite or outside the lattice.
     pub(super) fn lattice_coords(&self, p: &Point3<f64>) -> Option<Vector3<f64>> {

@@ -16,6 +16,8 @@
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
 //! - [`frontier`]: frontier cells and map entropy.
 //! - [`changeset`]: occupancy-grid map sharing (the thesis' OG baseline, §8.2.5).
+//! - [`meter`]: the bytes that baseline would send for a robot's frames at any
+//!   resolution, without flying it (§8.2.6, Table 8.1).
 
 mod actor;
 pub mod changeset;
@@ -24,11 +26,13 @@ mod endvoxel;
 pub mod frontier;
 pub mod hca;
 mod local;
+pub mod meter;
 mod scan;
 mod store;
 
 pub use actor::{
-    GridActor, GridConfig, free_range_m, insert_frame, insert_frame_with, insert_keyframe,
+    FrameScans, GridActor, GridConfig, frame_scans, free_range_m, insert_frame, insert_frame_with,
+    insert_keyframe,
 };
 pub use endvoxel::EndVoxelScratch;
 pub use local::{CellBox, CellState, LocalGrid, LogOddsParams, RayStep, RayWalk};

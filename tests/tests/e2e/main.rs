@@ -4,6 +4,7 @@
 
 mod crossing;
 mod keyframes;
+mod map_bytes;
 mod planner_team;
 mod realtime_team;
 mod team_run;

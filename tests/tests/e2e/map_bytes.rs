@@ -1,0 +1,61 @@
+//! What the occupancy-grid baseline would send, counted on a team's own frames
+//! (`metrics.og_change_set_resolutions_m`, thesis §8.2.6): it matches what the baseline
+//! sends when it is flown, and counting it changes nothing else in the run.
+
+use troupe_actors::grid::UpdateRule;
+use troupe_robot::MapSharing;
+use troupe_sims::camera::CameraBackend;
+use troupe_sims::report::timeseries_csv;
+use troupe_sims::scenario::Scenario;
+use troupe_sims::team::{RunOutput, Team};
+
+fn run(scenario: &Scenario) -> RunOutput {
+    Team::new(scenario).expect("assemble").run(|_| {})
+}
+
+#[test]
+fn og_meter_matches_the_flown_baseline_and_changes_no_flight() {
+    // One robot sharing change sets, its grid built from its own frames alone (no
+    // mapper, no peers): what it publishes on `grid/changes` is the baseline.
+    let mut scenario = Scenario {
+        name: "og_meter".into(),
+        duration_s: 15.0,
+        robots: 1,
+        ..Scenario::default()
+    };
+    scenario.camera.backend = CameraBackend::Cpu;
+    scenario.robot.map_sharing = MapSharing::Grid;
+    scenario.robot.mapper.enabled = false;
+    scenario.robot.grid.update_rule = UpdateRule::PerScan;
+    let plain = run(&scenario);
+    let resolution_m = scenario.robot.grid.resolution_m;
+    scenario.metrics.og_change_set_resolutions_m = vec![resolution_m, resolution_m / 2.0];
+    let counted = run(&scenario);
+
+    // Counting is observation only: the same flight, the same summary otherwise.
+    let mut summary = counted.summary.clone();
+    let og = std::mem::take(&mut summary.og_change_sets);
+    assert_eq!(summary, plain.summary);
+    assert_eq!(
+        timeseries_csv(&counted.timeseries),
+        timeseries_csv(&plain.timeseries)
+    );
+
+    assert_eq!(og.len(), 2);
+    let (at_grid, finer) = (&og[0].totals, &og[1].totals);
+    let frames = summary.per_robot[0].truth.frames;
+    assert_eq!(at_grid.frames, frames);
+    let flown = summary.per_robot[0].topics["grid/changes"].bytes as f64;
+    assert!(flown > 100_000.0, "the baseline sent {flown} B");
+    // The flown grid forgets cells that leave its window and drops changes outside
+    // it; over 15 s the two agree closely.
+    let ratio = at_grid.bytes as f64 / flown;
+    eprintln!("og meter: counted {} B, flown {flown} B", at_grid.bytes);
+    assert!(
+        (0.98..=1.02).contains(&ratio),
+        "counted {} B, flown {flown} B",
+        at_grid.bytes
+    );
+    // Halving the cell edge multiplies the cells a frame changes.
+    assert!(finer.bytes > 3 * at_grid.bytes, "{og:?}");
+}
