@@ -14,13 +14,14 @@
 //! two count the same cells (tested).
 
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::BuildHasherDefault;
 
 use nalgebra::Point3;
 use serde::Serialize;
 
 use super::changeset::MAX_CHANGES_PER_SET;
 use super::{LocalGrid, LogOddsParams, frame_scans};
+use crate::mapper::hash::CellHasher;
 use crate::msgs::DepthFrame;
 
 /// Bytes of one change set's metadata: grid dimensions (3 × u32) and origin (3 × f32),
@@ -142,31 +143,8 @@ fn pack(cell: [usize; 3]) -> u64 {
     x | y << 21 | z << 42
 }
 
-/// Maps keyed by [`pack`]ed cells: the keys are distinct integers, so a multiply
-/// (high half folded onto the low, which picks the bucket) spreads them well enough,
-/// at a fraction of the default hasher's cost.
+/// Maps keyed by [`pack`]ed cells.
 type CellMap<V> = HashMap<u64, V, BuildHasherDefault<CellHasher>>;
-
-/// The hasher of [`CellMap`] (a Fibonacci multiply of each `u64` written).
-#[derive(Default)]
-struct CellHasher(u64);
-
-impl Hasher for CellHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(self.0 << 8 | u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, key: u64) {
-        let h = key.wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        self.0 = h ^ h >> 32;
-    }
-}
 
 #[cfg(test)]
 mod tests;
