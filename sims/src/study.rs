@@ -1044,9 +1044,13 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         let dir = tempfile::tempdir().expect("temp dir");
         let path = write(dir.path(), "study.toml", "name = \"s\"\nseeds = [1, 2]\n");
         let study = Study::load(&path).expect("study");
-        let mut counted = row_with_coverage(1, 0.5);
+        let levels = study.coverage_levels.len();
+        let [mut counted, mut plain] = [1, 2].map(|seed| row_with_coverage(seed, 0.5));
+        for row in [&mut counted, &mut plain] {
+            row.time_to_coverage_s = vec![None; levels];
+        }
         counted.og_change_set_bytes = vec![[0.1, 800.0], [0.05, 6400.0]];
-        let csv = results_csv(&study, &[counted, row_with_coverage(2, 0.5)]);
+        let csv = results_csv(&study, &[counted, plain]);
         let lines: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
         let n = lines[0].len();
         assert_eq!(lines[0][n - 2..], ["og_bytes_0.05m", "og_bytes_0.1m"]);
