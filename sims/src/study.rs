@@ -1060,6 +1060,23 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
     }
 
     #[test]
+    fn the_shipped_studies_load_and_every_variant_validates() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
+        let mut studies = 0;
+        for entry in std::fs::read_dir(&dir).expect("sims/studies") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let variants = Study::load(&path)
+                    .and_then(|s| s.variants())
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                assert!(!variants.is_empty(), "{}", path.display());
+                studies += 1;
+            }
+        }
+        assert!(studies >= 6, "{studies} studies");
+    }
+
+    #[test]
     fn confidence_interval_matches_a_hand_computation() {
         let (m, h) = mean_ci95(&[1.0, 2.0, 3.0]);
         assert_eq!(m, 2.0);
