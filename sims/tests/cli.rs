@@ -35,6 +35,10 @@ fn malformed_scenarios_get_one_clear_error_and_write_nothing() {
     rejected("[robot]\nsensor_rate_hz = 0.0\n", "robot.sensor_rate_hz");
     rejected("[camera]\nhfov_deg = true\n", "camera.hfov_deg");
     rejected("robots = [\n", "bad.toml");
+    rejected(
+        "[metrics]\nog_change_set_resolutions_m = [0.1, 0.0]\n",
+        "metrics.og_change_set_resolutions_m[1]",
+    );
 }
 
 #[test]
