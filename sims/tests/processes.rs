@@ -3,7 +3,7 @@
 //! keyframes, and the robots keep apart.
 
 use std::net::TcpListener;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -25,6 +25,18 @@ fn free_ports(n: usize) -> Vec<u16> {
             bound.ok().map(|_| ports)
         })
         .expect("free ports below 19000")
+}
+
+/// Robot files for every robot of the scenario `dir/team.toml` (`robots` of them), each
+/// on its own free loopback port, running `duration_s`.
+fn loopback_team(dir: &Path, robots: usize, duration_s: f64) -> Vec<PathBuf> {
+    write_team(
+        dir,
+        Path::new("team.toml"),
+        &loopback_endpoints(&free_ports(robots)),
+        Some(duration_s),
+    )
+    .expect("robot files")
 }
 
 /// Waits for every process; each must exit successfully soon after its duration.
@@ -87,20 +99,13 @@ fn messages(summary: &serde_json::Value, topic: &str) -> u64 {
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let ports = free_ports(3);
     let duration_s = 20.0;
     std::fs::write(
         dir.path().join("team.toml"),
         "name = \"processes\"\nrobots = 3\n",
     )
     .expect("scenario");
-    let files = write_team(
-        dir.path(),
-        Path::new("team.toml"),
-        &loopback_endpoints(&ports),
-        Some(duration_s),
-    )
-    .expect("robot files");
+    let files = loopback_team(dir.path(), 3, duration_s);
     let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
     wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
@@ -337,15 +342,8 @@ fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
     )
     .expect("recorded sequence");
 
-    let ports = free_ports(2);
     let duration_s = 20.0;
-    let files = write_team(
-        dir.path(),
-        Path::new("team.toml"),
-        &loopback_endpoints(&ports),
-        Some(duration_s),
-    )
-    .expect("robot files");
+    let files = loopback_team(dir.path(), 2, duration_s);
     let replay_file = &files[1];
     let text = std::fs::read_to_string(replay_file).expect("robot1.toml");
     std::fs::write(replay_file, format!("sequence = \"recording\"\n{text}")).expect("robot1.toml");
