@@ -7,11 +7,8 @@ use troupe_robot::MapSharing;
 use troupe_sims::camera::CameraBackend;
 use troupe_sims::report::timeseries_csv;
 use troupe_sims::scenario::Scenario;
-use troupe_sims::team::{RunOutput, Team};
 
-fn run(scenario: &Scenario) -> RunOutput {
-    Team::new(scenario).expect("assemble").run(|_| {})
-}
+use crate::run;
 
 #[test]
 fn og_meter_matches_the_flown_baseline_and_changes_no_flight() {

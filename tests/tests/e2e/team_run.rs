@@ -11,9 +11,7 @@ use troupe_sims::report::{timeseries_csv, write_run};
 use troupe_sims::scenario::{Fault, Scenario};
 use troupe_sims::team::{RunOutput, Team};
 
-fn run(scenario: &Scenario) -> RunOutput {
-    Team::new(scenario).expect("assemble").run(|_| {})
-}
+use crate::run;
 
 fn files(output: &RunOutput) -> (Vec<u8>, Vec<u8>) {
     let dir = tempfile::tempdir().unwrap();
