@@ -294,25 +294,19 @@ impl LocalGrid {
         Some(self.walk_lattice(&g0, &g1))
     }
 
-    /// The world-lattice cells ([`LocalGrid::lattice_cell`]) that a segment crosses at
-    /// `resolution_m`, with no window: the walk of [`LocalGrid::walk`] with every
-    /// step's `cell` a lattice cell (and `index` meaningless). `None` for non-finite
-    /// input or points outside the lattice.
+    /// A one-cell grid at the corner of the world lattice of `resolution_m`: its local
+    /// cells are lattice cells ([`LocalGrid::lattice_cell`]), so the steps of its
+    /// [`LocalGrid::walk`]s name lattice cells in `cell` (their `index` is meaningless) —
+    /// walks with no window, as [`ChangeSetMeter`](super::meter::ChangeSetMeter) needs.
     #[must_use]
-    pub fn lattice_walk(
-        resolution_m: f64,
-        origin: &Point3<f64>,
-        end: &Point3<f64>,
-    ) -> Option<RayWalk> {
-        let lattice_corner = Point3::from(Vector3::repeat(-(LATTICE_HALF as f64) * resolution_m));
-        // One cell at the lattice's corner: local coordinates are lattice coordinates.
-        let unit = LocalGrid::centred(
-            &lattice_corner,
+    pub fn lattice_corner(resolution_m: f64, params: LogOddsParams) -> Self {
+        let corner = Point3::from(Vector3::repeat(-(LATTICE_HALF as f64) * resolution_m));
+        LocalGrid::centred(
+            &corner,
             &Vector3::repeat(resolution_m),
             resolution_m,
-            LogOddsParams::default(),
-        );
-        unit.walk(origin, end)
+            params,
+        )
     }
 
     /// `p` in world-lattice cell units (cell `c` spans `[c, c + 1)` along each axis),

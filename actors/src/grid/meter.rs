@@ -53,6 +53,8 @@ pub struct ChangeSetTotals {
 pub struct ChangeSetMeter {
     params: LogOddsParams,
     stride: u32,
+    /// Walks rays over the world lattice ([`LocalGrid::lattice_corner`]).
+    lattice: LocalGrid,
     totals: ChangeSetTotals,
     /// Log-odds per lattice cell ever observed ([`pack`]).
     cells: CellMap<f32>,
@@ -70,6 +72,7 @@ impl ChangeSetMeter {
         ChangeSetMeter {
             params,
             stride,
+            lattice: LocalGrid::lattice_corner(resolution_m, params),
             totals: ChangeSetTotals {
                 resolution_m,
                 ..ChangeSetTotals::default()
@@ -120,7 +123,7 @@ impl ChangeSetMeter {
     fn insert_scan(&mut self, origin: &Point3<f64>, ends: &[Point3<f64>], hit: bool) {
         self.scan.clear();
         for end in ends {
-            let Some(walk) = LocalGrid::lattice_walk(self.totals.resolution_m, origin, end) else {
+            let Some(walk) = self.lattice.walk(origin, end) else {
                 continue;
             };
             for step in walk {
