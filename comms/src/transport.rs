@@ -78,6 +78,9 @@ pub struct TransportStats {
     pub rejected_frames: u64,
 }
 
+/// Published inside a robot on the runtime's `link/transport` topic.
+impl troupe_core::Message for TransportStats {}
+
 /// Carries a robot's frames to its peers and theirs to it. Implementations never
 /// block the caller on the network: [`send`](Self::send) queues and returns.
 pub trait PacketTransport: Send + Sync {

@@ -463,10 +463,7 @@ mod tests {
             table.update_plan(&PeerPlan {
                 robot: RobotId(peer),
                 priority,
-                plan: Plan {
-                    stamp: t(received),
-                    trajectory,
-                },
+                plan: Plan::new(t(received), trajectory),
                 received_at: t(received),
             });
         }

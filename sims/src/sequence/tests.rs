@@ -1,7 +1,6 @@
 #![allow(clippy::unwrap_used)]
 
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
-use troupe_actors::mapper::sogmm::points::pixel_to_body;
 
 use super::*;
 use crate::camera::CameraParams;
@@ -69,7 +68,7 @@ fn a_recorded_sequence_reads_back_within_quantisation() {
                 assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6, "intensity {a} vs {b}");
             }
         }
-        troupe_actors::sensor::validate_frame(&frame).unwrap();
+        frame.validate().unwrap();
     }
     // As a frame source: the frames in order, restamped, then nothing.
     let mut source = SequenceSource::new(seq);
@@ -100,7 +99,7 @@ fn tum_optical_poses_and_body_poses_see_the_same_point() {
     // TUM: X = (u − cx) z / fx, Y = (v − cy) z / fy, Z = z in the optical frame.
     let (u, v) = (f64::from(col) + 0.5, f64::from(row) + 0.5);
     let p_optical = optical * Point3::new((u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z);
-    let p_body = body_pose(&optical) * pixel_to_body(&k, col, row, z);
+    let p_body = body_pose(&optical) * k.back_project(col, row, z);
     assert!((p_optical - p_body).norm() < 1e-12);
     let back = optical_pose(&body_pose(&optical));
     assert!((back.translation.vector - optical.translation.vector).norm() < 1e-12);

@@ -1,0 +1,137 @@
+//! What a robot knows about its teammates for inter-robot avoidance (thesis §8.2.3):
+//! their latest odometry (10 Hz over the link) and committed plan with its priority
+//! (1 Hz), and the [`PeerAvoidance`] trait through which the collision actor asks a
+//! policy (`troupe_policies::priority`) whether a candidate is safe against them.
+
+use std::collections::BTreeMap;
+
+use crate::frame::Odometry;
+use crate::team::{PeerOdometry, PeerPlan};
+use crate::trajectory::Trajectory;
+use troupe_core::{RobotId, Time};
+
+/// The latest of what arrived from one peer.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PeerTrack {
+    /// Latest odometry, if any.
+    pub odometry: Option<PeerOdometry>,
+    /// Latest committed plan (with the sender's priority), if any.
+    pub plan: Option<PeerPlan>,
+}
+
+impl PeerTrack {
+    /// The peer's priority as it last announced it (`None` before its first plan).
+    #[must_use]
+    pub fn priority(&self) -> Option<u16> {
+        self.plan.as_ref().map(|p| p.priority)
+    }
+}
+
+/// Latest odometry and plan per peer, keyed by robot.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PeerTable {
+    tracks: BTreeMap<RobotId, PeerTrack>,
+}
+
+impl PeerTable {
+    /// Records a peer's odometry (an older stamp than the one held is ignored: the link
+    /// may reorder).
+    pub fn update_odometry(&mut self, odometry: &PeerOdometry) {
+        let track = self.tracks.entry(odometry.robot).or_default();
+        if track
+            .odometry
+            .as_ref()
+            .is_none_or(|o| o.odometry.stamp <= odometry.odometry.stamp)
+        {
+            track.odometry = Some(odometry.clone());
+        }
+    }
+
+    /// Records a peer's plan (an older plan than the one held is ignored).
+    pub fn update_plan(&mut self, plan: &PeerPlan) {
+        let track = self.tracks.entry(plan.robot).or_default();
+        if track
+            .plan
+            .as_ref()
+            .is_none_or(|p| p.plan.stamp <= plan.plan.stamp)
+        {
+            track.plan = Some(plan.clone());
+        }
+    }
+
+    /// Every peer heard from, by robot id.
+    pub fn iter(&self) -> impl Iterator<Item = (RobotId, &PeerTrack)> {
+        self.tracks.iter().map(|(id, t)| (*id, t))
+    }
+
+    /// Number of peers heard from.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.tracks.len()
+    }
+
+    /// Whether no peer has been heard from.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.tracks.is_empty()
+    }
+}
+
+/// Why a candidate conflicts with a peer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerConflict {
+    /// The peer.
+    pub peer: RobotId,
+    /// True when the peer was modelled by its stopping envelope at its last known
+    /// position (plan stale or missing), false when its plan was followed in time.
+    pub envelope: bool,
+    /// Seconds after the check when the cylinders first overlap.
+    pub at_s: f64,
+    /// Horizontal distance between the centres there, metres.
+    pub separation_m: f64,
+}
+
+/// The inter-robot check of the collision actor (thesis §8.2.3), implemented by
+/// policies (`troupe_policies::priority::PriorityAvoidance`).
+pub trait PeerAvoidance: Send + 'static {
+    /// This robot's priority at `now` (announced to peers with its plans).
+    fn priority(&self, now: Time) -> u16;
+
+    /// Whether `candidate` (a primitive followed by its stopping primitive, from `now`)
+    /// conflicts with a peer that this robot must avoid; `None` when it is safe.
+    fn conflict(
+        &mut self,
+        now: Time,
+        me: RobotId,
+        own: &Odometry,
+        candidate: &Trajectory,
+        peers: &PeerTable,
+    ) -> Option<PeerConflict>;
+
+    /// Tells the policy whether the last round committed a candidate (`true`) or had to
+    /// stop because of peers (`false`); dynamic priority rules use it.
+    fn record_round(&mut self, now: Time, blocked_by_peers: bool) {
+        let _ = (now, blocked_by_peers);
+    }
+}
+
+impl PeerAvoidance for Box<dyn PeerAvoidance> {
+    fn priority(&self, now: Time) -> u16 {
+        (**self).priority(now)
+    }
+
+    fn conflict(
+        &mut self,
+        now: Time,
+        me: RobotId,
+        own: &Odometry,
+        candidate: &Trajectory,
+        peers: &PeerTable,
+    ) -> Option<PeerConflict> {
+        (**self).conflict(now, me, own, candidate, peers)
+    }
+
+    fn record_round(&mut self, now: Time, blocked_by_peers: bool) {
+        (**self).record_round(now, blocked_by_peers);
+    }
+}

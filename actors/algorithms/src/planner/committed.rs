@@ -1,0 +1,53 @@
+//! The committed reference of the planner and teleoperation actors: a primitive
+//! until the next planning time, then its stopping primitive (thesis §4.1.3).
+
+use std::time::Duration;
+
+use super::primitives::{FlatState, Primitive};
+use crate::trajectory::{Knot, Trajectory};
+use troupe_core::Time;
+
+/// A primitive from `start` until `switch_s`, then its stopping primitive.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Committed {
+    /// When the primitive starts.
+    pub start: Time,
+    /// The primitive flown until `switch_s`.
+    pub primitive: Primitive,
+    /// Seconds after `start` at which the stopping primitive takes over.
+    pub switch_s: f64,
+    /// The stopping primitive from the primitive's state at `switch_s`.
+    pub stopping: Primitive,
+}
+
+impl Committed {
+    /// The reference state at `t`.
+    pub fn state_at(&self, t: Time) -> FlatState {
+        let s = (t - self.start).as_secs_f64();
+        if s < self.switch_s {
+            self.primitive.state_at(s)
+        } else {
+            self.stopping.state_at(s - self.switch_s)
+        }
+    }
+
+    /// Knots every `step_s` (or closer) from `start` to the end of the stopping
+    /// primitive, for the vehicle.
+    pub fn trajectory(&self, step_s: f64) -> Trajectory {
+        let end_s = self.switch_s + self.stopping.duration_s();
+        let n = (end_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
+        let knots = (0..=n)
+            .map(|i| {
+                let time = self.start + Duration::from_secs_f64(end_s * i as f64 / n as f64);
+                let state = self.state_at(time);
+                Knot {
+                    time,
+                    position_m: state.position_m().into(),
+                    yaw_rad: state.yaw_rad(),
+                }
+            })
+            .collect();
+        // Knots are finite and in time order by construction.
+        Trajectory::new(knots).unwrap_or_default()
+    }
+}

@@ -1,0 +1,308 @@
+//! The planning problem of one round as a generator of scored children (thesis
+//! §4.1.3): from any state of a search tree it builds the library's primitive for one
+//! action, checks it for kinodynamic feasibility and safety (with its stopping
+//! primitive) and scores it. Single-step selection uses the children of the root
+//! only; tree search (MCTS) expands deeper states through the same calls.
+
+use nalgebra::Point3;
+
+use super::csqmi::view_information;
+use super::library;
+use super::primitives::{Action, FlatState, Primitive};
+pub use super::round::SearchParams;
+use super::round::{Candidate, RoundConfig, pose_of};
+use crate::camera::PinholeIntrinsics;
+use crate::grid::GridSnapshot;
+
+/// One round's problem: the round's settings, the grid snapshot and the camera, with
+/// the library's actions enumerated once.
+#[derive(Debug)]
+pub struct PlanningProblem<'a> {
+    config: &'a RoundConfig,
+    snapshot: &'a GridSnapshot,
+    camera: &'a PinholeIntrinsics,
+    actions: Vec<(Action, Option<f64>)>,
+}
+
+impl<'a> PlanningProblem<'a> {
+    /// The problem of a round with `config` on `snapshot`, scoring views of `camera`.
+    #[must_use]
+    pub fn new(
+        config: &'a RoundConfig,
+        snapshot: &'a GridSnapshot,
+        camera: &'a PinholeIntrinsics,
+    ) -> Self {
+        let actions = config
+            .library
+            .specs()
+            .iter()
+            .flat_map(|spec| library::actions(spec, &config.library_params))
+            .collect();
+        PlanningProblem {
+            config,
+            snapshot,
+            camera,
+            actions,
+        }
+    }
+
+    /// The round's settings.
+    #[must_use]
+    pub fn config(&self) -> &RoundConfig {
+        self.config
+    }
+
+    /// The grid snapshot planned against.
+    #[must_use]
+    pub fn snapshot(&self) -> &GridSnapshot {
+        self.snapshot
+    }
+
+    /// The library's actions (Eq. 4.3), with their fixed duration if any.
+    #[must_use]
+    pub fn actions(&self) -> &[(Action, Option<f64>)] {
+        &self.actions
+    }
+
+    /// The child of `from` for action `index` (into [`Self::actions`]): `None` when
+    /// the index is out of range, the primitive is infeasible (acceleration and jerk
+    /// limits) or it or its stopping primitive comes too close to unsafe space.
+    #[must_use]
+    pub fn child(&self, from: &FlatState, index: usize) -> Option<Candidate> {
+        let &(action, fixed) = self.actions.get(index)?;
+        let primitive = self.config.primitive(from, action, fixed)?;
+        let stopping = self.config.safe_with_stop(&primitive, self.snapshot)?;
+        Some(self.score(from, index, primitive, stopping))
+    }
+
+    /// Every feasible, safe child of `from`, scored, in library order.
+    #[must_use]
+    pub fn children(&self, from: &FlatState) -> Vec<Candidate> {
+        (0..self.actions.len())
+            .filter_map(|i| self.child(from, i))
+            .collect()
+    }
+
+    /// Where a branch continues after `candidate`: the state at the end of its
+    /// primitive, if the part after the planning period (not covered by the
+    /// candidate's own check) keeps the clearance too; `None` ends the branch.
+    #[must_use]
+    pub fn continuation(&self, candidate: &Candidate) -> Option<FlatState> {
+        let primitive = &candidate.primitive;
+        let switch_s = self.config.planning_period_s.min(primitive.duration_s());
+        let margin = self.config.margin_m(self.snapshot.grid.resolution_m());
+        let step_s = self.config.check_step_s.max(1e-3);
+        let tail_s = primitive.duration_s() - switch_s;
+        let n = (tail_s / step_s).ceil() as usize;
+        let tail_safe = (1..=n).all(|i| {
+            let t = switch_s + tail_s * i as f64 / n as f64;
+            let p = Point3::from(primitive.state_at(t).position_m());
+            self.snapshot.clearance_m(&p) >= margin
+        });
+        tail_safe.then(|| primitive.end_state())
+    }
+
+    /// Scores a safe, feasible primitive from `from`: the information reward (at
+    /// the end pose, or summed along the primitive, see
+    /// [`RoundConfig::information_samples`]) plus α times the frontier-distance
+    /// reward V = d(ξ₀) − d(ξτ) (paper Eq. 8, thesis §4.1.3).
+    fn score(
+        &self,
+        from: &FlatState,
+        index: usize,
+        primitive: Primitive,
+        stopping: Primitive,
+    ) -> Candidate {
+        let config = self.config;
+        let end = primitive.end_state();
+        let samples = config.information_samples.max(1);
+        // Hovering in place shows the sensor the view it has been seeing all along:
+        // what CSQMI still promises there (cells it cannot resolve, e.g. behind pixels
+        // with no return) will not be gained by staying, and would otherwise keep a
+        // robot hovering forever whenever it beats every move.
+        let information = if stays_put(from, &end) {
+            0.0
+        } else {
+            (1..=samples)
+                .map(|k| {
+                    let t = primitive.duration_s() * k as f64 / samples as f64;
+                    view_information(
+                        &self.snapshot.grid,
+                        &pose_of(&primitive.state_at(t)),
+                        self.camera,
+                        &config.view,
+                    )
+                })
+                .sum::<f64>()
+                / samples as f64
+        };
+        let start_frontier = self
+            .snapshot
+            .frontier_distance(&Point3::from(from.position_m()));
+        let end_frontier = self
+            .snapshot
+            .frontier_distance(&Point3::from(end.position_m()));
+        let frontier_gain_m = if start_frontier.is_finite() && end_frontier.is_finite() {
+            start_frontier - end_frontier
+        } else {
+            0.0
+        };
+        let mut reward = information + config.frontier_weight * frontier_gain_m;
+        if config.reward_per_second {
+            reward /= primitive.duration_s();
+        }
+        Candidate {
+            action_index: index,
+            primitive,
+            stopping,
+            information,
+            frontier_gain_m,
+            reward,
+        }
+    }
+}
+
+/// Whether a primitive from `from` (at rest) ends where it started: same position
+/// within a millimetre and same heading within a milliradian.
+fn stays_put(from: &FlatState, end: &FlatState) -> bool {
+    from.velocity_mps().norm() < 1e-6
+        && (end.position_m() - from.position_m()).norm() < 1e-3
+        && (end.yaw_rad() - from.yaw_rad()).abs() < 1e-3
+}
+
+impl RoundConfig {
+    /// Every feasible, safe candidate from `from`, scored (the children of the
+    /// root in [`PlanningProblem`]).
+    #[must_use]
+    pub fn candidates(
+        &self,
+        from: &FlatState,
+        snapshot: &GridSnapshot,
+        camera: &PinholeIntrinsics,
+    ) -> Vec<Candidate> {
+        PlanningProblem::new(self, snapshot, camera).children(from)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::planner::scenes;
+
+    #[test]
+    fn children_are_safe_scored_and_continue_only_through_clear_space() {
+        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let root = FlatState::at_rest(Vector3::zeros(), 0.0);
+        let children = problem.children(&root);
+        assert!(children.len() > 5 && children.len() <= problem.actions().len());
+        let margin = config.margin_m(snapshot.grid.resolution_m());
+        let per_second = RoundConfig {
+            reward_per_second: true,
+            ..config
+        };
+        let rated = PlanningProblem::new(&per_second, &snapshot, &camera);
+        let mut continued = 0;
+        for child in &children {
+            // The end-pose information of thesis §4.1.3, plus α V.
+            let end = child.primitive.end_state();
+            let info = if stays_put(&root, &end) {
+                0.0
+            } else {
+                view_information(&snapshot.grid, &pose_of(&end), &camera, &config.view)
+            };
+            assert!((child.information - info).abs() < 1e-12);
+            assert!(
+                (child.reward - (info + config.frontier_weight * child.frontier_gain_m)).abs()
+                    < 1e-12
+            );
+            let again = rated.child(&root, child.action_index).expect("same child");
+            assert!((again.reward * child.primitive.duration_s() - child.reward).abs() < 1e-9);
+            // A continuation exists only if the whole primitive keeps the margin.
+            if let Some(next) = problem.continuation(child) {
+                continued += 1;
+                assert_eq!(next, end);
+                for i in 0..=100 {
+                    let t = child.primitive.duration_s() * f64::from(i) / 100.0;
+                    let p = Point3::from(child.primitive.state_at(t).position_m());
+                    assert!(snapshot.clearance_m(&p) >= margin - 0.05, "{p}");
+                }
+            }
+        }
+        assert!(continued > 0);
+        // Out-of-range actions have no child.
+        assert!(problem.child(&root, problem.actions().len()).is_none());
+    }
+
+    #[test]
+    fn hovering_in_place_promises_no_information() {
+        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        // Facing the doorway: the view from here still holds unknown cells.
+        let root = FlatState::at_rest(Vector3::zeros(), 0.0);
+        let here = view_information(&snapshot.grid, &pose_of(&root), &camera, &config.view);
+        assert!(here > 1.0, "{here}");
+        let children = problem.children(&root);
+        let hover: Vec<_> = children
+            .iter()
+            .filter(|c| c.primitive.action() == crate::planner::primitives::Action::STOP)
+            .collect();
+        assert_eq!(
+            hover.len(),
+            1,
+            "the minimal library hovers once (vertical, v_z = 0)"
+        );
+        assert_eq!(hover[0].information, 0.0);
+        assert!(children.iter().any(|c| c.information > 1.0));
+    }
+
+    #[test]
+    fn inside_the_margin_children_never_come_closer_and_some_back_away() {
+        // A corridor 3 m wide and 2 m high; the robot hovers 0.55 m from its left wall,
+        // inside the 0.67 m margin (as when new cells close in on a hovering robot).
+        let snapshot = scenes::corridor(8.0, 1.5, 1.0);
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let margin = config.margin_m(snapshot.grid.resolution_m());
+        let root = FlatState::at_rest(Vector3::new(2.0, 0.95, 0.0), 0.0);
+        let start = snapshot.clearance_m(&Point3::from(root.position_m()));
+        assert!(start > 0.0 && start < margin, "start clearance {start}");
+        let children = problem.children(&root);
+        assert!(
+            !children.is_empty(),
+            "a robot inside the margin must not stall"
+        );
+        let mut backed_away = false;
+        for child in &children {
+            let switch_s = config.planning_period_s.min(child.primitive.duration_s());
+            let samples =
+                (0..=50).map(|i| child.primitive.state_at(switch_s * f64::from(i) / 50.0));
+            let stops = (0..=50).map(|i| {
+                child
+                    .stopping
+                    .state_at(child.stopping.duration_s() * f64::from(i) / 50.0)
+            });
+            for state in samples.chain(stops) {
+                let c = snapshot.clearance_m(&Point3::from(state.position_m()));
+                assert!(c >= start - 1e-9, "{child:?} comes closer: {c} < {start}");
+            }
+            let end = child.stopping.end_state();
+            backed_away |= snapshot.clearance_m(&Point3::from(end.position_m())) >= margin;
+        }
+        assert!(backed_away, "some child must get back out of the margin");
+        // In unsafe space itself nothing may leave.
+        let buried = FlatState::at_rest(Vector3::new(2.0, 1.6, 0.0), 0.0);
+        assert_eq!(
+            snapshot.clearance_m(&Point3::from(buried.position_m())),
+            0.0
+        );
+        assert!(problem.children(&buried).is_empty());
+    }
+}

@@ -1,0 +1,446 @@
+//! The collision actor: the last gate between planning and the vehicle (thesis §4.1.3,
+//! §7, §8.2.3).
+//!
+//! Each planning round arrives as [`PlanCandidates`], best first. The actor commits the
+//! first candidate that passes
+//!
+//! 1. the distance-field check: every sample of the candidate (primitive and stopping
+//!    primitive, every `check_step_s`) keeps the body's bounding radius plus the
+//!    field's discretisation slack from unsafe space in the latest [`GridSnapshot`]
+//!    — or, when the candidate starts inside that clearance, never comes closer to
+//!    unsafe space than its start ([`required_clearance_m`]) — (skipped when the robot
+//!    has no local grid, e.g. route-following robots);
+//! 2. the inter-robot check of a [`PeerAvoidance`] policy against peers' odometry and
+//!    plans (priority-based, §8.2.3);
+//!
+//! publishes it on [`PLAN`], or the round's stopping trajectory when none passes, and
+//! answers with a [`PlanDecision`]. Every rejection is counted by reason and logged;
+//! the counters go out on [`COLLISION_STATUS`] after each round.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use super::body::{BodyConfig, BodyError};
+use super::peers::{PeerAvoidance, PeerTable};
+use crate::msgs::{
+    GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
+    PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection,
+};
+use crate::planner::round::required_clearance_m;
+use crate::trajectory::Trajectory;
+use troupe_runtime::{Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, Topic};
+
+/// Settings of the collision actor (the world part; the peer part is the policy's).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CollisionActorConfig {
+    /// The robot body (its bounding radius is the required clearance).
+    pub body: BodyConfig,
+    /// Extra clearance on top of the body's bounding radius, metres.
+    pub margin_m: f64,
+    /// Spacing of the samples checked against the distance field, seconds.
+    pub check_step_s: f64,
+}
+
+impl Default for CollisionActorConfig {
+    fn default() -> Self {
+        CollisionActorConfig {
+            body: BodyConfig::default(),
+            margin_m: 0.0,
+            check_step_s: 0.1,
+        }
+    }
+}
+
+impl CollisionActorConfig {
+    /// Checks the numbers and the body; the error names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.margin_m.is_finite() && self.margin_m >= 0.0) {
+            return Err(format!("`margin_m` must be ≥ 0, got {}", self.margin_m));
+        }
+        if !(self.check_step_s.is_finite() && self.check_step_s > 0.0) {
+            return Err(format!(
+                "`check_step_s` must be > 0, got {}",
+                self.check_step_s
+            ));
+        }
+        self.body
+            .ellipsoid()
+            .map(|_| ())
+            .map_err(|e: BodyError| format!("`body`: {e}"))
+    }
+}
+
+/// The collision actor's counters (published after every round).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CollisionStatus {
+    /// Rounds decided.
+    pub rounds: u64,
+    /// Rounds that committed a candidate.
+    pub committed: u64,
+    /// Rounds that committed the stopping trajectory.
+    pub stopped: u64,
+    /// Candidates rejected by the distance field.
+    pub rejected_clearance: u64,
+    /// Candidates rejected against a peer's plan.
+    pub rejected_peer_plan: u64,
+    /// Candidates rejected against a peer's stopping envelope.
+    pub rejected_peer_envelope: u64,
+    /// This robot's priority in the last round.
+    pub priority: u16,
+}
+impl Message for CollisionStatus {}
+
+/// The collision actor's counters.
+pub const COLLISION_STATUS: Topic<CollisionStatus> = Topic::new("collision/status");
+
+/// Whether every sample of `trajectory` from `from` to its end (every `step_s`) has at
+/// least `clearance_m` in `snapshot`'s distance field to unsafe space — or, when its
+/// state at `from` is already closer than that, at least that state's own clearance
+/// ([`required_clearance_m`]).
+#[must_use]
+pub fn clear_of_unsafe_space(
+    trajectory: &Trajectory,
+    from: Time,
+    snapshot: &GridSnapshot,
+    clearance_m: f64,
+    step_s: f64,
+) -> bool {
+    let Some(start) = trajectory.state_at(from) else {
+        return false;
+    };
+    let Some(clearance_m) =
+        required_clearance_m(clearance_m, snapshot.clearance_m(&start.position_m))
+    else {
+        return false;
+    };
+    let span_s = trajectory.end_time().saturating_since(from).as_secs_f64();
+    let n = (span_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
+    (0..=n).all(|i| {
+        let t = from + Duration::from_secs_f64(span_s * i as f64 / n as f64);
+        trajectory
+            .state_at(t)
+            .is_some_and(|s| snapshot.clearance_m(&s.position_m) >= clearance_m)
+    })
+}
+
+/// Commits the first candidate of each planning round that passes the checks (see `actors::collision`).
+pub struct CollisionActor<P> {
+    config: CollisionActorConfig,
+    body_radius_m: f64,
+    avoidance: P,
+    snapshot: Option<Arc<GridSnapshot>>,
+    odometry: Option<Arc<Odometry>>,
+    peers: PeerTable,
+    status: CollisionStatus,
+}
+
+impl<P: PeerAvoidance> CollisionActor<P> {
+    /// A collision actor; `config` must be valid ([`CollisionActorConfig::validate`]),
+    /// else the body falls back to the default one.
+    #[must_use]
+    pub fn new(config: CollisionActorConfig, avoidance: P) -> Self {
+        let body = config
+            .body
+            .ellipsoid()
+            .or_else(|_| BodyConfig::default().ellipsoid());
+        let body_radius_m = body.map_or(0.3, |b| b.center().norm() + b.bounding_radius());
+        CollisionActor {
+            config,
+            body_radius_m,
+            avoidance,
+            snapshot: None,
+            odometry: None,
+            peers: PeerTable::default(),
+            status: CollisionStatus::default(),
+        }
+    }
+
+    fn judge(
+        &mut self,
+        now: Time,
+        ctx: &Context<'_>,
+        trajectory: &Trajectory,
+    ) -> Result<(), Rejection> {
+        if let Some(snapshot) = &self.snapshot {
+            let clearance = self.body_radius_m
+                + self.config.margin_m
+                + snapshot.grid.resolution_m() * (3f64.sqrt() + 1.0) / 2.0;
+            if !clear_of_unsafe_space(
+                trajectory,
+                now,
+                snapshot,
+                clearance,
+                self.config.check_step_s,
+            ) {
+                return Err(Rejection::Clearance);
+            }
+        }
+        let own = match &self.odometry {
+            Some(o) => (**o).clone(),
+            None => {
+                let Some(state) = trajectory.state_at(now) else {
+                    return Ok(());
+                };
+                Odometry {
+                    stamp: now,
+                    pose: state.pose(),
+                    velocity_mps: state.velocity_mps,
+                }
+            }
+        };
+        match self
+            .avoidance
+            .conflict(now, ctx.robot(), &own, trajectory, &self.peers)
+        {
+            None => Ok(()),
+            Some(c) if c.envelope => Err(Rejection::PeerEnvelope),
+            Some(_) => Err(Rejection::PeerPlan),
+        }
+    }
+
+    fn decide(&mut self, round: &PlanCandidates, ctx: &mut Context<'_>) {
+        let now = ctx.now();
+        let mut rejected = Vec::new();
+        let mut chosen = None;
+        for (i, candidate) in round.candidates.iter().enumerate() {
+            match self.judge(now, ctx, &candidate.trajectory) {
+                Ok(()) => {
+                    chosen = Some(i);
+                    break;
+                }
+                Err(reason) => {
+                    match reason {
+                        Rejection::Clearance => self.status.rejected_clearance += 1,
+                        Rejection::PeerPlan => self.status.rejected_peer_plan += 1,
+                        Rejection::PeerEnvelope => self.status.rejected_peer_envelope += 1,
+                    }
+                    tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, candidate = i, reason = reason.as_str(), "candidate rejected");
+                    rejected.push((i, reason));
+                }
+            }
+        }
+        let blocked_by_peers = chosen.is_none() && rejected.iter().any(|(_, r)| r.is_peer());
+        self.avoidance.record_round(now, blocked_by_peers);
+        self.status.rounds += 1;
+        self.status.priority = self.avoidance.priority(now);
+        let plan = match chosen.and_then(|i| round.candidates.get(i)) {
+            Some(c) => {
+                self.status.committed += 1;
+                Plan {
+                    stamp: now,
+                    trajectory: c.trajectory.clone(),
+                    reference: c.reference.clone(),
+                    stopping: false,
+                }
+            }
+            None => {
+                self.status.stopped += 1;
+                if !round.candidates.is_empty() {
+                    tracing::info!(robot = ctx.robot_name(), time = %now, round = round.round, rejected = rejected.len(), "every candidate rejected: stopping");
+                }
+                Plan {
+                    stamp: now,
+                    trajectory: round.stop.clone(),
+                    reference: round.stop_reference.clone(),
+                    stopping: true,
+                }
+            }
+        };
+        ctx.publish(&PLAN, plan);
+        ctx.publish(
+            &PLAN_DECISION,
+            PlanDecision {
+                round: round.round,
+                chosen,
+                rejected,
+            },
+        );
+        ctx.publish(&COLLISION_STATUS, self.status.clone());
+    }
+}
+
+impl<P: PeerAvoidance> Actor for CollisionActor<P> {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&PLAN_CANDIDATES, QueuePolicy::LATEST);
+        ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::LATEST);
+        ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
+        ctx.subscribe(&PEER_ODOMETRY, QueuePolicy::Fifo { capacity: 64 });
+        ctx.subscribe(&PEER_PLAN, QueuePolicy::Fifo { capacity: 16 });
+        Ok(())
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if let Event::Message(m) = event {
+            if let Some(round) = m.get_arc(&PLAN_CANDIDATES) {
+                self.decide(&round, ctx);
+            } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
+                self.snapshot = Some(snapshot);
+            } else if let Some(odometry) = m.get_arc(&ODOMETRY) {
+                self.odometry = Some(odometry);
+            } else if let Some(peer) = m.get_arc(&PEER_ODOMETRY) {
+                self.peers.update_odometry(&peer);
+            } else if let Some(plan) = m.get_arc(&PEER_PLAN) {
+                self.peers.update_plan(&plan);
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    use nalgebra::Point3;
+
+    use super::*;
+    use crate::collision::peers::PeerConflict;
+    use crate::msgs::CandidatePlan;
+    use crate::trajectory::Knot;
+    use troupe_runtime::{ActorSpec, Publication, RobotId, RobotSpec, SimExecutor, TimerId};
+
+    /// Rejects every trajectory that ends beyond `x_max` (as if a peer were there).
+    struct Wall {
+        x_max: f64,
+    }
+
+    impl PeerAvoidance for Wall {
+        fn priority(&self, _now: Time) -> u16 {
+            4
+        }
+        fn conflict(
+            &mut self,
+            _now: Time,
+            _me: RobotId,
+            _own: &Odometry,
+            candidate: &Trajectory,
+            _peers: &PeerTable,
+        ) -> Option<PeerConflict> {
+            let end = candidate.knots().last()?.position_m;
+            (end.x > self.x_max).then_some(PeerConflict {
+                peer: RobotId(9),
+                envelope: false,
+                at_s: 0.0,
+                separation_m: 0.0,
+            })
+        }
+    }
+
+    fn line(now: Time, to_x: f64) -> Trajectory {
+        Trajectory::new(vec![
+            Knot {
+                time: now,
+                position_m: Point3::new(0.0, 0.0, 1.0),
+                yaw_rad: 0.0,
+            },
+            Knot {
+                time: now + Duration::from_secs(2),
+                position_m: Point3::new(to_x, 0.0, 1.0),
+                yaw_rad: 0.0,
+            },
+        ])
+        .unwrap()
+    }
+
+    /// Publishes one round per second: candidates ending at x = 3, 2, 1.
+    struct Rounds(u64);
+
+    impl Actor for Rounds {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(0), Duration::from_secs(1));
+            Ok(())
+        }
+        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            self.0 += 1;
+            let now = ctx.now();
+            ctx.publish(
+                &PLAN_CANDIDATES,
+                PlanCandidates {
+                    round: self.0,
+                    stamp: now,
+                    candidates: [3.0, 2.0, 1.0]
+                        .iter()
+                        .map(|&x| CandidatePlan {
+                            trajectory: line(now, x),
+                            reference: None,
+                            switch_at: now + Duration::from_secs(1),
+                            reward: x,
+                        })
+                        .collect(),
+                    stop: line(now, 0.0),
+                    stop_reference: None,
+                },
+            );
+            Ok(())
+        }
+    }
+
+    fn run(x_max: f64) -> (Vec<PlanDecision>, Vec<Plan>, Option<CollisionStatus>) {
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("rounds", || Rounds(0)))
+            .with(ActorSpec::new("collision", move || {
+                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max })
+            }));
+        let log = Arc::new(Mutex::new((Vec::new(), Vec::new(), None)));
+        let tap = log.clone();
+        let mut exec = SimExecutor::new(vec![robot], 1);
+        exec.add_tap(move |p: &Publication<'_>| {
+            let mut log = tap.lock().unwrap();
+            if let Some(d) = p.get(&PLAN_DECISION) {
+                log.0.push(d.clone());
+            }
+            if let Some(plan) = p.get(&PLAN) {
+                log.1.push(plan.clone());
+            }
+            if let Some(s) = p.get(&COLLISION_STATUS) {
+                log.2 = Some(s.clone());
+            }
+        });
+        exec.run_until(Time::from_secs_f64(3.5));
+        let _ = exec.finish();
+        let log = log.lock().unwrap();
+        (log.0.clone(), log.1.clone(), log.2.clone())
+    }
+
+    #[test]
+    fn commits_the_first_accepted_candidate_and_counts_rejections() {
+        let (decisions, plans, status) = run(1.5);
+        assert_eq!(decisions.len(), 3);
+        for d in &decisions {
+            assert_eq!(d.chosen, Some(2));
+            assert_eq!(
+                d.rejected,
+                vec![(0, Rejection::PeerPlan), (1, Rejection::PeerPlan)]
+            );
+        }
+        // The committed plan is the accepted candidate (ends at x = 1).
+        assert!(
+            plans
+                .iter()
+                .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 1.0)
+        );
+        let status = status.unwrap();
+        assert_eq!((status.rounds, status.committed, status.stopped), (3, 3, 0));
+        assert_eq!(status.rejected_peer_plan, 6);
+        assert_eq!(status.priority, 4);
+    }
+
+    #[test]
+    fn stops_when_every_candidate_is_rejected() {
+        let (decisions, plans, status) = run(0.5);
+        assert!(
+            decisions
+                .iter()
+                .all(|d| d.chosen.is_none() && d.rejected.len() == 3)
+        );
+        assert!(
+            plans
+                .iter()
+                .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 0.0)
+        );
+        assert_eq!(status.unwrap().stopped, 3);
+    }
+}

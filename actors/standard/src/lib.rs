@@ -1,0 +1,41 @@
+//! troupe-actors: the standard actors of a troupe robot.
+//!
+//! Each actor is a thin wrapper that connects an algorithm core of
+//! [`troupe_algorithms`] to the robot's topics on the [`troupe_runtime`] executors:
+//!
+//! - [`msgs`]: the standard topics and their message types (the data flow of a robot).
+//! - [`sensor`]: captures depth frames from a [`FrameSource`](sensor::FrameSource).
+//! - [`mapper`]: keyframe selection and SOGMM fits (thesis §6, §8.2.2).
+//! - [`grid`]: the local occupancy grid (§3.2.3) and occupancy-grid map sharing.
+//! - [`planner`]: the motion-primitive planner (§4) and teleoperation (§5.1.2).
+//! - [`collision`]: commits plans clear of unsafe space and higher-priority peers (§8.2.3).
+//! - [`explorer`]: route behaviours chosen by name.
+//! - [`link`]: the only actor that talks to other robots.
+//!
+//! The runtime and the algorithm cores are re-exported as [`runtime`], [`geometry`]
+//! and [`trajectory`] for convenience.
+//!
+//! ```
+//! use troupe_actors::grid::{GridActor, GridConfig};
+//! use troupe_actors::msgs::GRID_SNAPSHOT;
+//! use troupe_actors::runtime::{ActorSpec, RobotSpec, SimExecutor, Time};
+//!
+//! // A robot with only a grid actor: with no odometry it publishes nothing.
+//! let robot = RobotSpec::new("r0").with(ActorSpec::new("grid", || GridActor::new(GridConfig::default())));
+//! let mut team = SimExecutor::new(vec![robot], 1);
+//! team.run_until(Time::from_secs_f64(2.0));
+//! assert_eq!(GRID_SNAPSHOT.name(), "grid/snapshot");
+//! ```
+#![deny(missing_docs)]
+
+pub mod collision;
+pub mod explorer;
+pub mod grid;
+pub mod link;
+pub mod mapper;
+pub mod msgs;
+pub mod planner;
+pub mod sensor;
+
+pub use troupe_algorithms::{geometry, trajectory};
+pub use troupe_runtime as runtime;

@@ -1,0 +1,92 @@
+//! The standard topics of a robot and their message types.
+//!
+//! | topic | type | from → to |
+//! |---|---|---|
+//! | `odometry` | [`Odometry`] | vehicle → sensor, explorer, link |
+//! | `sensor/frame` | [`DepthFrame`] | sensor → mapper |
+//! | `plan/committed` | [`Plan`] | explorer/planner → vehicle, link |
+//! | `mapper/keyframe` | [`Keyframe`] | mapper → link |
+//! | `peer/keyframe` | [`PeerKeyframe`] | link → local grid |
+//! | `grid/snapshot` | [`GridSnapshot`] | local grid → planner, collision |
+//! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
+//! | `peer/plan` | [`PeerPlan`] | link → collision |
+//! | `plan/candidates` | [`PlanCandidates`] | planner → collision |
+//! | `plan/decision` | [`PlanDecision`] | collision → planner |
+//! | `grid/changes` | [`GridChanges`] | local grid → link (occupancy-grid map sharing) |
+//! | `peer/grid_changes` | [`PeerGridChanges`] | link → local grid |
+//! | `link/tx`, `link/rx` | [`LinkTx`](troupe_runtime::LinkTx), [`LinkRx`](troupe_runtime::LinkRx) | link ↔ network |
+
+use nalgebra::Isometry3;
+use troupe_runtime::{Message, RobotId, Time, Topic};
+
+pub use troupe_algorithms::camera::PinholeIntrinsics;
+pub use troupe_algorithms::frame::{DepthFrame, Odometry};
+pub use troupe_algorithms::grid::GridSnapshot;
+pub use troupe_algorithms::keyframe::Keyframe;
+pub use troupe_algorithms::plan::Plan;
+pub use troupe_algorithms::planner::candidates::{
+    CandidatePlan, PlanCandidates, PlanDecision, Rejection,
+};
+pub use troupe_algorithms::team::{PeerKeyframe, PeerOdometry, PeerPlan};
+
+/// This robot's keyframes.
+pub const KEYFRAME: Topic<Keyframe> = Topic::new("mapper/keyframe");
+/// Peers' keyframes from the link.
+pub const PEER_KEYFRAME: Topic<PeerKeyframe> = Topic::new("peer/keyframe");
+
+/// Body pose and velocity from the vehicle.
+pub const ODOMETRY: Topic<Odometry> = Topic::new("odometry");
+/// Depth + intensity frames from the sensor.
+pub const DEPTH_FRAME: Topic<DepthFrame> = Topic::new("sensor/frame");
+/// The committed plan.
+pub const PLAN: Topic<Plan> = Topic::new("plan/committed");
+/// Local grid snapshots.
+pub const GRID_SNAPSHOT: Topic<GridSnapshot> = Topic::new("grid/snapshot");
+/// Peers' odometry from the link.
+pub const PEER_ODOMETRY: Topic<PeerOdometry> = Topic::new("peer/odometry");
+/// Peers' committed plans from the link.
+pub const PEER_PLAN: Topic<PeerPlan> = Topic::new("peer/plan");
+/// Ranked candidates of a planning round, for the collision actor.
+pub const PLAN_CANDIDATES: Topic<PlanCandidates> = Topic::new("plan/candidates");
+/// The collision actor's verdict on a planning round.
+pub const PLAN_DECISION: Topic<PlanDecision> = Topic::new("plan/decision");
+
+/// Changed cells of this robot's own occupancy observations since the last set: the
+/// occupancy-grid map sharing the thesis compares GMM keyframes with (§8.2.5, "OG").
+/// Values are the robot's own-evidence log-odds, not including what peers shared.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridChanges {
+    /// When the set was taken.
+    pub stamp: Time,
+    /// The cells, indexed in the grid window given with them.
+    pub set: troupe_comms::wire::GridChangeSet,
+}
+impl Message for GridChanges {
+    fn payload_bytes(&self) -> usize {
+        self.set.thesis_bytes()
+    }
+}
+
+/// A peer's [`GridChanges`], as received over the link.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerGridChanges {
+    /// The peer.
+    pub robot: RobotId,
+    /// Its changed cells, in its world frame.
+    pub set: troupe_comms::wire::GridChangeSet,
+    /// The transform from the peer's world frame into ours (Eq. 8.1), if they differ:
+    /// cell centres are moved with it and land in our nearest cell.
+    pub frame: Option<Isometry3<f64>>,
+    /// When it arrived here.
+    pub received_at: Time,
+}
+impl Message for PeerGridChanges {
+    fn payload_bytes(&self) -> usize {
+        self.set.thesis_bytes()
+    }
+}
+
+/// This robot's occupancy change sets (when it shares its map as a grid).
+pub const GRID_CHANGES: Topic<GridChanges> = Topic::new("grid/changes");
+/// Peers' occupancy change sets from the link.
+pub const PEER_GRID_CHANGES: Topic<PeerGridChanges> = Topic::new("peer/grid_changes");

@@ -1,0 +1,350 @@
+//! The planner actor: at a fixed rate, scores the motion primitive library from the
+//! committed reference state against the latest grid snapshot, lets an
+//! [`ActionSelection`] policy choose, and commits the choice followed by its
+//! stopping primitive (thesis §4.1.3: if nothing is safe, the stopping trajectory is
+//! sent).
+//!
+//! With a collision actor ([`PlannerActor::deferring_to_collision`]) the planner does
+//! not commit itself: it publishes the round's candidates on [`PLAN_CANDIDATES`], the
+//! selection's choice first and the rest by decreasing reward, with the stopping
+//! trajectory, and replans from the reference of whatever is committed on [`PLAN`]
+//! (the primitive it carries), as the vehicle follows it.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::committed::Committed;
+use super::primitives::{FlatState, Primitive};
+use super::problem::PlanningProblem;
+use super::round::{Candidate, RoundConfig};
+use crate::msgs::{
+    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PLAN_CANDIDATES,
+    PinholeIntrinsics, Plan, PlanCandidates,
+};
+use troupe_runtime::{
+    Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
+};
+
+/// Chooses among scored candidates. Implementations live in `troupe-policies`.
+pub trait ActionSelection: Send + 'static {
+    /// Index of the chosen candidate, or `None` to stop.
+    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize>;
+
+    /// Index of the chosen candidate among the children of `root` (`candidates`,
+    /// computed by `problem`), or `None` to stop. Search policies override this to
+    /// expand deeper states through `problem` (thesis §4.1.3); by default it is
+    /// [`Self::select`].
+    fn select_in(
+        &mut self,
+        problem: &PlanningProblem<'_>,
+        root: &FlatState,
+        candidates: &[Candidate],
+        rng: &mut ChaCha8Rng,
+    ) -> Option<usize> {
+        let _ = (problem, root);
+        self.select(candidates, rng)
+    }
+}
+
+impl ActionSelection for Box<dyn ActionSelection> {
+    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize> {
+        (**self).select(candidates, rng)
+    }
+
+    fn select_in(
+        &mut self,
+        problem: &PlanningProblem<'_>,
+        root: &FlatState,
+        candidates: &[Candidate],
+        rng: &mut ChaCha8Rng,
+    ) -> Option<usize> {
+        (**self).select_in(problem, root, candidates, rng)
+    }
+}
+
+/// Planner settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlannerConfig {
+    /// Replanning rate, Hz (thesis: 1 Hz).
+    pub rate_hz: f64,
+    /// The round: library, limits, rewards, safety.
+    pub round: RoundConfig,
+    /// Spacing of the knots sent to the vehicle, seconds.
+    pub knot_step_s: f64,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        PlannerConfig {
+            rate_hz: 1.0,
+            round: RoundConfig::default(),
+            knot_step_s: 0.1,
+        }
+    }
+}
+
+/// What one planning round did (for reports and the selection comparison).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanningReport {
+    /// When.
+    pub stamp: Time,
+    /// Safe, feasible candidates.
+    pub candidates: usize,
+    /// Reward of the chosen one (`None`: the stopping trajectory was sent).
+    pub chosen_reward: Option<f64>,
+}
+impl Message for PlanningReport {}
+
+/// Planning reports.
+pub const PLANNING_REPORT: Topic<PlanningReport> = Topic::new("planner/report");
+
+const REPLAN: TimerId = TimerId(0);
+/// One-shot delay before the first round (see [`round_phase_s`]).
+const PHASE: TimerId = TimerId(1);
+
+/// Delay of robot `robot`'s planning rounds within the replanning period: the
+/// fractional part of `robot · φ` (golden ratio) times the period, so that teammates do
+/// not commit at the same instant. A robot that commits while a peer commits cannot
+/// know the peer's new plan (§8.2.3 checks against received plans); with staggered
+/// rounds each plan is checked against the peer's latest one whenever the link
+/// delivers within the offset (0.38 of the period between robots 0 and 1).
+#[must_use]
+pub fn round_phase_s(robot: u32, period_s: f64) -> f64 {
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    (f64::from(robot) * golden).fract() * period_s
+}
+
+/// Replans at a fixed rate: scores the primitive library from the committed reference
+/// state against the latest grid snapshot, lets the [`ActionSelection`] policy choose,
+/// and commits the choice followed by its stopping primitive (the stopping trajectory
+/// alone when nothing is safe, thesis §4.1.3).
+pub struct PlannerActor<S> {
+    config: PlannerConfig,
+    camera: PinholeIntrinsics,
+    selection: S,
+    snapshot: Option<Arc<GridSnapshot>>,
+    odometry: Option<Arc<Odometry>>,
+    committed: Option<Committed>,
+    deferred: bool,
+    round: u64,
+}
+
+impl<S: ActionSelection> PlannerActor<S> {
+    /// Time between planning rounds (`1 / rate_hz`).
+    fn replan_period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.config.rate_hz.max(1e-3))
+    }
+
+    /// A planner scoring views of `camera`, choosing with `selection`.
+    #[must_use]
+    pub fn new(config: PlannerConfig, camera: PinholeIntrinsics, selection: S) -> Self {
+        PlannerActor {
+            config,
+            camera,
+            selection,
+            snapshot: None,
+            odometry: None,
+            committed: None,
+            deferred: false,
+            round: 0,
+        }
+    }
+
+    /// Publishes ranked candidates for a collision actor instead of committing, and
+    /// replans from what it commits on [`PLAN`] (module docs).
+    #[must_use]
+    pub fn deferring_to_collision(mut self) -> Self {
+        self.deferred = true;
+        self
+    }
+
+    /// The stopping trajectory from `root` as a committed reference.
+    fn stop_from(&self, root: &FlatState, now: Time) -> Option<Committed> {
+        let stopping = self.config.round.limits.stopping(root)?;
+        Some(Committed {
+            start: now,
+            primitive: stopping.clone(),
+            switch_s: stopping.duration_s(),
+            stopping: Primitive::forward_arc(
+                &stopping.end_state(),
+                super::primitives::Action::STOP,
+                1.0,
+            ),
+        })
+    }
+
+    /// Sends the round's candidates to the collision actor, best first: the
+    /// selection's choice, then the rest by decreasing reward.
+    fn defer(
+        &mut self,
+        now: Time,
+        root: &FlatState,
+        candidates: &[Candidate],
+        choice: Option<usize>,
+        ctx: &mut Context<'_>,
+    ) {
+        let Some(stop) = self.stop_from(root, now) else {
+            return;
+        };
+        let mut order: Vec<usize> = (0..candidates.len())
+            .filter(|&i| Some(i) != choice)
+            .collect();
+        order.sort_by(|&a, &b| candidates[b].reward.total_cmp(&candidates[a].reward));
+        if let Some(c) = choice.filter(|&c| c < candidates.len()) {
+            order.insert(0, c);
+        }
+        let period_s = self.config.round.planning_period_s;
+        let ranked: Vec<Committed> = order
+            .iter()
+            .map(|&i| {
+                let c = &candidates[i];
+                Committed {
+                    start: now,
+                    primitive: c.primitive.clone(),
+                    switch_s: period_s.min(c.primitive.duration_s()),
+                    stopping: c.stopping.clone(),
+                }
+            })
+            .collect();
+        self.round += 1;
+        let step = self.config.knot_step_s;
+        ctx.publish(
+            &PLAN_CANDIDATES,
+            PlanCandidates {
+                round: self.round,
+                stamp: now,
+                candidates: ranked
+                    .iter()
+                    .zip(&order)
+                    .map(|(c, &i)| CandidatePlan {
+                        trajectory: c.trajectory(step),
+                        reference: Some(c.clone()),
+                        switch_at: now + Duration::from_secs_f64(c.switch_s),
+                        reward: candidates[i].reward,
+                    })
+                    .collect(),
+                stop: stop.trajectory(step),
+                stop_reference: Some(stop),
+            },
+        );
+    }
+
+    fn plan(&mut self, ctx: &mut Context<'_>) {
+        let (Some(snapshot), Some(odometry)) = (self.snapshot.clone(), self.odometry.clone())
+        else {
+            return;
+        };
+        let now = ctx.now();
+        let root = match &self.committed {
+            Some(c) => c.state_at(now),
+            None => {
+                let (_, _, yaw) = odometry.pose.rotation.euler_angles();
+                FlatState::at_rest(odometry.pose.translation.vector, yaw)
+            }
+        };
+        let round = &self.config.round;
+        let problem = PlanningProblem::new(round, &snapshot, &self.camera);
+        let candidates = problem.children(&root);
+        let choice = self
+            .selection
+            .select_in(&problem, &root, &candidates, ctx.rng());
+        tracing::debug!(
+            robot = ctx.robot_name(),
+            time = %now,
+            candidates = candidates.len(),
+            clearance_m = snapshot.clearance_m(&nalgebra::Point3::from(root.position_m())),
+            reward = choice.map(|i| candidates[i].reward),
+            position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
+        );
+        if self.deferred {
+            ctx.publish(
+                &PLANNING_REPORT,
+                PlanningReport {
+                    stamp: now,
+                    candidates: candidates.len(),
+                    chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+                },
+            );
+            self.defer(now, &root, &candidates, choice, ctx);
+            return;
+        }
+        let committed = match choice.and_then(|i| candidates.get(i)) {
+            Some(c) => Committed {
+                start: now,
+                primitive: c.primitive.clone(),
+                switch_s: round.planning_period_s.min(c.primitive.duration_s()),
+                stopping: c.stopping.clone(),
+            },
+            None => {
+                tracing::debug!(robot = ctx.robot_name(), time = %now, candidates = candidates.len(), "no safe action: stopping");
+                let Some(stop) = self.stop_from(&root, now) else {
+                    return;
+                };
+                stop
+            }
+        };
+        ctx.publish(
+            &PLANNING_REPORT,
+            PlanningReport {
+                stamp: now,
+                candidates: candidates.len(),
+                chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+            },
+        );
+        let stopping = choice.and_then(|i| candidates.get(i)).is_none();
+        ctx.publish(
+            &PLAN,
+            Plan {
+                stamp: now,
+                trajectory: committed.trajectory(self.config.knot_step_s),
+                reference: Some(committed.clone()),
+                stopping,
+            },
+        );
+        self.committed = Some(committed);
+    }
+}
+
+impl<S: ActionSelection> Actor for PlannerActor<S> {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
+        ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::LATEST);
+        if self.deferred {
+            ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+        }
+        let period_s = self.replan_period().as_secs_f64();
+        let phase_s = round_phase_s(ctx.robot().0, period_s);
+        if phase_s > 0.0 {
+            ctx.set_timer(PHASE, Duration::from_secs_f64(phase_s));
+        } else {
+            ctx.set_timer(REPLAN, self.replan_period());
+        }
+        Ok(())
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Message(m) => {
+                if let Some(odometry) = m.get_arc(&ODOMETRY) {
+                    self.odometry = Some(odometry);
+                } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
+                    self.snapshot = Some(snapshot);
+                } else if let Some(plan) = m.get(&PLAN)
+                    && let Some(reference) = &plan.reference
+                {
+                    self.committed = Some(reference.clone());
+                }
+            }
+            Event::Timer(PHASE) => {
+                ctx.cancel_timer(PHASE);
+                ctx.set_timer(REPLAN, self.replan_period());
+            }
+            Event::Timer(_) => self.plan(ctx),
+        }
+        Ok(())
+    }
+}

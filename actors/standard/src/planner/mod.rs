@@ -1,0 +1,16 @@
+//! The planning actors (thesis §4.1, §5.1.2); the planning cores are
+//! [`troupe_algorithms::planner`], re-exported here.
+//!
+//! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
+//!   primitives; the choice among candidates is an [`ActionSelection`] policy.
+//! - [`TeleopActor`] commits teleoperation primitives at a fixed rate;
+//!   [`ScriptedTeleop`] publishes a timed command script in place of a joystick.
+
+mod actor;
+mod teleop_actor;
+
+pub use actor::{ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport};
+pub use teleop_actor::{
+    ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
+};
+pub use troupe_algorithms::planner::*;
