@@ -13,7 +13,32 @@
 //!   as stopping envelopes.
 //!
 //! [`behaviour_by_name`] and [`selection_by_name`] are how the robot assembly turns
-//! config strings into policies.
+//! config strings into policies:
+//!
+//! ```
+//! use nalgebra::{Isometry3, Point3, Vector3};
+//! use troupe_actors::msgs::Odometry;
+//! use troupe_actors::runtime::Time;
+//! use troupe_policies::{BehaviourInputs, SELECTIONS, behaviour_by_name, selection_by_name};
+//!
+//! // A route behaviour: from the origin to 4 m ahead.
+//! let inputs = BehaviourInputs {
+//!     route: vec![Point3::origin(), Point3::new(4.0, 0.0, 0.0)],
+//!     speed_mps: 1.0,
+//!     yaw_rate_rad_s: 0.5,
+//!     depart_at_s: 0.0,
+//! };
+//! let mut route = behaviour_by_name("waypoint_route", &inputs).unwrap()();
+//! let here = Odometry { stamp: Time::ZERO, pose: Isometry3::identity(), velocity_mps: Vector3::zeros() };
+//! let plan = route.replan(Time::ZERO, &here).expect("a route to follow");
+//! assert!(plan.knots().len() >= 2);
+//!
+//! // Every action selection the planner can be configured with.
+//! for name in SELECTIONS {
+//!     assert!(selection_by_name(name).is_ok());
+//! }
+//! assert!(selection_by_name("psychic").is_err());
+//! ```
 #![deny(missing_docs)]
 
 pub mod priority;

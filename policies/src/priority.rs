@@ -35,7 +35,7 @@
 use serde::{Deserialize, Serialize};
 use troupe_actors::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
 use troupe_actors::msgs::Odometry;
-use troupe_actors::runtime::{RobotId, Time};
+use troupe_actors::runtime::{ConfigError, RobotId, Time};
 use troupe_actors::trajectory::Trajectory;
 
 /// Settings of the priority check (thesis §8.2.3).
@@ -93,30 +93,23 @@ impl Default for PriorityConfig {
 
 impl PriorityConfig {
     /// Checks every number; the error names the key.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = [
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, value) in [
             ("cylinder_radius_m", self.cylinder_radius_m),
             ("cylinder_height_m", self.cylinder_height_m),
             ("check_radius_m", self.check_radius_m),
             ("stale_plan_s", self.stale_plan_s),
             ("stop_decel_mps2", self.stop_decel_mps2),
             ("lower_priority_react_s", self.lower_priority_react_s),
-        ];
-        for (key, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("`{key}` must be a finite number > 0, got {v}"));
-            }
+        ] {
+            ConfigError::positive(key, value)?;
         }
-        if !(self.boost_after_s.is_finite() && self.boost_after_s >= 0.0) {
-            return Err(format!(
-                "`boost_after_s` must be a finite number ≥ 0, got {}",
-                self.boost_after_s
-            ));
-        }
+        ConfigError::non_negative("boost_after_s", self.boost_after_s)?;
         if self.max_samples < 2 {
-            return Err(format!(
-                "`max_samples` must be ≥ 2, got {}",
-                self.max_samples
+            return Err(ConfigError::new(
+                "max_samples",
+                "must be ≥ 2",
+                self.max_samples,
             ));
         }
         Ok(())

@@ -205,40 +205,14 @@ impl Default for RobotConfig {
     }
 }
 
-/// A configuration value that is not acceptable.
-#[derive(Debug, thiserror::Error, PartialEq)]
-#[error("`{key}` {rule}, got {value}")]
-pub struct ConfigError {
-    /// Dotted key relative to the robot table.
-    pub key: String,
-    /// What it must be.
-    pub rule: &'static str,
-    /// What it was.
-    pub value: String,
-}
+pub use troupe_actors::runtime::ConfigError;
 
 fn positive(key: &str, value: f64) -> Result<(), ConfigError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(ConfigError {
-            key: key.into(),
-            rule: "must be a finite number > 0",
-            value: value.to_string(),
-        })
-    }
+    ConfigError::positive(key, value)
 }
 
 fn non_negative(key: &str, value: f64) -> Result<(), ConfigError> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(())
-    } else {
-        Err(ConfigError {
-            key: key.into(),
-            rule: "must be a finite number ≥ 0",
-            value: value.to_string(),
-        })
-    }
+    ConfigError::non_negative(key, value)
 }
 
 impl RobotConfig {
@@ -249,13 +223,7 @@ impl RobotConfig {
         positive("replan_rate_hz", self.replan_rate_hz)?;
         positive("sensor_rate_hz", self.sensor_rate_hz)?;
         positive("radius_m", self.radius_m)?;
-        if let Err(reason) = self.link.validate() {
-            return Err(ConfigError {
-                key: "link".into(),
-                rule: "must be valid",
-                value: reason,
-            });
-        }
+        self.link.validate().map_err(|e| e.within("link"))?;
         non_negative("latency_s.vehicle", self.latency_s.vehicle)?;
         non_negative("latency_s.sensor", self.latency_s.sensor)?;
         non_negative("latency_s.explorer", self.latency_s.explorer)?;
@@ -264,41 +232,23 @@ impl RobotConfig {
         non_negative("latency_s.planner", self.latency_s.planner)?;
         non_negative("latency_s.mapper", self.latency_s.mapper)?;
         non_negative("latency_s.collision", self.latency_s.collision)?;
-        if let Err(reason) = self.collision.actor().validate() {
-            return Err(ConfigError {
-                key: "collision".into(),
-                rule: "must be valid",
-                value: reason,
-            });
-        }
-        if let Err(reason) = self.collision.peers.validate() {
-            return Err(ConfigError {
-                key: "collision.peers".into(),
-                rule: "must be valid",
-                value: reason,
-            });
-        }
-        if let Err(reason) = self.mapper.validate() {
-            return Err(ConfigError {
-                key: "mapper".into(),
-                rule: "must be valid",
-                value: reason,
-            });
-        }
+        self.collision
+            .actor()
+            .validate()
+            .map_err(|e| e.within("collision"))?;
+        self.collision
+            .peers
+            .validate()
+            .map_err(|e| e.within("collision.peers"))?;
+        self.mapper.validate().map_err(|e| e.within("mapper"))?;
         if self.map_sharing == MapSharing::Grid && !self.grid.trace_depth_frames {
-            return Err(ConfigError {
-                key: "map_sharing".into(),
-                rule: "\"grid\" needs grid.trace_depth_frames = true (change sets are the cells own frames changed)",
-                value: "\"grid\"".into(),
-            });
+            return Err(ConfigError::new(
+                "map_sharing",
+                "\"grid\" needs grid.trace_depth_frames = true (change sets are the cells own frames changed)",
+                "\"grid\"",
+            ));
         }
-        if let Err(reason) = self.grid.validate() {
-            return Err(ConfigError {
-                key: "grid".into(),
-                rule: "must be a valid grid",
-                value: reason,
-            });
-        }
+        self.grid.validate().map_err(|e| e.within("grid"))?;
         positive("planner.rate_hz", self.planner.rate_hz)?;
         positive("planner.knot_step_s", self.planner.knot_step_s)?;
         positive(
@@ -310,11 +260,11 @@ impl RobotConfig {
             self.planner.round.collision_radius_m,
         )?;
         if !troupe_policies::SELECTIONS.contains(&self.selection.as_str()) {
-            return Err(ConfigError {
-                key: "selection".into(),
-                rule: "must name a known action selection (greedy, random)",
-                value: format!("{:?}", self.selection),
-            });
+            return Err(ConfigError::new(
+                "selection",
+                "must name a known action selection (greedy, random)",
+                format!("{:?}", self.selection),
+            ));
         }
         positive("teleop.command_rate_hz", self.teleop.command_rate_hz)?;
         positive(
@@ -326,11 +276,11 @@ impl RobotConfig {
         for (i, c) in self.teleop.script.iter().enumerate() {
             let values = [c.from_s, c.vx_mps, c.vz_mps, c.yaw_rate_rad_s];
             if values.iter().any(|v| !v.is_finite()) || c.from_s < 0.0 {
-                return Err(ConfigError {
-                    key: format!("teleop.script[{i}]"),
-                    rule: "must have finite speeds and from_s >= 0",
-                    value: format!("{c:?}"),
-                });
+                return Err(ConfigError::new(
+                    format!("teleop.script[{i}]"),
+                    "must have finite speeds and from_s >= 0",
+                    format!("{c:?}"),
+                ));
             }
         }
         non_negative("restart.window_s", self.restart.window_s)?;
@@ -338,11 +288,11 @@ impl RobotConfig {
             && self.behaviour != TELEOP
             && !troupe_policies::BEHAVIOURS.contains(&self.behaviour.as_str())
         {
-            return Err(ConfigError {
-                key: "behaviour".into(),
-                rule: "must be \"planner\", \"teleop\" or a known route behaviour (waypoint_route)",
-                value: format!("{:?}", self.behaviour),
-            });
+            return Err(ConfigError::new(
+                "behaviour",
+                "must be \"planner\", \"teleop\" or a known route behaviour (waypoint_route)",
+                format!("{:?}", self.behaviour),
+            ));
         }
         Ok(())
     }
@@ -370,10 +320,10 @@ mod tests {
         assert_eq!(c.validate().unwrap_err().key, "behaviour");
         let mut c = RobotConfig::default();
         c.collision.peers.max_samples = 1;
-        assert_eq!(c.validate().unwrap_err().key, "collision.peers");
+        assert_eq!(c.validate().unwrap_err().key, "collision.peers.max_samples");
         let mut c = RobotConfig::default();
         c.collision.body.semi_axes_m = [0.3, 0.0, 0.1];
-        assert_eq!(c.validate().unwrap_err().key, "collision");
+        assert_eq!(c.validate().unwrap_err().key, "collision.body");
     }
 
     #[test]

@@ -8,6 +8,23 @@
 //! teleoperation replace the grid + planner pair; the mapper and collision actor can
 //! be switched off (`[robot.mapper] enabled = false`, `[robot.collision] enabled =
 //! false`).
+//!
+//! A robot file overrides the standard robot key by key, and every value is checked
+//! before a robot is assembled:
+//!
+//! ```
+//! use troupe_robot::RobotConfig;
+//!
+//! let config: RobotConfig = toml::from_str("speed_mps = 1.5\n[grid]\nresolution_m = 0.1\n").unwrap();
+//! config.validate().unwrap();
+//! assert_eq!(config.grid.resolution_m, 0.1);
+//!
+//! let mut bad = RobotConfig::default();
+//! bad.grid.resolution_m = 0.0;
+//! let e = bad.validate().unwrap_err();
+//! assert_eq!(e.key, "grid.resolution_m");
+//! assert_eq!(e.to_string(), "`grid.resolution_m` must be ≥ 0.01, got 0");
+//! ```
 #![deny(missing_docs)]
 
 mod config;

@@ -263,11 +263,11 @@ impl Team {
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
         let world = scenario.world.build().map_err(|e| {
-            AssembleError::Config(troupe_robot::ConfigError {
-                key: "world.mesh.path".into(),
-                rule: "must be a readable PLY or OBJ mesh",
-                value: e.to_string(),
-            })
+            AssembleError::Config(troupe_robot::ConfigError::new(
+                "world.mesh.path",
+                "must be a readable PLY or OBJ mesh",
+                e,
+            ))
         })?;
         let shared_world: Arc<dyn World> = world.clone();
         // Reported in the summary; the robots' cameras resolve `auto` the same way.
@@ -329,11 +329,11 @@ impl Team {
             monitor.positions(),
         )
         .map_err(|reason| {
-            AssembleError::Config(troupe_robot::ConfigError {
-                key: "network".into(),
-                rule: "must be a valid network",
-                value: reason,
-            })
+            AssembleError::Config(troupe_robot::ConfigError::new(
+                "network",
+                "must be a valid network",
+                reason,
+            ))
         })?;
         let network_stats = network.stats();
         let network = network.with_loss_bursts(bursts);

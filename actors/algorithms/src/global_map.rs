@@ -34,7 +34,7 @@ use nalgebra::{Matrix3, Vector3, Vector4};
 use rayon::prelude::*;
 
 use crate::hash::SpatialHash;
-use crate::sogmm::gmm::{Chol3, log_sum_exp};
+use crate::mixture::{Chol3, MixtureError, log_sum_exp};
 use crate::sogmm::{FramePoints, Gmm4, SogmmConfig, SogmmError, fit_points};
 
 /// Points per rayon task in the relevance test (values are per point: the split does
@@ -373,7 +373,8 @@ impl GlobalMap {
         for (component, (mean, cov)) in local.means().iter().zip(local.covariances()).enumerate() {
             let m: Vector3<f64> = mean.xyz();
             let c: Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
-            spatial.push(Chol3::new(&m, &c).ok_or(SogmmError::NotPositiveDefinite { component })?);
+            spatial
+                .push(Chol3::new(&m, &c).ok_or(MixtureError::NotPositiveDefinite { component })?);
             marginals.push((m, c));
         }
         let new_support: Vec<f64> = local.weights().iter().map(|w| w * support_points).collect();

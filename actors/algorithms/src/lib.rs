@@ -7,8 +7,9 @@
 //!
 //! - Sensing: [`camera`] (pinhole intrinsics, back-projection), [`frame`] (depth +
 //!   intensity frames with their pose, odometry).
-//! - Mixtures and maps: [`sogmm`] (self-organizing GMMs, thesis §6), [`windowed`]
-//!   (fixed-size windowed GMMs, paper §IV-A), [`merge`] (Eqs. 3.4–3.5), [`model`],
+//! - Mixtures and maps: [`mixture`] (Gmm4/Gmm3, Cholesky, sampling, merging by
+//!   Eqs. 3.4–3.5), [`sogmm`] (self-organizing GMMs, thesis §6), [`windowed`]
+//!   (fixed-size windowed GMMs, paper §IV-A), [`model`],
 //!   [`global_map`] (§6.1.4) with its spatial [`hash`], [`keyframe`] (§8.2.2),
 //!   [`mapfile`] (map files and PLY export).
 //! - The local occupancy [`grid`] (§3.2.3, §5.1), distance fields and frontiers.
@@ -43,7 +44,7 @@ pub mod grid;
 pub mod hash;
 pub mod keyframe;
 pub mod mapfile;
-pub mod merge;
+pub mod mixture;
 pub mod model;
 pub mod plan;
 pub mod planner;

@@ -35,10 +35,10 @@ use nalgebra::{
 };
 use rand::Rng;
 
-use crate::merge::merge_gmm4;
+use crate::mixture::box_muller;
+use crate::mixture::merge_gmm4;
+use crate::mixture::{Gmm3, Gmm4, MixtureError};
 use crate::model::MapModel;
-use crate::sogmm::gmm::box_muller;
-use crate::sogmm::{Gmm3, Gmm4, SogmmError};
 
 /// The 8 bytes every map file starts with.
 pub const MAGIC: [u8; 8] = *b"TROUPEMP";
@@ -116,7 +116,7 @@ pub enum MapFileError {
         /// Keyframe index.
         keyframe: usize,
         /// What is wrong.
-        source: SogmmError,
+        source: MixtureError,
     },
 }
 
@@ -250,7 +250,7 @@ impl GmmMap {
 
     /// The global occupied surface: every keyframe's mixture merged by Eq. 3.5 with its
     /// support size. Errors on an empty map.
-    pub fn merged_occupied(&self) -> Result<Gmm4, SogmmError> {
+    pub fn merged_occupied(&self) -> Result<Gmm4, MixtureError> {
         let parts: Vec<(f64, &Gmm4)> = self
             .keyframes
             .iter()

@@ -6,7 +6,8 @@
 //! - [`Time`]: a point in a run's time (simulated or wall clock), integer nanoseconds;
 //! - [`RobotId`]: a robot's index in its team;
 //! - [`Message`]: what may be published on a topic;
-//! - [`ErrorChain`]: an error and its causes on one line, for logs.
+//! - [`ErrorChain`]: an error and its causes on one line, for logs;
+//! - [`ConfigError`]: a configuration value that breaks a rule.
 //!
 //! ```
 //! use std::time::Duration;
@@ -22,8 +23,10 @@
 //! ```
 #![deny(missing_docs)]
 
+mod config;
 mod time;
 
+pub use config::ConfigError;
 pub use time::Time;
 
 /// Index of a robot in its team.

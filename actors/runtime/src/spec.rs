@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 use std::time::Duration;
+use troupe_core::ConfigError;
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -47,18 +48,21 @@ impl LatencyModel {
     }
 
     /// Checks the numbers; the error names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
-        let ok = |v: f64| v.is_finite() && v >= 0.0;
+    pub fn validate(&self) -> Result<(), ConfigError> {
         match *self {
-            LatencyModel::Fixed { seconds } if !ok(seconds) => Err(format!(
-                "seconds must be a finite number ≥ 0, got {seconds}"
-            )),
-            LatencyModel::Uniform { min_s, max_s } if !ok(min_s) || !ok(max_s) || max_s < min_s => {
-                Err(format!(
-                    "need 0 ≤ min_s ≤ max_s (finite), got min_s = {min_s}, max_s = {max_s}"
-                ))
+            LatencyModel::Fixed { seconds } => ConfigError::non_negative("seconds", seconds),
+            LatencyModel::Uniform { min_s, max_s } => {
+                ConfigError::non_negative("min_s", min_s)?;
+                ConfigError::non_negative("max_s", max_s)?;
+                if max_s < min_s {
+                    return Err(ConfigError::new(
+                        "max_s",
+                        format!("must be ≥ min_s ({min_s})"),
+                        max_s,
+                    ));
+                }
+                Ok(())
             }
-            _ => Ok(()),
         }
     }
 

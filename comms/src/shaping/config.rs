@@ -1,29 +1,14 @@
 //! Shaper and reassembler settings (serde, validated).
 
 use serde::{Deserialize, Serialize};
-use thiserror::Error;
 
 use super::frame::DATA_HEADER_BYTES;
 use crate::wire::Class;
 
-/// A setting that is out of range; names the key, the rule and the value.
-#[derive(Clone, Debug, Error, PartialEq)]
-#[error("`{key}` {rule} (got {value})")]
-pub struct ConfigError {
-    /// Dotted key, e.g. `keyframe.capacity_bytes`.
-    pub key: String,
-    /// What it must satisfy.
-    pub rule: &'static str,
-    /// The offending value, as written.
-    pub value: String,
-}
+pub use troupe_core::ConfigError;
 
-fn fail(key: impl Into<String>, rule: &'static str, value: impl ToString) -> ConfigError {
-    ConfigError {
-        key: key.into(),
-        rule,
-        value: value.to_string(),
-    }
+fn fail(key: impl Into<String>, rule: &'static str, value: impl std::fmt::Display) -> ConfigError {
+    ConfigError::new(key, rule, value)
 }
 
 /// What a class queue does when it fills (DESIGN §5).

@@ -663,7 +663,7 @@ fn config_reads_from_toml_and_names_bad_keys() {
     let e = ShaperConfig { mtu_bytes: 10, ..c }.validate().unwrap_err();
     assert_eq!(
         e.to_string(),
-        "`mtu_bytes` must be between 64 and 65507 (got 10)"
+        "`mtu_bytes` must be between 64 and 65507, got 10"
     );
     assert_eq!(
         ReassemblyConfig {

@@ -4,12 +4,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::shaping::ConfigError;
 
-fn fail(key: String, rule: &'static str, value: impl ToString) -> ConfigError {
-    ConfigError {
-        key,
-        rule,
-        value: value.to_string(),
-    }
+fn fail(key: String, rule: &'static str, value: impl std::fmt::Display) -> ConfigError {
+    ConfigError::new(key, rule, value)
 }
 
 fn probability(key: String, p: f64) -> Result<(), ConfigError> {

@@ -1,6 +1,7 @@
 //! Settings of the local grid.
 
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::hca::HcaConfig;
 use super::{LogOddsParams, UpdateRule};
@@ -70,11 +71,12 @@ impl Default for GridConfig {
 
 impl GridConfig {
     /// Checks the numbers; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.resolution_m.is_finite() && self.resolution_m >= 0.01) {
-            return Err(format!(
-                "resolution_m must be ≥ 0.01, got {}",
-                self.resolution_m
+            return Err(ConfigError::new(
+                "resolution_m",
+                "must be ≥ 0.01",
+                self.resolution_m,
             ));
         }
         if self
@@ -82,44 +84,31 @@ impl GridConfig {
             .iter()
             .any(|s| !(s.is_finite() && *s >= 2.0 * self.resolution_m))
         {
-            return Err(format!(
-                "size_m must be finite and at least two cells, got {:?}",
-                self.size_m
+            return Err(ConfigError::new(
+                "size_m",
+                "must be finite and at least two cells per axis",
+                format!("{:?}", self.size_m),
             ));
         }
         let cells: f64 = self.size_m.iter().map(|s| s / self.resolution_m).product();
         if cells > 64e6 {
-            return Err(format!(
-                "size_m / resolution_m gives {cells:.0} cells; at most 64 million"
+            return Err(ConfigError::new(
+                "size_m",
+                format!("must hold at most 64 million cells of resolution_m (it holds {cells:.0})"),
+                format!("{:?}", self.size_m),
             ));
         }
-        if !(self.publish_rate_hz.is_finite() && self.publish_rate_hz > 0.0) {
-            return Err(format!(
-                "publish_rate_hz must be > 0, got {}",
-                self.publish_rate_hz
-            ));
-        }
+        ConfigError::positive("publish_rate_hz", self.publish_rate_hz)?;
         if self.pixel_stride == 0 {
-            return Err("pixel_stride must be ≥ 1".into());
+            return Err(ConfigError::new("pixel_stride", "must be ≥ 1", 0));
         }
         if self.max_stored_keyframes == 0 {
-            return Err("max_stored_keyframes must be ≥ 1".into());
+            return Err(ConfigError::new("max_stored_keyframes", "must be ≥ 1", 0));
         }
-        if !(self.index_cell_m.is_finite() && self.index_cell_m > 0.0) {
-            return Err(format!(
-                "index_cell_m must be > 0, got {}",
-                self.index_cell_m
-            ));
-        }
-        for (key, value) in [
-            ("body_radius_m", self.body_radius_m),
-            ("start_clearance_m", self.start_clearance_m),
-        ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{key} must be ≥ 0, got {value}"));
-            }
-        }
-        self.hca.validate().map_err(|e| format!("hca: {e}"))?;
-        self.logodds.validate().map_err(|e| format!("logodds: {e}"))
+        ConfigError::positive("index_cell_m", self.index_cell_m)?;
+        ConfigError::non_negative("body_radius_m", self.body_radius_m)?;
+        ConfigError::non_negative("start_clearance_m", self.start_clearance_m)?;
+        self.hca.validate().map_err(|e| e.within("hca"))?;
+        self.logodds.validate().map_err(|e| e.within("logodds"))
     }
 }

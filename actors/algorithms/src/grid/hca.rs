@@ -16,6 +16,8 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use troupe_core::ConfigError;
+
 use super::distance::unsafe_distance;
 use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, UpdateRule};
 use crate::keyframe::Keyframe;
@@ -67,37 +69,38 @@ impl Default for HcaConfig {
 
 impl HcaConfig {
     /// Checks the numbers; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if self.voxels.iter().any(|n| *n < 2 || *n > 512) {
-            return Err(format!(
-                "voxels must be between 2 and 512 per axis, got {:?}",
-                self.voxels
+            return Err(ConfigError::new(
+                "voxels",
+                "must be between 2 and 512 per axis",
+                format!("{:?}", self.voxels),
             ));
         }
-        let ok = |v: f64| v.is_finite() && v > 0.0;
-        if !(ok(self.alpha_min_m) && self.alpha_min_m >= 0.01) {
-            return Err(format!(
-                "alpha_min_m must be ≥ 0.01, got {}",
-                self.alpha_min_m
+        if !(self.alpha_min_m.is_finite() && self.alpha_min_m >= 0.01) {
+            return Err(ConfigError::new(
+                "alpha_min_m",
+                "must be ≥ 0.01",
+                self.alpha_min_m,
             ));
         }
         if !(self.alpha_max_m.is_finite() && self.alpha_max_m >= self.alpha_min_m) {
-            return Err(format!(
-                "alpha_max_m must be ≥ alpha_min_m ({}), got {}",
-                self.alpha_min_m, self.alpha_max_m
+            return Err(ConfigError::new(
+                "alpha_max_m",
+                format!("must be ≥ alpha_min_m ({})", self.alpha_min_m),
+                self.alpha_max_m,
             ));
         }
-        if !ok(self.alpha_step_m) {
-            return Err(format!(
-                "alpha_step_m must be > 0, got {}",
-                self.alpha_step_m
-            ));
-        }
+        ConfigError::positive("alpha_step_m", self.alpha_step_m)?;
         if self.level_count() > 10_000 {
-            return Err("(alpha_max_m − alpha_min_m) / alpha_step_m must be ≤ 10000".into());
+            return Err(ConfigError::new(
+                "alpha_step_m",
+                "must leave at most 10000 levels between alpha_min_m and alpha_max_m",
+                self.alpha_step_m,
+            ));
         }
         if self.max_levels == 0 {
-            return Err("max_levels must be ≥ 1".into());
+            return Err(ConfigError::new("max_levels", "must be ≥ 1", 0));
         }
         for (key, value) in [
             ("robot_radius_m", self.robot_radius_m),
@@ -105,9 +108,7 @@ impl HcaConfig {
             ("lookahead_m", self.lookahead_m),
             ("past_keyframe_distance_m", self.past_keyframe_distance_m),
         ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{key} must be ≥ 0, got {value}"));
-            }
+            ConfigError::non_negative(key, value)?;
         }
         Ok(())
     }

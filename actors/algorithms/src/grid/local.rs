@@ -3,6 +3,8 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use troupe_core::ConfigError;
+
 use crate::geometry::VoxelGrid;
 
 /// Log-odds update and classification rules (the standard inverse sensor model,
@@ -41,36 +43,34 @@ impl Default for LogOddsParams {
 
 impl LogOddsParams {
     /// Checks the rules; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        let finite = [
-            self.hit,
-            self.miss,
-            self.min,
-            self.max,
-            self.occupied_above,
-            self.free_below,
-        ]
-        .iter()
-        .all(|v| v.is_finite());
-        if !finite {
-            return Err("log-odds parameters must be finite".into());
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, value) in [
+            ("hit", self.hit),
+            ("miss", self.miss),
+            ("min", self.min),
+            ("max", self.max),
+            ("occupied_above", self.occupied_above),
+            ("free_below", self.free_below),
+        ] {
+            if !value.is_finite() {
+                return Err(ConfigError::new(key, "must be finite", value));
+            }
         }
-        if self.hit <= 0.0 {
-            return Err(format!("hit must be > 0, got {}", self.hit));
-        }
+        ConfigError::positive("hit", f64::from(self.hit))?;
         if self.miss >= 0.0 {
-            return Err(format!("miss must be < 0, got {}", self.miss));
+            return Err(ConfigError::new("miss", "must be < 0", self.miss));
         }
-        if !(self.min < 0.0 && self.max > 0.0) {
-            return Err(format!(
-                "need min < 0 < max, got min = {}, max = {}",
-                self.min, self.max
-            ));
+        if self.min >= 0.0 {
+            return Err(ConfigError::new("min", "must be < 0", self.min));
+        }
+        if self.max <= 0.0 {
+            return Err(ConfigError::new("max", "must be > 0", self.max));
         }
         if self.free_below > self.occupied_above {
-            return Err(format!(
-                "free_below ({}) must not exceed occupied_above ({})",
-                self.free_below, self.occupied_above
+            return Err(ConfigError::new(
+                "free_below",
+                format!("must not exceed occupied_above ({})", self.occupied_above),
+                self.free_below,
             ));
         }
         Ok(())

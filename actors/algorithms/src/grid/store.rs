@@ -19,7 +19,7 @@ use super::scan::{ScanScratch, UpdateRule};
 use super::{CellBox, LocalGrid};
 use crate::geometry::Aabb;
 use crate::keyframe::Keyframe;
-use crate::sogmm::gmm::box_muller;
+use crate::mixture::box_muller;
 use troupe_core::RobotId;
 
 /// Who produced a keyframe (part of each component's sampling seed).

@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use super::*;
 use crate::grid::UpdateRule;
 use crate::keyframe::Keyframe;
-use crate::sogmm::gmm::Gmm4;
+use crate::mixture::Gmm4;
 use troupe_core::{RobotId, Time};
 
 /// A keyframe seen from a random origin near the world origin: `n` small anisotropic

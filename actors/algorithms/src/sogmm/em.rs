@@ -43,8 +43,8 @@ use nalgebra::{Matrix4, Vector4};
 use rayon::prelude::*;
 
 use super::SogmmError;
-use super::gmm::{Chol4, Gmm4};
 use super::grid::{CellLists, PointGrid};
+use crate::mixture::{Chol4, Gmm4, MixtureError};
 
 /// `ln 10¹⁰`: components below the best one by more than this are skipped by the
 /// restricted E-step (responsibility < 1e-10 relative).
@@ -193,7 +193,7 @@ fn factor(params: &Params) -> Result<(Vec<Chol4>, Vec<f64>), SogmmError> {
         .zip(&params.covs)
         .enumerate()
     {
-        let c = Chol4::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?;
+        let c = Chol4::new(mean, cov).ok_or(MixtureError::NotPositiveDefinite { component })?;
         logc.push(w.ln() + c.log_norm);
         chol.push(c);
     }
@@ -242,7 +242,7 @@ pub fn init_from_partition(
     let mut weights: Vec<f64> = count.iter().map(|c| c / n).collect();
     let total: f64 = weights.iter().sum();
     weights.iter_mut().for_each(|w| *w /= total);
-    Gmm4::new(weights, means, covs)
+    Ok(Gmm4::new(weights, means, covs)?)
 }
 
 /// Run EM from `init` on `points` (see the module doc for the E-step variants, the

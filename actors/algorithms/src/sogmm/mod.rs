@@ -34,7 +34,6 @@
 //! ```
 
 pub mod em;
-pub mod gmm;
 mod grid;
 pub mod kmeanspp;
 pub mod mean_shift;
@@ -48,51 +47,21 @@ use nalgebra::{Isometry3, Vector4};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+pub use crate::mixture::{Gmm3, Gmm4, IntensityConditional, IntensityEstimate};
 pub use em::{EStep, EmConfig, EmReport, fit_em, init_from_partition};
-pub use gmm::{Gmm3, Gmm4, IntensityConditional, IntensityEstimate};
 pub use kmeanspp::{Seeding, kmeans_plusplus};
 pub use mean_shift::{MeanShiftConfig, MeanShiftModes, mean_shift_modes};
 pub use points::{FramePoints, frame_points};
 
 use crate::camera::PinholeIntrinsics;
 
-/// Errors of the SOGMM fit and of mixture construction.
+/// Errors of the SOGMM fit.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum SogmmError {
-    /// A mixture needs at least one component.
-    #[error("mixture has no components")]
-    EmptyModel,
-    /// Weights, means and covariances differ in number.
-    #[error("{weights} weights, {means} means, {covariances} covariances")]
-    LengthMismatch {
-        /// Number of weights.
-        weights: usize,
-        /// Number of means.
-        means: usize,
-        /// Number of covariances.
-        covariances: usize,
-    },
-    /// A weight is negative or not finite.
-    #[error("weight {weight} of component {component} is negative or not finite")]
-    InvalidWeight {
-        /// Component index.
-        component: usize,
-        /// The weight.
-        weight: f64,
-    },
-    /// Weights do not sum to one (within `gmm::WEIGHT_SUM_TOLERANCE`).
-    #[error("weights sum to {sum}, not 1")]
-    WeightsDoNotSumToOne {
-        /// Their sum.
-        sum: f64,
-    },
-    /// A covariance is not symmetric positive definite (or a mean is not finite).
-    #[error("covariance of component {component} is not symmetric positive definite")]
-    NotPositiveDefinite {
-        /// Component index.
-        component: usize,
-    },
+    /// The mixture is not valid (weights, covariances).
+    #[error("invalid mixture")]
+    Mixture(#[from] crate::mixture::MixtureError),
     /// The frame's buffers do not fit its intrinsics.
     #[error("unusable frame")]
     Frame(#[from] crate::frame::FrameError),

@@ -9,9 +9,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::em::LOG_TRUNCATION;
-use super::gmm::LN_2PI;
 use super::*;
 use crate::frame::FrameError;
+use crate::mixture::LN_2PI;
+use crate::mixture::MixtureError;
 
 // ---------------------------------------------------------------- support
 
@@ -137,31 +138,31 @@ fn new_rejects_invalid_models() {
     assert!(Gmm4::new(vec![1.0], mean.clone(), eye.clone()).is_ok());
     assert!(matches!(
         Gmm4::new(vec![0.9], mean.clone(), eye.clone()),
-        Err(SogmmError::WeightsDoNotSumToOne { .. })
+        Err(MixtureError::WeightsDoNotSumToOne { .. })
     ));
     assert!(matches!(
         Gmm4::new(vec![f64::NAN], mean.clone(), eye.clone()),
-        Err(SogmmError::InvalidWeight { .. })
+        Err(MixtureError::InvalidWeight { .. })
     ));
     assert!(matches!(
         Gmm4::new(vec![], vec![], vec![]),
-        Err(SogmmError::EmptyModel)
+        Err(MixtureError::EmptyModel)
     ));
     let mut not_pd = Matrix4::identity();
     not_pd[(2, 2)] = -1e-3;
     assert!(matches!(
         Gmm4::new(vec![1.0], mean.clone(), vec![not_pd]),
-        Err(SogmmError::NotPositiveDefinite { component: 0 })
+        Err(MixtureError::NotPositiveDefinite { component: 0 })
     ));
     let mut asym = Matrix4::identity();
     asym[(0, 1)] = 0.5;
     assert!(matches!(
         Gmm4::new(vec![1.0], mean.clone(), vec![asym]),
-        Err(SogmmError::NotPositiveDefinite { .. })
+        Err(MixtureError::NotPositiveDefinite { .. })
     ));
     assert!(matches!(
         Gmm4::new(vec![0.5, 0.5], mean, eye),
-        Err(SogmmError::LengthMismatch { .. })
+        Err(MixtureError::LengthMismatch { .. })
     ));
 }
 

@@ -17,7 +17,7 @@
 use nalgebra::{Matrix3, Vector3, Vector4};
 use rand::Rng;
 
-use crate::sogmm::gmm::{Chol3, log_sum_exp};
+use crate::mixture::{Chol3, log_sum_exp};
 use crate::sogmm::kmeans_plusplus;
 
 /// Settings of one gated EM fit.

@@ -9,7 +9,7 @@
 //!    windows by pixel position (Fig. 3.1d, paper Fig. 3c–d).
 //! 2. [`gated_em`]: per window, `n` components (k-means++ start, then EM with the
 //!    Mahalanobis gate λ of Eq. 3.3 around the initial components).
-//! 3. [`crate::merge`]: the windows' mixtures are merged by Eq. 3.5 with their
+//! 3. [`crate::mixture::merge_gmm4`]: the windows' mixtures are merged by Eq. 3.5 with their
 //!    support sizes `N_w` (points inside some gate).
 //!
 //! The occupied mixture is returned as a [`Gmm4`] over (x, y, z, intensity): the
@@ -45,7 +45,7 @@ use rayon::prelude::*;
 
 use crate::camera::PinholeIntrinsics;
 use crate::frame::DepthFrame;
-use crate::merge::{merge_gmm3, merge_gmm4};
+use crate::mixture::{merge_gmm3, merge_gmm4};
 use crate::sogmm::{Gmm3, Gmm4, SogmmError};
 pub use gated_em::{GatedEmConfig, GatedFit, fit_gated_em};
 

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::gated_em::gate;
 use super::*;
-use crate::sogmm::gmm::Chol3;
+use crate::mixture::Chol3;
 use crate::sogmm::synthetic;
 
 fn room() -> (Vec<f32>, Vec<f32>, PinholeIntrinsics, Isometry3<f64>) {

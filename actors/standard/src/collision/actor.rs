@@ -30,7 +30,9 @@ use crate::msgs::{
 };
 use crate::planner::round::required_clearance_m;
 use crate::trajectory::Trajectory;
-use troupe_runtime::{Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, Topic};
+use troupe_runtime::{
+    Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
+};
 
 /// Settings of the collision actor (the world part; the peer part is the policy's).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -56,20 +58,13 @@ impl Default for CollisionActorConfig {
 
 impl CollisionActorConfig {
     /// Checks the numbers and the body; the error names the key.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.margin_m.is_finite() && self.margin_m >= 0.0) {
-            return Err(format!("`margin_m` must be ≥ 0, got {}", self.margin_m));
-        }
-        if !(self.check_step_s.is_finite() && self.check_step_s > 0.0) {
-            return Err(format!(
-                "`check_step_s` must be > 0, got {}",
-                self.check_step_s
-            ));
-        }
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::non_negative("margin_m", self.margin_m)?;
+        ConfigError::positive("check_step_s", self.check_step_s)?;
         self.body
             .ellipsoid()
             .map(|_| ())
-            .map_err(|e: BodyError| format!("`body`: {e}"))
+            .map_err(|e: BodyError| ConfigError::new("body", "must describe a valid ellipsoid", e))
     }
 }
 

@@ -6,9 +6,9 @@
 use nalgebra::{Isometry3, Matrix4, UnitQuaternion, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
-use crate::mapper::sogmm::{Gmm4, SogmmError};
 use crate::msgs::{Keyframe, Plan};
 use crate::trajectory::{Knot, Trajectory, TrajectoryError};
+use troupe_algorithms::mixture::{Gmm4, MixtureError};
 
 /// Where a peer's world frame sits in ours (T₀ʲⁱ of Eq. 8.1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -35,7 +35,7 @@ impl PeerFrame {
 }
 
 /// A mixture moved by a rigid transform (Eq. 8.1 on the spatial block).
-pub fn transform_gmm(gmm: &Gmm4, transform: &Isometry3<f64>) -> Result<Gmm4, SogmmError> {
+pub fn transform_gmm(gmm: &Gmm4, transform: &Isometry3<f64>) -> Result<Gmm4, MixtureError> {
     let mut b = Matrix4::identity();
     b.fixed_view_mut::<3, 3>(0, 0)
         .copy_from(transform.rotation.to_rotation_matrix().matrix());
@@ -58,7 +58,7 @@ pub fn transform_gmm(gmm: &Gmm4, transform: &Isometry3<f64>) -> Result<Gmm4, Sog
 pub fn transform_keyframe(
     keyframe: &Keyframe,
     transform: &Isometry3<f64>,
-) -> Result<Keyframe, SogmmError> {
+) -> Result<Keyframe, MixtureError> {
     Ok(Keyframe {
         gmm: transform_gmm(&keyframe.gmm, transform)?,
         pose: transform * keyframe.pose,

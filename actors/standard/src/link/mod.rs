@@ -39,8 +39,8 @@ pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
 
 use troupe_runtime::{
-    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TRANSPORT, LINK_TX,
-    LinkTx, Message, QueuePolicy, RobotId, Time, TimerId, Topic,
+    Actor, ActorError, ActorResult, ConfigError, Context, Destination, Event, LINK_RX,
+    LINK_TRANSPORT, LINK_TX, LinkTx, Message, QueuePolicy, RobotId, Time, TimerId, Topic,
 };
 
 /// Link settings.
@@ -107,29 +107,14 @@ impl Default for LinkConfig {
 
 impl LinkConfig {
     /// Checks the settings; the error names the key (relative to the link table).
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.odometry_rate_hz.is_finite() && self.odometry_rate_hz >= 0.0) {
-            return Err(format!(
-                "odometry_rate_hz must be ≥ 0, got {}",
-                self.odometry_rate_hz
-            ));
-        }
-        if !(self.plan_rate_hz.is_finite() && self.plan_rate_hz >= 0.0) {
-            return Err(format!(
-                "plan_rate_hz must be ≥ 0, got {}",
-                self.plan_rate_hz
-            ));
-        }
-        if !(self.peer_timeout_s.is_finite() && self.peer_timeout_s >= 0.0) {
-            return Err(format!(
-                "peer_timeout_s must be ≥ 0, got {}",
-                self.peer_timeout_s
-            ));
-        }
-        self.shaper.validate().map_err(|e| format!("shaper.{e}"))?;
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::non_negative("odometry_rate_hz", self.odometry_rate_hz)?;
+        ConfigError::non_negative("plan_rate_hz", self.plan_rate_hz)?;
+        ConfigError::non_negative("peer_timeout_s", self.peer_timeout_s)?;
+        self.shaper.validate().map_err(|e| e.within("shaper"))?;
         self.reassembly
             .validate()
-            .map_err(|e| format!("reassembly.{e}"))
+            .map_err(|e| e.within("reassembly"))
     }
 }
 

@@ -13,7 +13,7 @@ use super::keyframe::{Frustum, KeyframeSelector};
 use super::sogmm::{FramePoints, SogmmConfig, fit_points, frame_points};
 use crate::msgs::{DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, PinholeIntrinsics};
 use troupe_runtime::{
-    Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, Time, Topic,
+    Actor, ActorError, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
 };
 
 /// Statistics of the mapper after a keyframe (published on [`MAPPER_STATS`]).
@@ -130,25 +130,34 @@ impl Default for MapperConfig {
 
 impl MapperConfig {
     /// Checks the numbers; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.bandwidth.is_finite() && self.bandwidth > 0.0) {
-            return Err(format!("bandwidth must be > 0, got {}", self.bandwidth));
-        }
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::positive("bandwidth", self.bandwidth)?;
         if self.pixel_stride == 0 {
-            return Err("pixel_stride must be ≥ 1".into());
+            return Err(ConfigError::new("pixel_stride", "must be ≥ 1", 0));
         }
         if !(0.0..=1.0).contains(&self.overlap_threshold) {
-            return Err(format!(
-                "overlap_threshold must be in [0, 1], got {}",
-                self.overlap_threshold
+            return Err(ConfigError::new(
+                "overlap_threshold",
+                "must be in [0, 1]",
+                self.overlap_threshold,
             ));
         }
         if self.remembered_keyframes == 0 {
-            return Err("remembered_keyframes must be ≥ 1".into());
+            return Err(ConfigError::new("remembered_keyframes", "must be ≥ 1", 0));
         }
-        self.global_map_config(0)
-            .validate()
-            .map_err(|e| format!("global map: {e}"))
+        // The global map's settings (GlobalMapConfig::validate, named by their keys here).
+        ConfigError::positive("hash_cell_m", self.hash_cell_m)?;
+        if self.relevance_threshold.is_nan() {
+            return Err(ConfigError::new(
+                "relevance_threshold",
+                "must be a number",
+                "NaN",
+            ));
+        }
+        if self.min_relevant_points == 0 {
+            return Err(ConfigError::new("min_relevant_points", "must be ≥ 1", 0));
+        }
+        Ok(())
     }
 
     /// The settings of the global map, with local fits seeded from `seed`.
@@ -509,7 +518,12 @@ mod tests {
             },
         ] {
             let e = bad.validate().unwrap_err();
-            assert!(e.starts_with("global map:"), "{e}");
+            assert!(
+                ["hash_cell_m", "relevance_threshold", "min_relevant_points"]
+                    .contains(&e.key.as_str()),
+                "{e}"
+            );
+            bad.global_map_config(0).validate().unwrap_err();
         }
     }
 

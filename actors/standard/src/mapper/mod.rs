@@ -11,5 +11,5 @@ pub use actor::{
 };
 pub use troupe_algorithms::model::{KeyframeFit, MapModel, fit_keyframe};
 pub use troupe_algorithms::{
-    global_map as global, hash, keyframe, mapfile, merge, model, sogmm, windowed,
+    global_map as global, hash, keyframe, mapfile, mixture, model, sogmm, windowed,
 };

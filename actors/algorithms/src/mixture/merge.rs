@@ -7,27 +7,27 @@
 //! to all parts ([`merge_weights`]); the merged density is the support-weighted average
 //! `p*(x) = Σ_i (N_i / N*) p_i(x)`.
 
-use crate::sogmm::{Gmm3, Gmm4, SogmmError};
+use super::{Gmm3, Gmm4, MixtureError};
 
 /// Eqs. 3.4–3.5 for any number of parts: `supports[i]` is `N_i`, `weights[i]` the
 /// weights of part `i`. Parts with zero support contribute nothing (their weights are
 /// kept as zeros so indices stay aligned). The result is renormalised to sum to 1
 /// exactly in floating point (it already does mathematically). Errors when the total
 /// support is zero or a support is not finite and non-negative.
-pub fn merge_weights(supports: &[f64], weights: &[&[f64]]) -> Result<Vec<f64>, SogmmError> {
+pub fn merge_weights(supports: &[f64], weights: &[&[f64]]) -> Result<Vec<f64>, MixtureError> {
     if supports.len() != weights.len() {
-        return Err(SogmmError::InvalidInput(
+        return Err(MixtureError::InvalidMerge(
             "one support size is needed per mixture",
         ));
     }
     if supports.iter().any(|n| !n.is_finite() || *n < 0.0) {
-        return Err(SogmmError::InvalidInput(
+        return Err(MixtureError::InvalidMerge(
             "support sizes must be finite and non-negative",
         ));
     }
     let n_star: f64 = supports.iter().sum();
     if n_star <= 0.0 {
-        return Err(SogmmError::EmptyModel);
+        return Err(MixtureError::EmptyModel);
     }
     let mut out: Vec<f64> = supports
         .iter()
@@ -36,7 +36,7 @@ pub fn merge_weights(supports: &[f64], weights: &[&[f64]]) -> Result<Vec<f64>, S
         .collect();
     let sum: f64 = out.iter().sum();
     if !(sum.is_finite() && sum > 0.0) {
-        return Err(SogmmError::EmptyModel);
+        return Err(MixtureError::EmptyModel);
     }
     out.iter_mut().for_each(|w| *w /= sum);
     Ok(out)
@@ -44,35 +44,40 @@ pub fn merge_weights(supports: &[f64], weights: &[&[f64]]) -> Result<Vec<f64>, S
 
 /// Merge 4D mixtures `(N_i, G_i)` by Eqs. 3.4–3.5; components of zero weight are
 /// dropped.
-pub fn merge_gmm4(parts: &[(f64, &Gmm4)]) -> Result<Gmm4, SogmmError> {
+pub fn merge_gmm4(parts: &[(f64, &Gmm4)]) -> Result<Gmm4, MixtureError> {
     let supports: Vec<f64> = parts.iter().map(|(n, _)| *n).collect();
-    let weights: Vec<&[f64]> = parts.iter().map(|(_, g)| g.weights()).collect();
-    let merged = merge_weights(&supports, &weights)?;
-    let means = parts.iter().flat_map(|(_, g)| g.means().iter().copied());
-    let covs = parts
+    let params: Vec<_> = parts
         .iter()
-        .flat_map(|(_, g)| g.covariances().iter().copied());
-    let (mut w, mut mu, mut cov) = (Vec::new(), Vec::new(), Vec::new());
-    for ((wi, mi), ci) in merged.into_iter().zip(means).zip(covs) {
-        if wi > 0.0 {
-            w.push(wi);
-            mu.push(mi);
-            cov.push(ci);
-        }
-    }
+        .map(|(_, g)| (g.weights(), g.means(), g.covariances()))
+        .collect();
+    let (w, mu, cov) = merged_parameters(&supports, &params)?;
     Gmm4::new(w, mu, cov)
 }
 
 /// Merge 3D mixtures `(N_i, G_i)` by Eqs. 3.4–3.5; components of zero weight are
 /// dropped.
-pub fn merge_gmm3(parts: &[(f64, &Gmm3)]) -> Result<Gmm3, SogmmError> {
+pub fn merge_gmm3(parts: &[(f64, &Gmm3)]) -> Result<Gmm3, MixtureError> {
     let supports: Vec<f64> = parts.iter().map(|(n, _)| *n).collect();
-    let weights: Vec<&[f64]> = parts.iter().map(|(_, g)| g.weights()).collect();
-    let merged = merge_weights(&supports, &weights)?;
-    let means = parts.iter().flat_map(|(_, g)| g.means().iter().copied());
-    let covs = parts
+    let params: Vec<_> = parts
         .iter()
-        .flat_map(|(_, g)| g.covariances().iter().copied());
+        .map(|(_, g)| (g.weights(), g.means(), g.covariances()))
+        .collect();
+    let (w, mu, cov) = merged_parameters(&supports, &params)?;
+    Gmm3::new(w, mu, cov)
+}
+
+/// Weights (Eq. 3.5), means and covariances of merged mixtures given as
+/// `(weights, means, covariances)`, without the components of zero weight.
+type Parameters<M, C> = (Vec<f64>, Vec<M>, Vec<C>);
+
+fn merged_parameters<M: Copy, C: Copy>(
+    supports: &[f64],
+    parts: &[(&[f64], &[M], &[C])],
+) -> Result<Parameters<M, C>, MixtureError> {
+    let weights: Vec<&[f64]> = parts.iter().map(|p| p.0).collect();
+    let merged = merge_weights(supports, &weights)?;
+    let means = parts.iter().flat_map(|p| p.1.iter().copied());
+    let covs = parts.iter().flat_map(|p| p.2.iter().copied());
     let (mut w, mut mu, mut cov) = (Vec::new(), Vec::new(), Vec::new());
     for ((wi, mi), ci) in merged.into_iter().zip(means).zip(covs) {
         if wi > 0.0 {
@@ -81,7 +86,7 @@ pub fn merge_gmm3(parts: &[(f64, &Gmm3)]) -> Result<Gmm3, SogmmError> {
             cov.push(ci);
         }
     }
-    Gmm3::new(w, mu, cov)
+    Ok((w, mu, cov))
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! Mixture types: the joint 4D model [`Gmm4`] (x, y, z, intensity; thesis Eq. 6.1), its
+//! Gaussian mixtures, the shared language of troupe's maps: the joint 4D model [`Gmm4`] (x, y, z, intensity; thesis Eq. 6.1), its
 //! spatial marginal [`Gmm3`] (Eq. 6.11), the intensity conditional
 //! [`IntensityConditional`] (Eqs. 6.12–6.13), log-likelihoods through Cholesky factors
 //! (App. A, Eq. A.3) and sampling (§6.1.5).
@@ -10,7 +10,51 @@ use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 use rand::Rng;
 use rayon::prelude::*;
 
-use super::SogmmError;
+mod merge;
+
+pub use merge::{merge_gmm3, merge_gmm4, merge_weights};
+
+/// Why a mixture is not valid.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MixtureError {
+    /// A mixture needs at least one component.
+    #[error("mixture has no components")]
+    EmptyModel,
+    /// Weights, means and covariances differ in number.
+    #[error("{weights} weights, {means} means, {covariances} covariances")]
+    LengthMismatch {
+        /// Number of weights.
+        weights: usize,
+        /// Number of means.
+        means: usize,
+        /// Number of covariances.
+        covariances: usize,
+    },
+    /// A weight is negative or not finite.
+    #[error("weight {weight} of component {component} is negative or not finite")]
+    InvalidWeight {
+        /// Component index.
+        component: usize,
+        /// The weight.
+        weight: f64,
+    },
+    /// Weights do not sum to one (within [`WEIGHT_SUM_TOLERANCE`]).
+    #[error("weights sum to {sum}, not 1")]
+    WeightsDoNotSumToOne {
+        /// Their sum.
+        sum: f64,
+    },
+    /// A covariance is not symmetric positive definite (or a mean is not finite).
+    #[error("covariance of component {component} is not symmetric positive definite")]
+    NotPositiveDefinite {
+        /// Component index.
+        component: usize,
+    },
+    /// Parts to merge are not valid (non-finite or negative support, no parts).
+    #[error("invalid merge: {0}")]
+    InvalidMerge(&'static str),
+}
 
 /// `ln(2π)`.
 pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -155,13 +199,13 @@ pub(crate) fn log_sum_exp(values: &[f64]) -> f64 {
     max + s.ln()
 }
 
-fn check_weights(weights: &[f64]) -> Result<(), SogmmError> {
+fn check_weights(weights: &[f64]) -> Result<(), MixtureError> {
     if weights.is_empty() {
-        return Err(SogmmError::EmptyModel);
+        return Err(MixtureError::EmptyModel);
     }
     for (component, w) in weights.iter().enumerate() {
         if !w.is_finite() || *w < 0.0 {
-            return Err(SogmmError::InvalidWeight {
+            return Err(MixtureError::InvalidWeight {
                 component,
                 weight: *w,
             });
@@ -169,9 +213,39 @@ fn check_weights(weights: &[f64]) -> Result<(), SogmmError> {
     }
     let sum: f64 = weights.iter().sum();
     if (sum - 1.0).abs() > WEIGHT_SUM_TOLERANCE {
-        return Err(SogmmError::WeightsDoNotSumToOne { sum });
+        return Err(MixtureError::WeightsDoNotSumToOne { sum });
     }
     Ok(())
+}
+
+/// The invariants [`Gmm4::new`] and [`Gmm3::new`] share (matching lengths, valid
+/// weights, symmetric positive-definite covariances), with each covariance factored by
+/// `factor`.
+fn checked_factors<const D: usize, F>(
+    weights: &[f64],
+    means: &[nalgebra::SVector<f64, D>],
+    covariances: &[nalgebra::SMatrix<f64, D, D>],
+    factor: impl Fn(&nalgebra::SVector<f64, D>, &nalgebra::SMatrix<f64, D, D>) -> Option<F>,
+) -> Result<Vec<F>, MixtureError> {
+    if means.len() != weights.len() || covariances.len() != weights.len() {
+        return Err(MixtureError::LengthMismatch {
+            weights: weights.len(),
+            means: means.len(),
+            covariances: covariances.len(),
+        });
+    }
+    check_weights(weights)?;
+    means
+        .iter()
+        .zip(covariances)
+        .enumerate()
+        .map(|(component, (mean, cov))| {
+            if asymmetry(cov) > SYMMETRY_TOLERANCE {
+                return Err(MixtureError::NotPositiveDefinite { component });
+            }
+            factor(mean, cov).ok_or(MixtureError::NotPositiveDefinite { component })
+        })
+        .collect()
 }
 
 fn asymmetry<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
@@ -210,22 +284,8 @@ impl Gmm4 {
         weights: Vec<f64>,
         means: Vec<Vector4<f64>>,
         covariances: Vec<Matrix4<f64>>,
-    ) -> Result<Self, SogmmError> {
-        if means.len() != weights.len() || covariances.len() != weights.len() {
-            return Err(SogmmError::LengthMismatch {
-                weights: weights.len(),
-                means: means.len(),
-                covariances: covariances.len(),
-            });
-        }
-        check_weights(&weights)?;
-        let mut chol = Vec::with_capacity(weights.len());
-        for (component, (mean, cov)) in means.iter().zip(&covariances).enumerate() {
-            if asymmetry(cov) > SYMMETRY_TOLERANCE {
-                return Err(SogmmError::NotPositiveDefinite { component });
-            }
-            chol.push(Chol4::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?);
-        }
+    ) -> Result<Self, MixtureError> {
+        let chol = checked_factors(&weights, &means, &covariances, Chol4::new)?;
         let log_weights = weights.iter().map(|w| w.ln()).collect();
         Ok(Self {
             weights,
@@ -273,7 +333,7 @@ impl Gmm4 {
     }
 
     /// Re-check every invariant of the type doc (weights sum to 1, covariances PD).
-    pub fn validate(&self) -> Result<(), SogmmError> {
+    pub fn validate(&self) -> Result<(), MixtureError> {
         Self::new(
             self.weights.clone(),
             self.means.clone(),
@@ -288,10 +348,14 @@ impl Gmm4 {
     /// §6.1.4.2). The cached Cholesky factors are reused, so the cost is linear in the
     /// number of components with a small constant. On error (wrong length, weights not
     /// summing to 1, see [`Gmm4::new`]) `self` is left unchanged.
-    pub fn append_reweighted(&mut self, other: &Gmm4, weights: Vec<f64>) -> Result<(), SogmmError> {
+    pub fn append_reweighted(
+        &mut self,
+        other: &Gmm4,
+        weights: Vec<f64>,
+    ) -> Result<(), MixtureError> {
         let n = self.len() + other.len();
         if weights.len() != n {
-            return Err(SogmmError::LengthMismatch {
+            return Err(MixtureError::LengthMismatch {
                 weights: weights.len(),
                 means: n,
                 covariances: n,
@@ -410,22 +474,8 @@ impl Gmm3 {
         weights: Vec<f64>,
         means: Vec<Vector3<f64>>,
         covariances: Vec<Matrix3<f64>>,
-    ) -> Result<Self, SogmmError> {
-        if means.len() != weights.len() || covariances.len() != weights.len() {
-            return Err(SogmmError::LengthMismatch {
-                weights: weights.len(),
-                means: means.len(),
-                covariances: covariances.len(),
-            });
-        }
-        check_weights(&weights)?;
-        let mut chol = Vec::with_capacity(weights.len());
-        for (component, (mean, cov)) in means.iter().zip(&covariances).enumerate() {
-            if asymmetry(cov) > SYMMETRY_TOLERANCE {
-                return Err(SogmmError::NotPositiveDefinite { component });
-            }
-            chol.push(Chol3::new(mean, cov).ok_or(SogmmError::NotPositiveDefinite { component })?);
-        }
+    ) -> Result<Self, MixtureError> {
+        let chol = checked_factors(&weights, &means, &covariances, Chol3::new)?;
         let log_weights = weights.iter().map(|w| w.ln()).collect();
         Ok(Self {
             weights,
