@@ -1,20 +1,38 @@
-//! `troupe launch SCENARIO.toml`: the scenario's team as separate `troupe-robot`
-//! processes on this machine, talking over zenoh on loopback; the same robot files
-//! work across hosts with other addresses ([`crate::process`]).
+//! `troupe launch SCENARIO.toml`: the scenario's team as separate `troupe robot`
+//! processes on this machine, talking over zenoh on loopback, peer to peer or (with
+//! `--router`) through one zenoh router ([`crate::router`]) that this process runs;
+//! the same robot files work across hosts with other addresses ([`crate::process`]).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 
 use serde::Serialize;
 
-use crate::process::{loopback_endpoints, min_distance_between, read_trajectory, write_team};
+use crate::process::{
+    loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
+};
+use crate::router::{Router, RouterError, settings};
 use crate::scenario::Scenario;
+
+/// How to launch a team.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LaunchOptions {
+    /// Peer to peer: robot `i` listens on `base_port + i`. Through a router: the
+    /// router listens on `base_port`.
+    pub base_port: u16,
+    /// Wall seconds each robot runs; `None`: until interrupted.
+    pub duration_s: Option<f64>,
+    /// Start one zenoh router and make the robots its clients.
+    pub router: bool,
+}
 
 /// What a launch did (`launch.json`).
 #[derive(Clone, Debug, Serialize)]
 pub struct LaunchReport {
     /// Robot files, one per process.
     pub robot_files: Vec<PathBuf>,
+    /// The router's endpoint, when the robots went through one.
+    pub router: Option<String>,
     /// Exit code of each process (`None`: killed by a signal).
     pub exit_codes: Vec<Option<i32>>,
     /// Smallest distance between two robots, from their trajectories aligned in
@@ -31,41 +49,69 @@ pub enum LaunchError {
     /// Files could not be written or read, or a process not started.
     #[error("{0}")]
     Io(String),
+    /// The router did not start.
+    #[error("starting the router")]
+    Router(#[source] RouterError),
 }
 
-/// Writes robot files for `scenario_path`'s team into `dir` (robot `i` on port
-/// `base_port + i`), starts one `robot_exe` per robot, waits for all of them, and
-/// writes `dir/launch.json`.
+/// Writes robot files for `scenario_path`'s team into `dir` (see [`LaunchOptions`]),
+/// starts the router if asked, starts one `troupe robot` (`troupe_exe`) per robot,
+/// waits for all of them, and writes `dir/launch.json`.
 pub fn launch(
     scenario_path: &Path,
     dir: &Path,
-    base_port: u16,
-    duration_s: Option<f64>,
-    robot_exe: &Path,
+    options: &LaunchOptions,
+    troupe_exe: &Path,
 ) -> Result<LaunchReport, LaunchError> {
     let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
     let scenario = Scenario::load(scenario_path)?;
     let scenario_abs = std::fs::canonicalize(scenario_path)
         .map_err(|e| io(&scenario_path.display().to_string(), e))?;
-    let ports: Vec<u16> = (0..scenario.robots)
-        .map(|i| {
-            u16::try_from(i)
-                .ok()
-                .and_then(|i| base_port.checked_add(i))
-                .ok_or_else(|| LaunchError::Io("ports beyond 65535".into()))
-        })
-        .collect::<Result<_, _>>()?;
-    let files = write_team(dir, &scenario_abs, &loopback_endpoints(&ports), duration_s)
+    let (files, router) = if options.router {
+        let endpoint = loopback_endpoints(&[options.base_port]);
+        let router =
+            Router::open(&settings(endpoint.clone(), Vec::new())).map_err(LaunchError::Router)?;
+        let files = write_client_team(
+            dir,
+            &scenario_abs,
+            scenario.robots,
+            &endpoint,
+            options.duration_s,
+        )
         .map_err(|e| io(&dir.display().to_string(), e))?;
+        (files, Some((router, endpoint[0].clone())))
+    } else {
+        let ports: Vec<u16> = (0..scenario.robots)
+            .map(|i| {
+                u16::try_from(i)
+                    .ok()
+                    .and_then(|i| options.base_port.checked_add(i))
+                    .ok_or_else(|| LaunchError::Io("ports beyond 65535".into()))
+            })
+            .collect::<Result<_, _>>()?;
+        let files = write_team(
+            dir,
+            &scenario_abs,
+            &loopback_endpoints(&ports),
+            options.duration_s,
+        )
+        .map_err(|e| io(&dir.display().to_string(), e))?;
+        (files, None)
+    };
     let mut children: Vec<Child> = Vec::new();
     for file in &files {
-        match Command::new(robot_exe).arg("--config").arg(file).spawn() {
+        match Command::new(troupe_exe)
+            .arg("robot")
+            .arg("--config")
+            .arg(file)
+            .spawn()
+        {
             Ok(child) => children.push(child),
             Err(e) => {
                 for mut c in children {
                     let _ = c.kill();
                 }
-                return Err(io(&robot_exe.display().to_string(), e));
+                return Err(io(&troupe_exe.display().to_string(), e));
             }
         }
     }
@@ -75,12 +121,19 @@ pub fn launch(
         .iter_mut()
         .map(|c| c.wait().map(|s| s.code()))
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| io("waiting for troupe-robot", e))?;
+        .map_err(|e| io("waiting for troupe robot", e))?;
+    let router = router.map(|(router, endpoint)| {
+        if let Err(e) = router.close() {
+            tracing::warn!("{e}");
+        }
+        endpoint
+    });
     let trajectories: Vec<_> = (0..files.len())
         .filter_map(|i| read_trajectory(&dir.join(format!("robot{i}/trajectory.csv"))).ok())
         .collect();
     let report = LaunchReport {
         robot_files: files,
+        router,
         exit_codes,
         min_inter_robot_distance_m: min_distance_between(&trajectories),
     };

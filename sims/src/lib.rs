@@ -8,8 +8,9 @@
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
-//! - [`process`], [`launch`]: one robot per process over zenoh (`troupe-robot`,
-//!   `troupe launch`); [`replay`]: a robot process replaying a recorded sequence.
+//! - [`process`], [`launch`]: one robot per process over zenoh (`troupe robot`,
+//!   `troupe launch`); [`router`]: a zenoh router (`troupe router`); [`replay`]: a
+//!   robot process replaying a recorded sequence.
 #![deny(missing_docs)]
 
 pub mod camera;
@@ -24,6 +25,7 @@ pub mod plot;
 pub mod process;
 pub mod replay;
 pub mod report;
+pub mod router;
 pub mod scenario;
 pub mod sequence;
 pub mod sim_sensor;
@@ -32,8 +34,7 @@ pub mod team;
 pub mod vehicle;
 pub mod world;
 
-/// Logs to stderr, filtered by `RUST_LOG` (default `warn`); for the `troupe` and
-/// `troupe-robot` binaries.
+/// Logs to stderr, filtered by `RUST_LOG` (default `warn`); for the `troupe` binary.
 pub fn init_logging() {
     tracing_subscriber::fmt()
         .with_env_filter(

@@ -8,10 +8,14 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use troupe_actors::mapper::MapModel;
+use troupe_sims::launch::LaunchOptions;
+use troupe_sims::process::{RobotProcess, run_until_signal, shutdown_signal};
 use troupe_sims::report::write_run;
+use troupe_sims::router::{Router, settings};
 use troupe_sims::scenario::Scenario;
 use troupe_sims::study::{
-    RunRow, Study, Variant, finished_run, run_variants, save_finished_run, write_study,
+    RunRow, Shard, Study, Variant, finished_run, merge_finished_runs, run_variants,
+    save_finished_run, write_study,
 };
 use troupe_sims::team::Team;
 
@@ -31,19 +35,51 @@ enum Command {
     /// Run a study: every combination of the study's levels under every seed, in
     /// parallel; writes `OUT/<study>/results.csv` (one row per run), `aggregate.csv`
     /// (means and 95% intervals over seeds), plots, and each run's report under
-    /// `OUT/<study>/runs/`.
+    /// `OUT/<study>/runs/`. Across machines: `--shard K/N` on each, then `--merge`.
     Sweep(SweepArgs),
     /// Build a map from a recorded sequence (TUM RGB-D layout: camera.toml, depth.txt,
     /// rgb.txt, groundtruth.txt, depth/ and rgb/ PNGs); write `map.troupe` (the
     /// keyframe mixtures) and `map.ply` (points sampled from it, with intensity) to
     /// OUT, and print one JSON line of statistics.
     Map(MapArgs),
-    /// Run a scenario's team as separate `troupe-robot` processes on this machine,
+    /// Run a scenario's team as separate `troupe robot` processes on this machine,
     /// talking over zenoh on loopback (robot i listens on BASE_PORT + i and connects
-    /// to the others); writes the robot files, each robot's `summary.json` and
-    /// `trajectory.csv`, and `launch.json` (exit codes, closest approach) to
-    /// `OUT/<scenario name>/`. Ctrl-C stops every robot cleanly.
+    /// to the others; with `--router`, through one zenoh router on BASE_PORT);
+    /// writes the robot files, each robot's `summary.json` and `trajectory.csv`, and
+    /// `launch.json` (exit codes, closest approach) to `OUT/<scenario name>/`. Ctrl-C
+    /// stops every robot cleanly.
     Launch(LaunchArgs),
+    /// Run one robot of a team in this process: its simulated vehicle and camera in
+    /// the scenario's world (or, with `sequence` in the robot file, a recorded
+    /// sequence replayed as its sensor), the standard actors on the wall clock, the
+    /// link over zenoh. Writes `summary.json` and `trajectory.csv` on exit (end of
+    /// `duration_s`, Ctrl-C or SIGTERM).
+    Robot(RobotArgs),
+    /// Run a zenoh router until Ctrl-C or SIGTERM: robots in client mode
+    /// (`[zenoh] mode = "client"`, `connect = ["tcp/<this host>:7447"]`) reach each
+    /// other through it instead of connecting to every other robot.
+    Router(RouterArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RobotArgs {
+    /// The robot file (TOML): `robot`, `scenario`, `duration_s`, `out`, `sequence`,
+    /// `[zenoh]`.
+    #[arg(long)]
+    config: PathBuf,
+    /// Override the file's `duration_s` (wall seconds).
+    #[arg(long, value_name = "SECONDS")]
+    duration_s: Option<f64>,
+}
+
+#[derive(Debug, clap::Args)]
+struct RouterArgs {
+    /// Endpoint to listen on (repeat for several).
+    #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7447")]
+    listen: Vec<String>,
+    /// Another router to connect to (repeat for several).
+    #[arg(long, value_name = "ENDPOINT")]
+    connect: Vec<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -53,9 +89,12 @@ struct LaunchArgs {
     /// Wall seconds each robot runs; without it, until Ctrl-C.
     #[arg(long, value_name = "SECONDS")]
     duration_s: Option<f64>,
-    /// Port of robot 0; robot i uses BASE_PORT + i.
+    /// Port of robot 0; robot i uses BASE_PORT + i (with `--router`: the router's).
     #[arg(long, default_value_t = 7447)]
     base_port: u16,
+    /// Start one zenoh router on BASE_PORT and run the robots as its clients.
+    #[arg(long)]
+    router: bool,
     /// Directory that receives the launch directory.
     #[arg(long, default_value = "runs/launch")]
     out: PathBuf,
@@ -71,13 +110,30 @@ struct SweepArgs {
     /// Directory that receives the study directory.
     #[arg(long, default_value = "runs")]
     out: PathBuf,
-    /// List the runs and exit without running them.
+    /// List the runs (of this shard) and exit without running them.
     #[arg(long)]
     dry_run: bool,
     /// Reuse runs that an earlier sweep into the same directory finished with the
     /// same scenario (their `runs/<run>/study_row.json`); fly only the rest.
     #[arg(long)]
     resume: bool,
+    /// Fly only shard K of N (0 <= K < N): the runs whose position in the study's
+    /// run list (`--dry-run` order) is K modulo N, whatever `--jobs`. Writes their
+    /// reports under `OUT/<study>/runs/` but not the study's tables: collect those
+    /// with `--merge` once every shard is done.
+    #[arg(long, value_name = "K/N", conflicts_with = "merge")]
+    shard: Option<Shard>,
+    /// Fly nothing: rebuild `results.csv`, `aggregate.csv` and the plots in
+    /// `OUT/<study>/` from the finished runs (`study_row.json`) found under these
+    /// directories (e.g. the `OUT/<study>` of every shard). Refuses runs of another
+    /// version of the study; lists the runs still missing and then fails.
+    #[arg(
+        long,
+        value_name = "DIR",
+        num_args = 1..,
+        conflicts_with_all = ["jobs", "dry_run", "resume"]
+    )]
+    merge: Vec<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -146,24 +202,25 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
     }
     let scenario = Scenario::load(&args.scenario)?;
     let dir = args.out.join(&scenario.name);
-    let exe = std::env::current_exe()
-        .context("locating troupe")?
-        .with_file_name(format!("troupe-robot{}", std::env::consts::EXE_SUFFIX));
-    if !exe.is_file() {
-        anyhow::bail!(
-            "{} not found: build it with `cargo build --release -p troupe-sims --bins`",
-            exe.display()
-        );
-    }
+    let troupe = std::env::current_exe().context("locating troupe")?;
     println!(
-        "launching {} robots of {} as processes (ports {}..), outputs in {}",
+        "launching {} robots of {} as processes ({} port {}), outputs in {}",
         scenario.robots,
         args.scenario.display(),
+        if args.router {
+            "through a router on"
+        } else {
+            "peer to peer from"
+        },
         args.base_port,
         dir.display()
     );
-    let report =
-        troupe_sims::launch::launch(&args.scenario, &dir, args.base_port, args.duration_s, &exe)?;
+    let options = LaunchOptions {
+        base_port: args.base_port,
+        duration_s: args.duration_s,
+        router: args.router,
+    };
+    let report = troupe_sims::launch::launch(&args.scenario, &dir, &options, &troupe)?;
     let failed = report.exit_codes.iter().filter(|c| **c != Some(0)).count();
     println!(
         "{} robots finished ({} failed); closest approach {}",
@@ -179,6 +236,41 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn robot(args: RobotArgs) -> anyhow::Result<()> {
+    let mut process = RobotProcess::load(&args.config)?;
+    if let Some(d) = args.duration_s {
+        if !(d.is_finite() && d > 0.0) {
+            anyhow::bail!("--duration-s must be a finite number > 0, got {d}");
+        }
+        process.config.duration_s = Some(d);
+    }
+    let summary = run_until_signal(&process)?;
+    println!(
+        "robot{}: {:.1} wall s, {} odometry samples; report: {}",
+        summary.robot,
+        summary.wall_s,
+        summary.trajectory_samples,
+        process.out.display()
+    );
+    Ok(())
+}
+
+fn router(args: RouterArgs) -> anyhow::Result<()> {
+    let router = Router::open(&settings(args.listen.clone(), args.connect))?;
+    println!(
+        "zenoh router {} listening on {}",
+        router.zid(),
+        args.listen.join(", ")
+    );
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?
+        .block_on(shutdown_signal());
+    router.close()?;
+    Ok(())
+}
+
 fn main() -> ExitCode {
     troupe_sims::init_logging();
     let cli = Cli::parse();
@@ -187,6 +279,8 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep(args),
         Command::Map(args) => map(args),
         Command::Launch(args) => launch(args),
+        Command::Robot(args) => robot(args),
+        Command::Router(args) => router(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -321,7 +415,14 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
 
 fn sweep(args: SweepArgs) -> anyhow::Result<()> {
     let study = Study::load(&args.study)?;
-    let variants = study.variants()?;
+    let all = study.variants()?;
+    if !args.merge.is_empty() {
+        return merge(&study, &all, &args.merge, &args.out);
+    }
+    let variants = match args.shard {
+        Some(shard) => shard.select(&all),
+        None => all,
+    };
     if args.dry_run {
         for v in &variants {
             println!("{}", v.name);
@@ -334,8 +435,9 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
     let root = args.out.join(&study.name);
     let runs_dir = root.join("runs");
     let total = variants.len();
+    let share = args.shard.map_or(String::new(), |s| format!(", shard {s}"));
     eprintln!(
-        "{}: {total} runs ({} seeds), {jobs} at a time",
+        "{}{share}: {total} runs ({} seeds), {jobs} at a time",
         study.name,
         study.seeds.len()
     );
@@ -370,7 +472,7 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
         |variant, output, row| {
             finished += 1;
             let saved = write_run(&runs_dir, &variant.name, output)
-                .and_then(|dir| save_finished_run(&dir, variant, row));
+                .and_then(|dir| save_finished_run(&dir, &study.name, variant, row));
             if let Err(e) = saved {
                 write_errors.push(format!("{}: {e}", variant.name));
             }
@@ -385,6 +487,21 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
             );
         },
     )?;
+    if let Some(e) = write_errors.first() {
+        anyhow::bail!("writing a run report under {}: {e}", runs_dir.display());
+    }
+    if let Some(shard) = args.shard {
+        // Other shards may be writing into the same directory: the study's tables
+        // come from `--merge` once all of them are done.
+        println!(
+            "{} shard {shard}: {total} runs in {:.0} wall s under {}; when every shard is done: troupe sweep {} --merge DIR…",
+            study.name,
+            started.elapsed().as_secs_f64(),
+            runs_dir.display(),
+            args.study.display()
+        );
+        return Ok(());
+    }
     let mut flown = flown.into_iter();
     for row in &mut rows {
         if row.is_none() {
@@ -392,9 +509,6 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
         }
     }
     let rows: Vec<RunRow> = rows.into_iter().flatten().collect();
-    if let Some(e) = write_errors.first() {
-        anyhow::bail!("writing a run report under {}: {e}", runs_dir.display());
-    }
     let written = write_study(&root, &study, &rows)
         .with_context(|| format!("writing the study outputs under {}", root.display()))?;
     println!(
@@ -404,4 +518,152 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
         written.join(", ")
     );
     Ok(())
+}
+
+/// `troupe sweep STUDY --merge DIR…`: the study's tables from finished runs.
+fn merge(
+    study: &Study,
+    variants: &[Variant],
+    dirs: &[PathBuf],
+    out: &std::path::Path,
+) -> anyhow::Result<()> {
+    let merged = merge_finished_runs(study, variants, dirs)?;
+    let total = variants.len();
+    let found = merged.rows.len();
+    let places: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+    if found == 0 {
+        anyhow::bail!(
+            "no finished run of study `{}` under {}",
+            study.name,
+            places.join(", ")
+        );
+    }
+    if merged.other_studies > 0 {
+        eprintln!("passed over {} runs of other studies", merged.other_studies);
+    }
+    let root = out.join(&study.name);
+    let written = write_study(&root, study, &merged.rows)
+        .with_context(|| format!("writing the study outputs under {}", root.display()))?;
+    println!(
+        "{}: {found} of {total} runs merged from {}; outputs: {}",
+        study.name,
+        places.join(", "),
+        written.join(", ")
+    );
+    if !merged.missing.is_empty() {
+        for run in &merged.missing {
+            eprintln!("missing: {run}");
+        }
+        anyhow::bail!(
+            "{} of {total} runs missing (listed above): the outputs hold only the {found} found; fly the rest (e.g. their shards with --resume) and merge again",
+            merged.missing.len()
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory as _;
+
+    fn parse(args: &[&str]) -> Result<Cli, clap::Error> {
+        Cli::try_parse_from(std::iter::once("troupe").chain(args.iter().copied()))
+    }
+
+    fn sweep_args(args: &[&str]) -> SweepArgs {
+        match parse(args).expect("parses").command {
+            Command::Sweep(a) => a,
+            other => panic!("not a sweep: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn shard_and_merge_flags_parse() {
+        let a = sweep_args(&["sweep", "s.toml", "--shard", "2/5", "--jobs", "3"]);
+        assert_eq!(a.shard, Some(Shard::new(2, 5).expect("shard")));
+        assert!(a.merge.is_empty());
+        let a = sweep_args(&["sweep", "s.toml", "--merge", "a", "b/c", "--out", "o"]);
+        assert_eq!(a.merge, [PathBuf::from("a"), PathBuf::from("b/c")]);
+        assert_eq!(a.shard, None);
+        assert_eq!(a.out, PathBuf::from("o"));
+        for bad in [
+            &["sweep", "s.toml", "--shard", "5/5"][..],
+            &["sweep", "s.toml", "--shard", "1"],
+            &["sweep", "s.toml", "--shard", "-1/3"],
+            &["sweep", "s.toml", "--merge"],
+            &["sweep", "s.toml", "--merge", "a", "--shard", "0/2"],
+            &["sweep", "s.toml", "--merge", "a", "--resume"],
+            &["sweep", "s.toml", "--merge", "a", "--jobs", "2"],
+        ] {
+            assert!(parse(bad).is_err(), "{bad:?} parsed");
+        }
+        let error = parse(&["sweep", "s.toml", "--shard", "3/2"])
+            .expect_err("3/2")
+            .to_string();
+        assert!(error.contains("0 <= K < N"), "{error}");
+    }
+
+    #[test]
+    fn robot_router_and_launch_flags_parse() {
+        match parse(&["robot", "--config", "r.toml", "--duration-s", "4"])
+            .expect("robot")
+            .command
+        {
+            Command::Robot(a) => {
+                assert_eq!(a.config, PathBuf::from("r.toml"));
+                assert_eq!(a.duration_s, Some(4.0));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(parse(&["robot"]).is_err(), "--config is required");
+        match parse(&["router"]).expect("router").command {
+            Command::Router(a) => {
+                assert_eq!(a.listen, ["tcp/0.0.0.0:7447"]);
+                assert!(a.connect.is_empty());
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse(&[
+            "router",
+            "--listen",
+            "tcp/127.0.0.1:9000",
+            "--connect",
+            "tcp/h:7447",
+        ])
+        .expect("router")
+        .command
+        {
+            Command::Router(a) => {
+                assert_eq!(a.listen, ["tcp/127.0.0.1:9000"]);
+                assert_eq!(a.connect, ["tcp/h:7447"]);
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse(&["launch", "team.toml", "--router"])
+            .expect("launch")
+            .command
+        {
+            Command::Launch(a) => assert!(a.router),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn help_names_the_new_flags_and_commands() {
+        Cli::command().debug_assert();
+        let mut cli = Cli::command();
+        let top = cli.render_long_help().to_string();
+        for command in ["robot", "router", "sweep", "launch"] {
+            assert!(top.contains(command), "{command} missing from: {top}");
+        }
+        let sweep = cli
+            .find_subcommand_mut("sweep")
+            .expect("sweep")
+            .render_long_help()
+            .to_string();
+        for flag in ["--shard <K/N>", "--merge <DIR>", "modulo N"] {
+            assert!(sweep.contains(flag), "{flag} missing from: {sweep}");
+        }
+    }
 }

@@ -1,4 +1,4 @@
-//! One robot per process (`troupe-robot --config robot.toml`): the robot of a
+//! One robot per process (`troupe robot --config robot.toml`): the robot of a
 //! scenario's team with its own simulated vehicle and camera in the scenario's world
 //! (the same world seed gives the same world in every process), or with a recorded
 //! sequence as its sensor (`sequence`, see [`crate::replay`]), the standard actors on
@@ -21,6 +21,15 @@
 //!                                                       # peers do not forward
 //! ```
 //!
+//! Beyond a handful of robots, a zenoh router (`troupe router`, [`crate::router`])
+//! forwards between them and each robot names only the router:
+//!
+//! ```toml
+//! [zenoh]
+//! mode = "client"
+//! connect = ["tcp/10.0.0.1:7447"]
+//! ```
+//!
 //! On exit (the duration, SIGINT or SIGTERM) the process writes `summary.json`
 //! ([`ProcessSummary`]) and `trajectory.csv` (`unix_time_s,x_m,y_m,z_m`, the ground
 //! truth at every odometry message) into `out`.
@@ -34,7 +43,7 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
-use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
+use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
 
 use crate::replay::replaying_robot;
 use crate::scenario::{Scenario, describe};
@@ -333,8 +342,49 @@ pub fn write_team(
     endpoints: &[String],
     duration_s: Option<f64>,
 ) -> std::io::Result<Vec<PathBuf>> {
+    write_robot_files(dir, scenario, endpoints.len(), duration_s, |i| {
+        ZenohConfig {
+            listen: vec![endpoints[i].clone()],
+            connect: endpoints
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, e)| e.clone())
+                .collect(),
+            ..ZenohConfig::default()
+        }
+    })
+}
+
+/// Writes one robot file per robot (`robots` of them) into `dir`, each a zenoh
+/// client that connects only to the router(s) `routers` (e.g. `tcp/10.0.0.1:7447`,
+/// started with `troupe router`); otherwise as [`write_team`]. Returns the files.
+pub fn write_client_team(
+    dir: &Path,
+    scenario: &Path,
+    robots: u32,
+    routers: &[String],
+    duration_s: Option<f64>,
+) -> std::io::Result<Vec<PathBuf>> {
+    write_robot_files(dir, scenario, robots as usize, duration_s, |_| {
+        ZenohConfig {
+            mode: ZenohMode::Client,
+            connect: routers.to_vec(),
+            ..ZenohConfig::default()
+        }
+    })
+}
+
+/// Writes `robot<i>.toml` for `i` below `robots`, with `zenoh(i)` as its session.
+fn write_robot_files(
+    dir: &Path,
+    scenario: &Path,
+    robots: usize,
+    duration_s: Option<f64>,
+    zenoh: impl Fn(usize) -> ZenohConfig,
+) -> std::io::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
-    (0..endpoints.len())
+    (0..robots)
         .map(|i| {
             let config = ProcessConfig {
                 robot: u32::try_from(i).map_err(std::io::Error::other)?,
@@ -342,16 +392,7 @@ pub fn write_team(
                 duration_s,
                 out: Some(PathBuf::from(format!("robot{i}"))),
                 sequence: None,
-                zenoh: ZenohConfig {
-                    listen: vec![endpoints[i].clone()],
-                    connect: endpoints
-                        .iter()
-                        .enumerate()
-                        .filter(|(j, _)| *j != i)
-                        .map(|(_, e)| e.clone())
-                        .collect(),
-                    ..ZenohConfig::default()
-                },
+                zenoh: zenoh(i),
             };
             let file = dir.join(format!("robot{i}.toml"));
             let text = toml::to_string(&config).map_err(std::io::Error::other)?;
@@ -420,4 +461,37 @@ pub fn min_distance_between(trajectories: &[Vec<[f64; 4]>]) -> Option<f64> {
         }
     }
     best
+}
+
+/// Runs the robot on a new multi-threaded tokio runtime until its duration is over,
+/// Ctrl-C or SIGTERM (`troupe robot`), then writes the outputs.
+pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, ProcessError> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| ProcessError::Run(format!("starting the runtime: {e}")))?;
+    runtime.block_on(run(process, shutdown_signal()))
+}
+
+/// Resolves on Ctrl-C or SIGTERM.
+pub async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
 }

@@ -1,5 +1,5 @@
 //! A robot whose sensor is a recorded sequence instead of the simulated camera
-//! (`sequence = "…"` in a `troupe-robot` file): it replays what a real robot saw,
+//! (`sequence = "…"` in a `troupe robot` file): it replays what a real robot saw,
 //! maps it and shares the map and its poses with the team as any robot would.
 //!
 //! The recording fixes where the robot was, so a replaying robot does not plan or

@@ -38,6 +38,10 @@ use crate::plot::{Chart, Series, write_chart};
 use crate::scenario::{Scenario, ScenarioError};
 use crate::team::{RunOutput, Summary, Team};
 
+mod shard;
+
+pub use shard::{MergeError, Merged, Shard, ShardError, merge_finished_runs};
+
 /// One level of an axis.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -515,13 +519,31 @@ fn scenario_json(scenario: &Scenario) -> serde_json::Result<serde_json::Value> {
     serde_json::from_str(&serde_json::to_string(scenario)?)
 }
 
-/// Records a finished run in `run_dir` (its report directory) for `--resume`.
+/// A finished run as [`save_finished_run`] records it.
+#[derive(Deserialize)]
+struct Record {
+    /// The study's name (absent in records written before it was kept).
+    #[serde(default)]
+    study: Option<String>,
+    /// The scenario the run flew, as [`scenario_json`] writes it.
+    scenario: serde_json::Value,
+    row: RunRow,
+}
+
+/// Records a finished run of study `study` in `run_dir` (its report directory) for
+/// `--resume` and `--merge`.
 ///
 /// # Errors
 ///
 /// Any I/O error.
-pub fn save_finished_run(run_dir: &Path, variant: &Variant, row: &RunRow) -> std::io::Result<()> {
+pub fn save_finished_run(
+    run_dir: &Path,
+    study: &str,
+    variant: &Variant,
+    row: &RunRow,
+) -> std::io::Result<()> {
     let record = serde_json::json!({
+        "study": study,
         "scenario": scenario_json(&variant.scenario)?,
         "row": row,
     });
@@ -536,11 +558,6 @@ pub fn save_finished_run(run_dir: &Path, variant: &Variant, row: &RunRow) -> std
 /// study or its base scenario changed since).
 #[must_use]
 pub fn finished_run(run_dir: &Path, variant: &Variant, levels: &[f64]) -> Option<RunRow> {
-    #[derive(Deserialize)]
-    struct Record {
-        scenario: serde_json::Value,
-        row: RunRow,
-    }
     let bytes = std::fs::read(run_dir.join(FINISHED_RUN_FILE)).ok()?;
     let record: Record = serde_json::from_slice(&bytes).ok()?;
     let same = scenario_json(&variant.scenario).ok()? == record.scenario
@@ -966,7 +983,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             "no record yet"
         );
         std::fs::create_dir(&run_dir).expect("run dir");
-        save_finished_run(&run_dir, variant, &row).expect("save");
+        save_finished_run(&run_dir, "s", variant, &row).expect("save");
 
         assert_eq!(finished_run(&run_dir, variant, &[0.3]), Some(row.clone()));
         let other_levels = finished_run(&run_dir, variant, &[0.1, 0.4, 0.9]).expect("reused");

@@ -488,7 +488,7 @@ impl Team {
 
 /// Robot `i` of a scenario's team, as the simulation builds it: the standard robot of
 /// `scenario.robot` with a simulated vehicle at the world's start position `i` and a
-/// simulated camera (used by [`Team`] and by the per-robot `troupe-robot` process),
+/// simulated camera (used by [`Team`] and by the per-robot `troupe robot` process),
 /// keeping its link's durable state in `link_journal`.
 pub fn simulated_robot(
     scenario: &Scenario,

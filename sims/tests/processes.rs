@@ -1,13 +1,16 @@
-//! Three `troupe-robot` processes, one robot each, talking over zenoh on loopback
+//! Three `troupe robot` processes, one robot each, talking over zenoh on loopback
 //! (issue 3 item 4, issue 8 item 7): every robot hears the others' odometry and
-//! keyframes, and the robots keep apart.
+//! keyframes, and the robots keep apart; the same through a `troupe router`
+//! (issue 22).
 
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use troupe_sims::process::{loopback_endpoints, min_distance_between, read_trajectory, write_team};
+use troupe_sims::process::{
+    loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
+};
 
 /// `n` consecutive free TCP ports on loopback, below the kernel's ephemeral range
 /// (32768 and up by default): a port picked from that range could be handed to one
@@ -45,21 +48,21 @@ fn wait_all(children: &mut [Child], duration_s: f64) {
     for child in children {
         loop {
             if let Some(status) = child.try_wait().expect("wait") {
-                assert!(status.success(), "troupe-robot exited with {status}");
+                assert!(status.success(), "troupe robot exited with {status}");
                 break;
             }
             if started.elapsed() > Duration::from_secs_f64(duration_s + 60.0) {
                 let _ = child.kill();
-                panic!("troupe-robot did not stop after its duration");
+                panic!("troupe robot did not stop after its duration");
             }
             std::thread::sleep(Duration::from_millis(100));
         }
     }
 }
 
-/// Starts `troupe-robot` on a robot file, inside network namespace `netns` if given.
+/// Starts `troupe robot` on a robot file, inside network namespace `netns` if given.
 fn spawn_robot(file: &Path, netns: Option<&str>) -> Child {
-    let exe = env!("CARGO_BIN_EXE_troupe-robot");
+    let exe = env!("CARGO_BIN_EXE_troupe");
     let mut command = match netns {
         Some(ns) => {
             let mut c = Command::new("ip");
@@ -69,11 +72,12 @@ fn spawn_robot(file: &Path, netns: Option<&str>) -> Child {
         None => Command::new(exe),
     };
     command
+        .arg("robot")
         .arg("--config")
         .arg(file)
         .stdout(Stdio::null())
         .spawn()
-        .expect("spawn troupe-robot")
+        .expect("spawn troupe robot")
 }
 
 /// Each robot's `summary.json` and `trajectory.csv` under `dir/robot<i>/`.
@@ -384,5 +388,117 @@ fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
     for [_, x, y, z] in trajectory {
         let moved = ((x - start.x).powi(2) + (y - start.y).powi(2) + (z - start.z).powi(2)).sqrt();
         assert!(moved < 1e-3, "robot1 at {x} {y} {z}, recorded at {start}");
+    }
+}
+
+/// Issue 22: a team through a zenoh router. `troupe router` runs on loopback, the
+/// three robots are zenoh clients that name only the router, and every robot still
+/// hears the others' odometry, keyframes and plans.
+#[test]
+fn three_robot_clients_talk_through_a_troupe_router() {
+    use std::io::{BufRead as _, BufReader};
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"routed\"\nrobots = 3\n",
+    )
+    .expect("scenario");
+    let endpoint = loopback_endpoints(&free_ports(1));
+    let mut router = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["router", "--listen", &endpoint[0]])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("spawn troupe router");
+    // It prints one line once it listens; clients that find no router give up.
+    let mut line = String::new();
+    BufReader::new(router.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("router output");
+    assert!(line.contains("listening on"), "router said {line:?}");
+    let duration_s = 20.0;
+    let files = write_client_team(
+        dir.path(),
+        Path::new("team.toml"),
+        3,
+        &endpoint,
+        Some(duration_s),
+    )
+    .expect("robot files");
+    let text = std::fs::read_to_string(&files[0]).expect("robot0.toml");
+    assert!(text.contains("mode = \"client\"") && !text.contains("listen = [\""));
+    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
+    wait_all(&mut children, duration_s);
+    for (i, (summary, _)) in outputs(dir.path(), 3).into_iter().enumerate() {
+        assert!(
+            messages(&summary, "peer/odometry") > 100,
+            "robot{i}: {summary}"
+        );
+        assert!(
+            messages(&summary, "peer/keyframe") >= 2,
+            "robot{i}: {summary}"
+        );
+        assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
+        assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
+    }
+    // SIGTERM stops the router cleanly.
+    let stopped = Command::new("kill")
+        .args(["-TERM", &router.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(stopped.success());
+    let status = router.wait().expect("router exit");
+    assert!(status.success(), "router exited with {status}");
+}
+
+/// `troupe launch --router`: the launcher starts the router itself and writes client
+/// robot files that name only it.
+#[test]
+fn launch_with_a_router_runs_the_team_as_its_clients() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"launched\"\nrobots = 2\n",
+    )
+    .expect("scenario");
+    let port = free_ports(1)[0].to_string();
+    let out = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["launch", "team.toml", "--router", "--duration-s", "12"])
+        .args(["--base-port", &port, "--out", "out"])
+        .current_dir(dir.path())
+        .output()
+        .expect("troupe launch");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let launched = dir.path().join("out/launched");
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(launched.join("launch.json")).expect("launch.json"),
+    )
+    .expect("json");
+    let router = format!("tcp/127.0.0.1:{port}");
+    assert_eq!(report["router"].as_str(), Some(router.as_str()));
+    for i in 0..2 {
+        let file =
+            std::fs::read_to_string(launched.join(format!("robot{i}.toml"))).expect("robot file");
+        let robot: toml::Table = file.parse().expect("toml");
+        assert_eq!(robot["zenoh"]["mode"].as_str(), Some("client"), "{file}");
+        assert_eq!(
+            robot["zenoh"]["connect"].as_array().map(Vec::len),
+            Some(1),
+            "{file}"
+        );
+    }
+    for (i, (summary, _)) in outputs(&launched, 2).into_iter().enumerate() {
+        assert!(
+            messages(&summary, "peer/odometry") > 40,
+            "robot{i}: {summary}"
+        );
+        assert!(
+            messages(&summary, "peer/keyframe") >= 1,
+            "robot{i}: {summary}"
+        );
     }
 }
