@@ -598,3 +598,7 @@ pub fn cloud_from_gmm<R: Rng + ?Sized>(
 pub fn camera_pose(body: &Isometry3<f64>, optical_in_body: &Isometry3<f64>) -> Isometry3<f64> {
     body * optical_in_body * optical_to_camera().inverse()
 }
+
+#[cfg(test)]
+#[path = "convert_tests.rs"]
+mod tests;
