@@ -20,7 +20,7 @@ pub struct Ros2ConfigError {
     pub source: Option<troupe_comms::transport::TransportError>,
 }
 
-fn invalid(key: &str, reason: impl Into<String>) -> Ros2ConfigError {
+pub(super) fn invalid(key: &str, reason: impl Into<String>) -> Ros2ConfigError {
     Ros2ConfigError {
         key: key.to_owned(),
         reason: reason.into(),

@@ -21,10 +21,64 @@ pub mod attachment;
 pub mod cdr;
 mod config;
 pub mod convert;
+mod inputs;
 pub mod keyexpr;
 pub mod msgs;
+mod outputs;
 
 pub use attachment::Attachment;
 pub use cdr::{CdrError, RosMessage};
 pub use config::{Extrinsics, Ros2Config, Ros2ConfigError, Ros2Topics};
-pub use keyexpr::{KeyFormat, WireFormat};
+pub use inputs::{InputStats, OdometryInput, Ros2FrameSource, Ros2Inputs};
+pub use keyexpr::{KeyFormat, TopicNameError, WireFormat};
+pub use outputs::{OutputStats, Ros2Outputs, Ros2Publisher};
+
+/// Why the ROS 2 drivers could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2Error {
+    /// The `[ros2]` table is invalid.
+    #[error(transparent)]
+    Config(#[from] Ros2ConfigError),
+    /// A topic name cannot be put on zenoh.
+    #[error(transparent)]
+    TopicName(#[from] TopicNameError),
+    /// zenoh refused something.
+    #[error("zenoh: {context}")]
+    Zenoh {
+        /// What we were doing.
+        context: String,
+        /// zenoh's error.
+        #[source]
+        source: zenoh::Error,
+    },
+    /// A configured input topic delivered nothing in time.
+    #[error(
+        "ROS 2 topic `{topic}` (zenoh key `{key}`) sent nothing within {timeout_s} s: check the \
+         topic name, `format`, `domain_id` and the zenoh endpoints"
+    )]
+    TopicSilent {
+        /// The topic.
+        topic: String,
+        /// The key subscribed to.
+        key: String,
+        /// The startup timeout, seconds.
+        timeout_s: f64,
+    },
+    /// The publishing thread could not start.
+    #[error("cannot start the ROS 2 publishing thread")]
+    Thread(#[source] std::io::Error),
+}
+
+/// Opens the zenoh session of the `[ros2]` table (its `zenoh` endpoints).
+pub fn open_session(config: &Ros2Config) -> Result<zenoh::Session, Ros2Error> {
+    config.validate()?;
+    let zenoh_config = config.zenoh.to_zenoh().map_err(|e| Ros2ConfigError {
+        key: "zenoh".into(),
+        reason: "invalid zenoh settings".into(),
+        source: Some(e),
+    })?;
+    zenoh::Wait::wait(zenoh::open(zenoh_config)).map_err(|source| Ros2Error::Zenoh {
+        context: "opening the session".into(),
+        source,
+    })
+}
