@@ -2,6 +2,8 @@
 //! every field decodes to the value the script set, re-encoding gives the same message,
 //! and the conversions turn them into the troupe frames and odometry they stand for.
 
+#![allow(clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use nalgebra::{Isometry3, Point3, Vector3};

@@ -8,6 +8,8 @@
 //! Needs the wheels `scripts/ros2/install.sh` puts in `.venv-ros2` (or a Python named by
 //! `TROUPE_ROS2_PYTHON`); without them each test prints why and skips.
 
+#![allow(clippy::unwrap_used)]
+
 use std::net::TcpListener;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};

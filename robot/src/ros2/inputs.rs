@@ -226,9 +226,7 @@ impl Shared {
                 troupe_stamp,
             )
         } else {
-            let Some(cloud) = store.points.take() else {
-                return None;
-            };
+            let cloud = store.points.take()?;
             drop(store);
             // Validated: `points_intrinsics` is set whenever `topics.points` is.
             let intrinsics = config.points_intrinsics?;

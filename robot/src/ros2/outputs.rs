@@ -138,7 +138,7 @@ impl Ros2Publisher {
         std::thread::Builder::new()
             .name("troupe-ros2-tx".into())
             .spawn(move || send_loop(&rx, lanes, attach, &thread_counters))
-            .map_err(|e| Ros2Error::Thread(e))?;
+            .map_err(Ros2Error::Thread)?;
         Ok(Ros2Publisher {
             queue,
             counters,
