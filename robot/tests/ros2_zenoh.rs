@@ -14,10 +14,12 @@ use std::net::TcpListener;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
-use nalgebra::{Point3, Vector3};
-use troupe_actors::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, Plan};
+use nalgebra::{Matrix4, Point3, Vector3, Vector4};
+use troupe_actors::mapper::sogmm::Gmm4;
+use troupe_actors::msgs::{
+    DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, ODOMETRY, Odometry, PLAN, Plan,
+};
 use troupe_actors::runtime::{
     Actor, ActorResult, ActorSpec, Context, Event, Publication, QueuePolicy, RealtimeExecutor,
     RobotSpec, Time,
@@ -70,8 +72,12 @@ fn free_port(slot: u16) -> u16 {
         .expect("a free loopback port")
 }
 
-/// Plans 1 m straight ahead of every odometry it gets (a stand-in for the planner).
-struct AheadPlanner;
+/// Plans 1 m straight ahead of every odometry it gets (a stand-in for the planner), and
+/// publishes one keyframe (a stand-in for the mapper): one component at (5, 0, 1) with
+/// intensity 0.5.
+struct AheadPlanner {
+    keyframe_sent: bool,
+}
 
 impl Actor for AheadPlanner {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
@@ -92,6 +98,26 @@ impl Actor for AheadPlanner {
             yaw_rad: yaw,
         };
         let now = ctx.now();
+        if !self.keyframe_sent {
+            self.keyframe_sent = true;
+            let covariance = Matrix4::from_diagonal(&Vector4::new(0.01, 0.04, 0.01, 0.001));
+            let gmm = Gmm4::new(
+                vec![1.0],
+                vec![Vector4::new(5.0, 0.0, 1.0, 0.5)],
+                vec![covariance],
+            )
+            .map_err(|e| troupe_actors::runtime::ActorError::with_source("gmm", e))?;
+            ctx.publish(
+                &KEYFRAME,
+                Keyframe {
+                    id: 0,
+                    stamp: now,
+                    pose: odometry.pose,
+                    support_size: 100,
+                    gmm,
+                },
+            );
+        }
         let later = Time::from_nanos(now.as_nanos() + 1_000_000_000);
         let trajectory = Trajectory::new(vec![knot(now, start), knot(later, ahead)])
             .map_err(|e| troupe_actors::runtime::ActorError::with_source("plan", e))?;
@@ -133,6 +159,8 @@ fn run(format: &str, topics: &str, extra: &str, slot: u16) -> Option<(Seen, serd
         [topics]
         odometry = "/odom"
         plan = "/troupe/plan"
+        map = "/troupe/map"
+        status = "/troupe/status"
         {topics}
         "#
     ))
@@ -161,13 +189,11 @@ fn run(format: &str, topics: &str, extra: &str, slot: u16) -> Option<(Seen, serd
         .add(ActorSpec::new("sensor", move || {
             SensorActor::new(frame_inputs.frame_source(), 20.0)
         }))
-        .add(ActorSpec::new("planner", || AheadPlanner))
+        .add(ActorSpec::new("planner", || AheadPlanner {
+            keyframe_sent: false,
+        }))
         .add(ActorSpec::new("ros2", move || {
-            Ros2Outputs::new(
-                publisher.clone(),
-                Some(status_inputs.clone()),
-                Duration::from_secs(1),
-            )
+            Ros2Outputs::new(publisher.clone(), Some(status_inputs.clone()))
         }));
     let mut executor = RealtimeExecutor::new(vec![robot], 1);
     let tap_seen = seen.clone();
@@ -205,7 +231,7 @@ fn run(format: &str, topics: &str, extra: &str, slot: u16) -> Option<(Seen, serd
 }
 
 /// Odometry at (1, 2, 3) yawed 90°, 1 m/s forward; camera 0.1 m ahead and 0.05 m below.
-fn check_pose_and_path(seen: &Seen, report: &serde_json::Value) {
+fn check_outputs(seen: &Seen, everything: &serde_json::Value) {
     let odometry = seen.odometry.last().expect("odometry published");
     assert!((odometry.pose.translation.vector - Vector3::new(1.0, 2.0, 3.0)).norm() < 1e-12);
     assert!((odometry.velocity_mps - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-9);
@@ -217,6 +243,7 @@ fn check_pose_and_path(seen: &Seen, report: &serde_json::Value) {
     );
     assert!((frame.pose.rotation * Vector3::x() - Vector3::y()).norm() < 1e-9);
 
+    let report = &everything["path"];
     assert_eq!(report["frame_id"], "odom");
     let poses = report["poses"].as_array().unwrap();
     assert_eq!(poses.len(), 2);
@@ -235,6 +262,33 @@ fn check_pose_and_path(seen: &Seen, report: &serde_json::Value) {
     for (got, want) in pose(1).iter().zip([1.0, 3.0, 3.0, h, h]) {
         assert!((got - want).abs() < 1e-9, "{:?}", pose(1));
     }
+
+    // The keyframe map: 2000 points (the default) around the component, its intensity.
+    let map = &everything["map"];
+    assert_eq!(map["frame_id"], "odom");
+    assert_eq!(map["width"], 2000);
+    assert_eq!(
+        map["fields"],
+        serde_json::json!([["x", 0, 7], ["y", 4, 7], ["z", 8, 7], ["intensity", 12, 7]])
+    );
+    let mean: Vec<f64> = map["mean"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    for (got, want) in mean.iter().zip([5.0, 0.0, 1.0, 0.5]) {
+        assert!((got - want).abs() < 0.02, "{mean:?}");
+    }
+
+    // The status: this robot, with the input counters.
+    let status = &everything["status"];
+    assert_eq!(status["robot"], "r0");
+    assert!(
+        status["inputs"]["received"]["odometry"].as_u64().unwrap() > 0,
+        "{status}"
+    );
+    assert_eq!(status["outputs"]["dropped_full"], 0, "{status}");
 }
 
 #[test]
@@ -247,7 +301,7 @@ fn rmw_zenoh_depth_intensity_and_odometry_round_trip_through_rclpy() {
     let Some((seen, report)) = run("rmw_zenoh", topics, "", 0) else {
         return;
     };
-    check_pose_and_path(&seen, &report);
+    check_outputs(&seen, &report);
     let frame = seen.frames.last().unwrap();
     let k = frame.intrinsics;
     assert_eq!(
@@ -273,6 +327,7 @@ fn rmw_zenoh_depth_intensity_and_odometry_round_trip_through_rclpy() {
         }
     }
     // The path came on an rmw_zenoh key with rmw_zenoh's attachment.
+    let report = &report["path"];
     assert!(
         report["key"]
             .as_str()
@@ -299,9 +354,10 @@ fn bridge_point_cloud_and_odometry_round_trip_through_rclpy() {
     let Some((seen, report)) = run("bridge", topics, intrinsics, 1) else {
         return;
     };
-    check_pose_and_path(&seen, &report);
-    assert_eq!(report["key"], "troupe/plan");
-    assert!(report["attachment"].is_null());
+    check_outputs(&seen, &report);
+    assert_eq!(report["path"]["key"], "troupe/plan");
+    assert_eq!(report["map"]["key"], "troupe/map");
+    assert!(report["path"]["attachment"].is_null());
     // (0, 0, 2) → pixel (4, 3); (1, 0.5, 4) → u 5, v 3.5 → (5, 3); (−0.5, −0.25, 1) →
     // u 2, v 2 → (2, 2).
     let frame = seen.frames.last().unwrap();

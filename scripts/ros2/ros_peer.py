@@ -11,9 +11,10 @@ uses, written here independently of troupe's Rust code:
 - bridge (zenoh-bridge-ros2dds): the topic without its leading slash, no attachment.
 
 It keeps publishing (odometry, then the frame, every 50 ms, stamped now) until troupe's
-`nav_msgs/Path` arrives; it deserialises it with rclpy's `deserialize_message`, checks
-the attachment under rmw_zenoh, and prints one JSON line with what it received.
-Exits 1 if no path came within --timeout seconds.
+`nav_msgs/Path`, `sensor_msgs/PointCloud2` map and `std_msgs/String` status have all
+arrived; it deserialises them with rclpy's `deserialize_message` and prints one JSON line
+with what it received (attachments included). Exits 1 if they did not all come within
+--timeout seconds.
 """
 import argparse
 import json
@@ -29,7 +30,7 @@ from geometry_msgs.msg import Point, Quaternion, Vector3
 from nav_msgs.msg import Odometry, Path
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from builtin_interfaces.msg import Time
 
 SHARE = pathlib.Path(sys.prefix) / "share"
@@ -129,7 +130,31 @@ def main():
             "attachment": list(attachment.to_bytes()) if attachment is not None else None,
         }
 
-    sub = session.declare_subscriber(key(args, "/troupe/plan", "nav_msgs/msg/Path", "*"), on_path)
+    def on_map(sample):
+        cloud = deserialize_message(bytes(sample.payload.to_bytes()), PointCloud2)
+        points = [struct.unpack_from("<4f", cloud.data, i * cloud.point_step)
+                  for i in range(cloud.width * cloud.height)]
+        n = max(len(points), 1)
+        received["map"] = {
+            "key": str(sample.key_expr),
+            "frame_id": cloud.header.frame_id,
+            "width": cloud.width,
+            "fields": [(f.name, f.offset, f.datatype) for f in cloud.fields],
+            "mean": [sum(p[k] for p in points) / n for k in range(4)],
+        }
+
+    def on_status(sample):
+        text = deserialize_message(bytes(sample.payload.to_bytes()), String).data
+        received["status"] = json.loads(text)
+
+    subs = [
+        session.declare_subscriber(key(args, "/troupe/plan", "nav_msgs/msg/Path", "*"), on_path),
+        session.declare_subscriber(
+            key(args, "/troupe/map", "sensor_msgs/msg/PointCloud2", "*"), on_map),
+        session.declare_subscriber(key(args, "/troupe/status", "std_msgs/msg/String", "*"),
+                                   on_status),
+    ]
+    wanted = ("path", "map", "status")
 
     gid = os.urandom(16)
     sequence = {}
@@ -145,7 +170,7 @@ def main():
             session.put(k, payload)
 
     deadline = time.time() + args.timeout
-    while "path" not in received and time.time() < deadline:
+    while not all(w in received for w in wanted) and time.time() < deadline:
         header = Header(stamp=stamp_now(), frame_id="camera_depth_optical_frame")
         put("/odom", "nav_msgs/msg/Odometry", odometry(Header(stamp=header.stamp, frame_id="odom")))
         if args.format == "rmw_zenoh":
@@ -155,13 +180,14 @@ def main():
         else:
             put("/camera/depth/points", "sensor_msgs/msg/PointCloud2", point_cloud(header))
         time.sleep(0.05)
-    # Let the last path's publisher see a few more samples, then report.
-    sub.undeclare()
+    for sub in subs:
+        sub.undeclare()
     session.close()
-    if "path" not in received:
-        print(json.dumps({"error": "no nav_msgs/Path received"}))
+    missing = [w for w in wanted if w not in received]
+    if missing:
+        print(json.dumps({"error": f"nothing received for {missing}"}))
         return 1
-    print(json.dumps(received["path"]))
+    print(json.dumps(received))
     return 0
 
 

@@ -131,6 +131,9 @@ pub struct Ros2Config {
     /// `frame_id` of what we publish in the world frame (plan, map).
     #[serde(default = "default_world_frame_id")]
     pub world_frame_id: String,
+    /// Period of the status message, seconds.
+    #[serde(default = "default_status_period_s")]
+    pub status_period_s: f64,
     /// Points drawn per keyframe map cloud.
     #[serde(default = "default_map_points")]
     pub map_points: usize,
@@ -168,6 +171,9 @@ fn default_odometry_history() -> usize {
 }
 fn default_world_frame_id() -> String {
     "odom".into()
+}
+fn default_status_period_s() -> f64 {
+    1.0
 }
 fn default_map_points() -> usize {
     2000
@@ -284,6 +290,7 @@ impl Ros2Config {
         positive("startup_timeout_s", self.startup_timeout_s)?;
         positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
         positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
+        positive("status_period_s", self.status_period_s)?;
         for (key, n) in [
             ("odometry_history", self.odometry_history),
             ("send_queue", self.send_queue),

@@ -239,7 +239,7 @@ struct Status<'a> {
 
 const STATUS: TimerId = TimerId(0);
 
-/// Publishes the committed plan, keyframe maps and a status (every `status_period`)
+/// Publishes the committed plan, keyframe maps and a status (every `status_period_s`)
 /// to ROS 2 through a [`Ros2Publisher`].
 pub struct Ros2Outputs {
     publisher: Ros2Publisher,
@@ -253,11 +253,8 @@ pub struct Ros2Outputs {
 impl Ros2Outputs {
     /// Outputs through `publisher`; the status includes `inputs`' counters if given.
     #[must_use]
-    pub fn new(
-        publisher: Ros2Publisher,
-        inputs: Option<Ros2Inputs>,
-        status_period: Duration,
-    ) -> Self {
+    pub fn new(publisher: Ros2Publisher, inputs: Option<Ros2Inputs>) -> Self {
+        let status_period = Duration::from_secs_f64(publisher.config.status_period_s);
         Ros2Outputs {
             publisher,
             inputs,
