@@ -4,11 +4,12 @@
 //! The store keeps the newest depth image (or point cloud), the newest calibration,
 //! the last few intensity images and a bounded odometry history. `capture` returns
 //! the newest depth frame not yet returned, paired with the odometry nearest its
-//! stamp within `odometry_tolerance_s`: if odometry newer than the frame exists but
-//! none is close enough, the frame is skipped and counted; if the odometry has not
-//! caught up with the frame yet, the frame waits for the next capture (unless a
-//! newer frame replaces it). Every message that cannot be decoded or converted is
-//! counted by topic and reason ([`Ros2Inputs::stats`]).
+//! stamp within `odometry_tolerance_s` (and, if configured, the intensity image
+//! nearest it within `intensity_tolerance_s`): if newer odometry (intensity) exists
+//! but none is close enough, the frame is skipped and counted; if it has not caught
+//! up with the frame yet, the frame waits for the next capture (unless a newer frame
+//! replaces it, which is counted too). Every message that cannot be decoded or
+//! converted is counted by topic and reason ([`Ros2Inputs::stats`]).
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -28,10 +29,10 @@ use super::cdr::decode;
 use super::config::Ros2Config;
 use super::convert::{
     DepthInputs, StampMap, camera_pose, depth_frame_from_image, depth_frame_from_points,
-    odometry_from_ros,
+    isometry_from_pose, odometry_from_ros,
 };
 use super::keyexpr::WireFormat;
-use super::msgs::{CameraInfo, Image, Odometry as RosOdometry, PointCloud2};
+use super::msgs::{CameraInfo, Image, Odometry as RosOdometry, PointCloud2, RosTime};
 
 /// Intensity images kept to pair with depth images.
 const INTENSITY_HISTORY: usize = 8;
@@ -58,6 +59,9 @@ pub struct InputStats {
     pub rejected: BTreeMap<String, u64>,
     /// Frames returned by the frame source.
     pub frames: u64,
+    /// Depth images or clouds replaced by a newer one before a capture took them (the
+    /// camera runs faster than the sensor rate, or frames wait for odometry).
+    pub superseded: u64,
     /// Odometry messages published by [`OdometryInput`].
     pub odometry: u64,
 }
@@ -119,70 +123,128 @@ impl Shared {
 
     /// Decodes one sample's payload (and attachment) and stores it.
     fn ingest(&self, input: Input, payload: &[u8], attachment: Option<&[u8]>) {
+        let attachment_problem = match (self.config.format, attachment.map(Attachment::decode)) {
+            (WireFormat::RmwZenoh, None) => Some("no_attachment"),
+            (WireFormat::RmwZenoh, Some(Err(_))) => Some("attachment"),
+            _ => None,
+        };
+        // Decode before taking the lock: a depth image is large.
+        let decoded = match input {
+            Input::Depth | Input::Intensity => decode::<Image>(payload).map(Decoded::Image),
+            Input::Points => decode::<PointCloud2>(payload).map(Decoded::Points),
+            Input::CameraInfo => {
+                decode::<CameraInfo>(payload).map(|m| Decoded::CameraInfo(Box::new(m)))
+            }
+            Input::Odometry => {
+                decode::<RosOdometry>(payload).map(|m| Decoded::Odometry(Box::new(m)))
+            }
+        };
         let mut store = self.lock();
         *store
             .stats
             .received
             .entry(input.name().to_owned())
             .or_default() += 1;
-        if self.config.format == WireFormat::RmwZenoh {
-            match attachment.map(Attachment::decode) {
-                Some(Ok(_)) => {}
-                Some(Err(_)) => store.reject(format!("{}/attachment", input.name())),
-                None => store.reject(format!("{}/no_attachment", input.name())),
-            }
+        if let Some(problem) = attachment_problem {
+            store.reject(format!("{}/{problem}", input.name()));
         }
-        let history = self.config.odometry_history;
-        let result = match input {
-            Input::Depth => decode::<Image>(payload).map(|m| store.depth = Some(m)),
-            Input::Points => decode::<PointCloud2>(payload).map(|m| store.points = Some(m)),
-            Input::CameraInfo => decode::<CameraInfo>(payload).map(|m| store.camera_info = Some(m)),
-            Input::Intensity => decode::<Image>(payload).map(|m| {
+        let decoded = match decoded {
+            Ok(decoded) => decoded,
+            Err(e) => {
+                tracing::debug!("{}: {e}", input.name());
+                store.reject(format!("{}/malformed", input.name()));
+                return;
+            }
+        };
+        let superseded = match decoded {
+            Decoded::Image(m) if input == Input::Intensity => {
                 if store.intensity.len() == INTENSITY_HISTORY {
                     store.intensity.pop_front();
                 }
                 store.intensity.push_back(m);
-            }),
-            Input::Odometry => decode::<RosOdometry>(payload).map(|m| {
+                false
+            }
+            Decoded::Image(m) => store.depth.replace(m).is_some(),
+            Decoded::Points(m) => store.points.replace(m).is_some(),
+            Decoded::CameraInfo(m) => {
+                store.camera_info = Some(*m);
+                false
+            }
+            Decoded::Odometry(m) => {
                 store.next_seq += 1;
                 let seq = store.next_seq;
-                if store.odometry.len() >= history {
+                if store.odometry.len() >= self.config.odometry_history {
                     store.odometry.pop_front();
                 }
-                store.odometry.push_back((seq, m));
-            }),
+                store.odometry.push_back((seq, *m));
+                false
+            }
         };
-        if let Err(e) = result {
-            tracing::debug!("{}: {e}", input.name());
-            store.reject(format!("{}/malformed", input.name()));
+        if superseded {
+            store.stats.superseded += 1;
+        }
+    }
+
+    /// Whether the stored frame stamped `stamp` can be converted now: the body pose
+    /// and intensity image to use, or why it must wait or be skipped.
+    fn readiness(&self, store: &Store, stamp: RosTime) -> Readiness {
+        let config = &self.config;
+        let tolerance_ns = (config.odometry_tolerance_s * 1e9) as i64;
+        let body = match store.nearest_odometry(stamp.as_nanos(), tolerance_ns) {
+            Ok(o) => o.pose.pose,
+            Err(true) => return Readiness::Wait,
+            Err(false) => return Readiness::Skip("no_odometry"),
+        };
+        let Some(body) = isometry_from_pose(&body) else {
+            return Readiness::Skip("odometry_pose");
+        };
+        if store.depth.is_none() {
+            return Readiness::Ready(body, None);
+        }
+        if store.camera_info.is_none() {
+            return Readiness::Wait;
+        }
+        if config.topics.intensity.is_none() {
+            return Readiness::Ready(body, None);
+        }
+        let window_ns = (config.intensity_tolerance_s * 1e9) as i64;
+        let offset = |i: &Image| (i.header.stamp.as_nanos() - stamp.as_nanos()).abs();
+        let found = store
+            .intensity
+            .iter()
+            .filter(|i| offset(i) <= window_ns)
+            .min_by_key(|i| offset(i));
+        match found {
+            Some(image) => Readiness::Ready(body, Some(image.clone())),
+            None if store
+                .intensity
+                .back()
+                .is_none_or(|i| i.header.stamp.as_nanos() < stamp.as_nanos()) =>
+            {
+                Readiness::Wait
+            }
+            None => Readiness::Skip("no_intensity"),
         }
     }
 
     /// The newest depth frame not yet returned, paired with odometry (see the module doc).
     fn capture(&self, now: Time) -> Option<DepthFrame> {
         let config = &self.config;
-        let tolerance_ns = (config.odometry_tolerance_s * 1e9) as i64;
         let mut store = self.lock();
         let stamp = match (&store.depth, &store.points) {
             (Some(d), _) => d.header.stamp,
             (None, Some(p)) => p.header.stamp,
             (None, None) => return None,
         };
-        let body = match store.nearest_odometry(stamp.as_nanos(), tolerance_ns) {
-            Ok(o) => o.pose.pose,
-            Err(true) => return None,
-            Err(false) => {
+        let (body, intensity) = match self.readiness(&store, stamp) {
+            Readiness::Ready(body, intensity) => (body, intensity),
+            Readiness::Wait => return None,
+            Readiness::Skip(reason) => {
                 store.depth = None;
                 store.points = None;
-                store.reject("frame/no_odometry".into());
+                store.reject(format!("frame/{reason}"));
                 return None;
             }
-        };
-        let Some(body) = super::convert::isometry_from_pose(&body) else {
-            store.depth = None;
-            store.points = None;
-            store.reject("frame/odometry_pose".into());
-            return None;
         };
         let pose = camera_pose(&body, &self.optical_in_body);
         let stamps = StampMap {
@@ -190,30 +252,11 @@ impl Shared {
             unix_now_ns: unix_now_ns(),
         };
         let troupe_stamp = stamps.to_troupe(stamp);
-        let converted = if let Some(depth) = store.depth.take() {
-            let Some(info) = store.camera_info.clone() else {
-                store.reject("frame/no_camera_info".into());
-                return None;
-            };
-            let intensity = if config.topics.intensity.is_some() {
-                let window = (config.intensity_tolerance_s * 1e9) as i64;
-                let found = store
-                    .intensity
-                    .iter()
-                    .filter(|i| (i.header.stamp.as_nanos() - stamp.as_nanos()).abs() <= window)
-                    .min_by_key(|i| (i.header.stamp.as_nanos() - stamp.as_nanos()).unsigned_abs());
-                match found {
-                    Some(image) => Some(image.clone()),
-                    None => {
-                        store.reject("frame/no_intensity".into());
-                        return None;
-                    }
-                }
-            } else {
-                None
-            };
-            drop(store);
-            depth_frame_from_image(
+        let info = store.camera_info.clone();
+        let (depth, cloud) = (store.depth.take(), store.points.take());
+        drop(store);
+        let converted = match (depth, info, cloud) {
+            (Some(depth), Some(info), _) => depth_frame_from_image(
                 &DepthInputs {
                     depth: &depth,
                     info: &info,
@@ -224,13 +267,12 @@ impl Shared {
                 },
                 pose,
                 troupe_stamp,
-            )
-        } else {
-            let cloud = store.points.take()?;
-            drop(store);
+            ),
             // Validated: `points_intrinsics` is set whenever `topics.points` is.
-            let intrinsics = config.points_intrinsics?;
-            depth_frame_from_points(&cloud, intrinsics, pose, troupe_stamp)
+            (None, _, Some(cloud)) => {
+                depth_frame_from_points(&cloud, config.points_intrinsics?, pose, troupe_stamp)
+            }
+            _ => return None,
         };
         let mut store = self.lock();
         match converted {
@@ -245,6 +287,24 @@ impl Shared {
             }
         }
     }
+}
+
+/// A decoded input message.
+enum Decoded {
+    Image(Image),
+    Points(PointCloud2),
+    CameraInfo(Box<CameraInfo>),
+    Odometry(Box<RosOdometry>),
+}
+
+/// Whether a stored frame can be converted.
+enum Readiness {
+    /// Yes: with this body pose and intensity image.
+    Ready(Isometry3<f64>, Option<Image>),
+    /// Not yet: what it needs may still come.
+    Wait,
+    /// Never: skip it, for this reason.
+    Skip(&'static str),
 }
 
 /// An input topic's role.

@@ -40,6 +40,22 @@ fn depth(ms: i64) -> Vec<u8> {
     .unwrap()
 }
 
+fn intensity(ms: i64) -> Vec<u8> {
+    encode(&Image {
+        header: Header {
+            stamp: stamp(ms),
+            frame_id: "optical".into(),
+        },
+        height: 1,
+        width: 2,
+        encoding: "mono8".into(),
+        step: 2,
+        data: vec![0, 255],
+        ..Default::default()
+    })
+    .unwrap()
+}
+
 fn info() -> Vec<u8> {
     encode(&CameraInfo {
         height: 1,
@@ -121,14 +137,21 @@ fn bad_payloads_attachments_and_frames_are_counted_by_reason() {
     s.ingest(Input::Odometry, &odometry(5, 0.0), Some(&[1, 2, 3]));
     s.ingest(Input::CameraInfo, &info(), Some(&ATTACHMENT));
     s.ingest(Input::Depth, &depth(0), Some(&ATTACHMENT));
-    // An intensity topic is configured but nothing came: skipped.
+    // An intensity topic is configured but nothing came yet: the frame waits.
     assert!(s.capture(Time::ZERO).is_none());
+    assert!(s.lock().depth.is_some());
+    // An intensity image newer than the frame but too far from it: skipped.
+    s.ingest(Input::Intensity, &intensity(30), Some(&ATTACHMENT));
+    assert!(s.capture(Time::ZERO).is_none());
+    assert!(s.lock().depth.is_none());
     let stats = s.lock().stats.clone();
     assert_eq!(stats.rejected["depth/malformed"], 1);
     assert_eq!(stats.rejected["odometry/no_attachment"], 1);
     assert_eq!(stats.rejected["odometry/attachment"], 1);
     assert_eq!(stats.rejected["frame/no_intensity"], 1);
     assert_eq!(stats.received["depth"], 2);
+    // A malformed image is not stored, so the good one superseded nothing.
+    assert_eq!(stats.superseded, 0);
     // A calibration of another size: the frame is rejected with that reason.
     let s = shared("bridge", false);
     s.ingest(
@@ -145,6 +168,27 @@ fn bad_payloads_attachments_and_frames_are_counted_by_reason() {
     s.ingest(Input::Depth, &depth(0), None);
     assert!(s.capture(Time::ZERO).is_none());
     assert_eq!(s.lock().stats.rejected["frame/size_mismatch"], 1);
+}
+
+#[test]
+fn a_frame_waits_for_its_intensity_image_and_uses_the_nearest() {
+    let s = shared("bridge", true);
+    s.ingest(Input::CameraInfo, &info(), None);
+    s.ingest(Input::Odometry, &odometry(0, 0.0), None);
+    s.ingest(Input::Odometry, &odometry(40, 0.0), None);
+    s.ingest(Input::Intensity, &intensity(0), None);
+    s.ingest(Input::Depth, &depth(20), None);
+    s.ingest(Input::Depth, &depth(21), None);
+    assert!(
+        s.capture(Time::ZERO).is_none(),
+        "the intensity of 21 ms may still come"
+    );
+    s.ingest(Input::Intensity, &intensity(22), None);
+    let frame = s.capture(Time::ZERO).unwrap();
+    assert_eq!(frame.intensity, [0.0, 1.0]);
+    let stats = s.lock().stats.clone();
+    assert_eq!(stats.superseded, 1);
+    assert!(stats.rejected.is_empty(), "{stats:?}");
 }
 
 #[test]
