@@ -52,7 +52,7 @@ struct Counters {
 pub struct OutputStats {
     /// Messages handed to the publishing thread.
     pub queued: u64,
-    /// Messages dropped because its queue was full.
+    /// Messages dropped because its queue was full (or the thread had stopped).
     pub dropped_full: u64,
     /// Samples put on zenoh.
     pub sent: u64,
