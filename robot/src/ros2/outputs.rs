@@ -319,3 +319,82 @@ impl Actor for Ros2Outputs {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::ros2::cdr::decode;
+    use crate::ros2::msgs::PoseStamped;
+
+    fn config(send_queue: usize) -> Ros2Config {
+        toml::from_str(&format!(
+            r#"
+            format = "rmw_zenoh"
+            send_queue = {send_queue}
+            [topics]
+            depth = "/d"
+            camera_info = "/i"
+            odometry = "/o"
+            plan = "/troupe/plan"
+            "#
+        ))
+        .unwrap()
+    }
+
+    /// A session with no endpoints delivers inside the process.
+    fn session(config: &Ros2Config) -> zenoh::Session {
+        crate::ros2::open_session(config).unwrap()
+    }
+
+    #[test]
+    fn every_offer_is_sent_or_counted_as_dropped_with_sequenced_attachments() {
+        let config = config(1);
+        let session = session(&config);
+        let received: Arc<Mutex<Vec<(Path, Attachment)>>> = Arc::default();
+        let sink = received.clone();
+        let key = config
+            .key_format()
+            .topic_key::<Path>("/troupe/plan")
+            .unwrap();
+        let _subscriber = session
+            .declare_subscriber(key)
+            .callback(move |sample| {
+                let path = decode::<Path>(&sample.payload().to_bytes()).unwrap();
+                let attachment = Attachment::decode(&sample.attachment().unwrap().to_bytes());
+                sink.lock().unwrap().push((path, attachment.unwrap()));
+            })
+            .wait()
+            .unwrap();
+        let publisher = Ros2Publisher::open(&session, &config).unwrap();
+        let offers = 2000;
+        for i in 0..offers {
+            let path = Path {
+                poses: vec![PoseStamped::default(); i % 7],
+                ..Path::default()
+            };
+            publisher.offer(Output::Plan, &path).unwrap();
+            // Outputs that are not configured are ignored, not counted.
+            publisher
+                .offer(Output::Status, &RosString::default())
+                .unwrap();
+        }
+        let stats = publisher.stats();
+        assert_eq!(stats.queued + stats.dropped_full, offers as u64);
+        drop(publisher);
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while (received.lock().unwrap().len() as u64) < stats.queued
+            && std::time::Instant::now() < deadline
+        {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let received = received.lock().unwrap();
+        assert_eq!(received.len() as u64, stats.queued);
+        for (i, (_, attachment)) in received.iter().enumerate() {
+            assert_eq!(attachment.sequence_number, i as i64 + 1);
+            assert_eq!(attachment.source_gid, received[0].1.source_gid);
+            assert!(attachment.source_timestamp_ns > 1_600_000_000_000_000_000);
+        }
+    }
+}
