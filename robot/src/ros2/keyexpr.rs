@@ -106,12 +106,13 @@ impl KeyFormat {
         })
     }
 
-    /// The key of the liveliness token rmw_zenoh expects from a publisher of `T` on
-    /// `topic` (so that `ros2 topic list` on the ROS side lists it): `@ros2_lv/<domain>/
-    /// <session id>/<node id>/<entity id>/MP/<enclave>/<namespace>/<node>/<topic>/
-    /// <type>/<hash>/<qos>`, names mangled, QoS keep-last 10 with every other policy at rmw_zenoh's default
-    /// (an empty component means the default).
-    /// `None` for the bridge format (the bridge discovers DDS, not zenoh, entities).
+    /// The key of the liveliness token that announces a publisher of `T` on `topic` to
+    /// rmw_zenoh's graph (what `ros2 topic list` reads): `@ros2_lv/<domain>/<session
+    /// id>/<node id>/<entity id>/MP/<enclave>/<namespace>/<node>/<topic>/<type>/<hash>/
+    /// <qos>`, names mangled, QoS keep-last 10 and rmw_zenoh's default for every other
+    /// policy (an empty component). Written from rmw_zenoh 0.6's design; not checked
+    /// against a live rmw_zenoh graph. `None` for the bridge format (the bridge
+    /// discovers DDS entities, not zenoh ones).
     pub fn publisher_liveliness_key<T: RosMessage>(
         &self,
         session_id: &str,
