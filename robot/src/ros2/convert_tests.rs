@@ -386,6 +386,34 @@ mod hostile {
             let _ = decode::<RosString>(&bytes);
         }
 
+        /// Point clouds with arbitrary layouts and data project or fail cleanly.
+        #[test]
+        fn random_clouds_project_or_fail_cleanly(
+            width in 0u32..6, height in 0u32..3, point_step in 0u32..24, row_step in 0u32..100,
+            offsets in proptest::collection::vec(0u32..24, 4), big in any::<bool>(),
+            data in proptest::collection::vec(any::<u8>(), 0..300),
+        ) {
+            let names = ["x", "y", "z", "intensity"];
+            let cloud = super::PointCloud2 {
+                height, width, point_step, row_step, is_bigendian: big, data,
+                fields: names.iter().zip(&offsets).map(|(n, o)| super::PointField {
+                    name: (*n).into(), offset: *o, datatype: super::PointField::FLOAT32, count: 1,
+                }).collect(),
+                ..Default::default()
+            };
+            let k = super::PinholeIntrinsics {
+                width: 4, height: 3, fx: 2.0, fy: 2.0, cx: 2.0, cy: 1.5, max_depth_m: 5.0,
+            };
+            let frame = super::depth_frame_from_points(
+                &cloud, k, super::Isometry3::identity(), super::Time::ZERO,
+            );
+            if let Ok(frame) = frame {
+                prop_assert_eq!(frame.depth_m.len(), 12);
+                prop_assert!(frame.depth_m.iter().all(|d| d.is_finite() && *d >= 0.0 && *d <= 5.0));
+                prop_assert!(frame.intensity.iter().all(|g| (0.0..=1.0).contains(g)));
+            }
+        }
+
         /// Images with arbitrary sizes, steps and data convert or fail cleanly.
         #[test]
         fn random_images_convert_or_fail_cleanly(
