@@ -159,9 +159,14 @@ impl Ros2Publisher {
         }
     }
 
+    /// Whether `output` has a topic.
+    fn enabled(&self, output: Output) -> bool {
+        self.enabled[output as usize]
+    }
+
     /// Queues a message without waiting; counts it as dropped when the queue is full.
     fn offer<T: RosMessage>(&self, output: Output, message: &T) -> ActorResult {
-        if !self.enabled[output as usize] {
+        if !self.enabled(output) {
             return Ok(());
         }
         let bytes = encode(message).map_err(|e| {
@@ -287,12 +292,16 @@ impl Actor for Ros2Outputs {
         let config = self.publisher.config.clone();
         match event {
             Event::Message(m) => {
-                if let Some(plan) = m.get(&PLAN) {
+                if let Some(plan) = m.get(&PLAN)
+                    && self.publisher.enabled(Output::Plan)
+                {
                     self.plans += 1;
                     let path = path_from_plan(plan, &config.world_frame_id, &Self::stamps(ctx));
                     self.publisher.offer(Output::Plan, &path)?;
                 }
-                if let Some(keyframe) = m.get(&KEYFRAME) {
+                if let Some(keyframe) = m.get(&KEYFRAME)
+                    && self.publisher.enabled(Output::Map)
+                {
                     self.keyframes += 1;
                     let header = Header {
                         stamp: Self::stamps(ctx).to_ros(keyframe.stamp),
