@@ -28,6 +28,7 @@
 #![deny(missing_docs)]
 
 mod config;
+pub mod ros2;
 
 use nalgebra::Point3;
 use troupe_actors::collision::CollisionActor;

@@ -1,0 +1,409 @@
+//! The `[ros2]` table of a hardware robot file.
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+use troupe_actors::msgs::PinholeIntrinsics;
+use troupe_comms::zenoh::ZenohConfig;
+
+use super::keyexpr::{KeyFormat, WireFormat, strip_topic};
+
+/// A setting of the `[ros2]` table that cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("ros2.{key}: {reason}")]
+pub struct Ros2ConfigError {
+    /// The key, below `ros2.`.
+    pub key: String,
+    /// What is wrong with it.
+    pub reason: String,
+    /// The underlying error (a zenoh setting).
+    #[source]
+    pub source: Option<troupe_comms::transport::TransportError>,
+}
+
+pub(super) fn invalid(key: &str, reason: impl Into<String>) -> Ros2ConfigError {
+    Ros2ConfigError {
+        key: key.to_owned(),
+        reason: reason.into(),
+        source: None,
+    }
+}
+
+/// ROS topic names (absolute, e.g. `/camera/depth/image_rect_raw`). Depth comes
+/// either from `depth` + `camera_info` (+ optional `intensity`) or from `points`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Topics {
+    /// `sensor_msgs/Image` depth, 16UC1 (mm) or 32FC1 (m).
+    pub depth: Option<String>,
+    /// `sensor_msgs/CameraInfo` of the depth image.
+    pub camera_info: Option<String>,
+    /// `sensor_msgs/Image` intensity (infrared), mono8 or mono16, registered to depth.
+    pub intensity: Option<String>,
+    /// `sensor_msgs/PointCloud2` in the camera's optical frame, instead of `depth`.
+    pub points: Option<String>,
+    /// `nav_msgs/Odometry` of the body (ENU world, FLU body).
+    pub odometry: String,
+    /// Where the committed plan goes (`nav_msgs/Path`); none: not published.
+    pub plan: Option<String>,
+    /// Where keyframe maps go (`sensor_msgs/PointCloud2`); none: not published.
+    pub map: Option<String>,
+    /// Where status goes (`std_msgs/String`, JSON); none: not published.
+    pub status: Option<String>,
+}
+
+/// The camera extrinsics: the pose of the depth camera's optical frame (z forward,
+/// x right, y down) in the body frame, as `tf2_echo base_link <optical frame>`
+/// prints it. The default is a camera at the body origin looking along body +x.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Extrinsics {
+    /// Translation, metres.
+    pub translation_m: [f64; 3],
+    /// Rotation as a quaternion `[x, y, z, w]` (normalised on use).
+    pub rotation_xyzw: [f64; 4],
+}
+
+impl Default for Extrinsics {
+    fn default() -> Self {
+        Extrinsics {
+            translation_m: [0.0; 3],
+            rotation_xyzw: [-0.5, 0.5, -0.5, 0.5],
+        }
+    }
+}
+
+impl Extrinsics {
+    /// The optical frame's pose in the body; `None` if not finite or a zero quaternion.
+    #[must_use]
+    pub fn isometry(&self) -> Option<Isometry3<f64>> {
+        let [x, y, z, w] = self.rotation_xyzw;
+        let all = self.translation_m.iter().chain(&self.rotation_xyzw);
+        let q = Quaternion::new(w, x, y, z);
+        if !all.clone().all(|v| v.is_finite()) || q.norm() < 1e-9 {
+            return None;
+        }
+        let [tx, ty, tz] = self.translation_m;
+        Some(Isometry3::from_parts(
+            Translation3::new(tx, ty, tz),
+            UnitQuaternion::from_quaternion(q),
+        ))
+    }
+}
+
+/// The `[ros2]` table: how a hardware robot's ROS 2 drivers reach zenoh.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Config {
+    /// `"rmw_zenoh"` or `"bridge"` (zenoh-bridge-ros2dds).
+    pub format: WireFormat,
+    /// `ROS_DOMAIN_ID` (rmw_zenoh keys start with it).
+    #[serde(default)]
+    pub domain_id: u32,
+    /// Topic names.
+    pub topics: Ros2Topics,
+    /// Depth encodings accepted (subset of `16UC1`, `32FC1`).
+    #[serde(default = "default_depth_encodings")]
+    pub depth_encodings: Vec<String>,
+    /// Intensity encodings accepted (subset of `mono8`, `mono16`).
+    #[serde(default = "default_intensity_encodings")]
+    pub intensity_encodings: Vec<String>,
+    /// Camera extrinsics.
+    #[serde(default)]
+    pub extrinsics: Extrinsics,
+    /// Intrinsics to project `points` into (required with `topics.points`).
+    #[serde(default)]
+    pub points_intrinsics: Option<PinholeIntrinsics>,
+    /// Depths beyond this are no return, metres (D435-like: 5).
+    #[serde(default = "default_max_depth_m")]
+    pub max_depth_m: f64,
+    /// A configured input topic silent for this long after start is an error, seconds.
+    #[serde(default = "default_startup_timeout_s")]
+    pub startup_timeout_s: f64,
+    /// A frame is paired with the odometry nearest its stamp, if within this, seconds.
+    #[serde(default = "default_odometry_tolerance_s")]
+    pub odometry_tolerance_s: f64,
+    /// An intensity image is paired with the depth image nearest its stamp, if within this.
+    #[serde(default = "default_intensity_tolerance_s")]
+    pub intensity_tolerance_s: f64,
+    /// Odometry messages kept for pairing (a bounded history).
+    #[serde(default = "default_odometry_history")]
+    pub odometry_history: usize,
+    /// `frame_id` of what we publish in the world frame (plan, map).
+    #[serde(default = "default_world_frame_id")]
+    pub world_frame_id: String,
+    /// Period of the status message, seconds.
+    #[serde(default = "default_status_period_s")]
+    pub status_period_s: f64,
+    /// Points drawn per keyframe map cloud.
+    #[serde(default = "default_map_points")]
+    pub map_points: usize,
+    /// Messages waiting for the publishing thread before new ones are dropped.
+    #[serde(default = "default_send_queue")]
+    pub send_queue: usize,
+    /// The node name our rmw_zenoh liveliness tokens announce.
+    #[serde(default = "default_node_name")]
+    pub node_name: String,
+    /// zenoh endpoints (peer/client, listen/connect, TLS, auth), like `[link.zenoh]`.
+    #[serde(default)]
+    pub zenoh: ZenohConfig,
+}
+
+fn default_depth_encodings() -> Vec<String> {
+    vec!["16UC1".into(), "32FC1".into()]
+}
+fn default_intensity_encodings() -> Vec<String> {
+    vec!["mono8".into(), "mono16".into()]
+}
+fn default_max_depth_m() -> f64 {
+    5.0
+}
+fn default_startup_timeout_s() -> f64 {
+    10.0
+}
+fn default_odometry_tolerance_s() -> f64 {
+    0.05
+}
+fn default_intensity_tolerance_s() -> f64 {
+    0.005
+}
+fn default_odometry_history() -> usize {
+    200
+}
+fn default_world_frame_id() -> String {
+    "odom".into()
+}
+fn default_status_period_s() -> f64 {
+    1.0
+}
+fn default_map_points() -> usize {
+    2000
+}
+fn default_send_queue() -> usize {
+    16
+}
+fn default_node_name() -> String {
+    "troupe".into()
+}
+
+fn positive(key: &str, value: f64) -> Result<(), Ros2ConfigError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(
+            key,
+            format!("must be a positive number, got {value}"),
+        ))
+    }
+}
+
+impl Ros2Config {
+    /// The key format of these settings.
+    #[must_use]
+    pub fn key_format(&self) -> KeyFormat {
+        KeyFormat {
+            format: self.format,
+            domain_id: self.domain_id,
+        }
+    }
+
+    /// Checks every setting; the error names the key.
+    pub fn validate(&self) -> Result<(), Ros2ConfigError> {
+        let t = &self.topics;
+        let named = [
+            ("topics.depth", &t.depth),
+            ("topics.camera_info", &t.camera_info),
+            ("topics.intensity", &t.intensity),
+            ("topics.points", &t.points),
+            ("topics.plan", &t.plan),
+            ("topics.map", &t.map),
+            ("topics.status", &t.status),
+        ];
+        for (key, topic) in named
+            .iter()
+            .filter_map(|(k, v)| v.as_deref().map(|v| (*k, v)))
+            .chain([("topics.odometry", t.odometry.as_str())])
+        {
+            strip_topic(topic).map_err(|e| invalid(key, e.to_string()))?;
+        }
+        match (&t.depth, &t.camera_info, &t.points) {
+            (Some(_), Some(_), None) => {}
+            (None, None, Some(_)) => {
+                if t.intensity.is_some() {
+                    return Err(invalid(
+                        "topics.intensity",
+                        "goes with `depth`; a point cloud carries its own intensity field",
+                    ));
+                }
+                let Some(k) = self.points_intrinsics else {
+                    return Err(invalid(
+                        "points_intrinsics",
+                        "is required with `topics.points` (the image to project into)",
+                    ));
+                };
+                let ok = k.width > 0
+                    && k.height > 0
+                    && [k.fx, k.fy].iter().all(|f| f.is_finite() && *f > 0.0)
+                    && k.cx.is_finite()
+                    && k.cy.is_finite();
+                if !ok {
+                    return Err(invalid(
+                        "points_intrinsics",
+                        "needs a non-empty image and finite, positive focal lengths",
+                    ));
+                }
+            }
+            (Some(_), None, _) => {
+                return Err(invalid("topics.camera_info", "is required with `depth`"));
+            }
+            _ => {
+                return Err(invalid(
+                    "topics",
+                    "set either `depth` and `camera_info`, or `points`",
+                ));
+            }
+        }
+        for (key, list, known) in [
+            ("depth_encodings", &self.depth_encodings, ["16UC1", "32FC1"]),
+            (
+                "intensity_encodings",
+                &self.intensity_encodings,
+                ["mono8", "mono16"],
+            ),
+        ] {
+            if list.is_empty() {
+                return Err(invalid(key, "must list at least one encoding"));
+            }
+            if let Some(bad) = list.iter().find(|e| !known.contains(&e.as_str())) {
+                return Err(invalid(
+                    key,
+                    format!("`{bad}` is not supported (supported: {})", known.join(", ")),
+                ));
+            }
+        }
+        if self.extrinsics.isometry().is_none() {
+            return Err(invalid(
+                "extrinsics",
+                "needs a finite translation and a non-zero quaternion",
+            ));
+        }
+        positive("max_depth_m", self.max_depth_m)?;
+        positive("startup_timeout_s", self.startup_timeout_s)?;
+        positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
+        positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
+        positive("status_period_s", self.status_period_s)?;
+        for (key, n) in [
+            ("odometry_history", self.odometry_history),
+            ("send_queue", self.send_queue),
+        ] {
+            if n == 0 {
+                return Err(invalid(key, "must be at least 1"));
+            }
+        }
+        if self.world_frame_id.is_empty() {
+            return Err(invalid("world_frame_id", "must not be empty"));
+        }
+        if self.node_name.is_empty()
+            || !self
+                .node_name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_')
+        {
+            return Err(invalid(
+                "node_name",
+                format!("`{}` is not a ROS node name", self.node_name),
+            ));
+        }
+        self.zenoh.validate().map_err(|e| Ros2ConfigError {
+            key: "zenoh".into(),
+            reason: "invalid zenoh settings".into(),
+            source: Some(e),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Ros2Config, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    const MINIMAL: &str = r#"
+        format = "rmw_zenoh"
+        [topics]
+        depth = "/camera/depth/image_rect_raw"
+        camera_info = "/camera/depth/camera_info"
+        odometry = "/odom"
+    "#;
+
+    #[test]
+    fn a_minimal_table_gets_d435_like_defaults() {
+        let c = parse(MINIMAL).unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.format, WireFormat::RmwZenoh);
+        assert_eq!(c.domain_id, 0);
+        assert_eq!(c.max_depth_m, 5.0);
+        assert_eq!(c.depth_encodings, ["16UC1", "32FC1"]);
+        // The default extrinsics put the camera body frame on the body frame.
+        let camera = crate::ros2::convert::camera_pose(
+            &Isometry3::identity(),
+            &c.extrinsics.isometry().unwrap(),
+        );
+        assert!((camera.rotation.angle()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unknown_keys_are_rejected() {
+        let err = parse(&format!("{MINIMAL}\nspeed = 3")).unwrap_err();
+        assert!(err.to_string().contains("speed"), "{err}");
+        let err = parse("format = \"dds\"\n[topics]\nodometry = \"/o\"").unwrap_err();
+        assert!(err.to_string().contains("dds"), "{err}");
+    }
+
+    #[test]
+    fn invalid_values_name_their_key() {
+        let cases: [(&str, &str); 9] = [
+            ("max_depth_m = nan", "ros2.max_depth_m"),
+            ("odometry_tolerance_s = -1.0", "ros2.odometry_tolerance_s"),
+            ("depth_encodings = [\"bgr8\"]", "ros2.depth_encodings"),
+            ("intensity_encodings = []", "ros2.intensity_encodings"),
+            ("send_queue = 0", "ros2.send_queue"),
+            ("node_name = \"a b\"", "ros2.node_name"),
+            (
+                "extrinsics = { rotation_xyzw = [0.0, 0.0, 0.0, 0.0] }",
+                "ros2.extrinsics",
+            ),
+            ("zenoh = { listen = [\"carrier-pigeon\"] }", "ros2.zenoh"),
+            ("world_frame_id = \"\"", "ros2.world_frame_id"),
+        ];
+        for (line, key) in cases {
+            let text = MINIMAL.replacen("[topics]", &format!("{line}\n[topics]"), 1);
+            let err = parse(&text).unwrap().validate().unwrap_err();
+            assert!(err.to_string().starts_with(key), "{line}: {err}");
+        }
+    }
+
+    #[test]
+    fn topic_sets_must_be_complete() {
+        let no_info = MINIMAL.replace("camera_info = \"/camera/depth/camera_info\"", "");
+        let err = parse(&no_info).unwrap().validate().unwrap_err();
+        assert_eq!(err.key, "topics.camera_info");
+        let bad_name = MINIMAL.replace("\"/odom\"", "\"/odom/\"");
+        let err = parse(&bad_name).unwrap().validate().unwrap_err();
+        assert_eq!(err.key, "topics.odometry");
+        let points = r#"
+            format = "bridge"
+            [topics]
+            points = "/camera/depth/points"
+            odometry = "/odom"
+        "#;
+        let err = parse(points).unwrap().validate().unwrap_err();
+        assert_eq!(err.key, "points_intrinsics");
+        let with_k = format!(
+            "points_intrinsics = {{ width = 8, height = 6, fx = 4.0, fy = 4.0, cx = 4.0, \
+             cy = 3.0, max_depth_m = 5.0 }}\n{points}"
+        );
+        parse(&with_k).unwrap().validate().unwrap();
+    }
+}

@@ -1,0 +1,84 @@
+//! ROS 2 drivers over zenoh: a hardware robot's depth camera and odometry in, its
+//! plan, map and status out.
+//!
+//! ROS 2 reaches zenoh in one of two ways, chosen by [`Ros2Config::format`]:
+//! rmw_zenoh (ROS 2's zenoh middleware) or zenoh-bridge-ros2dds in front of a DDS
+//! robot. [`keyexpr`] maps topics to keys for both; payloads are CDR ([`cdr`],
+//! [`msgs`]); rmw_zenoh samples carry an [`Attachment`].
+//!
+//! | part | job |
+//! |---|---|
+//! | [`msgs`], [`cdr`] | the ROS message types and their CDR codec |
+//! | [`keyexpr`], [`attachment`] | zenoh keys and rmw_zenoh's per-sample metadata |
+//! | [`convert`] | ROS ↔ troupe conversions (frames, pixels, stamps) |
+//! | [`Ros2Config`] | the `[ros2]` table of a hardware robot file |
+//! | [`Ros2Inputs`] | zenoh subscribers → [`Ros2FrameSource`] and [`OdometryInput`] |
+//! | [`Ros2Outputs`] | plan, keyframe map and status → ROS topics |
+//!
+//! See `docs/hardware-ros2.md` for a robot file.
+
+pub mod attachment;
+pub mod cdr;
+mod config;
+pub mod convert;
+mod inputs;
+pub mod keyexpr;
+pub mod msgs;
+mod outputs;
+
+pub use attachment::Attachment;
+pub use cdr::{CdrError, RosMessage};
+pub use config::{Extrinsics, Ros2Config, Ros2ConfigError, Ros2Topics};
+pub use inputs::{InputStats, OdometryInput, Ros2FrameSource, Ros2Inputs};
+pub use keyexpr::{KeyFormat, TopicNameError, WireFormat};
+pub use outputs::{OutputStats, Ros2Outputs, Ros2Publisher};
+
+/// Why the ROS 2 drivers could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2Error {
+    /// The `[ros2]` table is invalid.
+    #[error(transparent)]
+    Config(#[from] Ros2ConfigError),
+    /// A topic name cannot be put on zenoh.
+    #[error(transparent)]
+    TopicName(#[from] TopicNameError),
+    /// zenoh refused something.
+    #[error("zenoh: {context}")]
+    Zenoh {
+        /// What we were doing.
+        context: String,
+        /// zenoh's error.
+        #[source]
+        source: zenoh::Error,
+    },
+    /// A configured input topic delivered nothing in time.
+    #[error(
+        "ROS 2 topic `{topic}` (zenoh key `{key}`) sent nothing within {timeout_s} s: check the \
+         topic name, `format`, `domain_id` and the zenoh endpoints"
+    )]
+    TopicSilent {
+        /// The topic.
+        topic: String,
+        /// The key subscribed to.
+        key: String,
+        /// The startup timeout, seconds.
+        timeout_s: f64,
+    },
+    /// The publishing thread could not start.
+    #[error("cannot start the ROS 2 publishing thread")]
+    Thread(#[source] std::io::Error),
+}
+
+/// Opens the zenoh session of the `[ros2]` table (its `zenoh` endpoints).
+pub fn open_session(config: &Ros2Config) -> Result<zenoh::Session, Ros2Error> {
+    config.validate()?;
+    let zenoh_config = config.zenoh.to_zenoh().map_err(|e| Ros2ConfigError {
+        key: "zenoh".into(),
+        reason: "invalid zenoh settings".into(),
+        source: Some(e),
+    })?;
+    zenoh::Wait::wait(zenoh::open(zenoh_config)).map_err(|source| Ros2Error::Zenoh {
+        context: "opening the session".into(),
+        source,
+    })
+}
