@@ -11,6 +11,9 @@
 #![deny(missing_docs)]
 
 mod config;
+pub mod frames;
+pub mod mavlink;
+pub mod safety;
 
 use nalgebra::Point3;
 use troupe_actors::collision::CollisionActor;
