@@ -15,7 +15,9 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde_json::Value;
-use troupe_actors::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan};
+use troupe_actors::msgs::{
+    DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan,
+};
 use troupe_actors::runtime::{
     Actor, ActorResult, ActorSpec, Context, Event, RealtimeExecutor, RobotSpec, Time, TimerId,
 };
@@ -249,7 +251,9 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let (off_from_s, off_until_s) = scenario.frames_off_s;
     let robot = RobotSpec::new("r0")
         .with(vehicle)
-        .with(ActorSpec::new("mission", move || Mission { plan: plan.clone() }))
+        .with(ActorSpec::new("mission", move || Mission {
+            plan: plan.clone(),
+        }))
         .with(ActorSpec::new("camera", move || Camera {
             off_from_s,
             off_until_s,
@@ -261,10 +265,10 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
         let (odometry, status) = (odometry.clone(), status.clone());
         executor.add_tap(move |p: &troupe_actors::runtime::Publication<'_>| {
             if let Some(o) = p.get(&ODOMETRY) {
-                odometry.lock().unwrap().push(o.clone());
+                odometry.lock().expect("tap lock").push(o.clone());
             }
             if let Some(s) = p.get(&AUTOPILOT_STATUS) {
-                status.lock().unwrap().push(s.clone());
+                status.lock().expect("tap lock").push(s.clone());
             }
         });
     }
@@ -277,8 +281,8 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let text = std::fs::read_to_string(&report_path).expect("autopilot report");
     let _ = std::fs::remove_file(&report_path);
     let report: Value = serde_json::from_str(&text).expect("report is JSON");
-    let odometry = std::mem::take(&mut *odometry.lock().unwrap());
-    let status = std::mem::take(&mut *status.lock().unwrap());
+    let odometry = std::mem::take(&mut *odometry.lock().expect("tap lock"));
+    let status = std::mem::take(&mut *status.lock().expect("tap lock"));
     Some(Outcome {
         report,
         epoch_s,
@@ -344,15 +348,28 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
         .map(|w| num(&w[1]["t"]) - num(&w[0]["t"]))
         .collect();
     gaps.sort_by(f64::total_cmp);
-    assert!(gaps[gaps.len() / 2] < 0.05, "median gap {} s", gaps[gaps.len() / 2]);
-    println!("setpoint rate {rate_hz:.1} Hz, median gap {:.4} s", gaps[gaps.len() / 2]);
+    assert!(
+        gaps[gaps.len() / 2] < 0.05,
+        "median gap {} s",
+        gaps[gaps.len() / 2]
+    );
+    println!(
+        "setpoint rate {rate_hz:.1} Hz, median gap {:.4} s",
+        gaps[gaps.len() / 2]
+    );
 
     // Addressing and type: to the autopilot that sent the heartbeats, in LOCAL_NED,
     // position + velocity + acceleration + yaw.
     for sp in &window {
         assert_eq!(sp["frame"], 1, "MAV_FRAME_LOCAL_NED");
-        assert_eq!((&sp["target_system"], &sp["target_component"]), (&1.into(), &1.into()));
-        assert_eq!((&sp["src_system"], &sp["src_component"]), (&1.into(), &191.into()));
+        assert_eq!(
+            (&sp["target_system"], &sp["target_component"]),
+            (&1.into(), &1.into())
+        );
+        assert_eq!(
+            (&sp["src_system"], &sp["src_component"]),
+            (&1.into(), &191.into())
+        );
         assert_eq!(sp["type_mask"], 0x800, "yaw rate ignored only");
     }
     // Each setpoint is the plan's ENU reference at its time, converted to NED.
@@ -378,7 +395,10 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
     // The point mass arrived where the plan ends, in NED: 1.5 m north, 3 m east, 2.5 m up.
     let end = &outcome.report["final_position_ned"];
     let end = Vector3::new(num(&end[0]), num(&end[1]), num(&end[2]));
-    assert!((end - Vector3::new(1.5, 3.0, -2.5)).norm() < 0.1, "autopilot ended at {end}");
+    assert!(
+        (end - Vector3::new(1.5, 3.0, -2.5)).norm() < 0.1,
+        "autopilot ended at {end}"
+    );
     let yaw = num(&outcome.report["final_yaw_ned"]);
     assert!(
         (yaw - yaw_enu_to_ned(std::f64::consts::FRAC_PI_2)).abs() < 1e-3,
@@ -387,10 +407,20 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
     // The robot's odometry is the autopilot's state in ENU / FLU.
     let last = outcome.odometry.last().expect("odometry published");
     let p = last.pose.translation.vector;
-    assert!((p - Vector3::new(3.0, 1.5, 2.5)).norm() < 0.1, "odometry at {p}");
+    assert!(
+        (p - Vector3::new(3.0, 1.5, 2.5)).norm() < 0.1,
+        "odometry at {p}"
+    );
     let forward = last.pose.rotation * Vector3::x();
-    assert!((forward - Vector3::y()).norm() < 1e-3, "odometry facing {forward}");
-    assert!(outcome.odometry.len() > 100, "{} odometry messages", outcome.odometry.len());
+    assert!(
+        (forward - Vector3::y()).norm() < 1e-3,
+        "odometry facing {forward}"
+    );
+    assert!(
+        outcome.odometry.len() > 100,
+        "{} odometry messages",
+        outcome.odometry.len()
+    );
     // The status reports the autopilot as PX4 reports itself.
     let status = outcome.status.last().expect("status published");
     assert!(status.armed && status.mode == "OFFBOARD", "{status:?}");
@@ -403,7 +433,11 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_sensor_timeout_holds_then_resumes() {
     // East at 0.5 m/s for the whole run; frames stop in [2, 3.5) s.
-    let plan = Trajectory::new(vec![knot(0.0, 0.0, 0.0, 1.0, 0.0), knot(20.0, 10.0, 0.0, 1.0, 0.0)]).unwrap();
+    let plan = Trajectory::new(vec![
+        knot(0.0, 0.0, 0.0, 1.0, 0.0),
+        knot(20.0, 10.0, 0.0, 1.0, 0.0),
+    ])
+    .unwrap();
     let (off_from_s, off_until_s, timeout_s) = (2.0, 3.5, 0.5);
     let scenario = Scenario {
         plan,
@@ -424,8 +458,15 @@ async fn a_sensor_timeout_holds_then_resumes() {
     let is_hold = |sp: &Value| velocity_ned(sp).norm() == 0.0;
     let setpoints = outcome.setpoints();
     // Tracking (moving east = NED +y) while frames flow.
-    for sp in setpoints.iter().filter(|sp| (0.5..1.9).contains(&outcome.run_time(sp))) {
-        assert!(!is_hold(sp), "held at {:.3} s with frames flowing", outcome.run_time(sp));
+    for sp in setpoints
+        .iter()
+        .filter(|sp| (0.5..1.9).contains(&outcome.run_time(sp)))
+    {
+        assert!(
+            !is_hold(sp),
+            "held at {:.3} s with frames flowing",
+            outcome.run_time(sp)
+        );
         assert!((num(&sp["vy"]) - 0.5).abs() < 1e-4);
     }
     // The first hold comes within the timeout (+ 0.2 s) of the frames stopping, and
@@ -436,8 +477,14 @@ async fn a_sensor_timeout_holds_then_resumes() {
         .expect("a hold setpoint after the frames stopped");
     let hold_s = outcome.run_time(first_hold);
     println!("frames stopped at {off_from_s} s, hold from {hold_s:.3} s");
-    assert!(hold_s <= off_from_s + timeout_s + 0.2, "hold only at {hold_s:.3} s");
-    assert!(hold_s >= off_from_s - 0.1 + timeout_s - 0.05, "hold already at {hold_s:.3} s");
+    assert!(
+        hold_s <= off_from_s + timeout_s + 0.2,
+        "hold only at {hold_s:.3} s"
+    );
+    assert!(
+        hold_s >= off_from_s - 0.1 + timeout_s - 0.05,
+        "hold already at {hold_s:.3} s"
+    );
     // The hold stays at one position until the frames return.
     let held: Vec<&Value> = setpoints
         .iter()
@@ -445,7 +492,11 @@ async fn a_sensor_timeout_holds_then_resumes() {
         .collect();
     assert!(held.len() > 10);
     for sp in &held {
-        assert!(is_hold(sp), "moving at {:.3} s without frames", outcome.run_time(sp));
+        assert!(
+            is_hold(sp),
+            "moving at {:.3} s without frames",
+            outcome.run_time(sp)
+        );
         assert_eq!(position_ned(sp), position_ned(first_hold));
     }
     // Tracking resumes once frames return.
@@ -497,9 +548,8 @@ async fn holds_inside_the_geofence_and_goes_silent_without_heartbeat() {
         // Back to ENU: (north, east, down) → (east, north, up); f32 on the wire.
         let p = position_ned(sp);
         let enu = Point3::new(p.y, p.x, -p.z);
-        let inside = (0..3).all(|i| {
-            enu[i] >= geofence.min_m()[i] - 1e-5 && enu[i] <= geofence.max_m()[i] + 1e-5
-        });
+        let inside = (0..3)
+            .all(|i| enu[i] >= geofence.min_m()[i] - 1e-5 && enu[i] <= geofence.max_m()[i] + 1e-5);
         assert!(inside, "setpoint outside the fence: {enu}");
         if velocity_ned(sp).norm() == 0.0 && outcome.run_time(sp) > 3.0 {
             at_wall += 1;
@@ -515,14 +565,21 @@ async fn holds_inside_the_geofence_and_goes_silent_without_heartbeat() {
         .map(|sp| num(&sp["t"]))
         .filter(|at| *at > deadline)
         .collect();
-    assert!(late.is_empty(), "{} setpoints after the heartbeat stopped", late.len());
+    assert!(
+        late.is_empty(),
+        "{} setpoints after the heartbeat stopped",
+        late.len()
+    );
     assert!(
         setpoints.iter().any(|sp| num(&sp["t"]) > last_heartbeat),
         "setpoints went on until the timeout"
     );
     let last = outcome.status.last().expect("status");
     assert!(last.heartbeat_lost, "{last:?}");
-    assert!(last.guard.fence_holds > 10 && last.guard.plans_leaving_fence > 0, "{last:?}");
+    assert!(
+        last.guard.fence_holds > 10 && last.guard.plans_leaving_fence > 0,
+        "{last:?}"
+    );
     assert!(
         outcome
             .status

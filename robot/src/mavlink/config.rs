@@ -297,6 +297,19 @@ mod tests {
     }
 
     #[test]
+    fn the_documented_example_is_valid() {
+        let page = include_str!("../../../docs/hardware-mavlink.md");
+        let start = page.find("```toml\n").expect("a toml block") + "```toml\n".len();
+        let end = start + page[start..].find("```").expect("the block ends");
+        let table: toml::Table = toml::from_str(&page[start..end]).unwrap();
+        let config: MavlinkConfig = table["mavlink"].clone().try_into().unwrap();
+        let settings = config.validate().unwrap();
+        assert_eq!(settings.connection, "udpin:0.0.0.0:14540");
+        assert_eq!(settings.setpoint_rate_hz, 30.0);
+        assert_eq!(settings.odometry_source, OdometrySource::Autopilot);
+    }
+
+    #[test]
     fn rejects_unknown_keys_and_missing_fence() {
         let err = parse(&EXAMPLE.replace("setpoint_rate_hz", "setpoint_rate")).unwrap_err();
         assert!(

@@ -1,19 +1,4 @@
-//! The MAVLink wire: a thread that owns the connection, joined to the actor by two
-//! bounded channels, so that no actor handler ever waits on a socket or serial port.
-//!
-//! - Outbound ([`MavlinkLink::try_send`]): at most [`OUTBOUND_CAPACITY`] messages wait;
-//!   a full queue drops the new message and counts it (a stale setpoint is worth
-//!   nothing; the next tick sends a fresh one).
-//! - Inbound ([`MavlinkLink::try_recv`]): the reader thread decodes frames, keeps the
-//!   ones the vehicle reads (`HEARTBEAT`, `LOCAL_POSITION_NED`, `ATTITUDE`) and queues
-//!   at most [`INBOUND_CAPACITY`]; a full queue drops the new message and counts it.
-//!   Bytes that do not decode are counted and skipped (never a panic).
-//!
-//! Only the two message kinds of [`Outbound`] can be sent: this program cannot arm
-//! the vehicle or change its mode, by construction.
-//!
-//! The connection is opened on the I/O thread and reopened after a transport error
-//! (TCP closed, serial port unplugged), once per [`RECONNECT_PERIOD`].
+//! The MAVLink wire: the connection's threads and their bounded channels.
 
 use std::io;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -95,8 +80,25 @@ pub struct LinkStats {
     pub connected: bool,
 }
 
-/// See the [module docs](self). Dropping it stops the I/O threads (within
-/// [`READ_TIMEOUT`] for UDP, outbound TCP and serial links).
+/// The MAVLink wire: a thread that owns the connection, joined to the actor by two
+/// bounded channels, so that no actor handler ever waits on a socket or serial port.
+///
+/// - Outbound ([`MavlinkLink::try_send`]): at most [`OUTBOUND_CAPACITY`] messages wait;
+///   a full queue drops the new message and counts it (a stale setpoint is worth
+///   nothing; the next tick sends a fresh one).
+/// - Inbound ([`MavlinkLink::try_recv`]): the reader thread decodes frames, keeps the
+///   ones the vehicle reads (`HEARTBEAT`, `LOCAL_POSITION_NED`, `ATTITUDE`) and queues
+///   at most [`INBOUND_CAPACITY`]; a full queue drops the new message and counts it.
+///   Bytes that do not decode are counted and skipped (never a panic).
+///
+/// Only the two message kinds of [`Outbound`] can be sent: this program cannot arm
+/// the vehicle or change its mode, by construction.
+///
+/// The connection is opened on the I/O thread and reopened after a transport error
+/// (TCP closed, serial port unplugged), once per [`RECONNECT_PERIOD`].
+///
+/// Dropping it stops the I/O threads (within 100 ms for UDP, outbound TCP and
+/// serial links; an inbound TCP link waits for its peer first).
 pub struct MavlinkLink {
     outbound: SyncSender<Outbound>,
     inbound: Receiver<Inbound>,

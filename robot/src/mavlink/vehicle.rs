@@ -35,7 +35,8 @@ pub fn mavlink_vehicle(config: &MavlinkConfig) -> Result<ActorSpec, MavlinkConfi
     }))
 }
 
-/// See the [module docs](self) and the [`mavlink`](super) module.
+/// The robot's `vehicle` actor on a MAVLink autopilot; see the [`mavlink`](crate::mavlink)
+/// module for what it does.
 pub struct MavlinkVehicle {
     settings: MavlinkSettings,
     link: Option<MavlinkLink>,
@@ -304,6 +305,11 @@ impl Actor for MavlinkVehicle {
         self.link = Some(link);
         ctx.set_timer(SETPOINT_TICK, Duration::from_secs_f64(period_s));
         Ok(())
+    }
+
+    fn stop(&mut self, _ctx: &mut Context<'_>) {
+        // Dropping the link stops its threads and closes the connection.
+        self.link = None;
     }
 
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {

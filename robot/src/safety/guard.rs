@@ -1,20 +1,4 @@
-//! The setpoint a vehicle driver may stream now, given its inputs' health, the
-//! geofence and the committed plan.
-//!
-//! [`SetpointGuard`] combines three [`Watchdog`]s (depth frames, odometry, the
-//! autopilot's heartbeat) with a [`Geofence`]. At every setpoint tick it answers with
-//! one of:
-//!
-//! - nothing, while the autopilot's heartbeat is missing (nobody listens; the
-//!   autopilot's own failsafe is in charge);
-//! - a **hold** at the current position (clamped into the fence) with zero velocity —
-//!   the stopping reference — while a sensor or the odometry is stale, before the
-//!   first plan, after a heartbeat loss until a fresh plan arrives, or when the plan's
-//!   reference lies outside the fence;
-//! - otherwise the plan's **reference** (position, velocity, acceleration, yaw).
-//!
-//! The hold position is latched when the hold begins, so a drifting estimate does not
-//! drag the vehicle along; it is released when tracking resumes.
+//! The setpoint a vehicle driver may stream now (see [`SetpointGuard`]).
 
 use std::sync::Arc;
 
@@ -145,7 +129,23 @@ pub struct GuardCounters {
     pub plans_leaving_fence: u64,
 }
 
-/// See the [module docs](self).
+/// The setpoint a vehicle driver may stream now, given its inputs' health, the
+/// geofence and the committed plan.
+///
+/// [`SetpointGuard`] combines three [`Watchdog`]s (depth frames, odometry, the
+/// autopilot's heartbeat) with a [`Geofence`]. At every setpoint tick it answers with
+/// one of:
+///
+/// - nothing, while the autopilot's heartbeat is missing (nobody listens; the
+///   autopilot's own failsafe is in charge);
+/// - a **hold** at the current position (clamped into the fence) with zero velocity —
+///   the stopping reference — while a sensor or the odometry is stale, before the
+///   first plan, after a heartbeat loss until a fresh plan arrives, or when the plan's
+///   reference lies outside the fence;
+/// - otherwise the plan's **reference** (position, velocity, acceleration, yaw).
+///
+/// The hold position is latched when the hold begins, so a drifting estimate does not
+/// drag the vehicle along; it is released when tracking resumes.
 #[derive(Clone, Debug)]
 pub struct SetpointGuard {
     config: GuardConfig,
