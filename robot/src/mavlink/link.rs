@@ -283,6 +283,7 @@ impl IoThread {
     ) -> Option<JoinHandle<()>> {
         let reader = Reader {
             serial: matches!(self.address, ConnectionAddress::Serial(_)),
+            datagrams: matches!(self.address, ConnectionAddress::Udp(_)),
             inbound: self.inbound.clone(),
             stop: self.stop.clone(),
             counters: self.counters.clone(),
@@ -325,6 +326,8 @@ fn own_heartbeat() -> MavMessage {
 
 struct Reader {
     serial: bool,
+    /// UDP: an empty datagram reads as end-of-file but closes nothing.
+    datagrams: bool,
     inbound: SyncSender<Inbound>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
@@ -348,7 +351,7 @@ impl Reader {
                         e.kind(),
                         io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
                     ) => {}
-                Err(MessageReadError::Io(e)) if is_closed(e.kind()) => {
+                Err(MessageReadError::Io(e)) if !self.datagrams && is_closed(e.kind()) => {
                     tracing::warn!(link = %self.link, "MAVLink connection closed: {e}");
                     alive.store(false, Ordering::Relaxed);
                 }
@@ -389,5 +392,107 @@ impl Reader {
             }
             Err(TrySendError::Disconnected(_)) => self.stop.store(true, Ordering::Relaxed),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::MavlinkVersion;
+    use mavlink::dialects::common::ATTITUDE_DATA;
+    use std::net::UdpSocket;
+    use std::time::Instant;
+
+    fn frame(sequence: u8, message: &MavMessage) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence,
+        };
+        mavlink::write_versioned_msg(&mut bytes, MavlinkVersion::V2, header, message).unwrap();
+        bytes
+    }
+
+    fn attitude() -> MavMessage {
+        MavMessage::ATTITUDE(ATTITUDE_DATA {
+            yaw: 0.5,
+            ..ATTITUDE_DATA::default()
+        })
+    }
+
+    /// Waits up to 3 s for the link to deliver something.
+    fn next(link: &MavlinkLink) -> Option<Inbound> {
+        let deadline = Instant::now() + Duration::from_secs(3);
+        while Instant::now() < deadline {
+            if let Some(m) = link.try_recv() {
+                return Some(m);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        None
+    }
+
+    #[test]
+    fn hostile_bytes_are_counted_and_skipped_then_replies_flow() {
+        let port = UdpSocket::bind("127.0.0.1:0")
+            .and_then(|s| s.local_addr())
+            .unwrap()
+            .port();
+        let link = MavlinkLink::open(&format!("udpin:127.0.0.1:{port}"), 1, 191).unwrap();
+        let peer = UdpSocket::bind("127.0.0.1:0").unwrap();
+        peer.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+        let to = ("127.0.0.1", port);
+        // Wait for the link to be open (a datagram before the bind would be lost).
+        let deadline = Instant::now() + Duration::from_secs(3);
+        while !link.stats().connected && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let good = frame(0, &attitude());
+        let mut bad_crc = good.clone();
+        let last = bad_crc.len() - 1;
+        bad_crc[last] ^= 0xff;
+        let mut wrong_length = good.clone();
+        wrong_length[1] = 250;
+        let hostile = [
+            vec![0xfd; 3],
+            (0..=255u8).collect::<Vec<_>>(),
+            bad_crc,
+            wrong_length,
+            vec![],
+        ];
+        let system_time =
+            MavMessage::SYSTEM_TIME(mavlink::dialects::common::SYSTEM_TIME_DATA::default());
+        for (i, bytes) in hostile.iter().enumerate() {
+            peer.send_to(bytes, to).unwrap();
+            // A frame cut short or claiming a wrong length swallows what follows until
+            // its length is reached and its checksum fails; then the decoder rescans.
+            // A live autopilot streams on, so it resynchronises within a few frames.
+            peer.send_to(&frame(0, &system_time), to).unwrap();
+            for sequence in 1..=12 {
+                peer.send_to(&frame(sequence, &attitude()), to).unwrap();
+            }
+            let inbound = next(&link).unwrap_or_else(|| panic!("stuck after hostile input {i}"));
+            assert_eq!((inbound.system_id, inbound.component_id), (1, 1));
+            assert_eq!(inbound.message, attitude());
+            while link.try_recv().is_some() {}
+        }
+        let stats = link.stats();
+        assert!(stats.connected && stats.ignored >= 1, "{stats:?}");
+        // The link now knows where to answer: our heartbeat reaches the peer and decodes.
+        assert!(link.try_send(Outbound::Heartbeat));
+        let mut buf = [0u8; 300];
+        let n = peer.recv(&mut buf).expect("our heartbeat");
+        let mut reader = mavlink::MavlinkReader::new(&buf[..n]);
+        let (header, message) = reader
+            .read_any_message::<MavMessage>()
+            .expect("a MAVLink frame");
+        assert_eq!((header.system_id, header.component_id), (1, 191));
+        let MavMessage::HEARTBEAT(hb) = message else {
+            panic!("expected a heartbeat, got {message:?}");
+        };
+        assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_INVALID);
+        assert_eq!(hb.mavtype, MavType::MAV_TYPE_ONBOARD_CONTROLLER);
+        assert!(hb.base_mode.is_empty(), "never claims a mode");
     }
 }
