@@ -45,6 +45,8 @@ pub struct MavlinkVehicle {
     heartbeat: Option<HEARTBEAT_DATA>,
     attitude: Option<ATTITUDE_DATA>,
     local_position: Option<LOCAL_POSITION_NED_DATA>,
+    /// A position arrived since the last odometry was published.
+    fresh_position: bool,
     own_heartbeat_at: Option<Time>,
     status_at: Option<Time>,
     status_key: Option<(bool, String, bool, Option<crate::safety::HoldReason>)>,
@@ -69,6 +71,7 @@ impl MavlinkVehicle {
             heartbeat: None,
             attitude: None,
             local_position: None,
+            fresh_position: false,
             own_heartbeat_at: None,
             status_at: None,
             status_key: None,
@@ -134,6 +137,7 @@ impl MavlinkVehicle {
             }
             MavMessage::LOCAL_POSITION_NED(p) if self.target.is_some() => {
                 self.local_position = Some(p);
+                self.fresh_position = true;
             }
             MavMessage::ATTITUDE(a) if self.target.is_some() => self.attitude = Some(a),
             _ => {}
@@ -187,12 +191,10 @@ impl MavlinkVehicle {
         let received: Vec<Inbound> = (0..INBOUND_CAPACITY)
             .map_while(|_| link.try_recv())
             .collect();
-        let mut new_position = false;
         for inbound in received {
-            new_position |= matches!(inbound.message, MavMessage::LOCAL_POSITION_NED(_));
             self.receive(inbound, now)?;
         }
-        if new_position
+        if std::mem::take(&mut self.fresh_position)
             && self.settings.odometry_source == OdometrySource::Autopilot
             && let Some(odometry) = self.autopilot_odometry(now)
         {
