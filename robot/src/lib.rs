@@ -28,7 +28,10 @@
 #![deny(missing_docs)]
 
 mod config;
+pub mod frames;
+pub mod mavlink;
 pub mod ros2;
+pub mod safety;
 
 use nalgebra::Point3;
 use troupe_actors::collision::CollisionActor;

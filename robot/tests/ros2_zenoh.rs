@@ -121,13 +121,7 @@ impl Actor for AheadPlanner {
         let later = Time::from_nanos(now.as_nanos() + 1_000_000_000);
         let trajectory = Trajectory::new(vec![knot(now, start), knot(later, ahead)])
             .map_err(|e| troupe_actors::runtime::ActorError::with_source("plan", e))?;
-        ctx.publish(
-            &PLAN,
-            Plan {
-                stamp: now,
-                trajectory,
-            },
-        );
+        ctx.publish(&PLAN, Plan::new(now, trajectory));
         Ok(())
     }
 }

@@ -261,14 +261,14 @@ fn plan_becomes_a_path_of_its_knots() {
         position_m: Point3::new(x, 1.0, 2.0),
         yaw_rad: yaw,
     };
-    let plan = Plan {
-        stamp: Time::from_secs_f64(1.0),
-        trajectory: Trajectory::new(vec![
+    let plan = Plan::new(
+        Time::from_secs_f64(1.0),
+        Trajectory::new(vec![
             knot(1.0, 0.0, 0.0),
             knot(2.0, 1.5, std::f64::consts::FRAC_PI_2),
         ])
         .unwrap(),
-    };
+    );
     let map = StampMap {
         troupe_now: Time::from_secs_f64(1.0),
         unix_now_ns: 5_000_000_000,

@@ -1,0 +1,360 @@
+//! The `[mavlink]` configuration section and its validation.
+
+use mavlink::ConnectionAddress;
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+use crate::safety::Geofence;
+
+/// Where the robot's odometry comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OdometrySource {
+    /// The autopilot's estimate (`LOCAL_POSITION_NED` + `ATTITUDE`), published by the
+    /// MAVLink vehicle on `odometry`.
+    #[default]
+    Autopilot,
+    /// Another driver (e.g. a ROS 2 VIO source) publishes `odometry`; the vehicle only
+    /// watches it. Its world frame must be the autopilot's local frame (ENU), as when
+    /// the VIO estimate is also fed to the autopilot.
+    External,
+}
+
+/// The geofence box (`[mavlink.geofence]`), world frame (ENU), metres.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeofenceConfig {
+    /// Low corner `[x, y, z]`.
+    pub min_m: [f64; 3],
+    /// High corner `[x, y, z]`.
+    pub max_m: [f64; 3],
+}
+
+/// The `[mavlink]` section: how to reach the autopilot and the safety limits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MavlinkConfig {
+    /// Connection string as the `mavlink` crate reads it: `udpin:0.0.0.0:14540`,
+    /// `udpout:192.168.1.10:14580`, `tcpout:127.0.0.1:5760`, `tcpin:0.0.0.0:5760`,
+    /// `serial:/dev/ttyACM0:921600`.
+    pub connection: String,
+    /// This program's MAVLink system id (usually the vehicle's own).
+    #[serde(default = "default_source_system_id")]
+    pub source_system_id: u8,
+    /// This program's component id (191: onboard computer).
+    #[serde(default = "default_source_component_id")]
+    pub source_component_id: u8,
+    /// The autopilot's system id; absent: taken from the first autopilot heartbeat.
+    #[serde(default)]
+    pub target_system_id: Option<u8>,
+    /// The autopilot's component id; absent: taken from the first autopilot heartbeat.
+    #[serde(default)]
+    pub target_component_id: Option<u8>,
+    /// Setpoint stream rate, Hz (PX4 leaves offboard below 2 Hz; at least 20).
+    #[serde(default = "default_setpoint_rate_hz")]
+    pub setpoint_rate_hz: f64,
+    /// Longest gap between autopilot heartbeats before setpoints stop, seconds.
+    #[serde(default = "default_heartbeat_timeout_s")]
+    pub heartbeat_timeout_s: f64,
+    /// Longest gap between depth frames before the vehicle holds, seconds.
+    #[serde(default = "default_sensor_timeout_s")]
+    pub sensor_timeout_s: f64,
+    /// Longest gap between odometry messages before the vehicle holds, seconds.
+    #[serde(default = "default_odometry_timeout_s")]
+    pub odometry_timeout_s: f64,
+    /// Where odometry comes from.
+    #[serde(default)]
+    pub odometry_source: OdometrySource,
+    /// The box no setpoint may leave (required).
+    pub geofence: GeofenceConfig,
+}
+
+fn default_source_system_id() -> u8 {
+    1
+}
+fn default_source_component_id() -> u8 {
+    191
+}
+fn default_setpoint_rate_hz() -> f64 {
+    30.0
+}
+fn default_heartbeat_timeout_s() -> f64 {
+    3.0
+}
+fn default_sensor_timeout_s() -> f64 {
+    1.0
+}
+fn default_odometry_timeout_s() -> f64 {
+    0.5
+}
+
+/// A `[mavlink]` value that is not acceptable; names the key, the rule and the value.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("mavlink.{key} {rule}, got {value}")]
+pub struct MavlinkConfigError {
+    /// Key inside the `[mavlink]` section.
+    pub key: &'static str,
+    /// What it must be.
+    pub rule: &'static str,
+    /// What it was.
+    pub value: String,
+}
+
+/// A checked [`MavlinkConfig`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MavlinkSettings {
+    /// The connection string (parsed once to check it).
+    pub connection: String,
+    /// This program's system id.
+    pub source_system_id: u8,
+    /// This program's component id.
+    pub source_component_id: u8,
+    /// The autopilot's system id, if fixed.
+    pub target_system_id: Option<u8>,
+    /// The autopilot's component id, if fixed.
+    pub target_component_id: Option<u8>,
+    /// Setpoint stream rate, Hz.
+    pub setpoint_rate_hz: f64,
+    /// Heartbeat timeout, seconds.
+    pub heartbeat_timeout_s: f64,
+    /// Depth frame timeout, seconds.
+    pub sensor_timeout_s: f64,
+    /// Odometry timeout, seconds.
+    pub odometry_timeout_s: f64,
+    /// Where odometry comes from.
+    pub odometry_source: OdometrySource,
+    /// The fence.
+    pub geofence: Geofence,
+}
+
+/// Lowest accepted setpoint rate, Hz.
+pub const MIN_SETPOINT_RATE_HZ: f64 = 20.0;
+/// Highest accepted setpoint rate, Hz.
+pub const MAX_SETPOINT_RATE_HZ: f64 = 200.0;
+
+fn in_range(
+    key: &'static str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    rule: &'static str,
+) -> Result<(), MavlinkConfigError> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(MavlinkConfigError {
+            key,
+            rule,
+            value: value.to_string(),
+        })
+    }
+}
+
+fn nonzero_id(key: &'static str, id: Option<u8>) -> Result<(), MavlinkConfigError> {
+    if id == Some(0) {
+        Err(MavlinkConfigError {
+            key,
+            rule: "must be 1..=255 (0 is the broadcast id)",
+            value: "0".into(),
+        })
+    } else {
+        Ok(())
+    }
+}
+
+impl MavlinkConfig {
+    /// A configuration with the defaults, the given connection and fence.
+    #[must_use]
+    pub fn new(connection: impl Into<String>, geofence: GeofenceConfig) -> Self {
+        MavlinkConfig {
+            connection: connection.into(),
+            source_system_id: default_source_system_id(),
+            source_component_id: default_source_component_id(),
+            target_system_id: None,
+            target_component_id: None,
+            setpoint_rate_hz: default_setpoint_rate_hz(),
+            heartbeat_timeout_s: default_heartbeat_timeout_s(),
+            sensor_timeout_s: default_sensor_timeout_s(),
+            odometry_timeout_s: default_odometry_timeout_s(),
+            odometry_source: OdometrySource::default(),
+            geofence,
+        }
+    }
+
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<MavlinkSettings, MavlinkConfigError> {
+        let bad_connection = || MavlinkConfigError {
+            key: "connection",
+            rule: "must be udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, \
+                   tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD",
+            value: format!("{:?}", self.connection),
+        };
+        let address =
+            ConnectionAddress::parse_address(&self.connection).map_err(|_| bad_connection())?;
+        if !matches!(
+            address,
+            ConnectionAddress::Serial(_) | ConnectionAddress::File(_)
+        ) {
+            let port = self.connection.rsplit_once(':').map(|(_, port)| port);
+            if port.and_then(|p| p.parse::<u16>().ok()).is_none() {
+                return Err(bad_connection());
+            }
+        }
+        if self.connection.starts_with("file:") {
+            return Err(MavlinkConfigError {
+                key: "connection",
+                rule: "must be a live link (udp, tcp or serial), not a file",
+                value: format!("{:?}", self.connection),
+            });
+        }
+        nonzero_id("source_system_id", Some(self.source_system_id))?;
+        nonzero_id("target_system_id", self.target_system_id)?;
+        in_range(
+            "setpoint_rate_hz",
+            self.setpoint_rate_hz,
+            MIN_SETPOINT_RATE_HZ,
+            MAX_SETPOINT_RATE_HZ,
+            "must be in [20, 200] Hz",
+        )?;
+        in_range(
+            "heartbeat_timeout_s",
+            self.heartbeat_timeout_s,
+            0.1,
+            60.0,
+            "must be in [0.1, 60] s",
+        )?;
+        in_range(
+            "sensor_timeout_s",
+            self.sensor_timeout_s,
+            0.05,
+            60.0,
+            "must be in [0.05, 60] s",
+        )?;
+        in_range(
+            "odometry_timeout_s",
+            self.odometry_timeout_s,
+            0.05,
+            60.0,
+            "must be in [0.05, 60] s",
+        )?;
+        let geofence = Geofence::new(
+            Point3::from(self.geofence.min_m),
+            Point3::from(self.geofence.max_m),
+        )
+        .map_err(|_| MavlinkConfigError {
+            key: "geofence",
+            rule: "must have finite corners with min_m below max_m on every axis",
+            value: format!(
+                "min_m = {:?}, max_m = {:?}",
+                self.geofence.min_m, self.geofence.max_m
+            ),
+        })?;
+        Ok(MavlinkSettings {
+            connection: self.connection.clone(),
+            source_system_id: self.source_system_id,
+            source_component_id: self.source_component_id,
+            target_system_id: self.target_system_id,
+            target_component_id: self.target_component_id,
+            setpoint_rate_hz: self.setpoint_rate_hz,
+            heartbeat_timeout_s: self.heartbeat_timeout_s,
+            sensor_timeout_s: self.sensor_timeout_s,
+            odometry_timeout_s: self.odometry_timeout_s,
+            odometry_source: self.odometry_source,
+            geofence,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXAMPLE: &str = r#"
+        connection = "udpin:0.0.0.0:14540"
+        target_system_id = 1
+        setpoint_rate_hz = 30.0
+        sensor_timeout_s = 0.5
+        odometry_source = "external"
+        [geofence]
+        min_m = [-10.0, -10.0, 0.0]
+        max_m = [10.0, 10.0, 4.0]
+    "#;
+
+    fn parse(text: &str) -> Result<MavlinkConfig, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    #[test]
+    fn parses_and_validates_with_defaults() {
+        let config = parse(EXAMPLE).unwrap();
+        let settings = config.validate().unwrap();
+        assert_eq!(settings.source_component_id, 191);
+        assert_eq!(settings.target_system_id, Some(1));
+        assert_eq!(settings.target_component_id, None);
+        assert_eq!(settings.odometry_source, OdometrySource::External);
+        assert_eq!(settings.heartbeat_timeout_s, 3.0);
+        assert!(settings.geofence.contains(&Point3::new(0.0, 0.0, 1.0)));
+    }
+
+    #[test]
+    fn the_documented_example_is_valid() {
+        let page = include_str!("../../../docs/hardware-mavlink.md");
+        let start = page.find("```toml\n").expect("a toml block") + "```toml\n".len();
+        let end = start + page[start..].find("```").expect("the block ends");
+        let table: toml::Table = toml::from_str(&page[start..end]).unwrap();
+        let config: MavlinkConfig = table["mavlink"].clone().try_into().unwrap();
+        let settings = config.validate().unwrap();
+        assert_eq!(settings.connection, "udpin:0.0.0.0:14540");
+        assert_eq!(settings.setpoint_rate_hz, 30.0);
+        assert_eq!(settings.odometry_source, OdometrySource::Autopilot);
+    }
+
+    #[test]
+    fn rejects_unknown_keys_and_missing_fence() {
+        let err = parse(&EXAMPLE.replace("setpoint_rate_hz", "setpoint_rate")).unwrap_err();
+        assert!(
+            err.to_string().contains("unknown field `setpoint_rate`"),
+            "{err}"
+        );
+        let err = parse("connection = \"udpin:0.0.0.0:14540\"").unwrap_err();
+        assert!(
+            err.to_string().contains("missing field `geofence`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn errors_name_the_key_in_one_line() {
+        let fence = GeofenceConfig {
+            min_m: [0.0; 3],
+            max_m: [1.0; 3],
+        };
+        let check = |edit: &dyn Fn(&mut MavlinkConfig)| {
+            let mut c = MavlinkConfig::new("udpin:127.0.0.1:14540", fence);
+            edit(&mut c);
+            c.validate().unwrap_err()
+        };
+        let e = check(&|c| c.setpoint_rate_hz = 10.0);
+        assert_eq!(
+            e.to_string(),
+            "mavlink.setpoint_rate_hz must be in [20, 200] Hz, got 10"
+        );
+        let e = check(&|c| c.sensor_timeout_s = f64::NAN);
+        assert_eq!(e.key, "sensor_timeout_s");
+        let e = check(&|c| c.connection = "carrier-pigeon:1".into());
+        assert_eq!(e.key, "connection");
+        assert!(!e.to_string().contains('\n'));
+        let e = check(&|c| c.connection = "udpin:127.0.0.1".into());
+        assert_eq!(e.key, "connection");
+        let e = check(&|c| c.connection = "file:/tmp/log.tlog".into());
+        assert_eq!(e.key, "connection");
+        let e = check(&|c| c.target_system_id = Some(0));
+        assert_eq!(e.key, "target_system_id");
+        let e = check(&|c| c.geofence.max_m[2] = -1.0);
+        assert_eq!(e.key, "geofence");
+        let e = check(&|c| c.odometry_timeout_s = 0.0);
+        assert_eq!(e.key, "odometry_timeout_s");
+        let e = check(&|c| c.heartbeat_timeout_s = -1.0);
+        assert_eq!(e.key, "heartbeat_timeout_s");
+    }
+}

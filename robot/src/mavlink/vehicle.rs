@@ -1,0 +1,339 @@
+//! The MAVLink vehicle actor: streams the committed plan's reference to a PX4 or
+//! ArduPilot autopilot, publishes the autopilot's odometry and status, and never arms
+//! or changes mode.
+
+use std::time::Duration;
+
+use mavlink::dialects::common::{
+    ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
+};
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, Odometry, PLAN};
+use troupe_actors::runtime::{
+    Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, Time, TimerId,
+};
+
+use super::config::{MavlinkConfig, MavlinkConfigError, MavlinkSettings, OdometrySource};
+use super::link::{INBOUND_CAPACITY, Inbound, MavlinkLink, Outbound};
+use super::setpoint::{Target, position_target};
+use super::status::{AUTOPILOT_STATUS, AutopilotStatus, flight_mode, is_armed};
+use crate::frames::{ned_frd_from_euler, ned_frd_to_enu_flu, ned_to_enu};
+use crate::safety::{GuardConfig, GuardInput, SetpointGuard, WatchdogChange};
+
+const SETPOINT_TICK: TimerId = TimerId(0);
+/// Period of this program's own heartbeat.
+const OWN_HEARTBEAT_PERIOD_S: f64 = 1.0;
+/// Period of the status topic when nothing changes.
+const STATUS_PERIOD_S: f64 = 0.5;
+
+/// Builds the vehicle for [`RobotParts::vehicle`](crate::RobotParts::vehicle) from a
+/// `[mavlink]` section; a bad value is an error naming its key.
+pub fn mavlink_vehicle(config: &MavlinkConfig) -> Result<ActorSpec, MavlinkConfigError> {
+    let settings = config.validate()?;
+    Ok(ActorSpec::new("vehicle", move || {
+        MavlinkVehicle::new(settings.clone())
+    }))
+}
+
+/// The robot's `vehicle` actor on a MAVLink autopilot; see the [`mavlink`](crate::mavlink)
+/// module for what it does.
+pub struct MavlinkVehicle {
+    settings: MavlinkSettings,
+    link: Option<MavlinkLink>,
+    guard: Option<SetpointGuard>,
+    target: Option<Target>,
+    heartbeat: Option<HEARTBEAT_DATA>,
+    attitude: Option<ATTITUDE_DATA>,
+    local_position: Option<LOCAL_POSITION_NED_DATA>,
+    /// A position arrived since the last odometry was published.
+    fresh_position: bool,
+    own_heartbeat_at: Option<Time>,
+    status_at: Option<Time>,
+    status_key: Option<(bool, String, bool, Option<crate::safety::HoldReason>)>,
+}
+
+impl MavlinkVehicle {
+    /// A vehicle with checked settings; the connection opens when it starts.
+    #[must_use]
+    pub fn new(settings: MavlinkSettings) -> Self {
+        let target = settings
+            .target_system_id
+            .zip(settings.target_component_id)
+            .map(|(system_id, component_id)| Target {
+                system_id,
+                component_id,
+            });
+        MavlinkVehicle {
+            settings,
+            link: None,
+            guard: None,
+            target,
+            heartbeat: None,
+            attitude: None,
+            local_position: None,
+            fresh_position: false,
+            own_heartbeat_at: None,
+            status_at: None,
+            status_key: None,
+        }
+    }
+
+    fn guard(&mut self) -> Result<&mut SetpointGuard, ActorError> {
+        self.guard
+            .as_mut()
+            .ok_or_else(|| ActorError::msg("MAVLink vehicle used before start"))
+    }
+
+    /// Whether a message comes from the autopilot we talk to (or could: the first
+    /// autopilot heartbeat picks it when the ids are not configured).
+    fn is_from_autopilot(&self, inbound: &Inbound) -> bool {
+        let system_ok = self
+            .settings
+            .target_system_id
+            .is_none_or(|id| u32::from(id) == inbound.system_id);
+        let known_ok = self.target.is_none_or(|t| {
+            u32::from(t.system_id) == inbound.system_id && t.component_id == inbound.component_id
+        });
+        system_ok && known_ok
+    }
+
+    fn receive(&mut self, inbound: Inbound, now: Time) -> ActorResult {
+        if !self.is_from_autopilot(&inbound) {
+            return Ok(());
+        }
+        match inbound.message {
+            MavMessage::HEARTBEAT(hb) => {
+                // Ground stations and companion computers also send heartbeats.
+                if hb.autopilot == MavAutopilot::MAV_AUTOPILOT_INVALID {
+                    return Ok(());
+                }
+                if self.target.is_none() {
+                    let Ok(system_id) = u8::try_from(inbound.system_id) else {
+                        return Ok(());
+                    };
+                    let target = Target {
+                        system_id,
+                        component_id: self
+                            .settings
+                            .target_component_id
+                            .unwrap_or(inbound.component_id),
+                    };
+                    tracing::info!(
+                        system = target.system_id,
+                        component = target.component_id,
+                        "autopilot found: {}",
+                        flight_mode(&hb)
+                    );
+                    self.target = Some(target);
+                }
+                if self
+                    .target
+                    .is_some_and(|t| t.component_id == inbound.component_id)
+                {
+                    self.heartbeat = Some(hb);
+                    let change = self.guard()?.heartbeat(now);
+                    log_change(GuardInput::Heartbeat, change);
+                }
+            }
+            MavMessage::LOCAL_POSITION_NED(p) if self.target.is_some() => {
+                self.local_position = Some(p);
+                self.fresh_position = true;
+            }
+            MavMessage::ATTITUDE(a) if self.target.is_some() => self.attitude = Some(a),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The autopilot's latest estimate as troupe odometry (ENU / FLU).
+    fn autopilot_odometry(&self, now: Time) -> Option<Odometry> {
+        let (p, a) = (self.local_position.as_ref()?, self.attitude.as_ref()?);
+        let values = [p.x, p.y, p.z, p.vx, p.vy, p.vz, a.roll, a.pitch, a.yaw];
+        if !values.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let position = ned_to_enu(&Vector3::new(
+            f64::from(p.x),
+            f64::from(p.y),
+            f64::from(p.z),
+        ));
+        let velocity = ned_to_enu(&Vector3::new(
+            f64::from(p.vx),
+            f64::from(p.vy),
+            f64::from(p.vz),
+        ));
+        let rotation = ned_frd_to_enu_flu(&ned_frd_from_euler(
+            f64::from(a.roll),
+            f64::from(a.pitch),
+            f64::from(a.yaw),
+        ));
+        Some(Odometry {
+            stamp: now,
+            pose: Isometry3::from_parts(Translation3::from(position), rotation),
+            velocity_mps: velocity,
+        })
+    }
+
+    fn odometry_arrived(&mut self, odometry: &Odometry, now: Time) -> ActorResult {
+        let position = Point3::from(odometry.pose.translation.vector);
+        let forward = odometry.pose.rotation * Vector3::x();
+        let yaw = forward.y.atan2(forward.x);
+        let change = self.guard()?.odometry(now, position, yaw);
+        log_change(GuardInput::Odometry, change);
+        Ok(())
+    }
+
+    fn tick(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        let Some(link) = &self.link else {
+            return Err(ActorError::msg("MAVLink vehicle ticked before start"));
+        };
+        let received: Vec<Inbound> = (0..INBOUND_CAPACITY)
+            .map_while(|_| link.try_recv())
+            .collect();
+        for inbound in received {
+            self.receive(inbound, now)?;
+        }
+        if std::mem::take(&mut self.fresh_position)
+            && self.settings.odometry_source == OdometrySource::Autopilot
+            && let Some(odometry) = self.autopilot_odometry(now)
+        {
+            self.odometry_arrived(&odometry, now)?;
+            ctx.publish(&ODOMETRY, odometry);
+        }
+        let mut changes = Vec::new();
+        let setpoint = self.guard()?.tick(now, &mut changes);
+        for (input, change) in changes {
+            log_change(input, Some(change));
+        }
+        if let Some(link) = &self.link {
+            if let (Some(setpoint), Some(target)) = (setpoint, self.target) {
+                let time_boot_ms = (now.as_nanos() / 1_000_000) as u32;
+                link.try_send(Outbound::Setpoint(position_target(
+                    &setpoint,
+                    target,
+                    time_boot_ms,
+                )));
+            }
+            if self
+                .own_heartbeat_at
+                .is_none_or(|at| now.saturating_since(at).as_secs_f64() >= OWN_HEARTBEAT_PERIOD_S)
+            {
+                link.try_send(Outbound::Heartbeat);
+                self.own_heartbeat_at = Some(now);
+            }
+        }
+        self.publish_status(ctx)
+    }
+
+    fn publish_status(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        let (armed, mode) = self
+            .heartbeat
+            .as_ref()
+            .map_or((false, String::new()), |hb| (is_armed(hb), flight_mode(hb)));
+        let guard = self.guard()?;
+        let (lost, hold) = (guard.heartbeat_missing(), guard.hold_reason());
+        let (heartbeat_age_s, counters) = (guard.heartbeat_age_s(now), guard.counters());
+        let key = (armed, mode.clone(), lost, hold);
+        let due = self
+            .status_at
+            .is_none_or(|at| now.saturating_since(at).as_secs_f64() >= STATUS_PERIOD_S);
+        if !due && self.status_key.as_ref() == Some(&key) {
+            return Ok(());
+        }
+        self.status_key = Some(key);
+        self.status_at = Some(now);
+        let link = self
+            .link
+            .as_ref()
+            .map(MavlinkLink::stats)
+            .unwrap_or_default();
+        ctx.publish(
+            &AUTOPILOT_STATUS,
+            AutopilotStatus {
+                stamp: now,
+                autopilot: self.target.map(|t| (t.system_id, t.component_id)),
+                armed,
+                mode,
+                heartbeat_age_s,
+                heartbeat_lost: lost,
+                hold,
+                guard: counters,
+                link,
+            },
+        );
+        Ok(())
+    }
+}
+
+fn log_change(input: GuardInput, change: Option<WatchdogChange>) {
+    let what = match input {
+        GuardInput::Sensor => "depth frames",
+        GuardInput::Odometry => "odometry",
+        GuardInput::Heartbeat => "autopilot heartbeat",
+    };
+    match change {
+        Some(WatchdogChange::Lost) if input == GuardInput::Heartbeat => {
+            tracing::warn!("{what} lost: setpoints stop until it returns");
+        }
+        Some(WatchdogChange::Lost) => tracing::warn!("{what} lost: holding position"),
+        Some(WatchdogChange::Restored) => tracing::info!("{what} back"),
+        None => {}
+    }
+}
+
+impl Actor for MavlinkVehicle {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let s = &self.settings;
+        ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+        ctx.subscribe(&DEPTH_FRAME, QueuePolicy::LATEST);
+        if s.odometry_source == OdometrySource::External {
+            ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
+        }
+        let period_s = 1.0 / s.setpoint_rate_hz;
+        self.guard = Some(SetpointGuard::new(
+            GuardConfig {
+                sensor_timeout_s: s.sensor_timeout_s,
+                odometry_timeout_s: s.odometry_timeout_s,
+                heartbeat_timeout_s: s.heartbeat_timeout_s,
+                acceleration_window_s: period_s,
+                geofence: s.geofence,
+            },
+            ctx.now(),
+        ));
+        let link = MavlinkLink::open(&s.connection, s.source_system_id, s.source_component_id)
+            .map_err(|e| ActorError::with_source("cannot start the MAVLink link", e))?;
+        self.link = Some(link);
+        ctx.set_timer(SETPOINT_TICK, Duration::from_secs_f64(period_s));
+        Ok(())
+    }
+
+    fn stop(&mut self, _ctx: &mut Context<'_>) {
+        // Dropping the link stops its threads and closes the connection.
+        self.link = None;
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        match event {
+            Event::Timer(_) => self.tick(ctx),
+            Event::Message(m) => {
+                if let Some(plan) = m.get_arc(&PLAN) {
+                    if let Err(violation) = self.guard()?.plan(plan) {
+                        tracing::warn!(
+                            "committed plan leaves the geofence ({violation}); \
+                             the vehicle will hold inside it"
+                        );
+                    }
+                } else if m.get(&DEPTH_FRAME).is_some() {
+                    let change = self.guard()?.depth_frame(now);
+                    log_change(GuardInput::Sensor, change);
+                } else if let Some(odometry) = m.get(&ODOMETRY) {
+                    self.odometry_arrived(odometry, now)?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
