@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use troupe_actors::msgs::{ODOMETRY, Odometry};
-use troupe_actors::runtime::{
+use troupe_runtime::{
     Actor, ActorResult, ActorSpec, Context, Event, Message, QueuePolicy, TimerId, Topic,
 };
 use troupe_sims::scenario::Scenario;

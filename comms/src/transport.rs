@@ -42,7 +42,7 @@ pub enum TransportError {
         reason: String,
     },
     /// The network layer refused to open or declare something.
-    #[error("transport: {context}: {source}")]
+    #[error("transport: {context}")]
     Network {
         /// What was being done.
         context: String,

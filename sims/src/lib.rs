@@ -11,6 +11,20 @@
 //! - [`process`], [`launch`]: one robot per process over zenoh (`troupe robot`,
 //!   `troupe launch`); [`router`]: a zenoh router (`troupe router`); [`replay`]: a
 //!   robot process replaying a recorded sequence.
+//!
+//! A team in one process, deterministic in sim time (what `troupe run` does):
+//!
+//! ```
+//! use troupe_sims::{scenario::Scenario, team::Team};
+//!
+//! let mut scenario = Scenario::default();
+//! scenario.robots = 1;
+//! scenario.duration_s = 1.0;
+//! let run = Team::new(&scenario)?.run(|_fraction| {});
+//! assert_eq!(run.summary.robots, 1);
+//! assert!(run.summary.coverage.final_fraction >= 0.0);
+//! # Ok::<(), troupe_robot::AssembleError>(())
+//! ```
 #![deny(missing_docs)]
 
 pub mod camera;

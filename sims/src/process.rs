@@ -38,6 +38,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use troupe_actors::runtime::ErrorChain;
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
@@ -102,7 +103,7 @@ impl RobotProcess {
     /// Reads and checks a robot file and its scenario.
     pub fn load(path: &Path) -> Result<Self, ProcessError> {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| ProcessError::Config(format!("{}: {e}", path.display())))?;
+            .map_err(|e| ProcessError::Config(format!("{}: {}", path.display(), ErrorChain(&e))))?;
         let de = toml::Deserializer::parse(&text).map_err(|e| {
             ProcessError::Config(format!("{}: {}", path.display(), describe(&e, &text)))
         })?;
@@ -134,10 +135,9 @@ impl RobotProcess {
                 path.display()
             )));
         }
-        config
-            .zenoh
-            .validate()
-            .map_err(|e| ProcessError::Config(format!("{}: `zenoh`: {e}", path.display())))?;
+        config.zenoh.validate().map_err(|e| {
+            ProcessError::Config(format!("{}: `zenoh`: {}", path.display(), ErrorChain(&e)))
+        })?;
         let out = base.join(
             config
                 .out
@@ -149,7 +149,13 @@ impl RobotProcess {
             .as_ref()
             .map(|dir| Sequence::open(&base.join(dir)))
             .transpose()
-            .map_err(|e| ProcessError::Config(format!("{}: `sequence`: {e}", path.display())))?;
+            .map_err(|e| {
+                ProcessError::Config(format!(
+                    "{}: `sequence`: {}",
+                    path.display(),
+                    ErrorChain(&e)
+                ))
+            })?;
         Ok(RobotProcess {
             config,
             scenario,
@@ -225,14 +231,13 @@ pub async fn run(
             )
         }
         None => {
-            let world = scenario
-                .world
-                .build()
-                .map_err(|e| ProcessError::Run(format!("building the world: {e}")))?;
+            let world = scenario.world.build().map_err(|e| {
+                ProcessError::Run(format!("building the world: {}", ErrorChain(&e)))
+            })?;
             simulated_robot(scenario, &world, id as usize, journal)
         }
     }
-    .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {e}")))?;
+    .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {}", ErrorChain(&e))))?;
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());
@@ -256,12 +261,12 @@ pub async fn run(
     });
     let transport = Arc::new(
         ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
-            .map_err(|e| ProcessError::Run(format!("opening zenoh: {e}")))?,
+            .map_err(|e| ProcessError::Run(format!("opening zenoh: {}", ErrorChain(&e))))?,
     );
     let started = Instant::now();
     let handle = executor
         .spawn_with_transport(transport.clone())
-        .map_err(|e| ProcessError::Run(format!("starting the transport: {e}")))?;
+        .map_err(|e| ProcessError::Run(format!("starting the transport: {}", ErrorChain(&e))))?;
     tracing::info!(robot = id, "running");
     match process.config.duration_s {
         Some(d) => {
@@ -309,8 +314,13 @@ pub async fn run(
         transport_errors,
         trajectory_samples: trajectory.len(),
     };
-    write_outputs(&process.out, &summary, &trajectory)
-        .map_err(|e| ProcessError::Run(format!("writing {}: {e}", process.out.display())))?;
+    write_outputs(&process.out, &summary, &trajectory).map_err(|e| {
+        ProcessError::Run(format!(
+            "writing {}: {}",
+            process.out.display(),
+            ErrorChain(&e)
+        ))
+    })?;
     Ok(summary)
 }
 
@@ -469,7 +479,7 @@ pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, Proces
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| ProcessError::Run(format!("starting the runtime: {e}")))?;
+        .map_err(|e| ProcessError::Run(format!("starting the runtime: {}", ErrorChain(&e))))?;
     runtime.block_on(run(process, shutdown_signal()))
 }
 

@@ -98,7 +98,7 @@ impl Default for Scenario {
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
     /// The file could not be read.
-    #[error("cannot read scenario file `{path}`: {source}")]
+    #[error("cannot read scenario file `{path}`")]
     Read {
         /// File.
         path: PathBuf,

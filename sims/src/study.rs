@@ -129,7 +129,7 @@ pub struct Variant {
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
     /// The file could not be read.
-    #[error("study file `{path}`: {source}")]
+    #[error("study file `{path}`")]
     Read {
         /// File.
         path: PathBuf,
@@ -145,7 +145,7 @@ pub enum StudyError {
         message: String,
     },
     /// The base scenario or a variant of it is invalid.
-    #[error("study file `{path}`, run {run}: {source}")]
+    #[error("study file `{path}`, run {run}")]
     Scenario {
         /// Study file.
         path: PathBuf,
@@ -294,7 +294,7 @@ impl Study {
                 table.insert("name".into(), Value::String(name.clone()));
                 let text = toml::to_string(&table).map_err(|e| StudyError::Invalid {
                     path: self.path.clone(),
-                    message: format!("run {name}: {e}"),
+                    message: format!("run {name}: {}", troupe_actors::runtime::ErrorChain(&e)),
                 })?;
                 let scenario =
                     Scenario::from_toml(&text, &PathBuf::from(format!("<study run {name}>")))

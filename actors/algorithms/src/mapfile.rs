@@ -57,7 +57,7 @@ const KEYFRAME_FIXED_BYTES: usize = 8 + 8 * 7 + 8 + 8 + 4 + 4;
 #[non_exhaustive]
 pub enum MapFileError {
     /// The file could not be opened, read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -111,7 +111,7 @@ pub enum MapFileError {
         keyframe: usize,
     },
     /// A keyframe's mixture breaks an invariant.
-    #[error("keyframe {keyframe}: {source}")]
+    #[error("keyframe {keyframe}")]
     BadMixture {
         /// Keyframe index.
         keyframe: usize,

@@ -11,6 +11,54 @@
 //! - [`ActorSpec`] and [`RobotSpec`] describe a robot; [`SimExecutor`] runs a team in
 //!   deterministic simulated time, [`RealtimeExecutor`] on tokio against the wall clock.
 //! - Panics are contained and supervised per [`RestartPolicy`].
+//!
+//! A custom actor depends on this crate alone:
+//!
+//! ```
+//! use std::time::Duration;
+//! use troupe_runtime::{
+//!     Actor, ActorResult, ActorSpec, Context, Event, Message, QueuePolicy, RobotSpec, SimExecutor,
+//!     Time, TimerId, Topic,
+//! };
+//!
+//! struct Tick(u32);
+//! impl Message for Tick {}
+//! const TICKS: Topic<Tick> = Topic::new("ticks");
+//!
+//! /// Publishes a tick every 100 ms.
+//! struct Clock(u32);
+//! impl Actor for Clock {
+//!     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+//!         ctx.set_timer(TimerId(0), Duration::from_millis(100));
+//!         Ok(())
+//!     }
+//!     fn handle(&mut self, _: &Event, ctx: &mut Context<'_>) -> ActorResult {
+//!         self.0 += 1;
+//!         ctx.publish(&TICKS, Tick(self.0));
+//!         Ok(())
+//!     }
+//! }
+//!
+//! /// Counts what it receives.
+//! struct Counter;
+//! impl Actor for Counter {
+//!     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+//!         ctx.subscribe(&TICKS, QueuePolicy::fifo(16));
+//!         Ok(())
+//!     }
+//!     fn handle(&mut self, _: &Event, _: &mut Context<'_>) -> ActorResult {
+//!         Ok(())
+//!     }
+//! }
+//!
+//! let robot = RobotSpec::new("r0")
+//!     .with(ActorSpec::new("clock", || Clock(0)))
+//!     .with(ActorSpec::new("counter", || Counter));
+//! let mut team = SimExecutor::new(vec![robot], 7);
+//! team.run_until(Time::from_secs_f64(1.0));
+//! let report = &team.reports()[0];
+//! assert_eq!(report.topics["ticks"].messages, 10);
+//! ```
 
 mod actor;
 mod context;

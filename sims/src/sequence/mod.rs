@@ -66,7 +66,7 @@ pub const MAX_ASSOCIATION_S: f64 = 0.02;
 #[non_exhaustive]
 pub enum SequenceError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

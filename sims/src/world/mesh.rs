@@ -110,7 +110,7 @@ pub struct TriangleMesh {
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
     /// The file could not be read.
-    #[error("mesh file `{path}`: {source}")]
+    #[error("mesh file `{path}`")]
     Read {
         /// File.
         path: PathBuf,
