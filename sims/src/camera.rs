@@ -4,8 +4,7 @@
 //! runs to the right (body `-y`) and image `y` (rows, `v`) runs down (body `-z`). Pixel
 //! `(col, row)` has its centre at `(u, v) = (col + 0.5, row + 0.5)`. Depth is the z-depth
 //! along the optical axis, as a depth camera reports it, not the ray length. The
-//! geometry is that of the robots' own camera model,
-//! [`PinholeIntrinsics`](troupe_algorithms::camera::PinholeIntrinsics) (one
+//! geometry is that of the robots' own camera model, [`PinholeIntrinsics`] (one
 //! back-projection for the whole system), and frames come out as the standard
 //! [`DepthFrame`] message, ready to publish.
 //!
