@@ -6,6 +6,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use std::hint::black_box;
+use troupe_core::Time;
 use troupe_sims::camera::{CameraParams, GpuCamera};
 use troupe_sims::coverage::CoverageGrid;
 use troupe_sims::world::World;
@@ -26,25 +27,25 @@ fn bench_camera(c: &mut Criterion) {
     let cam = CameraParams::default();
     let pose = start_pose(&cave);
     c.bench_function("render_160x120_cave", |b| {
-        b.iter(|| cam.render(black_box(&cave), black_box(&pose), 0));
+        b.iter(|| cam.render(black_box(&cave), Time::ZERO, black_box(&pose), 0));
     });
     let scene = cave.gpu_scene();
     match scene.map(|s| GpuCamera::new(&cam, &s)) {
         Some(Ok(mut gpu)) => {
             eprintln!("GPU camera on {}", gpu.context().adapter_name());
             c.bench_function("render_160x120_cave_gpu", |b| {
-                b.iter(|| gpu.render(black_box(&pose), 0));
+                b.iter(|| gpu.render(Time::ZERO, black_box(&pose), 0));
             });
         }
         Some(Err(e)) => eprintln!("render_160x120_cave_gpu skipped: {e}"),
         None => eprintln!("render_160x120_cave_gpu skipped: the cave has no GPU scene"),
     }
-    let img = cam.render(&cave, &pose, 0);
+    let frame = cam.render(&cave, Time::ZERO, &pose, 0);
     let fresh = CoverageGrid::new(&cave, 0.25);
     c.bench_function("coverage_observe_160x120_stride1_cell0.25", |b| {
         b.iter_batched_ref(
             || fresh.clone(),
-            |cov| cov.observe(&cam, &pose, black_box(&img), 1),
+            |cov| cov.observe(black_box(&frame), 1),
             criterion::BatchSize::LargeInput,
         );
     });

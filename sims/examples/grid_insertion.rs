@@ -21,7 +21,8 @@ use std::io::Write;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use troupe_actors::grid::{EndVoxelScratch, LocalGrid, LogOddsParams, ScanScratch};
+use troupe_algorithms::grid::{EndVoxelScratch, LocalGrid, LogOddsParams, ScanScratch};
+use troupe_core::Time;
 use troupe_sims::camera::CameraParams;
 use troupe_sims::world::{CaveParams, CaveWorld};
 
@@ -43,15 +44,15 @@ fn main() -> anyhow::Result<()> {
             Translation3::from(pair[0].coords),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
         );
-        let image = camera.render(&world, &pose, i as u64);
+        let frame = camera.render(&world, Time::ZERO, &pose, i as u64);
         let origin = Point3::from(pose.translation.vector);
+        let k = frame.intrinsics;
         let mut ends = Vec::new();
-        for row in 0..image.height {
-            for col in 0..image.width {
-                let d = f64::from(image.depth_at(col, row));
+        for row in 0..k.height {
+            for col in 0..k.width {
+                let d = f64::from(frame.depth_m[(row * k.width + col) as usize]);
                 if d > 0.0 {
-                    let (u, v) = CameraParams::pixel_centre(col, row);
-                    ends.push(camera.back_project(&pose, u, v, d));
+                    ends.push(pose * k.back_project(col, row, d));
                 }
             }
         }

@@ -3,7 +3,10 @@
 //! The camera sits at the body origin and looks along body `+x`; image `x` (columns, `u`)
 //! runs to the right (body `-y`) and image `y` (rows, `v`) runs down (body `-z`). Pixel
 //! `(col, row)` has its centre at `(u, v) = (col + 0.5, row + 0.5)`. Depth is the z-depth
-//! along the optical axis, as a depth camera reports it, not the ray length.
+//! along the optical axis, as a depth camera reports it, not the ray length. The
+//! geometry is that of the robots' own camera model, [`PinholeIntrinsics`] (one
+//! back-projection for the whole system), and frames come out as the standard
+//! [`DepthFrame`] message, ready to publish.
 //!
 //! [`CameraParams::render`] sphere-traces a [`World`] on the CPU; see `render` for the
 //! exact rules. [`CameraRenderer`] renders on the backend named by
@@ -12,19 +15,17 @@
 
 mod backend;
 mod gpu;
-mod image;
 mod render;
 
 pub use backend::{CameraBackend, CameraRenderer, Choice, resolve_backend};
-pub use gpu::{
-    GpuAlbedo, GpuCamera, GpuCaveField, GpuContext, GpuError, GpuGeometry, GpuNoise, GpuPrimitive,
-    GpuScene,
-};
-pub use image::DepthImage;
+pub use gpu::{GpuCamera, GpuContext, GpuError};
 pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
 
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::DepthFrame;
+use troupe_core::Time;
 
 use crate::world::World;
 
@@ -66,19 +67,6 @@ impl Default for CameraParams {
     }
 }
 
-/// Pinhole intrinsics in pixels.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Intrinsics {
-    /// Horizontal focal length: `(width / 2) / tan(hfov / 2)`.
-    pub fx: f64,
-    /// Vertical focal length: `(height / 2) / tan(vfov / 2)`.
-    pub fy: f64,
-    /// Principal point column: `width / 2`.
-    pub cx: f64,
-    /// Principal point row: `height / 2`.
-    pub cy: f64,
-}
-
 impl CameraParams {
     /// Check every field; the error names the field, the rule and the value.
     pub fn validate(&self) -> Result<(), String> {
@@ -114,65 +102,54 @@ impl CameraParams {
         Ok(())
     }
 
-    /// The pinhole intrinsics derived from size and field of view.
+    /// The pinhole intrinsics derived from size and field of view:
+    /// `fx = (width / 2) / tan(hfov / 2)`, `fy = (height / 2) / tan(vfov / 2)`, the
+    /// principal point at the image centre, `max_depth_m = range_m`.
     #[must_use]
-    pub fn intrinsics(&self) -> Intrinsics {
+    pub fn intrinsics(&self) -> PinholeIntrinsics {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
-        Intrinsics {
+        PinholeIntrinsics {
+            width: self.width,
+            height: self.height,
             fx: (w / 2.0) / (self.hfov_deg.to_radians() / 2.0).tan(),
             fy: (h / 2.0) / (self.vfov_deg.to_radians() / 2.0).tan(),
             cx: w / 2.0,
             cy: h / 2.0,
+            max_depth_m: self.range_m,
         }
     }
 
-    /// Image coordinates `(u, v)` of the centre of pixel `(col, row)`.
+    /// A frame of this camera taken at `stamp` from `body_pose` with no returns yet
+    /// (every depth and intensity `0.0`).
     #[must_use]
-    pub fn pixel_centre(col: u32, row: u32) -> (f64, f64) {
-        (f64::from(col) + 0.5, f64::from(row) + 0.5)
+    pub(crate) fn blank_frame(&self, stamp: Time, body_pose: &Isometry3<f64>) -> DepthFrame {
+        let intrinsics = self.intrinsics();
+        let pixels = intrinsics.pixels();
+        DepthFrame {
+            stamp,
+            pose: *body_pose,
+            intrinsics,
+            depth_m: vec![0.0; pixels],
+            intensity: vec![0.0; pixels],
+        }
     }
 
-    /// Body-frame direction of image point `(u, v)` scaled to unit z-depth (its body `x`
-    /// component is 1).
-    #[must_use]
-    pub fn pixel_ray_body_unit_depth(&self, u: f64, v: f64) -> Vector3<f64> {
-        let k = self.intrinsics();
-        Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy)
-    }
-
-    /// Unit body-frame direction of the ray through image point `(u, v)`.
-    #[must_use]
-    pub fn pixel_ray_body(&self, u: f64, v: f64) -> Vector3<f64> {
-        self.pixel_ray_body_unit_depth(u, v).normalize()
-    }
-
-    /// World point seen at image point `(u, v)` with z-depth `depth_m`, for a camera at
-    /// `body_pose` (body to world).
-    #[must_use]
-    pub fn back_project(
-        &self,
-        body_pose: &Isometry3<f64>,
-        u: f64,
-        v: f64,
-        depth_m: f64,
-    ) -> Point3<f64> {
-        body_pose * Point3::from(self.pixel_ray_body_unit_depth(u, v) * depth_m)
-    }
-
-    /// Render a depth + intensity image of `world` from `body_pose` (body to world) on
-    /// the CPU, whatever [`CameraParams::backend`] says (see [`CameraRenderer`]).
+    /// Render the depth + intensity frame of `world` taken at `stamp` from `body_pose`
+    /// (body to world) on the CPU, whatever [`CameraParams::backend`] says (see
+    /// [`CameraRenderer`]).
     ///
-    /// Noise and dropouts derive from `(noise_seed, pixel index)` only, so the image is
+    /// Noise and dropouts derive from `(noise_seed, pixel index)` only, so the frame is
     /// bit-identical for any thread count; pass a different `noise_seed` per frame (for
     /// example a hash of robot and frame number) to get fresh noise.
     #[must_use]
     pub fn render(
         &self,
         world: &dyn World,
+        stamp: Time,
         body_pose: &Isometry3<f64>,
         noise_seed: u64,
-    ) -> DepthImage {
-        render::render(self, world, body_pose, noise_seed)
+    ) -> DepthFrame {
+        render::render(self, world, stamp, body_pose, noise_seed)
     }
 }
 

@@ -8,10 +8,10 @@
 
 pub use troupe_actors::geometry::VoxelGrid;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::Point3;
 use rayon::prelude::*;
+use troupe_algorithms::frame::{DepthFrame, check_buffers};
 
-use crate::camera::{CameraParams, DepthImage};
 use crate::world::World;
 
 const ROCK: u8 = 0;
@@ -62,36 +62,34 @@ impl CoverageGrid {
         &self.grid
     }
 
-    /// Mark what one image saw from `body_pose` (body to world, the camera at its origin).
+    /// Mark what one frame saw from its pose (body to world, the camera at its origin).
     ///
     /// Every `pixel_stride`-th pixel in both directions (from pixel `(0, 0)`; a stride of 0
     /// counts as 1) casts a ray from the camera. For a pixel with a return at z-depth `d`
     /// the ray runs to the point at z-depth `d`, and every free cell it crosses is marked
     /// except the cell holding that end point (it holds the surface). For a pixel without a
-    /// return the ray runs to z-depth `camera.range_m` and every free cell it crosses is
-    /// marked, the last one included. Every ray stops at the first rock cell (a cell
-    /// whose centre is inside the rock): coverage is ground truth, so a dropout or a
-    /// noisy depth past the wall never counts space behind it. Parts of rays outside
-    /// the grid are ignored.
-    pub fn observe(
-        &mut self,
-        camera: &CameraParams,
-        body_pose: &Isometry3<f64>,
-        image: &DepthImage,
-        pixel_stride: usize,
-    ) {
+    /// return the ray runs to z-depth `intrinsics.max_depth_m` and every free cell it
+    /// crosses is marked, the last one included. Every ray stops at the first rock cell
+    /// (a cell whose centre is inside the rock): coverage is ground truth, so a dropout
+    /// or a noisy depth past the wall never counts space behind it. Parts of rays outside
+    /// the grid are ignored. A frame whose buffers do not fit its intrinsics is ignored.
+    pub fn observe(&mut self, frame: &DepthFrame, pixel_stride: usize) {
+        let k = &frame.intrinsics;
+        if check_buffers(k, &frame.depth_m, &frame.intensity).is_err() {
+            return;
+        }
         let stride = pixel_stride.max(1);
-        let origin = Point3::from(body_pose.translation.vector);
-        for row in (0..image.height).step_by(stride) {
-            for col in (0..image.width).step_by(stride) {
-                let (u, v) = CameraParams::pixel_centre(col, row);
+        let origin = Point3::from(frame.pose.translation.vector);
+        let width = k.width as usize;
+        for row in (0..k.height).step_by(stride) {
+            for col in (0..k.width).step_by(stride) {
                 // With a unit-depth direction the ray parameter is the z-depth.
-                let dir = body_pose.rotation * camera.pixel_ray_body_unit_depth(u, v);
-                let depth = f64::from(image.depth_at(col, row));
+                let dir = frame.pose.rotation * k.pixel_ray(col, row);
+                let depth = f64::from(frame.depth_m[row as usize * width + col as usize]);
                 let (end, hit) = if depth > 0.0 {
                     (depth, true)
                 } else {
-                    (camera.range_m, false)
+                    (k.max_depth_m, false)
                 };
                 let grid = self.grid;
                 grid.traverse(&origin, &dir, end, |c, _t_enter, t_exit| {

@@ -14,9 +14,7 @@ use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use crate::network::Positions;
 use troupe_actors::runtime::{LINK_RX, Publication, Tap};
 
-use crate::camera::CameraParams;
 use crate::coverage::CoverageGrid;
-use crate::sim_sensor::image_of;
 use crate::world::{World, surface_distance_m};
 
 /// Collision checks along the path are this far apart, metres.
@@ -83,7 +81,6 @@ pub struct Truth {
 /// monitor to an executor.
 pub struct GroundTruthMonitor {
     world: Arc<dyn World>,
-    camera: CameraParams,
     pixel_stride: usize,
     radius_m: f64,
     truth: Arc<Mutex<Truth>>,
@@ -95,7 +92,6 @@ impl GroundTruthMonitor {
     #[must_use]
     pub fn new(
         world: Arc<dyn World>,
-        camera: CameraParams,
         coverage_cell_m: f64,
         pixel_stride: usize,
         robots: usize,
@@ -112,7 +108,6 @@ impl GroundTruthMonitor {
         ];
         GroundTruthMonitor {
             world,
-            camera,
             pixel_stride,
             radius_m,
             positions: Arc::new(Mutex::new(vec![[0.0; 3]; count])),
@@ -158,10 +153,7 @@ impl Tap for GroundTruthMonitor {
             if frame.valid_pixels() == 0 {
                 robot.empty_frames += 1;
             }
-            let image = image_of(frame);
-            truth
-                .coverage
-                .observe(&self.camera, &frame.pose, &image, self.pixel_stride);
+            truth.coverage.observe(frame, self.pixel_stride);
         } else if let Some(packet) = p.get(&LINK_RX) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.received_bytes += packet.bytes.len() as u64;

@@ -23,7 +23,7 @@ use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
 use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
 use crate::scenario::{Fault, Scenario};
-use crate::sim_sensor::{SimCameraSource, intrinsics_of};
+use crate::sim_sensor::SimCameraSource;
 use crate::vehicle::{SimVehicle, new_body};
 use crate::world::{Site, World};
 
@@ -287,7 +287,6 @@ impl Team {
         }
         let monitor = GroundTruthMonitor::new(
             shared_world,
-            scenario.camera.clone(),
             scenario.metrics.coverage_cell_m,
             scenario.metrics.coverage_pixel_stride,
             count,
@@ -533,7 +532,7 @@ pub fn simulated_robot(
         // The robot furthest into the tunnel leaves first; the others follow
         // at intervals so that robots sharing the first tunnel stay apart.
         depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
-        camera: intrinsics_of(&scenario.camera),
+        camera: scenario.camera.intrinsics(),
         link_journal,
     };
     assemble(&format!("robot{i}"), &scenario.robot, parts)

@@ -6,9 +6,11 @@ use std::sync::{Arc, Mutex};
 
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
+use troupe_algorithms::frame::DepthFrame;
+use troupe_core::Time;
 
+use super::CameraParams;
 use super::gpu::{GpuCamera, GpuContext, GpuError};
-use super::{CameraParams, DepthImage};
 use crate::world::World;
 
 /// Where the camera renders: `[camera] backend = "cpu" | "gpu" | "auto"`.
@@ -157,21 +159,22 @@ impl CameraRenderer {
         &self.params
     }
 
-    /// Renders from `body_pose` (body to world); see [`CameraParams::render`]. With
-    /// `auto`, a failing GPU frame is rendered on the CPU instead and the camera stays
-    /// on the CPU from then on.
+    /// Renders the frame taken at `stamp` from `body_pose` (body to world); see
+    /// [`CameraParams::render`]. With `auto`, a failing GPU frame is rendered on the
+    /// CPU instead and the camera stays on the CPU from then on.
     ///
     /// # Errors
     ///
     /// A failing GPU frame with backend `gpu`.
     pub fn render(
         &mut self,
+        stamp: Time,
         body_pose: &Isometry3<f64>,
         noise_seed: u64,
-    ) -> Result<DepthImage, GpuError> {
+    ) -> Result<DepthFrame, GpuError> {
         if let Some(gpu) = &mut self.gpu {
-            match gpu.render(body_pose, noise_seed) {
-                Ok(img) => return Ok(img),
+            match gpu.render(stamp, body_pose, noise_seed) {
+                Ok(frame) => return Ok(frame),
                 Err(e) if self.params.backend == CameraBackend::Gpu => return Err(e),
                 Err(e) => {
                     tracing::warn!("GPU camera failed ({e}); rendering on the CPU from now on");
@@ -182,6 +185,6 @@ impl CameraRenderer {
         }
         Ok(self
             .params
-            .render(self.world.as_ref(), body_pose, noise_seed))
+            .render(self.world.as_ref(), stamp, body_pose, noise_seed))
     }
 }

@@ -19,7 +19,10 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
-use super::{CameraParams, DepthImage};
+use troupe_algorithms::frame::DepthFrame;
+use troupe_core::Time;
+
+use super::CameraParams;
 use crate::world::World;
 use crate::world::noise::{mix64, unit_f64};
 
@@ -126,25 +129,24 @@ pub(super) fn noisy_depth_m(
 pub(super) fn render(
     cam: &CameraParams,
     world: &dyn World,
+    stamp: Time,
     body_pose: &Isometry3<f64>,
     noise_seed: u64,
-) -> DepthImage {
-    let mut img = DepthImage::empty(cam.width, cam.height);
-    let w = cam.width as usize;
+) -> DepthFrame {
+    let mut frame = cam.blank_frame(stamp, body_pose);
+    let k = frame.intrinsics;
+    let w = k.width as usize;
     let origin = Point3::from(body_pose.translation.vector);
     let rotation = body_pose.rotation;
     let range_m = cam.range_m;
-    let k = cam.intrinsics();
-    let rows = img
+    let rows = frame
         .depth_m
         .par_chunks_mut(w)
-        .zip(img.intensity.par_chunks_mut(w));
+        .zip(frame.intensity.par_chunks_mut(w));
     rows.enumerate()
         .for_each(|(row, (depth_row, intensity_row))| {
             for col in 0..w {
-                let (u, v) = (col as f64 + 0.5, row as f64 + 0.5);
-                // Same formula as `CameraParams::pixel_ray_body_unit_depth`.
-                let unit_depth = Vector3::new(1.0, -(u - k.cx) / k.fx, -(v - k.cy) / k.fy);
+                let unit_depth = k.pixel_ray(col as u32, row as u32);
                 let cos_axis = 1.0 / unit_depth.norm();
                 let dir = rotation * (unit_depth * cos_axis);
                 let Some(hit) = trace(world, &origin, &dir, range_m / cos_axis) else {
@@ -161,5 +163,5 @@ pub(super) fn render(
                 intensity_row[col] = intensity as f32;
             }
         });
-    img
+    frame
 }

@@ -5,6 +5,16 @@ use rand_chacha::ChaCha8Rng;
 use super::*;
 use crate::world::{Aabb, BoxRoom, CaveParams, CaveWorld};
 
+/// Depth of pixel `(col, row)` of a row-major frame.
+fn depth_at(frame: &DepthFrame, col: u32, row: u32) -> f32 {
+    frame.depth_m[(row * frame.intrinsics.width + col) as usize]
+}
+
+/// Intensity of pixel `(col, row)` of a row-major frame.
+fn intensity_at(frame: &DepthFrame, col: u32, row: u32) -> f32 {
+    frame.intensity[(row * frame.intrinsics.width + col) as usize]
+}
+
 fn room() -> BoxRoom {
     BoxRoom::new(Aabb::new(
         Point3::new(-1.0, -2.0, -1.5),
@@ -19,15 +29,16 @@ fn pose(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> Isometry3<f6
     )
 }
 
-/// Analytic z-depth of pixel `(u, v)` in `room` (the ray leaves the box), or 0 beyond range.
+/// Analytic z-depth of pixel `(col, row)` in `room` (the ray leaves the box), or 0 beyond
+/// range.
 fn box_depth(
     cam: &CameraParams,
     room: &BoxRoom,
     body_pose: &Isometry3<f64>,
-    u: f64,
-    v: f64,
+    col: u32,
+    row: u32,
 ) -> f64 {
-    let r = body_pose.rotation * cam.pixel_ray_body_unit_depth(u, v);
+    let r = body_pose.rotation * cam.intrinsics().pixel_ray(col, row);
     let o = Point3::from(body_pose.translation.vector);
     let b = &room.interior;
     let t = (0..3)
@@ -48,6 +59,7 @@ fn defaults_validate_and_give_expected_intrinsics() {
     assert!((k.fx - 80.0 / (89.57f64.to_radians() / 2.0).tan()).abs() < 1e-12);
     assert!((k.fy - 60.0 / (59.24f64.to_radians() / 2.0).tan()).abs() < 1e-12);
     assert_eq!((k.cx, k.cy), (80.0, 60.0));
+    assert_eq!((k.width, k.height, k.max_depth_m), (160, 120, 5.0));
     let bad = CameraParams {
         dropout_prob: 1.5,
         ..CameraParams::default()
@@ -79,27 +91,41 @@ fn the_backend_is_read_from_the_camera_table() {
 
 #[test]
 fn pixel_rays_follow_body_axes() {
-    let cam = CameraParams::default();
-    let centre = cam.pixel_ray_body(80.0, 60.0);
+    let k = CameraParams::default().intrinsics();
+    let ray = |u: f64, v: f64| k.unit_depth_ray(u, v).normalize();
+    let centre = ray(80.0, 60.0);
     assert!((centre - Vector3::x()).norm() < 1e-12);
     // Right of centre looks to body -y, below centre looks to body -z.
-    assert!(cam.pixel_ray_body(150.0, 60.0).y < 0.0);
-    assert!(cam.pixel_ray_body(80.0, 110.0).z < 0.0);
+    assert!(ray(150.0, 60.0).y < 0.0);
+    assert!(ray(80.0, 110.0).z < 0.0);
     // The image edge is at half the field of view.
-    let edge = cam.pixel_ray_body(160.0, 60.0);
+    let edge = ray(160.0, 60.0);
     let angle = (-edge.y).atan2(edge.x).to_degrees();
     assert!((angle - 89.57 / 2.0).abs() < 1e-9);
+}
+
+#[test]
+fn a_render_is_a_valid_depth_frame_of_the_camera() {
+    let cam = CameraParams::default();
+    let room = room();
+    let p = pose(0.5, 0.3, -0.2, 0.1, -0.2, 0.7);
+    let stamp = Time::from_secs_f64(2.5);
+    let frame = cam.render(&room, stamp, &p, 0);
+    assert_eq!((frame.stamp, frame.pose), (stamp, p));
+    assert_eq!(frame.intrinsics, cam.intrinsics());
+    assert_eq!(frame.validate(), Ok(()));
+    assert!(frame.valid_pixels() > 0);
 }
 
 #[test]
 fn facing_a_wall_gives_its_distance_at_the_centre() {
     let cam = CameraParams::default();
     let room = room();
-    let img = cam.render(&room, &Isometry3::identity(), 0);
+    let img = cam.render(&room, Time::ZERO, &Isometry3::identity(), 0);
     for (col, row) in [(79, 59), (80, 60), (79, 60), (80, 59)] {
-        let d = f64::from(img.depth_at(col, row));
+        let d = f64::from(depth_at(&img, col, row));
         assert!((d - 4.0).abs() < 2e-3, "pixel ({col},{row}) depth {d}");
-        assert!(img.intensity_at(col, row) > 0.0);
+        assert!(intensity_at(&img, col, row) > 0.0);
     }
 }
 
@@ -117,13 +143,12 @@ fn depths_match_the_analytic_box_for_any_pose() {
             rng.random_range(-0.5..0.5),
             rng.random_range(-3.1..3.1),
         );
-        let img = cam.render(&room, &p, 0);
+        let img = cam.render(&room, Time::ZERO, &p, 0);
         let mut worst: f64 = 0.0;
         for row in 0..cam.height {
             for col in 0..cam.width {
-                let (u, v) = CameraParams::pixel_centre(col, row);
-                let want = box_depth(&cam, &room, &p, u, v);
-                let got = f64::from(img.depth_at(col, row));
+                let want = box_depth(&cam, &room, &p, col, row);
+                let got = f64::from(depth_at(&img, col, row));
                 if want == 0.0 || got == 0.0 {
                     // Only a ray ending within a hair of the range may disagree.
                     let near_range = (want.max(got) - cam.range_m).abs() < 2e-3;
@@ -147,16 +172,16 @@ fn range_limit_applies_to_z_depth_not_ray_length() {
         Point3::new(-1.0, -20.0, -20.0),
         Point3::new(4.9, 20.0, 20.0),
     ));
-    let img = cam.render(&near, &Isometry3::identity(), 0);
+    let img = cam.render(&near, Time::ZERO, &Isometry3::identity(), 0);
     // Corner rays are ~1.4 times longer than the z-depth but still count.
-    assert!((f64::from(img.depth_at(0, 0)) - 4.9).abs() < 2e-3);
-    assert_eq!(img.valid_count(), 160 * 120);
+    assert!((f64::from(depth_at(&img, 0, 0)) - 4.9).abs() < 2e-3);
+    assert_eq!(img.valid_pixels(), 160 * 120);
     let far = BoxRoom::new(Aabb::new(
         Point3::new(-1.0, -20.0, -20.0),
         Point3::new(5.1, 20.0, 20.0),
     ));
-    let img = cam.render(&far, &Isometry3::identity(), 0);
-    assert_eq!(img.valid_count(), 0);
+    let img = cam.render(&far, Time::ZERO, &Isometry3::identity(), 0);
+    assert_eq!(img.valid_pixels(), 0);
 }
 
 fn cave_and_pose() -> (CaveWorld, Isometry3<f64>) {
@@ -171,23 +196,22 @@ fn cave_and_pose() -> (CaveWorld, Isometry3<f64>) {
 fn back_projected_pixels_lie_on_the_cave_surface() {
     let cam = CameraParams::default();
     let (cave, p) = cave_and_pose();
-    let img = cam.render(&cave, &p, 0);
+    let img = cam.render(&cave, Time::ZERO, &p, 0);
     assert!(
-        img.valid_count() > 1000,
+        img.valid_pixels() > 1000,
         "only {} returns",
-        img.valid_count()
+        img.valid_pixels()
     );
     for row in 0..cam.height {
         for col in 0..cam.width {
-            let d = img.depth_at(col, row);
+            let d = depth_at(&img, col, row);
             if d > 0.0 {
-                let (u, v) = CameraParams::pixel_centre(col, row);
-                let q = cam.back_project(&p, u, v, f64::from(d));
+                let q = p * cam.intrinsics().back_project(col, row, f64::from(d));
                 let s = cave.sdf_m(&q);
                 assert!(s.abs() < 5e-3, "({col},{row}) sdf {s}");
                 assert!(f64::from(d) <= cam.range_m);
             } else {
-                assert_eq!(img.intensity_at(col, row), 0.0);
+                assert_eq!(intensity_at(&img, col, row), 0.0);
             }
         }
     }
@@ -206,8 +230,8 @@ fn noise_and_dropout_statistics() {
         ..CameraParams::default()
     };
     let room = room();
-    let img = cam.render(&room, &Isometry3::identity(), 77);
-    let clean = CameraParams::default().render(&room, &Isometry3::identity(), 77);
+    let img = cam.render(&room, Time::ZERO, &Isometry3::identity(), 77);
+    let clean = CameraParams::default().render(&room, Time::ZERO, &Isometry3::identity(), 77);
     let n = img.depth_m.len() as f64;
     let dropped = img.depth_m.iter().filter(|d| **d == 0.0).count() as f64 / n;
     assert!((dropped - 0.2).abs() < 0.015, "dropout fraction {dropped}");
@@ -223,9 +247,9 @@ fn noise_and_dropout_statistics() {
     let std = (residuals.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / m).sqrt();
     assert!(mean.abs() < 5e-4, "mean residual {mean}");
     assert!((std - 0.01).abs() < 5e-4, "residual std {std}");
-    let again = cam.render(&room, &Isometry3::identity(), 77);
+    let again = cam.render(&room, Time::ZERO, &Isometry3::identity(), 77);
     assert_eq!(img, again);
-    let other = cam.render(&room, &Isometry3::identity(), 78);
+    let other = cam.render(&room, Time::ZERO, &Isometry3::identity(), 78);
     assert_ne!(img.depth_m, other.depth_m);
 }
 
@@ -242,7 +266,7 @@ fn image_is_identical_for_any_thread_count() {
             .num_threads(threads)
             .build()
             .expect("pool");
-        pool.install(|| cam.render(&cave, &p, 3))
+        pool.install(|| cam.render(&cave, Time::ZERO, &p, 3))
     };
     let one = render_with(1);
     for threads in [2, 3] {

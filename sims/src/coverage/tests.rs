@@ -1,6 +1,8 @@
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use troupe_core::Time;
 
 use super::*;
+use crate::camera::CameraParams;
 use crate::world::{Aabb, BoxRoom, CaveParams, CaveWorld};
 
 fn room() -> BoxRoom {
@@ -32,8 +34,7 @@ fn one_frame_explores_the_air_but_not_the_wall_cell() {
     let cam = CameraParams::default();
     let mut cov = CoverageGrid::new(&room, 0.25);
     let pose = Isometry3::identity();
-    let img = cam.render(&room, &pose, 0);
-    cov.observe(&cam, &pose, &img, 1);
+    cov.observe(&cam.render(&room, Time::ZERO, &pose, 0), 1);
     assert!(cov.coverage() > 0.0 && cov.coverage() <= 1.0);
     let g = *cov.grid();
     // The centre ray ends on the wall x = 4 (cells start at x = -1).
@@ -60,8 +61,7 @@ fn coverage_grows_monotonically_and_stays_at_most_one() {
             Point3::new(1.5, 0.0, 0.0),
             k as f64 * std::f64::consts::TAU / 16.0,
         );
-        let img = cam.render(&room, &pose, k);
-        cov.observe(&cam, &pose, &img, 2);
+        cov.observe(&cam.render(&room, Time::ZERO, &pose, k), 2);
         let c = cov.coverage();
         assert!(c >= last && c <= 1.0, "frame {k}: {last} -> {c}");
         last = c;
@@ -81,8 +81,7 @@ fn cave_coverage_is_deterministic_and_monotone_along_the_route() {
         for w in route.windows(2).take(12) {
             let yaw = (w[1].y - w[0].y).atan2(w[1].x - w[0].x);
             let pose = yawed(w[0], yaw);
-            let img = cam.render(&cave, &pose, 0);
-            cov.observe(&cam, &pose, &img, 2);
+            cov.observe(&cam.render(&cave, Time::ZERO, &pose, 0), 2);
             trace.push(cov.explored_cells());
         }
         (cov, trace)
@@ -127,9 +126,8 @@ fn rays_without_a_return_stop_at_the_first_rock_cell() {
     let cam = CameraParams::default();
     let mut cov = CoverageGrid::new(&world, 0.25);
     // Every pixel dropped out: rays run to the 5 m range, which would cross the wall.
-    let img = DepthImage::empty(cam.width, cam.height);
     let pose = Isometry3::translation(-2.0, 0.0, 0.0);
-    cov.observe(&cam, &pose, &img, 1);
+    cov.observe(&cam.blank_frame(Time::ZERO, &pose), 1);
     let g = *cov.grid();
     let near = g.cell_of(&Point3::new(0.1, 0.01, 0.01)).expect("in grid");
     assert!(cov.is_explored(near));
@@ -137,4 +135,18 @@ fn rays_without_a_return_stop_at_the_first_rock_cell() {
         let behind = g.cell_of(&Point3::new(x, 0.01, 0.01)).expect("in grid");
         assert!(cov.is_free(behind) && !cov.is_explored(behind), "x = {x}");
     }
+}
+
+#[test]
+fn a_frame_whose_buffers_do_not_fit_its_intrinsics_is_ignored() {
+    let room = room();
+    let cam = CameraParams::default();
+    let mut cov = CoverageGrid::new(&room, 0.25);
+    let mut frame = cam.render(&room, Time::ZERO, &Isometry3::identity(), 0);
+    frame.depth_m.truncate(100);
+    cov.observe(&frame, 1);
+    frame.depth_m.clear();
+    frame.intensity.clear();
+    cov.observe(&frame, 1);
+    assert_eq!(cov.explored_cells(), 0);
 }

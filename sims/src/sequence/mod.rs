@@ -691,20 +691,13 @@ pub fn record_camera(
     noise_seed: u64,
 ) -> Result<PathBuf, SequenceError> {
     let mut writer = SequenceWriter::create(dir, 1000.0)?;
-    let intrinsics = crate::sim_sensor::intrinsics_of(camera);
     for (i, (t, pose)) in path.iter().enumerate() {
-        let image = camera.render(
+        writer.write(&camera.render(
             world,
+            Time::from_secs_f64(t.max(0.0)),
             pose,
             noise_seed ^ (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
-        );
-        writer.write(&DepthFrame {
-            stamp: Time::from_secs_f64(t.max(0.0)),
-            pose: *pose,
-            intrinsics,
-            depth_m: image.depth_m,
-            intensity: image.intensity,
-        })?;
+        ))?;
     }
     writer.finish()
 }

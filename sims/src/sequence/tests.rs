@@ -49,9 +49,10 @@ fn a_recorded_sequence_reads_back_within_quantisation() {
         assert!((frame.stamp.as_secs_f64() - t).abs() < 1e-6);
         assert!((frame.pose.translation.vector - pose.translation.vector).norm() < 1e-8);
         assert!(frame.pose.rotation.angle_to(&pose.rotation) < 1e-8);
-        assert_eq!(frame.intrinsics, crate::sim_sensor::intrinsics_of(&cam));
+        assert_eq!(frame.intrinsics, cam.intrinsics());
         let truth = cam.render(
             &world,
+            frame.stamp,
             pose,
             1 ^ (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
         );

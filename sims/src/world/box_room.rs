@@ -2,8 +2,8 @@
 
 use nalgebra::Point3;
 
+use super::gpu_scene::{GpuAlbedo, GpuGeometry, GpuScene};
 use super::{Aabb, World};
-use crate::camera::{GpuAlbedo, GpuGeometry, GpuScene};
 
 /// Free space inside an axis-aligned box, rock everywhere outside it.
 ///

@@ -6,13 +6,15 @@
 //! parity along +x (the mesh should be closed). Queries interpolate the samples
 //! trilinearly, so surfaces are placed to within about one sample spacing.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use troupe_actors::grid::distance::distance_to;
 
+pub use super::mesh_io::MeshError;
 use super::noise::ValueNoise;
+pub use super::triangle_mesh::TriangleMesh;
 use super::{Aabb, Site, World};
 
 /// Which side of the mesh robots fly in.
@@ -91,108 +93,6 @@ impl MeshParams {
             return Err("starts_m and routes_m must hold finite coordinates".into());
         }
         Ok(())
-    }
-}
-
-/// A triangle mesh: vertices and triangles (indices into the vertices), with an
-/// optional grey level per vertex.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TriangleMesh {
-    /// Vertex positions, metres.
-    pub vertices: Vec<Point3<f64>>,
-    /// Triangles.
-    pub triangles: Vec<[u32; 3]>,
-    /// Grey level per vertex in `[0, 1]`, when the file has colours.
-    pub grey: Option<Vec<f64>>,
-}
-
-/// Why a mesh could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum MeshError {
-    /// The file could not be read.
-    #[error("mesh file `{path}`")]
-    Read {
-        /// File.
-        path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// The file is not a mesh we can read.
-    #[error("mesh file `{path}`: {reason}")]
-    Format {
-        /// File.
-        path: PathBuf,
-        /// What is wrong.
-        reason: String,
-    },
-}
-
-impl TriangleMesh {
-    /// Reads a PLY or OBJ file (by extension).
-    ///
-    /// # Errors
-    ///
-    /// A read error, or a format error naming the problem (unknown extension,
-    /// malformed header or element, out-of-range index, non-finite coordinate, no
-    /// triangles).
-    pub fn load(path: &Path) -> Result<TriangleMesh, MeshError> {
-        let bytes = std::fs::read(path).map_err(|source| MeshError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
-        let extension = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        let mesh = match extension.as_deref() {
-            Some("ply") => super::mesh_io::parse_ply(&bytes),
-            Some("obj") => super::mesh_io::parse_obj(&bytes),
-            _ => Err("the file name must end in .ply or .obj".to_string()),
-        }
-        .and_then(|m| m.checked())
-        .map_err(|reason| MeshError::Format {
-            path: path.to_owned(),
-            reason,
-        })?;
-        Ok(mesh)
-    }
-
-    /// Checks indices and coordinates; drops degenerate triangles.
-    pub(super) fn checked(mut self) -> Result<TriangleMesh, String> {
-        if let Some(v) = self
-            .vertices
-            .iter()
-            .find(|v| !v.coords.iter().all(|c| c.is_finite()))
-        {
-            return Err(format!("vertex {v} is not finite"));
-        }
-        let n = self.vertices.len() as u32;
-        if let Some(t) = self.triangles.iter().find(|t| t.iter().any(|&i| i >= n)) {
-            return Err(format!(
-                "triangle {t:?} refers to a vertex beyond the {n} vertices"
-            ));
-        }
-        let vertices = &self.vertices;
-        self.triangles.retain(|t| {
-            let [a, b, c] = t.map(|i| vertices[i as usize]);
-            (b - a).cross(&(c - a)).norm() > 1e-12
-        });
-        if self.triangles.is_empty() {
-            return Err("the mesh has no (non-degenerate) triangles".into());
-        }
-        Ok(self)
-    }
-
-    /// Bounding box of the vertices used by triangles.
-    #[must_use]
-    pub fn bounds(&self) -> Aabb {
-        let mut b = Aabb::from_point(self.vertices[self.triangles[0][0] as usize]);
-        for t in &self.triangles {
-            for &i in t {
-                b = b.union(&Aabb::from_point(self.vertices[i as usize]));
-            }
-        }
-        b
     }
 }
 

@@ -1,13 +1,68 @@
 //! Minimal readers for triangle meshes: PLY (ASCII and binary little-endian; vertex
 //! `x y z` as float or double, optional `red green blue`, faces as a list of vertex
-//! indices) and Wavefront OBJ (`v` and `f` lines; polygons are fanned into triangles).
+//! indices) and Wavefront OBJ (`v` and `f` lines; polygons are fanned into triangles),
+//! giving a [`TriangleMesh`] ([`TriangleMesh::load`]).
+
+use std::path::{Path, PathBuf};
 
 use nalgebra::Point3;
 
-use super::mesh::TriangleMesh;
+use super::triangle_mesh::TriangleMesh;
+
+/// Why a mesh could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// The file could not be read.
+    #[error("mesh file `{path}`")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The file is not a mesh we can read.
+    #[error("mesh file `{path}`: {reason}")]
+    Format {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl TriangleMesh {
+    /// Reads a PLY or OBJ file (by extension).
+    ///
+    /// # Errors
+    ///
+    /// A read error, or a format error naming the problem (unknown extension,
+    /// malformed header or element, out-of-range index, non-finite coordinate, no
+    /// triangles).
+    pub fn load(path: &Path) -> Result<TriangleMesh, MeshError> {
+        let bytes = std::fs::read(path).map_err(|source| MeshError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let extension = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let mesh = match extension.as_deref() {
+            Some("ply") => parse_ply(&bytes),
+            Some("obj") => parse_obj(&bytes),
+            _ => Err("the file name must end in .ply or .obj".to_string()),
+        }
+        .and_then(|m| m.checked())
+        .map_err(|reason| MeshError::Format {
+            path: path.to_owned(),
+            reason,
+        })?;
+        Ok(mesh)
+    }
+}
 
 /// Parses an OBJ file.
-pub(super) fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
+fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
     let text = std::str::from_utf8(bytes).map_err(|_| "an OBJ file must be UTF-8 text")?;
     let mut mesh = TriangleMesh::default();
     for (n, line) in text.lines().enumerate() {
@@ -144,7 +199,7 @@ impl Body<'_> {
 }
 
 /// Parses a PLY file.
-pub(super) fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
+fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
     let end = find(bytes, b"end_header\n").ok_or("not a PLY file: no `end_header` line")?;
     let header =
         std::str::from_utf8(&bytes[..end]).map_err(|_| "the PLY header must be ASCII text")?;

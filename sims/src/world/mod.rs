@@ -16,17 +16,20 @@
 mod box_room;
 pub mod cave;
 mod config;
+pub mod gpu_scene;
 pub mod mesh;
 mod mesh_io;
 pub mod noise;
 pub mod open_field;
 pub mod scenes;
 pub mod solids;
+mod triangle_mesh;
 pub mod warehouse;
 
 pub use box_room::BoxRoom;
 pub use cave::{CaveParams, CaveWorld};
 pub use config::{WorldConfig, WorldKind};
+pub use gpu_scene::{GpuAlbedo, GpuCaveField, GpuGeometry, GpuNoise, GpuPrimitive, GpuScene};
 pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use open_field::{OpenField, OpenFieldParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
@@ -34,8 +37,6 @@ pub use troupe_actors::geometry::Aabb;
 pub use warehouse::{Warehouse, WarehouseParams};
 
 use nalgebra::{Point3, Vector3};
-
-use crate::camera::GpuScene;
 
 /// Step used by the default [`World::normal`] for its central differences, in metres.
 pub const NORMAL_STEP_M: f64 = 1e-3;

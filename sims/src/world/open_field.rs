@@ -6,11 +6,11 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::{ValueNoise, mix64, unit_f64};
 use super::solids::BoxSolids;
 use super::warehouse::polyline_length_m;
 use super::{Aabb, Site, World};
-use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// Shape of an [`OpenField`]; lengths in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

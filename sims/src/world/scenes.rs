@@ -5,10 +5,10 @@
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::ValueNoise;
 use super::solids::BoxSolids;
 use super::{Aabb, Site, World};
-use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// The window scene: a 0.9 m × 0.9 m window in a wall 10 m ahead (thesis §5.2.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -9,7 +9,7 @@
 use nalgebra::Point3;
 
 use super::Aabb;
-use crate::camera::GpuGeometry;
+use super::gpu_scene::GpuGeometry;
 
 /// Solid boxes inside a free interior; everything outside the interior is rock.
 #[derive(Clone, Debug)]

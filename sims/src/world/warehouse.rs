@@ -3,10 +3,10 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::{ValueNoise, mix64, unit_f64};
 use super::solids::BoxSolids;
 use super::{Aabb, Site, World};
-use crate::camera::{GpuAlbedo, GpuNoise, GpuScene};
 
 /// Shape of a [`Warehouse`]; lengths in metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

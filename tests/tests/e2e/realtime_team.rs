@@ -9,7 +9,7 @@ use troupe_actors::msgs::{DEPTH_FRAME, PEER_ODOMETRY};
 use troupe_actors::runtime::{ActorSpec, Publication, RealtimeExecutor};
 use troupe_robot::{RobotConfig, RobotParts, assemble};
 use troupe_sims::camera::CameraParams;
-use troupe_sims::sim_sensor::{SimCameraSource, intrinsics_of};
+use troupe_sims::sim_sensor::SimCameraSource;
 use troupe_sims::vehicle::{SimVehicle, VehicleConfig, new_body};
 use troupe_sims::world::{CaveParams, CaveWorld, World};
 
@@ -39,7 +39,7 @@ fn standard_robots_run_on_the_wall_clock() {
                 }),
                 route: world.centreline_route(i, 2),
                 depart_at_s: 0.0,
-                camera: intrinsics_of(&CameraParams::default()),
+                camera: CameraParams::default().intrinsics(),
                 link_journal: LinkJournal::default(),
             };
             assemble(&format!("robot{i}"), &config, parts).unwrap()

@@ -8,21 +8,20 @@
 //! the CPU path, so they are identical; only the geometry differs, by `f32` rounding.
 
 mod pack;
-mod scene;
-
-pub use scene::{GpuAlbedo, GpuCaveField, GpuGeometry, GpuNoise, GpuPrimitive, GpuScene};
 
 use std::sync::{OnceLock, mpsc};
 
 use nalgebra::Isometry3;
+use troupe_algorithms::frame::DepthFrame;
+use troupe_core::Time;
 use wgpu::util::DeviceExt;
 
+use super::CameraParams;
 use super::render::{
     HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, MIN_REFINE_COS, OVER_RELAXATION,
     noisy_depth_m,
 };
-use super::{CameraParams, DepthImage};
-use crate::world::NORMAL_STEP_M;
+use crate::world::{GpuScene, NORMAL_STEP_M};
 
 /// Edge of the shader's square workgroups, in pixels (`@workgroup_size` in the shader).
 const WORKGROUP_EDGE: u32 = 8;
@@ -215,17 +214,18 @@ impl GpuCamera {
         self.ctx
     }
 
-    /// Renders from `body_pose` (body to world), with noise from `noise_seed` exactly as
-    /// [`CameraParams::render`] draws it.
+    /// Renders the frame taken at `stamp` from `body_pose` (body to world), with noise
+    /// from `noise_seed` exactly as [`CameraParams::render`] draws it.
     ///
     /// # Errors
     ///
     /// [`GpuError::Frame`] when the device fails.
     pub fn render(
         &mut self,
+        stamp: Time,
         body_pose: &Isometry3<f64>,
         noise_seed: u64,
-    ) -> Result<DepthImage, GpuError> {
+    ) -> Result<DepthFrame, GpuError> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let cam = &self.params;
         queue.write_buffer(
@@ -260,7 +260,7 @@ impl GpuCamera {
         rx.recv()
             .map_err(|e| GpuError::Frame(e.to_string()))?
             .map_err(|e| GpuError::Frame(e.to_string()))?;
-        let mut img = DepthImage::empty(cam.width, cam.height);
+        let mut frame = cam.blank_frame(stamp, body_pose);
         {
             let bytes = slice
                 .get_mapped_range()
@@ -274,19 +274,19 @@ impl GpuCamera {
                 ];
                 f32::from_le_bytes(b)
             };
-            for index in 0..img.depth_m.len() {
+            for index in 0..frame.depth_m.len() {
                 let depth = word(2 * index);
                 if depth < 0.0 {
                     continue;
                 }
                 if let Some(d) = noisy_depth_m(cam, noise_seed, index as u64, f64::from(depth)) {
-                    img.depth_m[index] = d as f32;
-                    img.intensity[index] = word(2 * index + 1);
+                    frame.depth_m[index] = d as f32;
+                    frame.intensity[index] = word(2 * index + 1);
                 }
             }
         }
         self.readback.unmap();
-        Ok(img)
+        Ok(frame)
     }
 }
 

@@ -3,9 +3,9 @@
 
 use nalgebra::Isometry3;
 
-use super::scene::{GpuAlbedo, GpuGeometry, GpuNoise, GpuPrimitive, GpuScene};
 use crate::camera::CameraParams;
 use crate::world::noise::PERIOD;
+use crate::world::{GpuAlbedo, GpuGeometry, GpuNoise, GpuPrimitive, GpuScene};
 
 /// Noise slots of the shader: wall roughness, texture grain, strata.
 const NOISE_SLOTS: usize = 3;

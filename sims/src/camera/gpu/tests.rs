@@ -65,10 +65,9 @@ impl Agreement {
     fn add(
         &mut self,
         world: &dyn World,
-        params: &CameraParams,
         pose: &Isometry3<f64>,
-        cpu: &DepthImage,
-        gpu: &DepthImage,
+        cpu: &DepthFrame,
+        gpu: &DepthFrame,
     ) {
         for i in 0..cpu.depth_m.len() {
             let (dc, dg) = (cpu.depth_m[i], gpu.depth_m[i]);
@@ -82,12 +81,9 @@ impl Agreement {
                 let ie = (cpu.intensity[i] - gpu.intensity[i]).abs();
                 self.depth_ok += usize::from(de <= depth_tolerance_m(dc));
                 self.max_depth_err_m = self.max_depth_err_m.max(de);
-                let (col, row) = (
-                    (i % cpu.width as usize) as u32,
-                    (i / cpu.width as usize) as u32,
-                );
-                let (u, v) = CameraParams::pixel_centre(col, row);
-                let p = params.back_project(pose, u, v, f64::from(dc));
+                let k = &cpu.intrinsics;
+                let (col, row) = ((i % k.width as usize) as u32, (i / k.width as usize) as u32);
+                let p = pose * k.back_project(col, row, f64::from(dc));
                 let n = world.normal(&p) * TEXTURE_SLAB_M;
                 let jump = (world.albedo(&(p + n)) - world.albedo(&(p - n))).abs();
                 if jump > f64::from(INTENSITY_TOLERANCE) {
@@ -155,9 +151,9 @@ fn compare(what: &str, world: Arc<dyn World>, poses: &[Isometry3<f64>], params: 
     let mut agreement = Agreement::default();
     for (k, pose) in poses.iter().enumerate() {
         let seed = 11 + k as u64;
-        let cpu = params.render(world.as_ref(), pose, seed);
-        let img = gpu.render(pose, seed).expect("GPU frame");
-        agreement.add(world.as_ref(), params, pose, &cpu, &img);
+        let cpu = params.render(world.as_ref(), Time::ZERO, pose, seed);
+        let img = gpu.render(Time::ZERO, pose, seed).expect("GPU frame");
+        agreement.add(world.as_ref(), pose, &cpu, &img);
     }
     agreement.check(what);
 }
@@ -272,9 +268,9 @@ fn noise_and_dropouts_are_those_of_the_cpu_path() {
     };
     let mut dropped = 0;
     for pose in &poses[..3] {
-        let geometry = clean.render(cave.as_ref(), pose, 0);
-        let cpu = params.render(cave.as_ref(), pose, 5);
-        let img = gpu.render(pose, 5).expect("frame");
+        let geometry = clean.render(cave.as_ref(), Time::ZERO, pose, 0);
+        let cpu = params.render(cave.as_ref(), Time::ZERO, pose, 5);
+        let img = gpu.render(Time::ZERO, pose, 5).expect("frame");
         for i in 0..img.depth_m.len() {
             if geometry.depth_m[i] > 0.0 && img.depth_m[i] == 0.0 {
                 dropped += 1;
@@ -311,8 +307,8 @@ fn auto_falls_back_to_the_cpu_for_a_mesh_world_and_gpu_refuses_it() {
         Choice::Gpu(name) => panic!("auto chose the GPU ({name}) for a mesh world"),
     }
     let pose = Isometry3::translation(start.x, start.y, start.z);
-    let img = renderer.render(&pose, 3).expect("CPU frame");
-    assert_eq!(img, auto.render(world.as_ref(), &pose, 3));
+    let img = renderer.render(Time::ZERO, &pose, 3).expect("CPU frame");
+    assert_eq!(img, auto.render(world.as_ref(), Time::ZERO, &pose, 3));
     let forced = CameraParams {
         backend: CameraBackend::Gpu,
         ..small_camera()
@@ -353,10 +349,12 @@ fn auto_picks_a_hardware_gpu_gpu_takes_any_and_cpu_stays_on_the_cpu() {
         (Ok(_), Ok(mut gpu)) => {
             assert!(matches!(gpu.choice(), Choice::Gpu(_)));
             let pose = Isometry3::translation(1.0, 0.3, 0.2);
-            let img = gpu.render(&pose, 1).expect("frame");
+            let img = gpu.render(Time::ZERO, &pose, 1).expect("frame");
             assert_eq!(
-                img.valid_count(),
-                forced.render(room.as_ref(), &pose, 1).valid_count()
+                img.valid_pixels(),
+                forced
+                    .render(room.as_ref(), Time::ZERO, &pose, 1)
+                    .valid_pixels()
             );
         }
         (Err(_), Err(reason)) => assert!(reason.contains("no Vulkan adapter"), "{reason}"),

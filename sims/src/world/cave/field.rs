@@ -9,8 +9,8 @@
 
 use nalgebra::{Point3, Vector3};
 
-use crate::camera::{GpuCaveField, GpuNoise, GpuPrimitive};
 use crate::world::Aabb;
+use crate::world::gpu_scene::{GpuCaveField, GpuNoise, GpuPrimitive};
 
 /// Depth below which rock distances are clamped (a conservative rock distance).
 pub(super) const ROCK_CLAMP_M: f64 = 1.0;

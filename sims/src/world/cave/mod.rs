@@ -26,9 +26,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use self::field::{Field, Primitive};
+use super::gpu_scene::{GpuAlbedo, GpuGeometry, GpuNoise, GpuScene};
 use super::noise::{self, ValueNoise};
 use super::{Aabb, World};
-use crate::camera::{GpuAlbedo, GpuGeometry, GpuNoise, GpuScene};
 
 /// How far below the node a chamber's flat floor lies, as a fraction of its radius.
 const CHAMBER_FLOOR_FRACTION: f64 = 0.6;

@@ -1,15 +1,15 @@
-//! What a world tells the GPU camera about itself: its distance field and texture as
-//! plain tables, with no graphics types, so worlds can describe themselves without
-//! depending on wgpu.
+//! What a world tells the GPU camera about itself ([`World::gpu_scene`](super::World::gpu_scene)): its distance
+//! field and texture as plain tables, with no graphics types, so worlds describe
+//! themselves without depending on wgpu or on the camera (the camera reads these).
 //!
-//! The shader (`trace.wgsl`) evaluates the same formulas as the worlds' CPU code in
+//! The camera's shader (`camera/gpu/trace.wgsl`) evaluates the same formulas as the worlds' CPU code in
 //! `f32`; the lookup tables (noise permutations and lattice values, the cave's
 //! primitive index) are copied exactly.
 
 use nalgebra::{Point3, Vector3};
 
-use crate::world::Aabb;
-use crate::world::noise::{PERIOD, ValueNoise};
+use super::noise::{PERIOD, ValueNoise};
+use troupe_algorithms::geometry::Aabb;
 
 /// The tables of one [`ValueNoise`]: the doubled permutation and the lattice values.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,7 +140,7 @@ pub enum GpuAlbedo {
     },
 }
 
-/// A world as the GPU camera sees it (see [`crate::world::World::gpu_scene`]).
+/// A world as the GPU camera sees it (see [`World::gpu_scene`](super::World::gpu_scene)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GpuScene {
     /// The distance field.
