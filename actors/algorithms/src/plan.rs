@@ -19,7 +19,7 @@ pub struct Plan {
     pub trajectory: Trajectory,
     /// The motion primitive and its stopping primitive that `trajectory` samples, when
     /// a primitive planner made it (`None` for routes and plans received from peers).
-    pub reference: Option<Committed>,
+    pub reference: Option<Box<Committed>>,
     /// Whether this is the stopping trajectory, committed because no candidate of the
     /// round was safe.
     pub stopping: bool,
@@ -40,6 +40,11 @@ impl Plan {
 
 impl Message for Plan {
     fn payload_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.trajectory.payload_bytes()
+        std::mem::size_of::<Self>()
+            + self.trajectory.payload_bytes()
+            + self
+                .reference
+                .as_ref()
+                .map_or(0, |_| std::mem::size_of::<Committed>())
     }
 }

@@ -227,7 +227,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                 Plan {
                     stamp: now,
                     trajectory: c.trajectory.clone(),
-                    reference: c.reference.clone(),
+                    reference: c.reference.clone().map(Box::new),
                     stopping: false,
                 }
             }
@@ -239,7 +239,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                 Plan {
                     stamp: now,
                     trajectory: round.stop.clone(),
-                    reference: round.stop_reference.clone(),
+                    reference: round.stop_reference.clone().map(Box::new),
                     stopping: true,
                 }
             }

@@ -301,7 +301,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             Plan {
                 stamp: now,
                 trajectory: committed.trajectory(self.config.knot_step_s),
-                reference: Some(committed.clone()),
+                reference: Some(Box::new(committed.clone())),
                 stopping,
             },
         );
@@ -336,7 +336,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 } else if let Some(plan) = m.get(&PLAN)
                     && let Some(reference) = &plan.reference
                 {
-                    self.committed = Some(reference.clone());
+                    self.committed = Some(Committed::clone(reference));
                 }
             }
             Event::Timer(PHASE) => {
