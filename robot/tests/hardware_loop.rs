@@ -310,3 +310,57 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
         );
     }
 }
+
+/// Fail safe: with a silent camera topic the robot exits with one line naming the
+/// topic, before it ever talks to the autopilot.
+#[test]
+fn a_silent_topic_stops_the_robot_before_any_setpoint() {
+    let mav_python = match python(".venv-pymavlink", "pymavlink") {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED silent-topic test: {e}");
+            return;
+        }
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_silent");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mavlink_port = free_port(true);
+    let config = dir.join("robot.toml");
+    let text = robot_file(free_port(false), free_port(false), mavlink_port)
+        .replace("startup_timeout_s = 15.0", "startup_timeout_s = 1.0");
+    std::fs::write(&config, text).unwrap();
+    let report = dir.join("autopilot.json");
+    let autopilot = Command::new(mav_python)
+        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
+        .args(["--report", report.to_str().unwrap(), "--duration-s", "4"])
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("start the autopilot");
+    let robot = Command::new(env!("CARGO_BIN_EXE_troupe-robot"))
+        .args(["--config", config.to_str().unwrap()])
+        .output()
+        .expect("run troupe-robot");
+    finish(autopilot, "the autopilot");
+    assert!(!robot.status.success());
+    let stderr = String::from_utf8_lossy(&robot.stderr);
+    let last = stderr.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with(
+            "troupe-robot: starting the ROS 2 drivers: ROS 2 topic `/camera/depth/image_rect_raw`"
+        ),
+        "{stderr}"
+    );
+    let autopilot: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(
+        autopilot["received_types"],
+        serde_json::json!({}),
+        "the robot talked MAVLink"
+    );
+    assert!(
+        !dir.join("out").exists(),
+        "no outputs from a robot that never started"
+    );
+}

@@ -347,7 +347,7 @@ mod tests {
                 "hw.toml: `id` must be below",
             ),
             (
-                text.replace("id = 0", "id = 0\nspeed = 1"),
+                text.replacen("id = 0", "id = 0\nspeed = 1", 1),
                 "unknown field `speed`",
             ),
             (
@@ -355,15 +355,15 @@ mod tests {
                 "invalid `[mavlink]` table: mavlink.setpoint_rate_hz",
             ),
             (
-                text.replace("[robot]\n", "[robot]\nsensor_rate_hz = -1.0\n"),
+                text.replace("sensor_rate_hz = 15.0", "sensor_rate_hz = -1.0"),
                 "invalid `[robot]` table: `sensor_rate_hz`",
             ),
             (text.replace("fx = ", "fx = -"), "`camera` needs"),
             (
-                text.replace("id = 0", "id = 0\nduration_s = -1.0"),
+                text.replacen("id = 0", "id = 0\nduration_s = -1.0", 1),
                 "`duration_s` must be",
             ),
-            (text.replace("id = 0", "id = \"zero\""), "`id`: line 8"),
+            (text.replacen("id = 0", "id = \"zero\"", 1), "`id`: line 8"),
             (
                 text.replace("connect = [\"tcp/10", "connect = [\"nowhere\", \"tcp/10"),
                 "invalid `[zenoh]` table",
