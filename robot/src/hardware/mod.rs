@@ -17,10 +17,10 @@
 //! ```
 //!
 //! `robot/examples/hardware_robot.toml` is a complete, commented file and
-//! `docs/hardware.md` says how to fly one. [`run`] (in [`HardwareRobot::run`]) does
-//! every startup check — the file, both zenoh sessions, the ROS topics, the camera's
-//! calibration — before the MAVLink vehicle starts, so a robot that cannot start never
-//! sends a setpoint.
+//! `docs/hardware.md` says how to fly one. [`HardwareRobot::load`] checks every table;
+//! [`run`] then opens the ROS 2 session, waits for its topics, takes the camera's
+//! calibration and opens the team link before the MAVLink vehicle starts, so a robot
+//! that cannot start never sends a setpoint.
 
 mod file;
 mod run;
