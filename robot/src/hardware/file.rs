@@ -123,9 +123,15 @@ pub enum HardwareError {
     /// The robot could not be assembled.
     #[error("assembling the robot")]
     Assemble(#[from] AssembleError),
-    /// The executor or its runtime could not start.
-    #[error("starting the executor: {0}")]
-    Executor(String),
+    /// The executor did not accept the robot's id.
+    #[error("starting the executor")]
+    RobotId(#[from] troupe_actors::runtime::RobotIdsError),
+    /// The executor could not start receiving from the team link.
+    #[error("starting the team link")]
+    Transport(#[source] TransportError),
+    /// The executor ended without a report of the robot.
+    #[error("the executor reported no robot")]
+    NoReport,
     /// The runtime could not start.
     #[error("starting the tokio runtime")]
     Runtime(#[source] std::io::Error),

@@ -238,8 +238,7 @@ async fn fly(
     let collected: Arc<Mutex<Collected>> = Arc::default();
     let tap = collected.clone();
     let mut executor = RealtimeExecutor::new(vec![started.spec], u64::from(id))
-        .with_robot_ids(vec![RobotId(id)])
-        .map_err(|e| HardwareError::Executor(e.to_string()))?;
+        .with_robot_ids(vec![RobotId(id)])?;
     executor.add_tap(move |p: &Publication<'_>| {
         let mut c = tap.lock().unwrap_or_else(PoisonError::into_inner);
         if p.get(&DEPTH_FRAME).is_some() {
@@ -255,7 +254,7 @@ async fn fly(
     let started_at = Instant::now();
     let handle = executor
         .spawn_with_transport(started.transport.clone())
-        .map_err(|e| HardwareError::Executor(e.to_string()))?;
+        .map_err(HardwareError::Transport)?;
     tracing::info!(robot = id, "running");
     match robot.file.duration_s {
         Some(d) => {
@@ -272,10 +271,7 @@ async fn fly(
     if let Err(e) = started.transport.close() {
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
-    let report = reports
-        .into_iter()
-        .next()
-        .ok_or_else(|| HardwareError::Executor("the executor reported no robot".into()))?;
+    let report = reports.into_iter().next().ok_or(HardwareError::NoReport)?;
     let collected = std::mem::take(&mut *collected.lock().unwrap_or_else(PoisonError::into_inner));
     let count = |name: &str| report.topics.get(name).map_or(0, |t| t.messages);
     let summary = HardwareSummary {
