@@ -29,6 +29,7 @@
 
 mod config;
 pub mod frames;
+pub mod hardware;
 pub mod mavlink;
 pub mod ros2;
 pub mod safety;

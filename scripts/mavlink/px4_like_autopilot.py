@@ -9,7 +9,12 @@ type mask), and after --duration-s writes a JSON report of everything it receive
 
 Usage: px4_like_autopilot.py --connection udpout:127.0.0.1:14540 --report out.json
        [--duration-s 8] [--heartbeat-hz 2] [--heartbeat-stop-after-s 4.5]
-       [--start-ned 0,0,-1]
+       [--start-ned 0,0,-1] [--state-to 127.0.0.1:PORT]
+
+With --state-to it also sends its state as one JSON datagram per LOCAL_POSITION_NED
+({"t": unix s, "ned": [x, y, z], "vel_ned": [...], "yaw_ned": rad}) to that UDP
+address, for a camera stand-in that renders what the vehicle sees
+(scripts/ros2/box_room_camera.py).
 
 It prints "ready <unix time>" on stdout once its link is open; times in the report
 are Unix seconds.
@@ -19,6 +24,7 @@ import argparse
 import json
 import math
 import os
+import socket
 import sys
 import time
 
@@ -45,6 +51,7 @@ def parse_args():
     p.add_argument("--start-ned", default="0,0,-1")
     p.add_argument("--system-id", type=int, default=1)
     p.add_argument("--component-id", type=int, default=1)
+    p.add_argument("--state-to", default=None)
     return p.parse_args()
 
 
@@ -57,6 +64,10 @@ def main():
         dialect="common",
     )
     pos = [float(v) for v in args.start_ned.split(",")]
+    state_sock, state_to = None, None
+    if args.state_to:
+        host, port = args.state_to.rsplit(":", 1)
+        state_sock, state_to = socket.socket(socket.AF_INET, socket.SOCK_DGRAM), (host, int(port))
     vel = [0.0, 0.0, 0.0]
     yaw = 0.0
     setpoint = None  # (message, receive time)
@@ -151,6 +162,9 @@ def main():
         if now >= next_state:
             conn.mav.local_position_ned_send(boot_ms, *pos, *vel)
             conn.mav.attitude_send(boot_ms, 0.0, 0.0, yaw, 0.0, 0.0, 0.0)
+            if state_sock is not None:
+                state = {"t": now, "ned": pos, "vel_ned": vel, "yaw_ned": yaw}
+                state_sock.sendto(json.dumps(state).encode(), state_to)
             next_state += 1.0 / 30.0
         if now >= next_track:
             track.append([now, *pos, yaw])

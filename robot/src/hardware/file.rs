@@ -1,0 +1,391 @@
+//! The hardware robot file: reading, checking, resolving its paths.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use troupe_actors::msgs::PinholeIntrinsics;
+use troupe_comms::transport::TransportError;
+use troupe_comms::zenoh::ZenohConfig;
+
+use crate::mavlink::{MavlinkConfig, MavlinkConfigError};
+use crate::ros2::{Ros2Config, Ros2Error};
+use crate::{AssembleError, ConfigError, RobotConfig};
+
+/// A hardware robot file as written (see the [module docs](crate::hardware) and
+/// `robot/examples/hardware_robot.toml`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HardwareFile {
+    /// This robot's index in the team: its id on the link, `robot<id>` in logs.
+    pub id: u32,
+    /// Robots in the team (ids `0..team_size`); list the ones to keep plans and maps
+    /// for from the start in `[robot.link] peers`.
+    pub team_size: u32,
+    /// Wall seconds to run; absent: until SIGINT or SIGTERM (`--duration-s` overrides).
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// Output directory, relative to the robot file; default `hw<id>/` next to it.
+    #[serde(default)]
+    pub out: Option<PathBuf>,
+    /// The standard robot's settings (the tables of a scenario's `[robot]`).
+    #[serde(default)]
+    pub robot: RobotConfig,
+    /// The depth camera's intrinsics for the planner; absent: taken from the first
+    /// depth frame (its `CameraInfo`) at start.
+    #[serde(default)]
+    pub camera: Option<PinholeIntrinsics>,
+    /// The ROS 2 drivers (camera and odometry in; plan, map, status out).
+    pub ros2: Ros2Config,
+    /// The flight controller.
+    pub mavlink: MavlinkConfig,
+    /// The team link's zenoh session (the same table as a simulated robot file's).
+    #[serde(default)]
+    pub zenoh: ZenohConfig,
+}
+
+/// A checked robot file with its paths resolved.
+#[derive(Clone, Debug)]
+pub struct HardwareRobot {
+    /// The robot file (names it in errors).
+    pub path: PathBuf,
+    /// The file's settings, paths made relative to the working directory.
+    pub file: HardwareFile,
+    /// Where `summary.json` and `events.csv` go.
+    pub out: PathBuf,
+}
+
+/// Why a hardware robot could not start or finish.
+#[derive(Debug, thiserror::Error)]
+pub enum HardwareError {
+    /// The robot file cannot be read.
+    #[error("cannot read the robot file {}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The robot file is not valid TOML of the right shape.
+    #[error("{}: {message}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Where and what (key, line, column).
+        message: String,
+    },
+    /// A value of the robot file is out of range.
+    #[error("{}: `{key}` {reason}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The key.
+        key: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The `[robot]` table is invalid.
+    #[error("{}: invalid `[robot]` table", path.display())]
+    Robot {
+        /// The file.
+        path: PathBuf,
+        /// The bad key.
+        source: ConfigError,
+    },
+    /// The `[mavlink]` table is invalid.
+    #[error("{}: invalid `[mavlink]` table", path.display())]
+    Mavlink {
+        /// The file.
+        path: PathBuf,
+        /// The bad key.
+        source: MavlinkConfigError,
+    },
+    /// A zenoh table is invalid, or the team link's session did not open.
+    #[error("{context}")]
+    Zenoh {
+        /// Which session, doing what.
+        context: String,
+        /// The transport's error.
+        source: TransportError,
+    },
+    /// The ROS 2 drivers could not start (a silent topic names itself here).
+    #[error("starting the ROS 2 drivers")]
+    Ros2(#[from] Ros2Error),
+    /// No depth frame arrived to take the camera's calibration from.
+    #[error(
+        "no depth frame paired with odometry arrived within {timeout_s} s to take the camera \
+         intrinsics from (check odometry stamps and `ros2.odometry_tolerance_s`, or set \
+         `[camera]`)"
+    )]
+    NoCalibration {
+        /// The startup timeout, seconds.
+        timeout_s: f64,
+    },
+    /// The robot could not be assembled.
+    #[error("assembling the robot")]
+    Assemble(#[from] AssembleError),
+    /// The executor did not accept the robot's id.
+    #[error("starting the executor")]
+    RobotId(#[from] troupe_actors::runtime::RobotIdsError),
+    /// The executor could not start receiving from the team link.
+    #[error("starting the team link")]
+    Transport(#[source] TransportError),
+    /// The executor ended without a report of the robot.
+    #[error("the executor reported no robot")]
+    NoReport,
+    /// The runtime could not start.
+    #[error("starting the tokio runtime")]
+    Runtime(#[source] std::io::Error),
+    /// The outputs could not be written.
+    #[error("writing {}", path.display())]
+    Output {
+        /// The file or directory.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+impl HardwareRobot {
+    /// Reads, checks and resolves a robot file.
+    pub fn load(path: &Path) -> Result<Self, HardwareError> {
+        let text = std::fs::read_to_string(path).map_err(|source| HardwareError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Self::from_toml(&text, path, base)
+    }
+
+    /// Parses and checks a robot file's text; `path` names it in errors and relative
+    /// paths are resolved against `base`.
+    pub fn from_toml(text: &str, path: &Path, base: &Path) -> Result<Self, HardwareError> {
+        let parse = |message: String| HardwareError::Parse {
+            path: path.to_path_buf(),
+            message,
+        };
+        let de = toml::Deserializer::parse(text).map_err(|e| parse(describe(&e, text)))?;
+        let mut file: HardwareFile = serde_path_to_error::deserialize(de)
+            .map_err(|e| parse(format!("`{}`: {}", e.path(), describe(e.inner(), text))))?;
+        resolve_zenoh(&mut file.zenoh, base);
+        resolve_zenoh(&mut file.ros2.zenoh, base);
+        file.validate(path)?;
+        let out = base.join(
+            file.out
+                .clone()
+                .unwrap_or_else(|| PathBuf::from(format!("hw{}", file.id))),
+        );
+        Ok(HardwareRobot {
+            path: path.to_path_buf(),
+            file,
+            out,
+        })
+    }
+}
+
+impl HardwareFile {
+    /// Checks every table; errors name the file and the key.
+    pub fn validate(&self, path: &Path) -> Result<(), HardwareError> {
+        let invalid = |key: &str, reason: String| HardwareError::Invalid {
+            path: path.to_path_buf(),
+            key: key.into(),
+            reason,
+        };
+        if self.id >= self.team_size {
+            return Err(invalid(
+                "id",
+                format!(
+                    "must be below `team_size` ({}), got {}",
+                    self.team_size, self.id
+                ),
+            ));
+        }
+        if let Some(d) = self.duration_s
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(invalid(
+                "duration_s",
+                format!("must be a finite number > 0, got {d}"),
+            ));
+        }
+        if let Some(c) = &self.camera {
+            let positive = [c.fx, c.fy, c.max_depth_m]
+                .iter()
+                .all(|v| v.is_finite() && *v > 0.0);
+            let centre = c.cx.is_finite() && c.cy.is_finite();
+            if !(positive && centre && c.width > 0 && c.height > 0) {
+                return Err(invalid(
+                    "camera",
+                    "needs width, height > 0 and finite fx, fy, max_depth_m > 0, cx, cy".into(),
+                ));
+            }
+        }
+        self.robot
+            .validate()
+            .map_err(|source| HardwareError::Robot {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        self.ros2.validate().map_err(Ros2Error::from)?;
+        self.mavlink
+            .validate()
+            .map_err(|source| HardwareError::Mavlink {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        self.zenoh
+            .validate()
+            .map_err(|source| HardwareError::Zenoh {
+                context: format!("{}: invalid `[zenoh]` table", path.display()),
+                source,
+            })
+    }
+}
+
+/// Makes the TLS and password-file paths of a zenoh table relative to `base`.
+fn resolve_zenoh(zenoh: &mut ZenohConfig, base: &Path) {
+    if let Some(tls) = &mut zenoh.tls {
+        for p in [&mut tls.root_ca_path, &mut tls.cert_path, &mut tls.key_path] {
+            *p = base.join(&*p);
+        }
+    }
+    if let Some(dictionary) = zenoh.auth.as_mut().and_then(|a| a.dictionary_path.as_mut()) {
+        *dictionary = base.join(&*dictionary);
+    }
+}
+
+/// A TOML error with its line and column.
+fn describe(error: &toml::de::Error, text: &str) -> String {
+    let message = error.message().trim_end();
+    match error.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {column}: {message}")
+        }
+        None => message.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn example_path() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hardware_robot.toml")
+    }
+
+    fn example_text() -> String {
+        std::fs::read_to_string(example_path()).unwrap()
+    }
+
+    fn load(text: &str) -> Result<HardwareRobot, HardwareError> {
+        HardwareRobot::from_toml(text, Path::new("hw.toml"), Path::new("/robots"))
+    }
+
+    /// The error and its causes on one line, as the binary prints them.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut text = e.to_string();
+        let mut cause = e.source();
+        while let Some(c) = cause {
+            text = format!("{text}: {c}");
+            cause = c.source();
+        }
+        text
+    }
+
+    #[test]
+    fn the_example_file_parses_and_validates() {
+        let robot = HardwareRobot::load(&example_path()).unwrap();
+        let f = &robot.file;
+        assert_eq!(f.id, 0);
+        assert!(f.team_size >= 1);
+        assert_eq!(f.mavlink.connection, "udpin:0.0.0.0:14540");
+        assert_eq!(
+            f.ros2.topics.depth.as_deref(),
+            Some("/camera/depth/image_rect_raw")
+        );
+        let camera = f.camera.unwrap();
+        assert_eq!((camera.width, camera.height), (848, 480));
+        assert!(f.mavlink.setpoint_rate_hz >= 20.0);
+        assert!(
+            robot
+                .out
+                .starts_with(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples"))
+        );
+    }
+
+    #[test]
+    fn relative_paths_are_resolved_against_the_file() {
+        let base = std::env::temp_dir().join(format!("troupe-hw-file-{}", std::process::id()));
+        std::fs::create_dir_all(base.join("certs")).unwrap();
+        for name in ["ca.pem", "hw0.pem", "hw0.key"] {
+            std::fs::write(base.join("certs").join(name), "").unwrap();
+        }
+        let text = example_text()
+            .replace(
+                "[zenoh]\n",
+                "[zenoh]\ntls = { root_ca_path = \"certs/ca.pem\", cert_path = \"certs/hw0.pem\", \
+                 key_path = \"certs/hw0.key\" }\n",
+            )
+            .replace("listen = [\"tcp/", "listen = [\"tls/");
+        let robot = HardwareRobot::from_toml(&text, Path::new("hw.toml"), &base).unwrap();
+        let tls = robot.file.zenoh.tls.unwrap();
+        assert_eq!(tls.root_ca_path, base.join("certs/ca.pem"));
+        assert_eq!(tls.key_path, base.join("certs/hw0.key"));
+        assert_eq!(robot.out, base.join("runs/hw0"));
+        // Missing files are named.
+        let e = load(&text).unwrap_err();
+        assert!(
+            chain(&e).contains("/robots/certs/ca.pem is not a readable file"),
+            "{}",
+            chain(&e)
+        );
+        std::fs::remove_dir_all(base).unwrap();
+    }
+
+    #[test]
+    fn bad_files_name_the_key() {
+        let text = example_text();
+        let cases = [
+            (
+                text.replace("team_size = 3", "team_size = 0"),
+                "hw.toml: `id` must be below",
+            ),
+            (
+                text.replacen("id = 0", "id = 0\nspeed = 1", 1),
+                "unknown field `speed`",
+            ),
+            (
+                text.replace("setpoint_rate_hz = 30.0", "setpoint_rate_hz = 5.0"),
+                "invalid `[mavlink]` table: mavlink.setpoint_rate_hz",
+            ),
+            (
+                text.replace("sensor_rate_hz = 15.0", "sensor_rate_hz = -1.0"),
+                "invalid `[robot]` table: `sensor_rate_hz`",
+            ),
+            (text.replace("fx = ", "fx = -"), "`camera` needs"),
+            (
+                text.replacen("id = 0", "id = 0\nduration_s = -1.0", 1),
+                "`duration_s` must be",
+            ),
+            (text.replacen("id = 0", "id = \"zero\"", 1), "`id`: line 8"),
+            (
+                text.replace("connect = [\"tcp/10", "connect = [\"nowhere\", \"tcp/10"),
+                "invalid `[zenoh]` table",
+            ),
+            (
+                text.replace("odometry = \"/odom\"", ""),
+                "missing field `odometry`",
+            ),
+        ];
+        for (text, expected) in cases {
+            let e = load(&text).unwrap_err();
+            assert!(
+                chain(&e).contains(expected),
+                "{expected:?} not in {:?}",
+                chain(&e)
+            );
+        }
+    }
+}

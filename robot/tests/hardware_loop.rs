@@ -1,0 +1,366 @@
+//! The `troupe-robot` binary in a closed loop with real ROS 2 and MAVLink peers.
+//!
+//! - `scripts/mavlink/px4_like_autopilot.py` (pymavlink, `.venv-pymavlink`) plays a PX4
+//!   autopilot in offboard mode: a point mass flying the setpoints it receives; it
+//!   sends its state to the camera;
+//! - `scripts/ros2/box_room_camera.py` (rclpy + zenoh, `.venv-ros2`) publishes the
+//!   odometry of that state and 640×480 16UC1 depth images of a box room rendered
+//!   from it at 15 Hz, with rmw_zenoh keys; it deserialises the `nav_msgs/Path`s the
+//!   robot publishes back and counts the team link's samples.
+//!
+//! The robot runs 20 s. Checks: it maps (keyframes), plans (paths received on the
+//! ROS side), streams setpoints at ≥ 20 Hz, none outside the geofence, and shares its
+//! keyframes on the team link's zenoh keys. Also prints (does not assert) the latency
+//! from a depth frame's publication to the first setpoint after the first plan
+//! committed after it, and the robot's CPU use. Skips, saying why, without the venvs
+//! (`.ci/run` installs them). A simulated peer (`troupe robot`) is not part of this
+//! test: troupe-sims is not a dependency of troupe-robot.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Instant;
+
+use serde_json::Value;
+
+const RUN_S: f64 = 20.0;
+const FENCE_MIN: [f64; 3] = [-2.5, -2.5, 0.5];
+const FENCE_MAX: [f64; 3] = [4.5, 2.5, 2.5];
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("robot/ has a parent")
+        .to_path_buf()
+}
+
+/// The venv's Python if it imports `modules`, or why not.
+fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
+    let python = root().join(venv).join("bin/python");
+    let ok = Command::new(&python)
+        .args(["-c", &format!("import {modules}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        Ok(python)
+    } else {
+        Err(format!(
+            "{} cannot import {modules} (run .ci/run)",
+            python.display()
+        ))
+    }
+}
+
+fn free_port(udp: bool) -> u16 {
+    if udp {
+        std::net::UdpSocket::bind("127.0.0.1:0").and_then(|s| s.local_addr())
+    } else {
+        std::net::TcpListener::bind("127.0.0.1:0").and_then(|s| s.local_addr())
+    }
+    .expect("a free loopback port")
+    .port()
+}
+
+fn robot_file(ros_port: u16, team_port: u16, mavlink_port: u16) -> String {
+    format!(
+        r#"
+id = 0
+team_size = 1
+out = "out"
+[robot]
+sensor_rate_hz = 15.0
+[robot.link]
+team = 3
+[ros2]
+format = "rmw_zenoh"
+startup_timeout_s = 15.0
+zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
+[ros2.topics]
+depth = "/camera/depth/image_rect_raw"
+camera_info = "/camera/depth/camera_info"
+odometry = "/odom"
+plan = "/troupe/plan"
+status = "/troupe/status"
+[mavlink]
+connection = "udpin:127.0.0.1:{mavlink_port}"
+odometry_source = "external"
+[mavlink.geofence]
+min_m = {FENCE_MIN:?}
+max_m = {FENCE_MAX:?}
+[zenoh]
+listen = ["tcp/127.0.0.1:{team_port}"]
+"#
+    )
+}
+
+/// Children's user + system CPU seconds of this process so far (`/proc/self/stat`
+/// cutime + cstime, counted when a child is waited for; 100 ticks per second).
+fn children_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i)?.parse::<f64>().ok();
+    Some((ticks(13)? + ticks(14)?) / 100.0)
+}
+
+fn finish(child: Child, name: &str) -> Output {
+    let output = child.wait_with_output().expect("wait");
+    assert!(
+        output.status.success(),
+        "{name} failed: {}\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+#[test]
+fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
+    let (ros_python, mav_python) = match (
+        python(
+            ".venv-ros2",
+            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
+        ),
+        python(".venv-pymavlink", "pymavlink"),
+    ) {
+        (Ok(r), Ok(m)) => (r, m),
+        (r, m) => {
+            eprintln!(
+                "SKIPPED hardware loop test: {}",
+                [r.err(), m.err()]
+                    .into_iter()
+                    .flatten()
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+            return;
+        }
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_loop");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ros_port, team_port) = (free_port(false), free_port(false));
+    let (mavlink_port, state_port) = (free_port(true), free_port(true));
+    let config = dir.join("robot.toml");
+    std::fs::write(&config, robot_file(ros_port, team_port, mavlink_port)).unwrap();
+
+    let robot = Command::new(env!("CARGO_BIN_EXE_troupe-robot"))
+        .args([
+            "--config",
+            config.to_str().unwrap(),
+            "--duration-s",
+            &RUN_S.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start troupe-robot");
+    let cpu_before = children_cpu_s();
+    let started = Instant::now();
+    let peers_s = (RUN_S + 12.0).to_string();
+    let report = dir.join("autopilot.json");
+    let autopilot = Command::new(mav_python)
+        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
+        .args([
+            "--report",
+            report.to_str().unwrap(),
+            "--duration-s",
+            &peers_s,
+        ])
+        .args([
+            "--start-ned",
+            "0,0,-1.2",
+            "--state-to",
+            &format!("127.0.0.1:{state_port}"),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the autopilot");
+    let camera = Command::new(ros_python)
+        .arg(root().join("scripts/ros2/box_room_camera.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
+        .args(["--team-connect", &format!("tcp/127.0.0.1:{team_port}")])
+        .args([
+            "--state-port",
+            &state_port.to_string(),
+            "--duration-s",
+            &peers_s,
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the camera");
+
+    let robot_out = finish(robot, "troupe-robot");
+    let robot_wall_s = started.elapsed().as_secs_f64();
+    let cpu_s = cpu_before.zip(children_cpu_s()).map(|(a, b)| b - a);
+    let camera_out = finish(camera, "the camera");
+    finish(autopilot, "the autopilot");
+    println!("{}", String::from_utf8_lossy(&robot_out.stdout));
+
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap())
+            .unwrap();
+    let camera: Value = serde_json::from_str(
+        String::from_utf8_lossy(&camera_out.stdout)
+            .lines()
+            .last()
+            .expect("the camera's report"),
+    )
+    .unwrap();
+    let autopilot: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let n = |v: &Value| v.as_u64().unwrap_or(0);
+    println!(
+        "frames {} keyframes {} plans {} vehicle {} ros2 inputs {}",
+        summary["frames"],
+        summary["keyframes"],
+        summary["plans"],
+        summary["vehicle"],
+        summary["ros2_inputs"]
+    );
+
+    // It maps and plans, and the ROS side deserialised its paths.
+    assert!(n(&summary["frames"]) > 0, "no depth frames");
+    assert!(n(&summary["keyframes"]) > 0, "no keyframes");
+    assert!(n(&summary["plans"]) > 0, "no plans");
+    let paths = camera["paths"].as_array().unwrap();
+    assert!(!paths.is_empty(), "no nav_msgs/Path reached the ROS side");
+    assert!(
+        paths
+            .iter()
+            .any(|p| !p["poses"].as_array().unwrap().is_empty())
+    );
+    assert_eq!(paths[0]["frame_id"], "odom");
+
+    // Setpoints at ≥ 20 Hz while the robot ran, none outside the geofence.
+    let setpoints = autopilot["setpoints"].as_array().unwrap();
+    let times: Vec<f64> = setpoints.iter().map(|s| s["t"].as_f64().unwrap()).collect();
+    assert!(times.len() > 100, "{} setpoints", times.len());
+    let span_s = times[times.len() - 1] - times[0];
+    let rate_hz = (times.len() - 1) as f64 / span_s;
+    println!(
+        "{} setpoints over {span_s:.1} s: {rate_hz:.1} Hz",
+        times.len()
+    );
+    assert!(rate_hz >= 20.0, "setpoints at {rate_hz:.1} Hz");
+    assert!(span_s > RUN_S * 0.5, "setpoints over only {span_s:.1} s");
+    for s in setpoints {
+        let f = |k: &str| s[k].as_f64().unwrap();
+        let enu = [f("y"), f("x"), -f("z")];
+        for k in 0..3 {
+            assert!(
+                (FENCE_MIN[k] - 1e-3..=FENCE_MAX[k] + 1e-3).contains(&enu[k]),
+                "setpoint {enu:?} outside the geofence"
+            );
+        }
+    }
+    let vehicle = &summary["vehicle"];
+    assert!(
+        n(&vehicle["setpoints"]) > n(&vehicle["holds"]),
+        "the vehicle only held"
+    );
+
+    // The team link shares its keyframes on zenoh as a simulated robot process does.
+    let team = camera["team"].as_object().unwrap();
+    println!("team link samples: {team:?}");
+    assert!(
+        team.iter()
+            .any(|(k, v)| k == "troupe/3/0/keyframe" && n(v) > 0),
+        "no keyframe on the team link"
+    );
+
+    // Latency: a frame's publication → the first plan committed after it → the first
+    // setpoint after that plan.
+    let events = std::fs::read_to_string(dir.join("out/events.csv")).unwrap();
+    let plans: Vec<f64> = events
+        .lines()
+        .filter_map(|l| l.strip_suffix(",plan")?.parse().ok())
+        .collect();
+    let mut latencies: Vec<f64> = camera["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| {
+            let f = f.as_f64()?;
+            let plan = plans.iter().find(|&&p| p > f)?;
+            let setpoint = times.iter().find(|&&s| s > *plan)?;
+            Some(setpoint - f)
+        })
+        .collect();
+    latencies.sort_by(f64::total_cmp);
+    if !latencies.is_empty() {
+        println!(
+            "frame → plan → setpoint latency over {} frames: median {:.0} ms, p95 {:.0} ms",
+            latencies.len(),
+            1e3 * percentile(&latencies, 0.5),
+            1e3 * percentile(&latencies, 0.95)
+        );
+    }
+    if let Some(cpu_s) = cpu_s {
+        println!(
+            "troupe-robot CPU: {cpu_s:.1} s user+sys over {robot_wall_s:.1} s wall = {:.0} % of one core",
+            100.0 * cpu_s / robot_wall_s
+        );
+    }
+}
+
+/// Fail safe: with a silent camera topic the robot exits with one line naming the
+/// topic, before it ever talks to the autopilot.
+#[test]
+fn a_silent_topic_stops_the_robot_before_any_setpoint() {
+    let mav_python = match python(".venv-pymavlink", "pymavlink") {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED silent-topic test: {e}");
+            return;
+        }
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_silent");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mavlink_port = free_port(true);
+    let config = dir.join("robot.toml");
+    let text = robot_file(free_port(false), free_port(false), mavlink_port)
+        .replace("startup_timeout_s = 15.0", "startup_timeout_s = 1.0");
+    std::fs::write(&config, text).unwrap();
+    let report = dir.join("autopilot.json");
+    let autopilot = Command::new(mav_python)
+        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
+        .args(["--report", report.to_str().unwrap(), "--duration-s", "4"])
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("start the autopilot");
+    let robot = Command::new(env!("CARGO_BIN_EXE_troupe-robot"))
+        .args(["--config", config.to_str().unwrap()])
+        .output()
+        .expect("run troupe-robot");
+    finish(autopilot, "the autopilot");
+    assert!(!robot.status.success());
+    let stderr = String::from_utf8_lossy(&robot.stderr);
+    let last = stderr.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with(
+            "troupe-robot: starting the ROS 2 drivers: ROS 2 topic `/camera/depth/image_rect_raw`"
+        ),
+        "{stderr}"
+    );
+    let autopilot: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(
+        autopilot["received_types"],
+        serde_json::json!({}),
+        "the robot talked MAVLink"
+    );
+    assert!(
+        !dir.join("out").exists(),
+        "no outputs from a robot that never started"
+    );
+}
