@@ -10,9 +10,11 @@
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
 //! - [`process`], [`launch`]: one robot per process over zenoh (`troupe robot`,
 //!   `troupe launch`); [`router`]: a zenoh router (`troupe router`); [`replay`]: a
-//!   robot process replaying a recorded sequence.
+//!   robot process replaying a recorded sequence; [`base`]: the base station that
+//!   collects the team's maps (`troupe base`).
 #![deny(missing_docs)]
 
+pub mod base;
 pub mod camera;
 pub mod coverage;
 pub mod faults;
