@@ -4,7 +4,7 @@
 //! [`LinkActor`], so every frame the robots send is reassembled, decoded, validated
 //! (team, sender) and deduplicated by the same code a robot uses, and store-and-forward
 //! keyframes are acknowledged like a peer does (a robot adds the base to its
-//! recipients when the first ack arrives and sends it its stored backlog). A [`Tap`]
+//! recipients when the first ack arrives and sends it its stored backlog). A [`Tap`](troupe_actors::runtime::Tap)
 //! on the link's publications collects every robot's keyframes (`peer/keyframe`),
 //! odometry and plans into [`BaseMaps`].
 //!

@@ -231,3 +231,14 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
     let points = ply_vertices(&out.join("merged_map.ply"));
     assert!((19_990..=20_010).contains(&points), "{points}");
 }
+
+#[test]
+fn the_example_base_file_loads() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/base.toml");
+    let station = troupe_sims::base::BaseStation::load(&file).expect("sims/robots/base.toml");
+    assert_eq!(station.base_id, station.scenario.robots);
+    assert_eq!(
+        station.config.zenoh.connect.len(),
+        station.scenario.robots as usize
+    );
+}
