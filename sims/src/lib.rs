@@ -10,8 +10,7 @@
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
 //! - [`process`], [`launch`]: one robot per process over zenoh (`troupe robot`,
 //!   `troupe launch`); [`router`]: a zenoh router (`troupe router`); [`replay`]: a
-//!   robot process replaying a recorded sequence; [`base`]: the base station that
-//!   collects the team's maps (`troupe base`).
+//!   robot process replaying a recorded sequence.
 #![deny(missing_docs)]
 
 pub mod base;
