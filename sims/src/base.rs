@@ -43,6 +43,7 @@ use troupe_actors::mapper::mapfile::{
     GmmMap, MapFileError, MapKeyframe, SurfacePoint, write_atomically, write_ply,
     write_ply_with_source,
 };
+use troupe_actors::mapper::sogmm::SogmmError;
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
 use troupe_actors::runtime::{
     ActorSpec, LINK_RX, Publication, RealtimeExecutor, RobotId, RobotSpec,
@@ -50,7 +51,7 @@ use troupe_actors::runtime::{
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 
 use crate::maps::merged_points;
-use crate::scenario::{Scenario, describe};
+use crate::scenario::{Scenario, ScenarioError, describe};
 
 /// Default points in `merged_map.ply`.
 pub const DEFAULT_PLY_POINTS: usize = 200_000;
@@ -101,11 +102,32 @@ pub enum BaseError {
     /// Unreadable or invalid base file (the message names the file and the key).
     #[error("{0}")]
     Config(String),
-    /// The base could not be started or stopped.
-    #[error("{0}")]
-    Run(String),
-    /// Writing the outputs failed.
-    #[error("writing {path}")]
+    /// The base file's scenario cannot be used.
+    #[error("the base file's scenario")]
+    Scenario(#[source] ScenarioError),
+    /// The base could not be started.
+    #[error("{context}")]
+    Start {
+        /// What was being started.
+        context: &'static str,
+        /// Why it failed.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// Sampling the merged map's points failed.
+    #[error("sampling the merged map")]
+    Sample(#[source] SogmmError),
+    /// Writing a map file failed.
+    #[error("writing {}", path.display())]
+    Map {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: MapFileError,
+    },
+    /// Writing another output failed.
+    #[error("writing {}", path.display())]
     Write {
         /// The file or directory.
         path: PathBuf,
@@ -124,8 +146,7 @@ impl BaseStation {
         let config: BaseConfig = serde_path_to_error::deserialize(de)
             .map_err(|e| config_error(format!("`{}`: {}", e.path(), describe(e.inner(), &text))))?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        let scenario = Scenario::load(&dir.join(&config.scenario))
-            .map_err(|e| BaseError::Config(e.to_string()))?;
+        let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
         let base_id = config.base_id.unwrap_or(scenario.robots);
         if base_id < scenario.robots {
             return Err(config_error(format!(
@@ -291,10 +312,7 @@ impl BaseMaps {
         };
         let map_error = |path: &Path| {
             let path = path.to_path_buf();
-            move |e: MapFileError| BaseError::Write {
-                path,
-                source: std::io::Error::other(e),
-            }
+            move |source| BaseError::Map { path, source }
         };
         let maps_dir = dir.join("maps");
         std::fs::create_dir_all(&maps_dir).map_err(write_error(&maps_dir))?;
@@ -306,10 +324,7 @@ impl BaseMaps {
             .collect();
         let maps: Vec<GmmMap> = mapped.iter().map(|(_, m)| (*m).clone()).collect();
         let (points, source) =
-            merged_points(&maps, total_points, seed).map_err(|e| BaseError::Write {
-                path: dir.join("merged_map.ply"),
-                source: std::io::Error::other(e),
-            })?;
+            merged_points(&maps, total_points, seed).map_err(BaseError::Sample)?;
         let mut written = BTreeMap::new();
         for (index, (id, map)) in mapped.iter().enumerate() {
             let path = maps_dir.join(format!("robot{id}.troupe"));
@@ -413,7 +428,10 @@ pub async fn run(
     let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
-        .map_err(|e| BaseError::Run(e.to_string()))?;
+        .map_err(|e| BaseError::Start {
+            context: "the base's robot id",
+            source: Box::new(e),
+        })?;
     let (maps_tap, status_tap) = (maps.clone(), status.clone());
     executor.add_tap(move |p: &Publication<'_>| {
         if let Some(s) = p.get(&LINK_STATUS) {
@@ -423,13 +441,20 @@ pub async fn run(
         }
     });
     let transport = Arc::new(
-        ZenohTransport::open(&station.config.zenoh, scenario.robot.link.team, vec![id])
-            .map_err(|e| BaseError::Run(format!("opening zenoh: {e}")))?,
+        ZenohTransport::open(&station.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
+            |e| BaseError::Start {
+                context: "opening zenoh",
+                source: Box::new(e),
+            },
+        )?,
     );
     let started = Instant::now();
     let handle = executor
         .spawn_with_transport(transport.clone())
-        .map_err(|e| BaseError::Run(format!("starting the transport: {e}")))?;
+        .map_err(|e| BaseError::Start {
+            context: "starting the transport",
+            source: Box::new(e),
+        })?;
     tracing::info!(base = id, "running");
     let print_status = async {
         let mut tick = tokio::time::interval(Duration::from_secs(1));
@@ -499,7 +524,7 @@ pub async fn run(
     let path = station.out.join("summary.json");
     let mut json = serde_json::to_string_pretty(&summary).map_err(|e| BaseError::Write {
         path: path.clone(),
-        source: std::io::Error::other(e),
+        source: e.into(),
     })?;
     json.push('\n');
     std::fs::write(&path, json).map_err(|source| BaseError::Write { path, source })?;
@@ -512,6 +537,9 @@ pub fn run_until_signal(station: &BaseStation) -> Result<BaseSummary, BaseError>
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| BaseError::Run(format!("starting the runtime: {e}")))?;
+        .map_err(|e| BaseError::Start {
+            context: "starting the tokio runtime",
+            source: Box::new(e),
+        })?;
     runtime.block_on(run(station, crate::process::shutdown_signal()))
 }
