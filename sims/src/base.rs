@@ -33,6 +33,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -46,7 +47,8 @@ use troupe_actors::mapper::mapfile::{
 use troupe_actors::mapper::sogmm::SogmmError;
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
 use troupe_actors::runtime::{
-    ActorSpec, LINK_RX, Publication, RealtimeExecutor, RobotId, RobotSpec,
+    Actor, ActorResult, ActorSpec, Context, ErrorChain, Event, LINK_RX, Publication,
+    RealtimeExecutor, RobotId, RobotSpec,
 };
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 
@@ -377,8 +379,9 @@ pub struct BaseSummary {
     /// The link's last counters (`rejected_messages`: frames that failed decoding or
     /// validation).
     pub link: Option<LinkStatus>,
-    /// Actor errors (each a rejected frame or message, logged).
-    pub link_errors: u64,
+    /// Frames and messages the link rejected (bad bytes, another team, a sender that
+    /// disagrees with the zenoh key), logged at the 1st, 2nd, 4th, 8th, …
+    pub rejected: u64,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
 }
@@ -402,6 +405,34 @@ pub struct BaseRobotSummary {
     pub ply_points: usize,
 }
 
+/// The base's link: what its handler rejects (each a bad frame or message from the
+/// network) is counted and logged at the 1st, 2nd, 4th, … rejection instead of once
+/// per frame, so a flood of hostile bytes cannot flood the log.
+struct CountRejections {
+    inner: Box<dyn Actor>,
+    rejected: Arc<AtomicU64>,
+}
+
+impl Actor for CountRejections {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        self.inner.start(ctx)
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if let Err(e) = self.inner.handle(event, ctx) {
+            let n = self.rejected.fetch_add(1, Ordering::Relaxed) + 1;
+            if n.is_power_of_two() {
+                tracing::warn!("base link: {n} rejected so far; latest: {}", ErrorChain(&e));
+            }
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context<'_>) {
+        self.inner.stop(ctx);
+    }
+}
+
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
 }
@@ -421,9 +452,19 @@ pub async fn run(
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u32);
     let journal = LinkJournal::starting_at(first_id);
-    let robot = RobotSpec::new("base").with(ActorSpec::new("link", move || {
-        LinkActor::new(link.clone())?.journaled(journal.clone())
-    }));
+    let rejected = Arc::new(AtomicU64::new(0));
+    let counter = rejected.clone();
+    let robot = RobotSpec::new("base").with(
+        ActorSpec::new("link", move || {
+            LinkActor::new(link.clone())?.journaled(journal.clone())
+        })
+        .wrap(move |inner| {
+            Box::new(CountRejections {
+                inner,
+                rejected: counter.clone(),
+            })
+        }),
+    );
     let maps: Arc<Mutex<BaseMaps>> = Arc::default();
     let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
@@ -489,11 +530,7 @@ pub async fn run(
     if let Err(e) = transport.close() {
         tracing::warn!(base = id, "closing zenoh: {e}");
     }
-    let link_errors = reports
-        .iter()
-        .flat_map(|r| &r.actors)
-        .map(|a| a.stats.errors)
-        .sum();
+    drop(reports);
     let maps = std::mem::take(&mut *lock(&maps));
     let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
     let summary = BaseSummary {
@@ -518,7 +555,7 @@ pub async fn run(
         merged_keyframes: maps.robots.values().map(|r| r.map.keyframes.len()).sum(),
         merged_points: written.values().sum(),
         link: lock(&status).clone(),
-        link_errors,
+        rejected: rejected.load(Ordering::Relaxed),
         zenoh,
     };
     let path = station.out.join("summary.json");

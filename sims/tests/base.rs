@@ -77,6 +77,39 @@ fn ply_vertices(path: &Path) -> usize {
     vertices
 }
 
+/// Sends `messages` frames of garbage (each a whole message that does not decode) as
+/// robot 5 of team 0 to `endpoint` through the real zenoh transport; returns how
+/// many messages went out.
+fn send_garbage(endpoint: &str, messages: u64) -> u64 {
+    use troupe_comms::shaping::{LinkShaper, ShaperConfig};
+    use troupe_comms::transport::PacketTransport as _;
+    use troupe_comms::wire::Class;
+    use troupe_comms::zenoh::{ZenohConfig, ZenohTransport};
+
+    let config = ZenohConfig {
+        connect: vec![endpoint.to_owned()],
+        ..ZenohConfig::default()
+    };
+    let transport = ZenohTransport::open(&config, 0, vec![5]).expect("zenoh");
+    std::thread::sleep(Duration::from_millis(500));
+    let mut shaper = LinkShaper::new(ShaperConfig::default()).expect("shaper");
+    let mut now_ns = 0;
+    let mut sent = 0;
+    for i in 0..messages {
+        let garbage: Vec<u8> = (0..200u64).map(|b| (b * 31 + i * 7) as u8).collect();
+        if shaper.offer(now_ns, Class::Odometry, garbage).is_ok() {
+            sent += 1;
+        }
+        now_ns += 50_000_000;
+        while let Some(frame) = shaper.poll(now_ns) {
+            transport.send(5, frame.to, &frame.bytes).expect("send");
+        }
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    transport.close().expect("close");
+    sent
+}
+
 #[test]
 fn base_help_names_its_flags() {
     let out = troupe().args(["base", "--help"]).output().expect("run");
@@ -177,6 +210,10 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
         let status = wait(robot, Duration::from_secs_f64(duration_s + 60.0), "robot");
         assert!(status.success(), "troupe robot exited with {status}");
     }
+    // A hostile participant of the session (robot 5, which does not exist) sends
+    // well-framed messages of garbage: the base's link rejects and counts them.
+    let hostile = send_garbage(&endpoints[2], 40);
+    std::thread::sleep(Duration::from_secs(2));
     // The base runs until told to stop.
     let pid = base.id().to_string();
     assert!(
@@ -211,7 +248,12 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
             .expect("json");
     assert_eq!(summary["base_id"].as_u64(), Some(2), "{summary}");
-    assert_eq!(summary["link_errors"].as_u64(), Some(0), "{summary}");
+    let rejected = summary["rejected"].as_u64().expect("rejected");
+    assert!(
+        (1..=hostile).contains(&rejected),
+        "{rejected} of {hostile}: {summary}"
+    );
+    assert_eq!(summary["robots"]["5"]["keyframes"].as_u64(), Some(0));
     let mut total = 0;
     for robot in 0..2 {
         let map = GmmMap::load(&out.join(format!("maps/robot{robot}.troupe"))).expect("map");
