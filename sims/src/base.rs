@@ -525,12 +525,12 @@ pub async fn run(
         () = until => {}
         () = print_status => {}
     }
-    let reports = handle.shutdown().await;
+    // The link's own counters come from its status (the tap), not the report.
+    let _reports = handle.shutdown().await;
     let zenoh = transport.stats();
     if let Err(e) = transport.close() {
         tracing::warn!(base = id, "closing zenoh: {e}");
     }
-    drop(reports);
     let maps = std::mem::take(&mut *lock(&maps));
     let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
     let summary = BaseSummary {
