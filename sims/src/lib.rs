@@ -27,6 +27,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod base;
 pub mod camera;
 pub mod coverage;
 pub mod faults;

@@ -59,6 +59,23 @@ enum Command {
     /// (`[zenoh] mode = "client"`, `connect = ["tcp/<this host>:7447"]`) reach each
     /// other through it instead of connecting to every other robot.
     Router(RouterArgs),
+    /// Run the base station: join the team over zenoh without flying, collect every
+    /// robot's keyframes, odometry and plans, print one status line per robot per
+    /// second, and on exit (end of `duration_s`, Ctrl-C or SIGTERM) write
+    /// `merged_map.ply`, `merged_map.troupe`, `maps/robot<i>.troupe|.ply` and
+    /// `summary.json`.
+    Base(BaseArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct BaseArgs {
+    /// The base file (TOML): `scenario`, `base_id`, `duration_s`, `out`,
+    /// `ply_points`, `[zenoh]`.
+    #[arg(long)]
+    config: PathBuf,
+    /// Override the file's `duration_s` (wall seconds).
+    #[arg(long, value_name = "SECONDS")]
+    duration_s: Option<f64>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -255,6 +272,32 @@ fn robot(args: RobotArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn base(args: BaseArgs) -> anyhow::Result<()> {
+    let mut station = troupe_sims::base::BaseStation::load(&args.config)?;
+    if let Some(d) = args.duration_s {
+        if !(d.is_finite() && d > 0.0) {
+            anyhow::bail!("--duration-s must be a finite number > 0, got {d}");
+        }
+        station.config.duration_s = Some(d);
+    }
+    println!(
+        "base station (id {}) of {}: {} robots; maps in {}",
+        station.base_id,
+        station.scenario.name,
+        station.scenario.robots,
+        station.out.display()
+    );
+    let summary = troupe_sims::base::run_until_signal(&station)?;
+    println!(
+        "base: {:.1} wall s, {} keyframes from {} robots; maps: {}",
+        summary.wall_s,
+        summary.merged_keyframes,
+        summary.robots.values().filter(|r| r.keyframes > 0).count(),
+        station.out.display()
+    );
+    Ok(())
+}
+
 fn router(args: RouterArgs) -> anyhow::Result<()> {
     let router = Router::open(&settings(args.listen.clone(), args.connect))?;
     println!(
@@ -281,6 +324,7 @@ fn main() -> ExitCode {
         Command::Launch(args) => launch(args),
         Command::Robot(args) => robot(args),
         Command::Router(args) => router(args),
+        Command::Base(args) => base(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,582 @@
+//! The base station (`troupe base --config base.toml`, thesis §8.2.6: the robots'
+//! maps go to a base station): a zenoh participant with its own robot id that flies
+//! nothing. It runs one "robot" on the real-time executor holding only the
+//! [`LinkActor`], so every frame the robots send is reassembled, decoded, validated
+//! (team, sender) and deduplicated by the same code a robot uses, and store-and-forward
+//! keyframes are acknowledged like a peer does (a robot adds the base to its
+//! recipients when the first ack arrives and sends it its stored backlog). A [`Tap`](troupe_actors::runtime::Tap)
+//! on the link's publications collects every robot's keyframes (`peer/keyframe`),
+//! odometry and plans into [`BaseMaps`].
+//!
+//! A base file:
+//!
+//! ```toml
+//! scenario = "../scenarios/default.toml"  # the team (its id, link settings, size)
+//! # base_id = 2                          # the base's id on the link; default: the
+//! #                                      # team size (must not be a robot's index)
+//! # duration_s = 600.0                   # wall seconds; absent: until Ctrl-C
+//! # out = "base"                         # relative to this file; default `base/`
+//! # ply_points = 200000                  # points sampled into merged_map.ply
+//!
+//! [zenoh]                                # troupe_comms::zenoh::ZenohConfig
+//! listen = ["tcp/0.0.0.0:7450"]
+//! connect = ["tcp/10.0.0.2:7447", "tcp/10.0.0.3:7447"]
+//! ```
+//!
+//! Every second it prints one line per robot ([`BaseMaps::status_lines`]). On exit
+//! (the duration, SIGINT or SIGTERM) it writes into `out`: `maps/robot<i>.troupe` (each
+//! robot's keyframe mixtures), `maps/robot<i>.ply`, `merged_map.troupe` (every
+//! keyframe of the team: their support-weighted union is the merged map of Eq. 3.5),
+//! `merged_map.ply` (points drawn from it, with a `source` property naming the robot)
+//! and `summary.json` ([`BaseSummary`]).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+use troupe_actors::link::{LINK_STATUS, LinkActor, LinkJournal, LinkStatus};
+use troupe_actors::mapper::MapModel;
+use troupe_actors::mapper::mapfile::{
+    GmmMap, MapFileError, MapKeyframe, SurfacePoint, write_atomically, write_ply,
+    write_ply_with_source,
+};
+use troupe_actors::mapper::sogmm::SogmmError;
+use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
+use troupe_actors::runtime::{
+    Actor, ActorResult, ActorSpec, Context, ErrorChain, Event, LINK_RX, Publication,
+    RealtimeExecutor, RobotId, RobotSpec,
+};
+use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
+
+use crate::maps::merged_points;
+use crate::scenario::{Scenario, ScenarioError, describe};
+
+/// Default points in `merged_map.ply`.
+pub const DEFAULT_PLY_POINTS: usize = 200_000;
+
+/// A base file as written (see the module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BaseConfig {
+    /// The team's scenario file, relative to the base file.
+    pub scenario: PathBuf,
+    /// The base's id on the link; default: the team size.
+    #[serde(default)]
+    pub base_id: Option<u32>,
+    /// Wall seconds to run; absent: until interrupted.
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// Output directory, relative to the base file; default `base/` next to it.
+    #[serde(default)]
+    pub out: Option<PathBuf>,
+    /// Points sampled into `merged_map.ply` (shared among the robots by support).
+    #[serde(default = "default_ply_points")]
+    pub ply_points: usize,
+    /// The zenoh session.
+    #[serde(default)]
+    pub zenoh: ZenohConfig,
+}
+
+fn default_ply_points() -> usize {
+    DEFAULT_PLY_POINTS
+}
+
+/// A base file with its paths resolved and its scenario loaded.
+#[derive(Clone, Debug)]
+pub struct BaseStation {
+    /// The file's settings.
+    pub config: BaseConfig,
+    /// The team's scenario.
+    pub scenario: Scenario,
+    /// The base's id on the link.
+    pub base_id: u32,
+    /// Where the outputs go.
+    pub out: PathBuf,
+}
+
+/// Why the base station cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum BaseError {
+    /// Unreadable or invalid base file (the message names the file and the key).
+    #[error("{0}")]
+    Config(String),
+    /// The base file's scenario cannot be used.
+    #[error("the base file's scenario")]
+    Scenario(#[source] ScenarioError),
+    /// The base could not be started.
+    #[error("{context}")]
+    Start {
+        /// What was being started.
+        context: &'static str,
+        /// Why it failed.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// Sampling the merged map's points failed.
+    #[error("sampling the merged map")]
+    Sample(#[source] SogmmError),
+    /// Writing a map file failed.
+    #[error("writing {}", path.display())]
+    Map {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: MapFileError,
+    },
+    /// Writing another output failed.
+    #[error("writing {}", path.display())]
+    Write {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl BaseStation {
+    /// Reads and checks a base file and its scenario.
+    pub fn load(path: &Path) -> Result<Self, BaseError> {
+        let config_error = |m: String| BaseError::Config(format!("{}: {m}", path.display()));
+        let text = std::fs::read_to_string(path).map_err(|e| config_error(e.to_string()))?;
+        let de = toml::Deserializer::parse(&text).map_err(|e| config_error(describe(&e, &text)))?;
+        let config: BaseConfig = serde_path_to_error::deserialize(de)
+            .map_err(|e| config_error(format!("`{}`: {}", e.path(), describe(e.inner(), &text))))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
+        let base_id = config.base_id.unwrap_or(scenario.robots);
+        if base_id < scenario.robots {
+            return Err(config_error(format!(
+                "`base_id` must not be a robot's index (below {}), got {base_id}",
+                scenario.robots
+            )));
+        }
+        if config
+            .duration_s
+            .is_some_and(|d| !(d.is_finite() && d > 0.0))
+        {
+            return Err(config_error(
+                "`duration_s` must be a finite number > 0".into(),
+            ));
+        }
+        config
+            .zenoh
+            .validate()
+            .map_err(|e| config_error(format!("`zenoh`: {e}")))?;
+        let out = dir.join(config.out.clone().unwrap_or_else(|| PathBuf::from("base")));
+        Ok(BaseStation {
+            config,
+            scenario,
+            base_id,
+            out,
+        })
+    }
+}
+
+/// What the base holds of one robot.
+#[derive(Clone, Debug)]
+pub struct RobotRecord {
+    /// The robot's keyframes, in arrival order.
+    pub map: GmmMap,
+    /// (keyframe id, stamp ns) of every keyframe kept: a repeat is not kept twice.
+    seen: BTreeSet<(u32, u64)>,
+    /// Link frames received from it.
+    pub frames: u64,
+    /// Bytes of those frames.
+    pub bytes: u64,
+    /// Odometry messages received.
+    pub odometry: u64,
+    /// When the last odometry message arrived.
+    pub last_odometry: Option<Instant>,
+    /// Committed plans received.
+    pub plans: u64,
+}
+
+impl Default for RobotRecord {
+    fn default() -> Self {
+        RobotRecord {
+            map: GmmMap {
+                model: MapModel::Sogmm,
+                keyframes: Vec::new(),
+            },
+            seen: BTreeSet::new(),
+            frames: 0,
+            bytes: 0,
+            odometry: 0,
+            last_odometry: None,
+            plans: 0,
+        }
+    }
+}
+
+/// Every robot's keyframes, odometry and plans as the base received them, by robot id.
+#[derive(Clone, Debug, Default)]
+pub struct BaseMaps {
+    /// Per robot id.
+    pub robots: BTreeMap<u32, RobotRecord>,
+}
+
+impl BaseMaps {
+    /// Keeps a robot's keyframe (already validated by the link); returns whether it
+    /// was new.
+    pub fn add_keyframe(&mut self, peer: &PeerKeyframe) -> bool {
+        let k = &peer.keyframe;
+        let record = self.robots.entry(peer.robot.0).or_default();
+        if !record.seen.insert((k.id, k.stamp.as_nanos())) {
+            return false;
+        }
+        record.map.keyframes.push(MapKeyframe {
+            stamp_s: k.stamp.as_secs_f64(),
+            pose: k.pose,
+            support: u64::from(k.support_size),
+            occupied: k.gmm.clone(),
+            free: None,
+            free_support: 0,
+        });
+        true
+    }
+
+    /// Records an observed publication of the base's link (the [`Tap`] body).
+    ///
+    /// [`Tap`]: troupe_actors::runtime::Tap
+    pub fn observe(&mut self, p: &Publication<'_>, now: Instant) {
+        if let Some(rx) = p.get(&LINK_RX) {
+            let record = self.robots.entry(rx.from.0).or_default();
+            record.frames += 1;
+            record.bytes += rx.bytes.len() as u64;
+        } else if let Some(k) = p.get(&PEER_KEYFRAME) {
+            self.add_keyframe(k);
+        } else if let Some(o) = p.get(&PEER_ODOMETRY) {
+            let record = self.robots.entry(o.robot.0).or_default();
+            record.odometry += 1;
+            record.last_odometry = Some(now);
+        } else if let Some(plan) = p.get(&PEER_PLAN) {
+            self.robots.entry(plan.robot.0).or_default().plans += 1;
+        }
+    }
+
+    /// One status line per robot (every robot of `team` first, then any other sender
+    /// heard), e.g. `robot0 keyframes=12 components=3456 bytes=812345
+    /// odometry_age_s=0.08 plans=9` (`odometry_age_s=none` before the first).
+    #[must_use]
+    pub fn status_lines(&self, team: u32, now: Instant) -> Vec<String> {
+        let ids: BTreeSet<u32> = (0..team).chain(self.robots.keys().copied()).collect();
+        let empty = RobotRecord::default();
+        ids.into_iter()
+            .map(|id| {
+                let r = self.robots.get(&id).unwrap_or(&empty);
+                let age = r.last_odometry.map_or("none".into(), |t| {
+                    format!("{:.2}", now.saturating_duration_since(t).as_secs_f64())
+                });
+                format!(
+                    "robot{id} keyframes={} components={} bytes={} odometry_age_s={age} plans={}",
+                    r.map.keyframes.len(),
+                    r.map.occupied_components(),
+                    r.bytes,
+                    r.plans
+                )
+            })
+            .collect()
+    }
+
+    /// Every robot's keyframes in one map: its surface is the support-weighted merge of
+    /// all of them (Eq. 3.5, [`GmmMap::merged_occupied`]).
+    #[must_use]
+    pub fn merged(&self) -> GmmMap {
+        GmmMap {
+            model: MapModel::Sogmm,
+            keyframes: self
+                .robots
+                .values()
+                .flat_map(|r| r.map.keyframes.iter().cloned())
+                .collect(),
+        }
+    }
+
+    /// Writes the maps into `dir` (see the module docs): `total_points` are drawn
+    /// for `merged_map.ply` in proportion to each robot's support, and each robot's
+    /// PLY holds its share. Robots without keyframes get no files. Returns the
+    /// points written per robot.
+    pub fn write(
+        &self,
+        dir: &Path,
+        total_points: usize,
+        seed: u64,
+    ) -> Result<BTreeMap<u32, usize>, BaseError> {
+        let write_error = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| BaseError::Write { path, source }
+        };
+        let map_error = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| BaseError::Map { path, source }
+        };
+        let maps_dir = dir.join("maps");
+        std::fs::create_dir_all(&maps_dir).map_err(write_error(&maps_dir))?;
+        let mapped: Vec<(u32, &GmmMap)> = self
+            .robots
+            .iter()
+            .filter(|(_, r)| !r.map.keyframes.is_empty())
+            .map(|(id, r)| (*id, &r.map))
+            .collect();
+        let maps: Vec<GmmMap> = mapped.iter().map(|(_, m)| (*m).clone()).collect();
+        let (points, source) =
+            merged_points(&maps, total_points, seed).map_err(BaseError::Sample)?;
+        let mut written = BTreeMap::new();
+        for (index, (id, map)) in mapped.iter().enumerate() {
+            let path = maps_dir.join(format!("robot{id}.troupe"));
+            map.save(&path).map_err(map_error(&path))?;
+            let own: Vec<SurfacePoint> = points
+                .iter()
+                .zip(&source)
+                .filter(|(_, s)| usize::from(**s) == index)
+                .map(|(p, _)| *p)
+                .collect();
+            let path = maps_dir.join(format!("robot{id}.ply"));
+            let mut ply = Vec::with_capacity(256 + 19 * own.len());
+            write_ply(&mut ply, &own).map_err(write_error(&path))?;
+            write_atomically(&path, &ply).map_err(map_error(&path))?;
+            written.insert(*id, own.len());
+        }
+        let path = dir.join("merged_map.troupe");
+        self.merged().save(&path).map_err(map_error(&path))?;
+        // Tag each point with the robot's id (ids above 254 share the tag 255).
+        let tags: Vec<u8> = source
+            .iter()
+            .map(|s| {
+                mapped
+                    .get(usize::from(*s))
+                    .and_then(|(id, _)| u8::try_from(*id).ok())
+                    .unwrap_or(u8::MAX)
+            })
+            .collect();
+        let path = dir.join("merged_map.ply");
+        let mut ply = Vec::with_capacity(256 + 20 * points.len());
+        write_ply_with_source(&mut ply, &points, Some(&tags)).map_err(write_error(&path))?;
+        write_atomically(&path, &ply).map_err(map_error(&path))?;
+        Ok(written)
+    }
+}
+
+/// What the base did (`summary.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct BaseSummary {
+    /// The base's id on the link.
+    pub base_id: u32,
+    /// Wall seconds it ran.
+    pub wall_s: f64,
+    /// Per robot id.
+    pub robots: BTreeMap<u32, BaseRobotSummary>,
+    /// Keyframes in the merged map.
+    pub merged_keyframes: usize,
+    /// Points in `merged_map.ply`.
+    pub merged_points: usize,
+    /// The link's last counters (`rejected_messages`: frames that failed decoding or
+    /// validation).
+    pub link: Option<LinkStatus>,
+    /// Frames and messages the link rejected (bad bytes, another team, a sender that
+    /// disagrees with the zenoh key), logged at the 1st, 2nd, 4th, 8th, …
+    pub rejected: u64,
+    /// The zenoh session's counters.
+    pub zenoh: ZenohStats,
+}
+
+/// One robot as the base saw it.
+#[derive(Clone, Debug, Serialize)]
+pub struct BaseRobotSummary {
+    /// Keyframes kept.
+    pub keyframes: usize,
+    /// Their occupied components.
+    pub components: usize,
+    /// Link frames received.
+    pub frames: u64,
+    /// Their bytes.
+    pub bytes: u64,
+    /// Odometry messages.
+    pub odometry: u64,
+    /// Committed plans.
+    pub plans: u64,
+    /// Points in `maps/robot<i>.ply`.
+    pub ply_points: usize,
+}
+
+/// The base's link: what its handler rejects (each a bad frame or message from the
+/// network) is counted and logged at the 1st, 2nd, 4th, … rejection instead of once
+/// per frame, so a flood of hostile bytes cannot flood the log.
+struct CountRejections {
+    inner: Box<dyn Actor>,
+    rejected: Arc<AtomicU64>,
+}
+
+impl Actor for CountRejections {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        self.inner.start(ctx)
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if let Err(e) = self.inner.handle(event, ctx) {
+            let n = self.rejected.fetch_add(1, Ordering::Relaxed) + 1;
+            if n.is_power_of_two() {
+                tracing::warn!("base link: {n} rejected so far; latest: {}", ErrorChain(&e));
+            }
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context<'_>) {
+        self.inner.stop(ctx);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Runs the base until its duration is over or `stop` resolves, printing the status
+/// lines every second, then writes the outputs; must be called inside a
+/// multi-threaded tokio runtime.
+pub async fn run(
+    station: &BaseStation,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<BaseSummary, BaseError> {
+    let scenario = &station.scenario;
+    let id = station.base_id;
+    let link = scenario.robot.link.clone();
+    // As a robot process: message ids start somewhere new in every run.
+    let first_id = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u32);
+    let journal = LinkJournal::starting_at(first_id);
+    let rejected = Arc::new(AtomicU64::new(0));
+    let counter = rejected.clone();
+    let robot = RobotSpec::new("base").with(
+        ActorSpec::new("link", move || {
+            LinkActor::new(link.clone())?.journaled(journal.clone())
+        })
+        .wrap(move |inner| {
+            Box::new(CountRejections {
+                inner,
+                rejected: counter.clone(),
+            })
+        }),
+    );
+    let maps: Arc<Mutex<BaseMaps>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
+        .with_robot_ids(vec![RobotId(id)])
+        .map_err(|e| BaseError::Start {
+            context: "the base's robot id",
+            source: Box::new(e),
+        })?;
+    let (maps_tap, status_tap) = (maps.clone(), status.clone());
+    executor.add_tap(move |p: &Publication<'_>| {
+        if let Some(s) = p.get(&LINK_STATUS) {
+            *lock(&status_tap) = Some(s.clone());
+        } else {
+            lock(&maps_tap).observe(p, Instant::now());
+        }
+    });
+    let transport = Arc::new(
+        ZenohTransport::open(&station.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
+            |e| BaseError::Start {
+                context: "opening zenoh",
+                source: Box::new(e),
+            },
+        )?,
+    );
+    let started = Instant::now();
+    let handle = executor
+        .spawn_with_transport(transport.clone())
+        .map_err(|e| BaseError::Start {
+            context: "starting the transport",
+            source: Box::new(e),
+        })?;
+    tracing::info!(base = id, "running");
+    let print_status = async {
+        let mut tick = tokio::time::interval(Duration::from_secs(1));
+        tick.tick().await;
+        loop {
+            tick.tick().await;
+            let lines = lock(&maps).status_lines(scenario.robots, Instant::now());
+            // A closed stdout must not stop the base: it still writes the maps.
+            let mut stdout = std::io::stdout().lock();
+            for line in lines {
+                let _ = writeln!(stdout, "{line}");
+            }
+        }
+    };
+    let until = async {
+        match station.config.duration_s {
+            Some(d) => {
+                tokio::select! {
+                    () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
+                    () = stop => {}
+                }
+            }
+            None => stop.await,
+        }
+    };
+    tokio::select! {
+        () = until => {}
+        () = print_status => {}
+    }
+    // The link's own counters come from its status (the tap), not the report.
+    let _reports = handle.shutdown().await;
+    let zenoh = transport.stats();
+    if let Err(e) = transport.close() {
+        tracing::warn!(base = id, "closing zenoh: {e}");
+    }
+    let maps = std::mem::take(&mut *lock(&maps));
+    let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
+    let summary = BaseSummary {
+        base_id: id,
+        wall_s: started.elapsed().as_secs_f64(),
+        robots: maps
+            .robots
+            .iter()
+            .map(|(robot, r)| {
+                let summary = BaseRobotSummary {
+                    keyframes: r.map.keyframes.len(),
+                    components: r.map.occupied_components(),
+                    frames: r.frames,
+                    bytes: r.bytes,
+                    odometry: r.odometry,
+                    plans: r.plans,
+                    ply_points: written.get(robot).copied().unwrap_or(0),
+                };
+                (*robot, summary)
+            })
+            .collect(),
+        merged_keyframes: maps.robots.values().map(|r| r.map.keyframes.len()).sum(),
+        merged_points: written.values().sum(),
+        link: lock(&status).clone(),
+        rejected: rejected.load(Ordering::Relaxed),
+        zenoh,
+    };
+    let path = station.out.join("summary.json");
+    let mut json = serde_json::to_string_pretty(&summary).map_err(|e| BaseError::Write {
+        path: path.clone(),
+        source: e.into(),
+    })?;
+    json.push('\n');
+    std::fs::write(&path, json).map_err(|source| BaseError::Write { path, source })?;
+    Ok(summary)
+}
+
+/// Runs the base on a new multi-threaded tokio runtime until its duration is over,
+/// Ctrl-C or SIGTERM (`troupe base`), then writes the outputs.
+pub fn run_until_signal(station: &BaseStation) -> Result<BaseSummary, BaseError> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| BaseError::Start {
+            context: "starting the tokio runtime",
+            source: Box::new(e),
+        })?;
+    runtime.block_on(run(station, crate::process::shutdown_signal()))
+}
