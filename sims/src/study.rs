@@ -938,7 +938,9 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         ];
         for (text, needle) in cases {
             let path = write(dir.path(), "bad.toml", text);
-            let message = Study::load(&path).expect_err(text).to_string();
+            let error = Study::load(&path).expect_err(text);
+            // What the CLI prints: the error and its causes.
+            let message = troupe_actors::runtime::ErrorChain(&error).to_string();
             assert!(
                 message.contains(needle),
                 "{message:?} should mention {needle}"
