@@ -1,0 +1,581 @@
+//! The link actor (module docs of [`crate::link`]).
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+use troupe_comms::shaping::{
+    DurableState, Incoming, LinkShaper, MessageId, Reassembler, ReassemblyStats, ShaperStats,
+};
+use troupe_comms::transport::TransportStats;
+use troupe_comms::wire::{self, Envelope, Payload};
+
+use crate::msgs::{
+    GRID_CHANGES, KEYFRAME, ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_ODOMETRY,
+    PEER_PLAN, PLAN, PeerGridChanges, PeerKeyframe, PeerOdometry, PeerPlan, Plan,
+};
+
+use troupe_runtime::{
+    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TRANSPORT, LINK_TX,
+    LinkTx, Message, QueuePolicy, RobotId, Time, TimerId, Topic,
+};
+
+use super::config::{KeyframeEncoding, LinkConfig};
+use super::convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
+use super::frames::{PeerFrame, transform_keyframe, transform_plan};
+/// The link's counters, published every second.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LinkStatus {
+    /// When.
+    #[serde(skip)]
+    pub stamp: Time,
+    /// Outgoing: per class offered, sent, dropped by reason, queue delay, age of information.
+    pub shaper: ShaperStats,
+    /// Incoming: frames, completed messages, duplicates, timeouts, evictions.
+    pub reassembly: ReassemblyStats,
+    /// Messages rejected after reassembly (decode errors, wrong team or sender).
+    pub rejected_messages: u64,
+    /// The process's network transport counters, when it has one (robot processes
+    /// over zenoh; `None` in simulation), as last published on `link/transport`.
+    pub transport: Option<TransportStats>,
+}
+impl Message for LinkStatus {}
+
+/// Link counters.
+pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
+
+/// The link's non-volatile storage: what it must not forget when it restarts (an
+/// actor restart after a panic, or a reboot of the whole robot). It holds the
+/// shaper's [`DurableState`] — the next message id and every store-and-forward
+/// message not yet acknowledged by all its recipients — and the envelope sequence.
+/// A [`LinkActor::journaled`] link writes it after every event it handles and
+/// resumes from it when built again, so nothing accepted into a store-and-forward
+/// class is lost and peers never see a reused message id (they would drop the
+/// message as a duplicate). The robot assembly gives each robot one, outside the
+/// actors' factories; clones share the storage.
+#[derive(Clone, Debug, Default)]
+pub struct LinkJournal(Arc<Mutex<JournalEntry>>);
+
+#[derive(Clone, Debug, Default)]
+struct JournalEntry {
+    shaper: Option<DurableState>,
+    sequence: u64,
+}
+
+impl LinkJournal {
+    /// An empty journal whose first message id is `first_id`. A robot process that
+    /// keeps no journal across its own restarts starts each run at a different id
+    /// (e.g. from the clock) so that peers who remember the previous run's ids do
+    /// not take new messages for repeats.
+    #[must_use]
+    pub fn starting_at(first_id: u32) -> Self {
+        LinkJournal(Arc::new(Mutex::new(JournalEntry {
+            shaper: Some(DurableState {
+                next_id: first_id,
+                ..DurableState::default()
+            }),
+            sequence: 0,
+        })))
+    }
+
+    fn entry(&self) -> std::sync::MutexGuard<'_, JournalEntry> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Store-and-forward messages kept (accepted, not acknowledged by every recipient).
+    #[must_use]
+    pub fn stored_messages(&self) -> usize {
+        self.entry().shaper.as_ref().map_or(0, |s| s.stored.len())
+    }
+}
+
+const SEND_ODOMETRY: TimerId = TimerId(0);
+const PUMP: TimerId = TimerId(1);
+const STATUS: TimerId = TimerId(2);
+const SEND_PLAN: TimerId = TimerId(3);
+
+/// See the [module docs](self).
+pub struct LinkActor {
+    config: LinkConfig,
+    shaper: LinkShaper,
+    reassembler: Reassembler,
+    sequence: u64,
+    latest: Option<Arc<Odometry>>,
+    sent_stamp: Option<Time>,
+    /// The latest committed plan not yet sent.
+    unsent_plan: Option<Arc<Plan>>,
+    /// When the last plan went out (for the rate limit).
+    plan_sent_at: Option<Time>,
+    plans_sent: u32,
+    /// When each store-and-forward recipient was last heard.
+    last_heard: BTreeMap<u32, Time>,
+    rejected: u64,
+    /// The latest transport counters from the executor (`link/transport`).
+    transport: Option<TransportStats>,
+    /// Whether this robot's keyframes go to peers ([`LinkActor::without_keyframes`]).
+    share_keyframes: bool,
+    /// Where the durable part of the link is kept ([`LinkJournal`]).
+    journal: LinkJournal,
+    /// The shaper's store generation last written to the journal.
+    journaled_generation: Option<u64>,
+}
+
+impl LinkActor {
+    /// A link actor; fails if the shaper or reassembly settings are invalid.
+    pub fn new(config: LinkConfig) -> Result<Self, ActorError> {
+        let shaper = LinkShaper::new(config.shaper)
+            .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
+        let reassembler = Reassembler::new(config.reassembly)
+            .map_err(|e| ActorError::msg(format!("link reassembly: {e}")))?;
+        Ok(LinkActor {
+            config,
+            shaper,
+            reassembler,
+            sequence: 0,
+            latest: None,
+            sent_stamp: None,
+            unsent_plan: None,
+            plan_sent_at: None,
+            plans_sent: 0,
+            last_heard: BTreeMap::new(),
+            rejected: 0,
+            transport: None,
+            share_keyframes: true,
+            journal: LinkJournal::default(),
+            journaled_generation: None,
+        })
+    }
+
+    /// Keeps the link's durable state in `journal` and resumes from what it holds
+    /// (see [`LinkJournal`]); fails if the stored state does not fit the settings.
+    pub fn journaled(mut self, journal: LinkJournal) -> Result<Self, ActorError> {
+        let entry = journal.entry().clone();
+        if let Some(state) = &entry.shaper {
+            self.shaper = LinkShaper::restore(self.config.shaper, state)
+                .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
+            if !state.stored.is_empty() {
+                tracing::info!(
+                    stored = state.stored.len(),
+                    next_id = state.next_id,
+                    "link resumed its store-and-forward messages from the journal"
+                );
+            }
+        }
+        self.sequence = entry.sequence;
+        self.journal = journal;
+        self.journaled_generation = None;
+        Ok(self)
+    }
+
+    /// Writes the durable state to the journal: the stored messages when they
+    /// changed (bytes are shared, not copied), the counters always.
+    fn save(&mut self) {
+        let generation = self.shaper.store_generation();
+        let mut entry = self.journal.entry();
+        match &mut entry.shaper {
+            Some(state) if self.journaled_generation == Some(generation) => {
+                state.next_id = self.shaper.next_id().0;
+            }
+            slot => {
+                *slot = Some(self.shaper.durable_state());
+                self.journaled_generation = Some(generation);
+            }
+        }
+        entry.sequence = self.sequence;
+    }
+
+    /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
+    /// sets instead, §8.2.5; change sets on `grid/changes` are always sent).
+    #[must_use]
+    pub fn without_keyframes(mut self) -> Self {
+        self.share_keyframes = false;
+        self
+    }
+
+    /// The transform from a peer's world frame into ours, if it differs.
+    fn frame_of(&self, peer: RobotId) -> Option<Isometry3<f64>> {
+        self.config
+            .peer_frames
+            .iter()
+            .find(|f| f.robot == peer.0)
+            .map(PeerFrame::transform)
+    }
+
+    /// Encodes and offers one payload to the shaper.
+    fn send(&mut self, payload: Payload, stamp: Time, ctx: &mut Context<'_>) -> ActorResult {
+        let class = payload.class();
+        let envelope = Envelope::new(
+            self.config.team,
+            ctx.robot().0,
+            self.sequence,
+            stamp.as_nanos(),
+            payload,
+        );
+        let bytes = wire::encode(&envelope)
+            .map_err(|e| ActorError::with_source("encoding a message", e))?;
+        self.sequence += 1;
+        if let Err(refused) = self.shaper.offer(ctx.now().as_nanos(), class, bytes) {
+            tracing::debug!(
+                robot = ctx.robot_name(),
+                ?class,
+                "link refused a message: {refused}"
+            );
+        }
+        self.pump(ctx);
+        Ok(())
+    }
+
+    /// Sends every frame the bucket allows now and arms the pump for the next one.
+    fn pump(&mut self, ctx: &mut Context<'_>) {
+        let now = ctx.now().as_nanos();
+        while let Some(frame) = self.shaper.poll(now) {
+            ctx.publish(
+                &LINK_TX,
+                LinkTx {
+                    to: frame
+                        .to
+                        .map_or(Destination::Broadcast, |p| Destination::Robot(RobotId(p))),
+                    bytes: Arc::from(frame.bytes),
+                },
+            );
+        }
+        match self.shaper.next_send_time(now) {
+            Some(next) => {
+                ctx.set_timer(PUMP, Duration::from_nanos(next.saturating_sub(now).max(1)))
+            }
+            None => ctx.cancel_timer(PUMP),
+        }
+    }
+
+    fn send_odometry(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let Some(odometry) = self.latest.clone() else {
+            return Ok(());
+        };
+        if self.sent_stamp == Some(odometry.stamp) {
+            return Ok(());
+        }
+        let q = odometry.pose.rotation.quaternion();
+        let payload = Payload::Odometry(wire::Odometry {
+            position_m: odometry.pose.translation.vector.into(),
+            orientation_xyzw: [q.i, q.j, q.k, q.w],
+            velocity_mps: odometry.velocity_mps.into(),
+        });
+        self.sent_stamp = Some(odometry.stamp);
+        self.send(payload, odometry.stamp, ctx)
+    }
+
+    /// Minimum time between two plans; `None` when plans are not shared.
+    fn plan_period(&self) -> Option<Duration> {
+        (self.config.plan_rate_hz > 0.0)
+            .then(|| Duration::from_secs_f64(1.0 / self.config.plan_rate_hz))
+    }
+
+    /// Sends the latest unsent plan now if the rate allows, else arms the timer
+    /// for when it will.
+    fn send_plan(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let Some(period) = self.plan_period() else {
+            self.unsent_plan = None;
+            return Ok(());
+        };
+        if self.unsent_plan.is_none() {
+            ctx.cancel_timer(SEND_PLAN);
+            return Ok(());
+        }
+        let now = ctx.now();
+        if let Some(last) = self.plan_sent_at {
+            let since = now.saturating_since(last);
+            if since < period {
+                ctx.set_timer(SEND_PLAN, period - since);
+                return Ok(());
+            }
+        }
+        ctx.cancel_timer(SEND_PLAN);
+        let Some(plan) = self.unsent_plan.take() else {
+            return Ok(());
+        };
+        let Some(wire_plan) = plan_to_wire(&plan, self.plans_sent, self.config.priority) else {
+            return Ok(()); // an empty trajectory: nothing to share
+        };
+        self.plans_sent = self.plans_sent.wrapping_add(1);
+        self.plan_sent_at = Some(now);
+        self.send(Payload::Plan(wire_plan), plan.stamp, ctx)
+    }
+
+    /// A peer proved it is a team member (a valid message or an ack): it becomes a
+    /// recipient of store-and-forward messages (with the stored backlog) and its
+    /// silence clock restarts.
+    fn heard(&mut self, peer: RobotId, ctx: &mut Context<'_>) {
+        self.last_heard.insert(peer.0, ctx.now());
+        if self.shaper.add_peer(peer.0) {
+            tracing::debug!(robot = ctx.robot_name(), %peer, "store-and-forward peer added");
+            self.pump(ctx);
+        }
+    }
+
+    /// Removes peers silent for longer than `peer_timeout_s` from the
+    /// store-and-forward recipients (what they missed is given up and counted).
+    fn expire_peers(&mut self, ctx: &mut Context<'_>) {
+        if self.config.peer_timeout_s <= 0.0 {
+            return;
+        }
+        let timeout = Duration::from_secs_f64(self.config.peer_timeout_s);
+        let now = ctx.now();
+        let silent: Vec<u32> = self
+            .last_heard
+            .iter()
+            .filter(|(_, at)| now.saturating_since(**at) > timeout)
+            .map(|(p, _)| *p)
+            .collect();
+        for peer in silent {
+            self.last_heard.remove(&peer);
+            let given_up = self.shaper.remove_peer(peer);
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                peer,
+                given_up,
+                "peer silent for more than {} s: store-and-forward gave up its backlog",
+                self.config.peer_timeout_s
+            );
+        }
+        self.pump(ctx);
+    }
+
+    fn receive_frame(&mut self, from: RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now().as_nanos();
+        let incoming = self
+            .reassembler
+            .push(now, from.0, bytes)
+            .map_err(|e| ActorError::with_source(format!("rejected a frame from {from}"), e))?;
+        match incoming {
+            None => Ok(()),
+            Some(Incoming::Message(message)) => {
+                if message.ack_requested {
+                    self.shaper.queue_ack(from.0, message.message_id);
+                    self.pump(ctx);
+                }
+                let result = self.receive_message(from, &message.bytes, ctx);
+                match result {
+                    Ok(()) => self.heard(from, ctx),
+                    Err(_) => self.rejected += 1,
+                }
+                result
+            }
+            Some(Incoming::Duplicate {
+                message_id,
+                ack_requested,
+                ..
+            }) => {
+                if ack_requested {
+                    self.shaper.queue_ack(from.0, message_id);
+                    self.pump(ctx);
+                }
+                Ok(())
+            }
+            Some(Incoming::Ack { ids, .. }) => {
+                // Acks are addressed to us; each releases our stored message for
+                // that peer only (the store keeps it until every peer has it).
+                self.heard(from, ctx);
+                for id in ids {
+                    self.shaper.acknowledge(now, from.0, MessageId(id));
+                }
+                self.pump(ctx);
+                Ok(())
+            }
+        }
+    }
+
+    fn receive_message(
+        &mut self,
+        from: RobotId,
+        bytes: &[u8],
+        ctx: &mut Context<'_>,
+    ) -> ActorResult {
+        let envelope = wire::decode(bytes)
+            .map_err(|e| ActorError::with_source(format!("rejected a message from {from}"), e))?;
+        if envelope.team != self.config.team {
+            return Err(ActorError::msg(format!(
+                "rejected a message from {from}: team {} is not ours ({})",
+                envelope.team, self.config.team
+            )));
+        }
+        if envelope.sender != from.0 {
+            return Err(ActorError::msg(format!(
+                "rejected a message from {from}: envelope names robot{} as its sender",
+                envelope.sender
+            )));
+        }
+        let frame = self.frame_of(from);
+        if let Payload::Keyframe(keyframe) = &envelope.payload {
+            let reject = |e| ActorError::with_source(format!("rejected a keyframe from {from}"), e);
+            let mut keyframe = keyframe_from_wire(keyframe, Time::from_nanos(envelope.stamp_ns))
+                .map_err(reject)?;
+            if let Some(t) = frame {
+                keyframe = transform_keyframe(&keyframe, &t).map_err(|e| {
+                    ActorError::with_source(format!("rejected a keyframe from {from}"), e)
+                })?;
+            }
+            ctx.publish(
+                &PEER_KEYFRAME,
+                PeerKeyframe {
+                    robot: from,
+                    keyframe,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        if let Payload::Plan(p) = &envelope.payload {
+            let reject = |e| ActorError::with_source(format!("rejected a plan from {from}"), e);
+            let mut plan = plan_from_wire(p, Time::from_nanos(envelope.stamp_ns))?;
+            if let Some(t) = frame {
+                plan = transform_plan(&plan, &t).map_err(reject)?;
+            }
+            ctx.publish(
+                &PEER_PLAN,
+                PeerPlan {
+                    robot: from,
+                    priority: p.priority,
+                    plan,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        if let Payload::GridChanges(set) = envelope.payload {
+            ctx.publish(
+                &PEER_GRID_CHANGES,
+                PeerGridChanges {
+                    robot: from,
+                    set,
+                    frame,
+                    received_at: ctx.now(),
+                },
+            );
+            return Ok(());
+        }
+        // Heartbeats only prove liveness.
+        if let Payload::Odometry(o) = envelope.payload {
+            let [x, y, z, w] = o.orientation_xyzw;
+            let pose = Isometry3::from_parts(
+                Translation3::from(Vector3::from(o.position_m)),
+                UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+            );
+            ctx.publish(
+                &PEER_ODOMETRY,
+                PeerOdometry {
+                    robot: from,
+                    odometry: Odometry {
+                        stamp: Time::from_nanos(envelope.stamp_ns),
+                        pose: frame.map_or(pose, |t| t * pose),
+                        velocity_mps: frame.map_or(Vector3::from(o.velocity_mps), |t| {
+                            t.rotation * Vector3::from(o.velocity_mps)
+                        }),
+                    },
+                    received_at: ctx.now(),
+                },
+            );
+        }
+        Ok(())
+    }
+}
+
+impl Actor for LinkActor {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
+        ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
+        ctx.subscribe(&LINK_TRANSPORT, QueuePolicy::LATEST);
+        if self.share_keyframes {
+            ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));
+        }
+        ctx.subscribe(&GRID_CHANGES, QueuePolicy::fifo(64));
+        ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+        let me = ctx.robot().0;
+        for &peer in self.config.peers.iter().filter(|p| **p != me) {
+            self.shaper.add_peer(peer);
+            self.last_heard.insert(peer, ctx.now());
+        }
+        if self.config.odometry_rate_hz > 0.0 {
+            ctx.set_timer(
+                SEND_ODOMETRY,
+                Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz),
+            );
+        }
+        ctx.set_timer(STATUS, Duration::from_secs(1));
+        self.save();
+        Ok(())
+    }
+
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        let result = self.handle_event(event, ctx);
+        self.save();
+        result
+    }
+}
+
+impl LinkActor {
+    fn handle_event(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Timer(SEND_ODOMETRY) => self.send_odometry(ctx),
+            Event::Timer(SEND_PLAN) => self.send_plan(ctx),
+            Event::Timer(PUMP) => {
+                self.pump(ctx);
+                Ok(())
+            }
+            Event::Timer(_) => {
+                self.expire_peers(ctx);
+                ctx.publish(
+                    &LINK_STATUS,
+                    LinkStatus {
+                        stamp: ctx.now(),
+                        shaper: *self.shaper.stats(),
+                        reassembly: *self.reassembler.stats(),
+                        rejected_messages: self.rejected,
+                        transport: self.transport,
+                    },
+                );
+                Ok(())
+            }
+            Event::Message(m) => {
+                if let Some(odometry) = m.get_arc(&ODOMETRY) {
+                    self.latest = Some(odometry);
+                    Ok(())
+                } else if let Some(stats) = m.get(&LINK_TRANSPORT) {
+                    self.transport = Some(*stats);
+                    Ok(())
+                } else if let Some(plan) = m.get_arc(&PLAN) {
+                    self.unsent_plan = Some(plan);
+                    self.send_plan(ctx)
+                } else if let Some(keyframe) = m.get(&KEYFRAME) {
+                    let mut wire = keyframe_to_wire(keyframe);
+                    if self.config.keyframe_encoding == KeyframeEncoding::Compact {
+                        match wire.mixture.compact() {
+                            Ok(compact) => wire.mixture = compact,
+                            Err(e) => tracing::debug!(
+                                robot = ctx.robot_name(),
+                                "keyframe {} goes exact: {e}",
+                                keyframe.id
+                            ),
+                        }
+                    }
+                    self.send(Payload::Keyframe(wire), keyframe.stamp, ctx)
+                } else if let Some(changes) = m.get(&GRID_CHANGES) {
+                    self.send(
+                        Payload::GridChanges(changes.set.clone()),
+                        changes.stamp,
+                        ctx,
+                    )
+                } else if let Some(rx) = m.get(&LINK_RX) {
+                    self.receive_frame(rx.from, &rx.bytes, ctx)
+                } else {
+                    Ok(())
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+#[path = "tests.rs"]
+mod tests;
