@@ -76,7 +76,7 @@ pub const LINK_RX: Topic<LinkRx> = Topic::new("link/rx");
 /// The counters of the process's network transport, published about once a second
 /// on each local robot by an executor that has one (the real-time executor with
 /// [`spawn_with_transport`](crate::RealtimeExecutor::spawn_with_transport)); the link
-/// actor adds the latest to its [`LinkStatus`](crate::link::LinkStatus).
+/// actor adds the latest to its `LinkStatus` (`troupe_actors::link`).
 pub const LINK_TRANSPORT: Topic<TransportStats> = Topic::new("link/transport");
 
 /// A deterministic network model for the sim-time executor: decides when (if ever)

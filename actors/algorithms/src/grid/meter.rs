@@ -7,8 +7,8 @@
 //! world lattice of its resolution, inserts every frame the way the grid actor does
 //! under [`UpdateRule::PerScan`](super::UpdateRule::PerScan) (the frame's returns as one
 //! scan, its no-return pixels as a second, [`frame_scans`]), and counts the cells whose
-//! value the frame changed: the change set [`OwnChanges`](super::changeset::OwnChanges)
-//! would send, costed as the thesis does at 8N + 24 bytes per set (§8.2.5). Its map has
+//! value the frame changed: the change set the grid actor's `OwnChanges`
+//! (`troupe_actors::grid::changeset`) would send, costed as the thesis does at 8N + 24 bytes per set (§8.2.5). Its map has
 //! no window, so it never forgets a cell (the grid actor's sets leave out cells outside
 //! its window); at the grid's own resolution and a window that holds the frames, the
 //! two count the same cells (tested).

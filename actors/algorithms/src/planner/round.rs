@@ -12,7 +12,7 @@ use crate::grid::GridSnapshot;
 /// A feasible, safe candidate and its reward.
 #[derive(Clone, Debug)]
 pub struct Candidate {
-    /// Index of its action in the library ([`PlanningProblem::actions`]).
+    /// Index of its action in the library ([`PlanningProblem::actions`](super::problem::PlanningProblem::actions)).
     pub action_index: usize,
     /// The primitive.
     pub primitive: Primitive,

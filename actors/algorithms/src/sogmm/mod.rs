@@ -11,7 +11,7 @@
 //! 4. [`em`]: EM with full covariances in log space via Cholesky (Eqs. A.2–A.3), with an
 //!    exact dense E-step and a restricted one that skips components whose
 //!    responsibility is provably below 1e-10 relative.
-//! 5. [`gmm`]: the model types [`Gmm4`] and [`Gmm3`], log-likelihoods, the spatial
+//! 5. [`crate::mixture`]: the model types [`Gmm4`] and [`Gmm3`], log-likelihoods, the spatial
 //!    marginal, sampling, and the intensity conditional (Eqs. 6.12–6.13).
 //!
 //! [`fit_frame`] / [`fit_points`] run the whole pipeline; a fit is deterministic for a

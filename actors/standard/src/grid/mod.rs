@@ -1,6 +1,6 @@
 //! The local grid actor and the occupancy-grid map sharing it can do.
 //!
-//! - [`GridActor`]: keeps a [`LocalGrid`](troupe_algorithms::grid::LocalGrid) centred
+//! - [`GridActor`]: keeps a [`LocalGrid`] centred
 //!   on the robot and publishes snapshots (the grid core is
 //!   [`troupe_algorithms::grid`], re-exported here).
 //! - [`changeset`]: occupancy-grid map sharing (the thesis' OG baseline, §8.2.5).

@@ -96,7 +96,7 @@ const PUMP: TimerId = TimerId(1);
 const STATUS: TimerId = TimerId(2);
 const SEND_PLAN: TimerId = TimerId(3);
 
-/// See the [module docs](self).
+/// See the [module docs](crate::link).
 pub struct LinkActor {
     config: LinkConfig,
     shaper: LinkShaper,

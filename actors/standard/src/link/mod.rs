@@ -1,14 +1,14 @@
 //! The link actor: the only actor that talks to other robots (DESIGN §5).
 //!
 //! Outgoing: the robot's odometry and keyframes are encoded in a versioned envelope
-//! (`troupe_comms::wire`) at a fixed rate and offered to a [`LinkShaper`] — token
+//! (`troupe_comms::wire`) at a fixed rate and offered to a [`LinkShaper`](troupe_comms::shaping::LinkShaper) — token
 //! bucket, strict priority classes, fragmentation to the MTU, per-class queue
-//! policies — whose frames go out on [`LINK_TX`] as the bucket allows. Incoming frames
-//! from [`LINK_RX`] are reassembled, decoded and validated; odometry is published as
-//! [`PEER_ODOMETRY`], keyframes (from the mapper's [`KEYFRAME`]) as
-//! [`PEER_KEYFRAME`], committed plans ([`PLAN`], thesis §8.2.3: at most
+//! policies — whose frames go out on [`LINK_TX`](troupe_runtime::LINK_TX) as the bucket allows. Incoming frames
+//! from [`LINK_RX`](troupe_runtime::LINK_RX) are reassembled, decoded and validated; odometry is published as
+//! [`PEER_ODOMETRY`](crate::msgs::PEER_ODOMETRY), keyframes (from the mapper's [`KEYFRAME`](crate::msgs::KEYFRAME)) as
+//! [`PEER_KEYFRAME`](crate::msgs::PEER_KEYFRAME), committed plans ([`PLAN`](crate::msgs::PLAN), thesis §8.2.3: at most
 //! [`LinkConfig::plan_rate_hz`], with [`LinkConfig::priority`], in the plan class)
-//! as [`PEER_PLAN`]. Peers' keyframes, odometry and plans are moved into this
+//! as [`PEER_PLAN`](crate::msgs::PEER_PLAN). Peers' keyframes, odometry and plans are moved into this
 //! robot's world frame with Eq. 8.1 when a [`PeerFrame`] is configured. A frame or message that does not decode, comes from another
 //! team, or whose envelope sender disagrees with the network's sender is rejected
 //! with a reason and counted (as an actor error). Every second the shaper and
