@@ -28,7 +28,8 @@ pub struct GridConfig {
     pub peer_keyframe_samples: usize,
     /// Ray-trace the robot's own depth frames directly (the occupancy-grid baseline).
     /// With the mapper on, turn this off to build the grid from GMMs only (§3.2.3);
-    /// with both, a keyframe's observations count twice.
+    /// with both, the robot's own keyframes only rebuild the boxes the moving window
+    /// uncovers (each view enters the grid once).
     pub trace_depth_frames: bool,
     /// Most keyframes kept for rebuilding novel boxes; the oldest goes first.
     pub max_stored_keyframes: usize,

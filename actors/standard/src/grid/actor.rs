@@ -86,13 +86,14 @@ impl GridActor {
         self
     }
 
-    /// Stores a keyframe's components and ray-traces them into the grid (if there is
-    /// one yet: otherwise they enter when the first pose creates it).
-    fn on_keyframe(&mut self, source: KeyframeSource, keyframe: &Keyframe) {
+    /// Stores a keyframe's components and, when `trace` is set, ray-traces them into
+    /// the grid (if there is one yet: otherwise they enter when the first pose creates
+    /// it). Stored components rebuild the novel boxes whenever the window moves.
+    fn on_keyframe(&mut self, source: KeyframeSource, keyframe: &Keyframe, trace: bool) {
         let Some(k) = self.store.insert(source, keyframe) else {
             return;
         };
-        if let Some(grid) = self.grid.as_mut() {
+        if trace && let Some(grid) = self.grid.as_mut() {
             self.store.trace_keyframe(grid, k);
         }
     }
@@ -216,10 +217,14 @@ impl Actor for GridActor {
                 if let Some(odometry) = m.get(&ODOMETRY) {
                     self.on_odometry(odometry);
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
-                    self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe);
+                    self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe, true);
                 } else if let Some(own) = m.get(&KEYFRAME) {
                     self.pair.push(own);
-                    self.on_keyframe(KeyframeSource::Own, own);
+                    // With its depth frames traced, the robot's own view is already in
+                    // the grid: its keyframe is kept for rebuilding novel boxes only, so
+                    // that each view enters the grid once.
+                    let trace = !self.config.trace_depth_frames;
+                    self.on_keyframe(KeyframeSource::Own, own, trace);
                 } else if let Some(frame) = m.get(&DEPTH_FRAME) {
                     if !self.config.trace_depth_frames {
                         return Ok(());

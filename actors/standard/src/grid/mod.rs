@@ -15,3 +15,5 @@ pub use troupe_algorithms::grid::*;
 mod hca_actor_tests;
 #[cfg(test)]
 mod meter_tests;
+#[cfg(test)]
+mod view_once_tests;
