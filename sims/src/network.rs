@@ -5,7 +5,7 @@
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use troupe_actors::runtime::{Destination, RobotId, SimNetwork, Time};
+use troupe_actors::runtime::{ConfigError, Destination, RobotId, SimNetwork, Time};
 use troupe_comms::simnet::{NetStats, SimNet, SimNetConfig};
 
 use crate::faults::LossBurst;
@@ -28,8 +28,8 @@ pub struct ScenarioNetwork {
 
 impl ScenarioNetwork {
     /// A network from its configuration; `seed` drives every random effect.
-    pub fn new(config: SimNetConfig, seed: u64, positions: Positions) -> Result<Self, String> {
-        let net = SimNet::new(config, seed).map_err(|e| e.to_string())?;
+    pub fn new(config: SimNetConfig, seed: u64, positions: Positions) -> Result<Self, ConfigError> {
+        let net = SimNet::new(config, seed)?;
         Ok(ScenarioNetwork {
             net,
             positions,

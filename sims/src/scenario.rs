@@ -211,9 +211,12 @@ impl Scenario {
                 format!("{}, got {}", e.rule, e.value),
             )
         })?;
-        self.vehicle
-            .validate()
-            .map_err(|reason| invalid("vehicle", reason))?;
+        self.vehicle.validate().map_err(|e| {
+            invalid(
+                &format!("vehicle.{}", e.key),
+                format!("{}, got {}", e.rule, e.value),
+            )
+        })?;
         self.network.validate().map_err(|e| {
             invalid(
                 &format!("network.{}", e.key),

@@ -327,13 +327,7 @@ impl Team {
             scenario.seed ^ 0x6e65_7477,
             monitor.positions(),
         )
-        .map_err(|reason| {
-            AssembleError::Config(troupe_robot::ConfigError::new(
-                "network",
-                "must be a valid network",
-                reason,
-            ))
-        })?;
+        .map_err(|e| AssembleError::Config(e.within("network")))?;
         let network_stats = network.stats();
         let network = network.with_loss_bursts(bursts);
         let mut executor = SimExecutor::new(team, scenario.seed).with_network(network);

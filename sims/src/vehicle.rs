@@ -13,6 +13,7 @@ use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::{ODOMETRY, Odometry, PLAN, Plan};
+use troupe_actors::runtime::ConfigError;
 use troupe_actors::runtime::{
     Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId,
 };
@@ -42,27 +43,18 @@ impl Default for VehicleConfig {
 
 impl VehicleConfig {
     /// Checks the numbers; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.odometry_rate_hz.is_finite() && self.odometry_rate_hz > 0.0) {
-            return Err(format!(
-                "odometry_rate_hz must be > 0, got {}",
-                self.odometry_rate_hz
-            ));
-        }
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::positive("odometry_rate_hz", self.odometry_rate_hz)?;
         if !(self.tracking_error_std_m.is_finite()
             && (0.0..=0.5).contains(&self.tracking_error_std_m))
         {
-            return Err(format!(
-                "tracking_error_std_m must be in [0, 0.5] m, got {}",
-                self.tracking_error_std_m
+            return Err(ConfigError::new(
+                "tracking_error_std_m",
+                "must be in [0, 0.5] m",
+                self.tracking_error_std_m,
             ));
         }
-        if !(self.tracking_error_tau_s.is_finite() && self.tracking_error_tau_s > 0.0) {
-            return Err(format!(
-                "tracking_error_tau_s must be > 0, got {}",
-                self.tracking_error_tau_s
-            ));
-        }
+        ConfigError::positive("tracking_error_tau_s", self.tracking_error_tau_s)?;
         Ok(())
     }
 }
