@@ -3,8 +3,9 @@
 //! its status lines every second and, stopped by SIGTERM, writes the merged map and
 //! the per-robot maps.
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read};
-use std::net::TcpListener;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -16,21 +17,9 @@ fn troupe() -> Command {
     Command::new(env!("CARGO_BIN_EXE_troupe"))
 }
 
-/// `n` consecutive free TCP ports on loopback below the ephemeral range (a port
-/// from that range could be taken by an outgoing connection before it is bound).
+/// `n` consecutive free TCP ports on loopback, in this binary's range.
 fn free_ports(n: usize) -> Vec<u16> {
-    let start = 20_000 + (std::process::id() % 3_000) as u16 * 3;
-    (0..3_000u16)
-        .map(|k| 20_000 + (start - 20_000 + k * 3) % 9_000)
-        .find_map(|base| {
-            let ports: Vec<u16> = (0..n as u16).map(|i| base + i).collect();
-            let bound: Result<Vec<TcpListener>, _> = ports
-                .iter()
-                .map(|p| TcpListener::bind(("127.0.0.1", *p)))
-                .collect();
-            bound.ok().map(|_| ports)
-        })
-        .expect("free ports below 29000")
+    common::free_ports_from(20_000, n)
 }
 
 fn wait(child: &mut Child, within: Duration, what: &str) -> std::process::ExitStatus {

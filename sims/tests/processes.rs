@@ -3,7 +3,8 @@
 //! keyframes, and the robots keep apart; the same through a `troupe router`
 //! (issue 22).
 
-use std::net::TcpListener;
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -12,22 +13,9 @@ use troupe_sims::process::{
     loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
 };
 
-/// `n` consecutive free TCP ports on loopback, below the kernel's ephemeral range
-/// (32768 and up by default): a port picked from that range could be handed to one
-/// robot's outgoing connection before the robot meant to listen on it has bound it.
+/// `n` consecutive free TCP ports on loopback, in this binary's range.
 fn free_ports(n: usize) -> Vec<u16> {
-    let start = 10_000 + (std::process::id() % 3_000) as u16 * 3;
-    (0..3_000u16)
-        .map(|k| 10_000 + (start - 10_000 + k * 3) % 9_000)
-        .find_map(|base| {
-            let ports: Vec<u16> = (0..n as u16).map(|i| base + i).collect();
-            let bound: Result<Vec<TcpListener>, _> = ports
-                .iter()
-                .map(|p| TcpListener::bind(("127.0.0.1", *p)))
-                .collect();
-            bound.ok().map(|_| ports)
-        })
-        .expect("free ports below 19000")
+    common::free_ports_from(10_000, n)
 }
 
 /// Robot files for every robot of the scenario `dir/team.toml` (`robots` of them), each

@@ -1,0 +1,28 @@
+//! Helpers shared by the integration tests that start robot processes.
+
+use std::net::TcpListener;
+
+/// `n` consecutive free TCP ports on loopback in `[first, first + 9000)`, below the
+/// kernel's ephemeral range (32768 and up by default): a port picked from that range
+/// could be handed to one robot's outgoing connection before the robot meant to
+/// listen on it has bound it. Test binaries that run at the same time use disjoint
+/// ranges.
+pub fn free_ports_from(first: u16, n: usize) -> Vec<u16> {
+    let start = first + (std::process::id() % 3_000) as u16 * 3;
+    (0..3_000u16)
+        .map(|k| first + (start - first + k * 3) % 9_000)
+        .find_map(|base| {
+            let ports: Vec<u16> = (0..n as u16).map(|i| base + i).collect();
+            let bound: Result<Vec<TcpListener>, _> = ports
+                .iter()
+                .map(|p| TcpListener::bind(("127.0.0.1", *p)))
+                .collect();
+            bound.ok().map(|_| ports)
+        })
+        .unwrap_or_else(|| {
+            panic!(
+                "no {n} free ports in [{first}, {})",
+                u32::from(first) + 9_000
+            )
+        })
+}
