@@ -51,3 +51,20 @@ impl Committed {
         Trajectory::new(knots).unwrap_or_default()
     }
 }
+
+/// Where a planning round starts (thesis §4.1.3): the committed reference's state at
+/// `now`, or, before anything is committed, at rest at the body pose.
+#[must_use]
+pub fn replanning_root(
+    committed: Option<&Committed>,
+    now: Time,
+    pose: &nalgebra::Isometry3<f64>,
+) -> FlatState {
+    committed.map_or_else(
+        || {
+            let (_, _, yaw) = pose.rotation.euler_angles();
+            FlatState::at_rest(pose.translation.vector, yaw)
+        },
+        |c| c.state_at(now),
+    )
+}

@@ -16,7 +16,7 @@ use std::time::Duration;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::committed::Committed;
+use super::committed::{Committed, replanning_root};
 use super::primitives::{FlatState, Primitive};
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
@@ -239,13 +239,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             return;
         };
         let now = ctx.now();
-        let root = match &self.committed {
-            Some(c) => c.state_at(now),
-            None => {
-                let (_, _, yaw) = odometry.pose.rotation.euler_angles();
-                FlatState::at_rest(odometry.pose.translation.vector, yaw)
-            }
-        };
+        let root = replanning_root(self.committed.as_ref(), now, &odometry.pose);
         let round = &self.config.round;
         let problem = PlanningProblem::new(round, &snapshot, &self.camera);
         let candidates = problem.children(&root);

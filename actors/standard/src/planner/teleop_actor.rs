@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::committed::Committed;
-use super::primitives::{FlatState, Primitive};
+use super::committed::{Committed, replanning_root};
+use super::primitives::Primitive;
 use super::round::RoundConfig;
 use super::teleop::{TeleopCommand, TeleopParams, closest_safe_primitive};
 use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, Plan};
@@ -76,13 +76,7 @@ impl TeleopActor {
             return;
         };
         let now = ctx.now();
-        let root = match &self.reference {
-            Some(r) => r.state_at(now),
-            None => {
-                let (_, _, yaw) = odometry.pose.rotation.euler_angles();
-                FlatState::at_rest(odometry.pose.translation.vector, yaw)
-            }
-        };
+        let root = replanning_root(self.reference.as_ref(), now, &odometry.pose);
         let timeout = Duration::from_secs_f64(self.config.params.command_timeout_s.max(0.0));
         let command = self
             .command
