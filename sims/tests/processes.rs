@@ -88,6 +88,19 @@ fn messages(summary: &serde_json::Value, topic: &str) -> u64 {
     summary["topics"][topic]["messages"].as_u64().unwrap_or(0)
 }
 
+/// Robot `i` of a three-robot team heard its two peers: their odometry at 10 Hz
+/// (allowing for start-up and a busy machine) and at least two keyframes.
+fn assert_heard_peers(i: usize, summary: &serde_json::Value) {
+    assert!(
+        messages(summary, "peer/odometry") > 100,
+        "robot{i}: {summary}"
+    );
+    assert!(
+        messages(summary, "peer/keyframe") >= 2,
+        "robot{i}: {summary}"
+    );
+}
+
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -102,15 +115,7 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
-        // Two peers at 10 Hz; allow for start-up and a busy machine.
-        assert!(
-            messages(&summary, "peer/odometry") > 100,
-            "robot{i}: {summary}"
-        );
-        assert!(
-            messages(&summary, "peer/keyframe") >= 2,
-            "robot{i}: {summary}"
-        );
+        assert_heard_peers(i, &summary);
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
         assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
@@ -275,14 +280,7 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     wait_all(&mut children, duration_s);
     let mut trajectories = Vec::new();
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
-        assert!(
-            messages(&summary, "peer/odometry") > 100,
-            "robot{i}: {summary}"
-        );
-        assert!(
-            messages(&summary, "peer/keyframe") >= 2,
-            "robot{i}: {summary}"
-        );
+        assert_heard_peers(i, &summary);
         trajectories.push(trajectory);
     }
     let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
@@ -418,14 +416,7 @@ fn three_robot_clients_talk_through_a_troupe_router() {
     let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
     wait_all(&mut children, duration_s);
     for (i, (summary, _)) in outputs(dir.path(), 3).into_iter().enumerate() {
-        assert!(
-            messages(&summary, "peer/odometry") > 100,
-            "robot{i}: {summary}"
-        );
-        assert!(
-            messages(&summary, "peer/keyframe") >= 2,
-            "robot{i}: {summary}"
-        );
+        assert_heard_peers(i, &summary);
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
     }
