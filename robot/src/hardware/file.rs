@@ -7,7 +7,7 @@ use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::ZenohConfig;
 
-use crate::mavlink::{MavlinkConfig, MavlinkConfigError};
+use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
 use crate::{AssembleError, ConfigError, RobotConfig};
 
@@ -73,31 +73,14 @@ pub enum HardwareError {
         /// Where and what (key, line, column).
         message: String,
     },
-    /// A value of the robot file is out of range.
-    #[error("{}: `{key}` {reason}", path.display())]
-    Invalid {
+    /// A value of the robot file breaks a rule; the source names the dotted key
+    /// (`id`, `camera`, `robot.speed_mps`, `mavlink.setpoint_rate_hz`, `ros2.topics.depth`).
+    #[error("{}: invalid setting", path.display())]
+    Config {
         /// The file.
         path: PathBuf,
-        /// The key.
-        key: String,
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// The `[robot]` table is invalid.
-    #[error("{}: invalid `[robot]` table", path.display())]
-    Robot {
-        /// The file.
-        path: PathBuf,
-        /// The bad key.
+        /// The key, the rule and the value.
         source: ConfigError,
-    },
-    /// The `[mavlink]` table is invalid.
-    #[error("{}: invalid `[mavlink]` table", path.display())]
-    Mavlink {
-        /// The file.
-        path: PathBuf,
-        /// The bad key.
-        source: MavlinkConfigError,
     },
     /// A zenoh table is invalid, or the team link's session did not open.
     #[error("{context}")]
@@ -185,27 +168,19 @@ impl HardwareRobot {
 impl HardwareFile {
     /// Checks every table; errors name the file and the key.
     pub fn validate(&self, path: &Path) -> Result<(), HardwareError> {
-        let invalid = |key: &str, reason: String| HardwareError::Invalid {
+        let config = |source: ConfigError| HardwareError::Config {
             path: path.to_path_buf(),
-            key: key.into(),
-            reason,
+            source,
         };
         if self.id >= self.team_size {
-            return Err(invalid(
+            return Err(config(ConfigError::new(
                 "id",
-                format!(
-                    "must be below `team_size` ({}), got {}",
-                    self.team_size, self.id
-                ),
-            ));
+                format!("must be below `team_size` ({})", self.team_size),
+                self.id,
+            )));
         }
-        if let Some(d) = self.duration_s
-            && !(d.is_finite() && d > 0.0)
-        {
-            return Err(invalid(
-                "duration_s",
-                format!("must be a finite number > 0, got {d}"),
-            ));
+        if let Some(d) = self.duration_s {
+            ConfigError::positive("duration_s", d).map_err(config)?;
         }
         if let Some(c) = &self.camera {
             let positive = [c.fx, c.fy, c.max_depth_m]
@@ -213,31 +188,27 @@ impl HardwareFile {
                 .all(|v| v.is_finite() && *v > 0.0);
             let centre = c.cx.is_finite() && c.cy.is_finite();
             if !(positive && centre && c.width > 0 && c.height > 0) {
-                return Err(invalid(
+                return Err(config(ConfigError::new(
                     "camera",
-                    "needs width, height > 0 and finite fx, fy, max_depth_m > 0, cx, cy".into(),
-                ));
+                    "needs width, height > 0 and finite fx, fy, max_depth_m > 0, cx, cy",
+                    format!("{c:?}"),
+                )));
             }
         }
         self.robot
             .validate()
-            .map_err(|source| HardwareError::Robot {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        self.ros2.validate().map_err(Ros2Error::from)?;
+            .map_err(|e| config(e.within("robot")))?;
+        self.ros2.validate().map_err(|e| config(e.within("ros2")))?;
         self.mavlink
             .validate()
-            .map_err(|source| HardwareError::Mavlink {
-                path: path.to_path_buf(),
+            .map_err(|e| config(e.within("mavlink")))?;
+        for (table, zenoh) in [("zenoh", &self.zenoh), ("ros2.zenoh", &self.ros2.zenoh)] {
+            zenoh.validate().map_err(|source| HardwareError::Zenoh {
+                context: format!("{}: invalid `[{table}]` table", path.display()),
                 source,
             })?;
-        self.zenoh
-            .validate()
-            .map_err(|source| HardwareError::Zenoh {
-                context: format!("{}: invalid `[zenoh]` table", path.display()),
-                source,
-            })
+        }
+        Ok(())
     }
 }
 
@@ -350,7 +321,7 @@ mod tests {
         let cases = [
             (
                 text.replace("team_size = 3", "team_size = 0"),
-                "hw.toml: `id` must be below",
+                "hw.toml: invalid setting: `id` must be below",
             ),
             (
                 text.replacen("id = 0", "id = 0\nspeed = 1", 1),
@@ -358,11 +329,11 @@ mod tests {
             ),
             (
                 text.replace("setpoint_rate_hz = 30.0", "setpoint_rate_hz = 5.0"),
-                "invalid `[mavlink]` table: mavlink.setpoint_rate_hz",
+                "invalid setting: `mavlink.setpoint_rate_hz` must be in [20, 200] Hz, got 5",
             ),
             (
                 text.replace("sensor_rate_hz = 15.0", "sensor_rate_hz = -1.0"),
-                "invalid `[robot]` table: `sensor_rate_hz`",
+                "invalid setting: `robot.sensor_rate_hz`",
             ),
             (text.replace("fx = ", "fx = -"), "`camera` needs"),
             (

@@ -163,9 +163,9 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
     inputs.wait_for_topics()?;
     let camera = camera_intrinsics(robot, &inputs)?;
     let publisher = Ros2Publisher::open(&ros_session, &file.ros2)?;
-    let vehicle = mavlink_vehicle(&file.mavlink).map_err(|source| HardwareError::Mavlink {
+    let vehicle = mavlink_vehicle(&file.mavlink).map_err(|e| HardwareError::Config {
         path: robot.path.clone(),
-        source,
+        source: e.within("mavlink"),
     })?;
     // Nothing of the link outlives the process: start its message ids somewhere new,
     // as a simulated robot process does, so peers do not drop them as repeats.

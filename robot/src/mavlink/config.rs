@@ -4,6 +4,7 @@ use mavlink::ConnectionAddress;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+use crate::ConfigError;
 use crate::safety::Geofence;
 
 /// Where the robot's odometry comes from.
@@ -88,18 +89,6 @@ fn default_odometry_timeout_s() -> f64 {
     0.5
 }
 
-/// A `[mavlink]` value that is not acceptable; names the key, the rule and the value.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("mavlink.{key} {rule}, got {value}")]
-pub struct MavlinkConfigError {
-    /// Key inside the `[mavlink]` section.
-    pub key: &'static str,
-    /// What it must be.
-    pub rule: &'static str,
-    /// What it was.
-    pub value: String,
-}
-
 /// A checked [`MavlinkConfig`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct MavlinkSettings {
@@ -138,25 +127,21 @@ fn in_range(
     lo: f64,
     hi: f64,
     rule: &'static str,
-) -> Result<(), MavlinkConfigError> {
+) -> Result<(), ConfigError> {
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
-        Err(MavlinkConfigError {
-            key,
-            rule,
-            value: value.to_string(),
-        })
+        Err(ConfigError::new(key, rule, value))
     }
 }
 
-fn nonzero_id(key: &'static str, id: Option<u8>) -> Result<(), MavlinkConfigError> {
+fn nonzero_id(key: &'static str, id: Option<u8>) -> Result<(), ConfigError> {
     if id == Some(0) {
-        Err(MavlinkConfigError {
+        Err(ConfigError::new(
             key,
-            rule: "must be 1..=255 (0 is the broadcast id)",
-            value: "0".into(),
-        })
+            "must be 1..=255 (0 is the broadcast id)",
+            0,
+        ))
     } else {
         Ok(())
     }
@@ -182,12 +167,14 @@ impl MavlinkConfig {
     }
 
     /// Checks every value; the error names the key.
-    pub fn validate(&self) -> Result<MavlinkSettings, MavlinkConfigError> {
-        let bad_connection = || MavlinkConfigError {
-            key: "connection",
-            rule: "must be udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, \
+    pub fn validate(&self) -> Result<MavlinkSettings, ConfigError> {
+        let bad_connection = || {
+            ConfigError::new(
+                "connection",
+                "must be udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, \
                    tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD",
-            value: format!("{:?}", self.connection),
+                format!("{:?}", self.connection),
+            )
         };
         let address =
             ConnectionAddress::parse_address(&self.connection).map_err(|_| bad_connection())?;
@@ -201,11 +188,11 @@ impl MavlinkConfig {
             }
         }
         if self.connection.starts_with("file:") {
-            return Err(MavlinkConfigError {
-                key: "connection",
-                rule: "must be a live link (udp, tcp or serial), not a file",
-                value: format!("{:?}", self.connection),
-            });
+            return Err(ConfigError::new(
+                "connection",
+                "must be a live link (udp, tcp or serial), not a file",
+                format!("{:?}", self.connection),
+            ));
         }
         nonzero_id("source_system_id", Some(self.source_system_id))?;
         nonzero_id("target_system_id", self.target_system_id)?;
@@ -241,13 +228,15 @@ impl MavlinkConfig {
             Point3::from(self.geofence.min_m),
             Point3::from(self.geofence.max_m),
         )
-        .map_err(|_| MavlinkConfigError {
-            key: "geofence",
-            rule: "must have finite corners with min_m below max_m on every axis",
-            value: format!(
-                "min_m = {:?}, max_m = {:?}",
-                self.geofence.min_m, self.geofence.max_m
-            ),
+        .map_err(|_| {
+            ConfigError::new(
+                "geofence",
+                "must have finite corners with min_m below max_m on every axis",
+                format!(
+                    "min_m = {:?}, max_m = {:?}",
+                    self.geofence.min_m, self.geofence.max_m
+                ),
+            )
         })?;
         Ok(MavlinkSettings {
             connection: self.connection.clone(),
@@ -337,7 +326,7 @@ mod tests {
         let e = check(&|c| c.setpoint_rate_hz = 10.0);
         assert_eq!(
             e.to_string(),
-            "mavlink.setpoint_rate_hz must be in [20, 200] Hz, got 10"
+            "`setpoint_rate_hz` must be in [20, 200] Hz, got 10"
         );
         let e = check(&|c| c.sensor_timeout_s = f64::NAN);
         assert_eq!(e.key, "sensor_timeout_s");

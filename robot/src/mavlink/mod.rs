@@ -28,8 +28,8 @@ mod status;
 mod vehicle;
 
 pub use config::{
-    GeofenceConfig, MAX_SETPOINT_RATE_HZ, MIN_SETPOINT_RATE_HZ, MavlinkConfig, MavlinkConfigError,
-    MavlinkSettings, OdometrySource,
+    GeofenceConfig, MAX_SETPOINT_RATE_HZ, MIN_SETPOINT_RATE_HZ, MavlinkConfig, MavlinkSettings,
+    OdometrySource,
 };
 pub use link::{
     INBOUND_CAPACITY, Inbound, LinkStats, MavlinkLink, OUTBOUND_CAPACITY, Outbound,

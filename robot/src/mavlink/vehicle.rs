@@ -13,10 +13,11 @@ use troupe_actors::runtime::{
     Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, Time, TimerId,
 };
 
-use super::config::{MavlinkConfig, MavlinkConfigError, MavlinkSettings, OdometrySource};
+use super::config::{MavlinkConfig, MavlinkSettings, OdometrySource};
 use super::link::{INBOUND_CAPACITY, Inbound, MavlinkLink, Outbound};
 use super::setpoint::{Target, position_target};
 use super::status::{AUTOPILOT_STATUS, AutopilotStatus, flight_mode, is_armed};
+use crate::ConfigError;
 use crate::frames::{ned_frd_from_euler, ned_frd_to_enu_flu, ned_to_enu};
 use crate::safety::{GuardConfig, GuardInput, SetpointGuard, WatchdogChange};
 
@@ -28,7 +29,7 @@ const STATUS_PERIOD_S: f64 = 0.5;
 
 /// Builds the vehicle for [`RobotParts::vehicle`](crate::RobotParts::vehicle) from a
 /// `[mavlink]` section; a bad value is an error naming its key.
-pub fn mavlink_vehicle(config: &MavlinkConfig) -> Result<ActorSpec, MavlinkConfigError> {
+pub fn mavlink_vehicle(config: &MavlinkConfig) -> Result<ActorSpec, ConfigError> {
     let settings = config.validate()?;
     Ok(ActorSpec::new("vehicle", move || {
         MavlinkVehicle::new(settings.clone())

@@ -5,28 +5,9 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_comms::zenoh::ZenohConfig;
 
+use crate::ConfigError;
+
 use super::keyexpr::{KeyFormat, WireFormat, strip_topic};
-
-/// A setting of the `[ros2]` table that cannot be used.
-#[derive(Debug, thiserror::Error)]
-#[error("ros2.{key}: {reason}")]
-pub struct Ros2ConfigError {
-    /// The key, below `ros2.`.
-    pub key: String,
-    /// What is wrong with it.
-    pub reason: String,
-    /// The underlying error (a zenoh setting).
-    #[source]
-    pub source: Option<troupe_comms::transport::TransportError>,
-}
-
-pub(super) fn invalid(key: &str, reason: impl Into<String>) -> Ros2ConfigError {
-    Ros2ConfigError {
-        key: key.to_owned(),
-        reason: reason.into(),
-        source: None,
-    }
-}
 
 /// ROS topic names (absolute, e.g. `/camera/depth/image_rect_raw`). Depth comes
 /// either from `depth` + `camera_info` (+ optional `intensity`) or from `points`.
@@ -185,17 +166,6 @@ fn default_node_name() -> String {
     "troupe".into()
 }
 
-fn positive(key: &str, value: f64) -> Result<(), Ros2ConfigError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(
-            key,
-            format!("must be a positive number, got {value}"),
-        ))
-    }
-}
-
 impl Ros2Config {
     /// The key format of these settings.
     #[must_use]
@@ -206,8 +176,9 @@ impl Ros2Config {
         }
     }
 
-    /// Checks every setting; the error names the key.
-    pub fn validate(&self) -> Result<(), Ros2ConfigError> {
+    /// Checks every setting except the zenoh table (its own `validate`); the error
+    /// names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         let t = &self.topics;
         let named = [
             ("topics.depth", &t.depth),
@@ -223,21 +194,24 @@ impl Ros2Config {
             .filter_map(|(k, v)| v.as_deref().map(|v| (*k, v)))
             .chain([("topics.odometry", t.odometry.as_str())])
         {
-            strip_topic(topic).map_err(|e| invalid(key, e.to_string()))?;
+            strip_topic(topic)
+                .map_err(|e| ConfigError::new(key, e.to_string(), format!("{topic:?}")))?;
         }
         match (&t.depth, &t.camera_info, &t.points) {
             (Some(_), Some(_), None) => {}
             (None, None, Some(_)) => {
                 if t.intensity.is_some() {
-                    return Err(invalid(
+                    return Err(ConfigError::new(
                         "topics.intensity",
                         "goes with `depth`; a point cloud carries its own intensity field",
+                        format!("{:?}", t.intensity),
                     ));
                 }
                 let Some(k) = self.points_intrinsics else {
-                    return Err(invalid(
+                    return Err(ConfigError::new(
                         "points_intrinsics",
                         "is required with `topics.points` (the image to project into)",
+                        "nothing",
                     ));
                 };
                 let ok = k.width > 0
@@ -246,19 +220,25 @@ impl Ros2Config {
                     && k.cx.is_finite()
                     && k.cy.is_finite();
                 if !ok {
-                    return Err(invalid(
+                    return Err(ConfigError::new(
                         "points_intrinsics",
                         "needs a non-empty image and finite, positive focal lengths",
+                        format!("{k:?}"),
                     ));
                 }
             }
             (Some(_), None, _) => {
-                return Err(invalid("topics.camera_info", "is required with `depth`"));
+                return Err(ConfigError::new(
+                    "topics.camera_info",
+                    "is required with `depth`",
+                    "nothing",
+                ));
             }
             _ => {
-                return Err(invalid(
+                return Err(ConfigError::new(
                     "topics",
-                    "set either `depth` and `camera_info`, or `points`",
+                    "must set either `depth` and `camera_info`, or `points`",
+                    format!("{t:?}"),
                 ));
             }
         }
@@ -271,36 +251,46 @@ impl Ros2Config {
             ),
         ] {
             if list.is_empty() {
-                return Err(invalid(key, "must list at least one encoding"));
+                return Err(ConfigError::new(
+                    key,
+                    "must list at least one encoding",
+                    "[]",
+                ));
             }
             if let Some(bad) = list.iter().find(|e| !known.contains(&e.as_str())) {
-                return Err(invalid(
+                return Err(ConfigError::new(
                     key,
-                    format!("`{bad}` is not supported (supported: {})", known.join(", ")),
+                    format!("must list supported encodings ({})", known.join(", ")),
+                    format!("{bad:?}"),
                 ));
             }
         }
         if self.extrinsics.isometry().is_none() {
-            return Err(invalid(
+            return Err(ConfigError::new(
                 "extrinsics",
                 "needs a finite translation and a non-zero quaternion",
+                format!("{:?}", self.extrinsics),
             ));
         }
-        positive("max_depth_m", self.max_depth_m)?;
-        positive("startup_timeout_s", self.startup_timeout_s)?;
-        positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
-        positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
-        positive("status_period_s", self.status_period_s)?;
+        ConfigError::positive("max_depth_m", self.max_depth_m)?;
+        ConfigError::positive("startup_timeout_s", self.startup_timeout_s)?;
+        ConfigError::positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
+        ConfigError::positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
+        ConfigError::positive("status_period_s", self.status_period_s)?;
         for (key, n) in [
             ("odometry_history", self.odometry_history),
             ("send_queue", self.send_queue),
         ] {
             if n == 0 {
-                return Err(invalid(key, "must be at least 1"));
+                return Err(ConfigError::new(key, "must be at least 1", n));
             }
         }
         if self.world_frame_id.is_empty() {
-            return Err(invalid("world_frame_id", "must not be empty"));
+            return Err(ConfigError::new(
+                "world_frame_id",
+                "must not be empty",
+                "\"\"",
+            ));
         }
         if self.node_name.is_empty()
             || !self
@@ -308,16 +298,13 @@ impl Ros2Config {
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || c == '_')
         {
-            return Err(invalid(
+            return Err(ConfigError::new(
                 "node_name",
-                format!("`{}` is not a ROS node name", self.node_name),
+                "must be a ROS node name (ASCII letters, digits, `_`)",
+                format!("{:?}", self.node_name),
             ));
         }
-        self.zenoh.validate().map_err(|e| Ros2ConfigError {
-            key: "zenoh".into(),
-            reason: "invalid zenoh settings".into(),
-            source: Some(e),
-        })
+        Ok(())
     }
 }
 
@@ -363,25 +350,34 @@ mod tests {
 
     #[test]
     fn invalid_values_name_their_key() {
-        let cases: [(&str, &str); 9] = [
-            ("max_depth_m = nan", "ros2.max_depth_m"),
-            ("odometry_tolerance_s = -1.0", "ros2.odometry_tolerance_s"),
-            ("depth_encodings = [\"bgr8\"]", "ros2.depth_encodings"),
-            ("intensity_encodings = []", "ros2.intensity_encodings"),
-            ("send_queue = 0", "ros2.send_queue"),
-            ("node_name = \"a b\"", "ros2.node_name"),
+        let cases: [(&str, &str); 8] = [
+            ("max_depth_m = nan", "max_depth_m"),
+            ("odometry_tolerance_s = -1.0", "odometry_tolerance_s"),
+            ("depth_encodings = [\"bgr8\"]", "depth_encodings"),
+            ("intensity_encodings = []", "intensity_encodings"),
+            ("send_queue = 0", "send_queue"),
+            ("node_name = \"a b\"", "node_name"),
             (
                 "extrinsics = { rotation_xyzw = [0.0, 0.0, 0.0, 0.0] }",
-                "ros2.extrinsics",
+                "extrinsics",
             ),
-            ("zenoh = { listen = [\"carrier-pigeon\"] }", "ros2.zenoh"),
-            ("world_frame_id = \"\"", "ros2.world_frame_id"),
+            ("world_frame_id = \"\"", "world_frame_id"),
         ];
         for (line, key) in cases {
             let text = MINIMAL.replacen("[topics]", &format!("{line}\n[topics]"), 1);
             let err = parse(&text).unwrap().validate().unwrap_err();
-            assert!(err.to_string().starts_with(key), "{line}: {err}");
+            assert_eq!(err.key, key, "{line}: {err}");
+            assert!(
+                err.to_string().starts_with(&format!("`{key}`")),
+                "{line}: {err}"
+            );
         }
+        let text = MINIMAL.replacen(
+            "[topics]",
+            "zenoh = { listen = [\"carrier-pigeon\"] }\n[topics]",
+            1,
+        );
+        assert!(parse(&text).unwrap().zenoh.validate().is_err());
     }
 
     #[test]

@@ -446,10 +446,13 @@ impl Ros2Inputs {
 impl Shared {
     fn new(config: &Ros2Config) -> Result<Self, Ros2Error> {
         config.validate()?;
-        let optical_in_body = config
-            .extrinsics
-            .isometry()
-            .ok_or_else(|| Ros2Error::Config(super::config::invalid("extrinsics", "unusable")))?;
+        let optical_in_body = config.extrinsics.isometry().ok_or_else(|| {
+            crate::ConfigError::new(
+                "extrinsics",
+                "needs a finite translation and a non-zero quaternion",
+                format!("{:?}", config.extrinsics),
+            )
+        })?;
         Ok(Shared {
             config: config.clone(),
             optical_in_body,

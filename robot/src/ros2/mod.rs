@@ -17,6 +17,10 @@
 //!
 //! See `docs/hardware-ros2.md` for a robot file.
 
+use troupe_comms::transport::TransportError;
+
+use crate::ConfigError;
+
 pub mod attachment;
 pub mod cdr;
 mod config;
@@ -28,7 +32,7 @@ mod outputs;
 
 pub use attachment::Attachment;
 pub use cdr::{CdrError, RosMessage};
-pub use config::{Extrinsics, Ros2Config, Ros2ConfigError, Ros2Topics};
+pub use config::{Extrinsics, Ros2Config, Ros2Topics};
 pub use inputs::{InputStats, OdometryInput, Ros2FrameSource, Ros2Inputs};
 pub use keyexpr::{KeyFormat, TopicNameError, WireFormat};
 pub use outputs::{OutputStats, Ros2Outputs, Ros2Publisher};
@@ -36,9 +40,12 @@ pub use outputs::{OutputStats, Ros2Outputs, Ros2Publisher};
 /// Why the ROS 2 drivers could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum Ros2Error {
-    /// The `[ros2]` table is invalid.
-    #[error(transparent)]
-    Config(#[from] Ros2ConfigError),
+    /// A value of the `[ros2]` table breaks a rule (the key is relative to the table).
+    #[error("invalid `[ros2]` table")]
+    Config(#[from] ConfigError),
+    /// The `[ros2.zenoh]` table is invalid.
+    #[error("invalid `[ros2.zenoh]` table")]
+    ZenohSettings(#[source] TransportError),
     /// A topic name cannot be put on zenoh.
     #[error(transparent)]
     TopicName(#[from] TopicNameError),
@@ -72,11 +79,7 @@ pub enum Ros2Error {
 /// Opens the zenoh session of the `[ros2]` table (its `zenoh` endpoints).
 pub fn open_session(config: &Ros2Config) -> Result<zenoh::Session, Ros2Error> {
     config.validate()?;
-    let zenoh_config = config.zenoh.to_zenoh().map_err(|e| Ros2ConfigError {
-        key: "zenoh".into(),
-        reason: "invalid zenoh settings".into(),
-        source: Some(e),
-    })?;
+    let zenoh_config = config.zenoh.to_zenoh().map_err(Ros2Error::ZenohSettings)?;
     zenoh::Wait::wait(zenoh::open(zenoh_config)).map_err(|source| Ros2Error::Zenoh {
         context: "opening the session".into(),
         source,
