@@ -33,6 +33,7 @@ pub mod hardware;
 pub mod mavlink;
 pub mod ros2;
 pub mod safety;
+pub mod toml_file;
 
 use nalgebra::Point3;
 use troupe_actors::collision::CollisionActor;

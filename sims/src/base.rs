@@ -47,13 +47,15 @@ use troupe_actors::mapper::mapfile::{
 use troupe_actors::mapper::sogmm::SogmmError;
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
 use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, ErrorChain, Event, LINK_RX, Publication,
+    Actor, ActorResult, ActorSpec, ConfigError, Context, ErrorChain, Event, LINK_RX, Publication,
     RealtimeExecutor, RobotId, RobotSpec,
 };
+use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
+use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use crate::maps::merged_points;
-use crate::scenario::{Scenario, ScenarioError, describe};
+use crate::scenario::{Scenario, ScenarioError};
 
 /// Default points in `merged_map.ply`.
 pub const DEFAULT_PLY_POINTS: usize = 200_000;
@@ -101,9 +103,25 @@ pub struct BaseStation {
 /// Why the base station cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum BaseError {
-    /// Unreadable or invalid base file (the message names the file and the key).
-    #[error("{0}")]
-    Config(String),
+    /// The base file cannot be read or does not have the expected shape.
+    #[error(transparent)]
+    File(#[from] TomlFileError),
+    /// A value of the base file breaks a rule.
+    #[error("{}: invalid setting", path.display())]
+    Config {
+        /// The base file.
+        path: PathBuf,
+        /// The key, the rule and the value.
+        source: ConfigError,
+    },
+    /// The `[zenoh]` table is invalid.
+    #[error("{}: invalid `[zenoh]` table", path.display())]
+    ZenohSettings {
+        /// The base file.
+        path: PathBuf,
+        /// The transport's error.
+        source: TransportError,
+    },
     /// The base file's scenario cannot be used.
     #[error("the base file's scenario")]
     Scenario(#[source] ScenarioError),
@@ -142,32 +160,34 @@ pub enum BaseError {
 impl BaseStation {
     /// Reads and checks a base file and its scenario.
     pub fn load(path: &Path) -> Result<Self, BaseError> {
-        let config_error = |m: String| BaseError::Config(format!("{}: {m}", path.display()));
-        let text = std::fs::read_to_string(path).map_err(|e| config_error(e.to_string()))?;
-        let de = toml::Deserializer::parse(&text).map_err(|e| config_error(describe(&e, &text)))?;
-        let config: BaseConfig = serde_path_to_error::deserialize(de)
-            .map_err(|e| config_error(format!("`{}`: {}", e.path(), describe(e.inner(), &text))))?;
+        let config: BaseConfig = read_toml(path)?;
+        let invalid = |source: ConfigError| BaseError::Config {
+            path: path.to_path_buf(),
+            source,
+        };
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
         let base_id = config.base_id.unwrap_or(scenario.robots);
         if base_id < scenario.robots {
-            return Err(config_error(format!(
-                "`base_id` must not be a robot's index (below {}), got {base_id}",
-                scenario.robots
+            return Err(invalid(ConfigError::new(
+                "base_id",
+                format!(
+                    "must not be a robot's index (must be at least {})",
+                    scenario.robots
+                ),
+                base_id,
             )));
         }
-        if config
-            .duration_s
-            .is_some_and(|d| !(d.is_finite() && d > 0.0))
-        {
-            return Err(config_error(
-                "`duration_s` must be a finite number > 0".into(),
-            ));
+        if let Some(d) = config.duration_s {
+            ConfigError::positive("duration_s", d).map_err(invalid)?;
         }
         config
             .zenoh
             .validate()
-            .map_err(|e| config_error(format!("`zenoh`: {e}")))?;
+            .map_err(|source| BaseError::ZenohSettings {
+                path: path.to_path_buf(),
+                source,
+            })?;
         let out = dir.join(config.out.clone().unwrap_or_else(|| PathBuf::from("base")));
         Ok(BaseStation {
             config,

@@ -38,18 +38,23 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-use troupe_actors::runtime::ErrorChain;
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::ODOMETRY;
-use troupe_actors::runtime::{Publication, RealtimeExecutor, RobotId, TopicStats};
+use troupe_actors::runtime::{
+    ConfigError, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
+};
+use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
+use troupe_robot::AssembleError;
+use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use crate::replay::replaying_robot;
-use crate::scenario::{Scenario, describe};
-use crate::sequence::Sequence;
+use crate::scenario::{Scenario, ScenarioError};
+use crate::sequence::{Sequence, SequenceError};
 use crate::team::simulated_robot;
+use crate::world::mesh::MeshError;
 
 /// A robot file as written (see the module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -88,56 +93,114 @@ pub struct RobotProcess {
     pub sequence: Option<Sequence>,
 }
 
-/// Why a robot file cannot be used.
+/// Why a robot process could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
-    /// Unreadable or invalid file (the message names the file and the key).
-    #[error("{0}")]
-    Config(String),
-    /// The robot could not be built, started or reported.
-    #[error("{0}")]
-    Run(String),
+    /// The robot file cannot be read or does not have the expected shape.
+    #[error(transparent)]
+    File(#[from] TomlFileError),
+    /// The scenario the robot file names cannot be used.
+    #[error("{}: the scenario it names", path.display())]
+    Scenario {
+        /// The robot file.
+        path: PathBuf,
+        /// Why the scenario cannot be used.
+        source: ScenarioError,
+    },
+    /// A value of the robot file breaks a rule.
+    #[error("{}: invalid setting", path.display())]
+    Config {
+        /// The robot file.
+        path: PathBuf,
+        /// The key, the rule and the value.
+        source: ConfigError,
+    },
+    /// The `[zenoh]` table is invalid.
+    #[error("{}: invalid `[zenoh]` table", path.display())]
+    ZenohSettings {
+        /// The robot file.
+        path: PathBuf,
+        /// The transport's error.
+        source: TransportError,
+    },
+    /// The recorded sequence the robot file names cannot be opened.
+    #[error("{}: cannot open its `sequence`", path.display())]
+    Sequence {
+        /// The robot file.
+        path: PathBuf,
+        /// Why.
+        source: SequenceError,
+    },
+    /// The scenario's world could not be built.
+    #[error("building the world")]
+    World(#[source] MeshError),
+    /// The robot could not be assembled.
+    #[error("assembling robot{id}")]
+    Assemble {
+        /// The robot's id.
+        id: u32,
+        /// Why.
+        source: AssembleError,
+    },
+    /// The executor did not accept the robot's id.
+    #[error("starting the executor")]
+    RobotId(#[source] RobotIdsError),
+    /// The team link could not be opened or started.
+    #[error("{context}")]
+    Transport {
+        /// What we were doing.
+        context: &'static str,
+        /// The transport's error.
+        source: TransportError,
+    },
+    /// The executor ended without a report of the robot.
+    #[error("the executor reported no robot")]
+    NoReport,
+    /// The outputs could not be written.
+    #[error("writing {}", path.display())]
+    Output {
+        /// The directory.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The tokio runtime could not start.
+    #[error("starting the tokio runtime")]
+    Runtime(#[source] std::io::Error),
 }
 
 impl RobotProcess {
     /// Reads and checks a robot file and its scenario.
     pub fn load(path: &Path) -> Result<Self, ProcessError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ProcessError::Config(format!("{}: {}", path.display(), ErrorChain(&e))))?;
-        let de = toml::Deserializer::parse(&text).map_err(|e| {
-            ProcessError::Config(format!("{}: {}", path.display(), describe(&e, &text)))
-        })?;
-        let config: ProcessConfig = serde_path_to_error::deserialize(de).map_err(|e| {
-            ProcessError::Config(format!(
-                "{}: `{}`: {}",
-                path.display(),
-                e.path(),
-                describe(e.inner(), &text)
-            ))
-        })?;
+        let config: ProcessConfig = read_toml(path)?;
+        let invalid = |source: ConfigError| ProcessError::Config {
+            path: path.to_path_buf(),
+            source,
+        };
         let base = path.parent().unwrap_or(Path::new("."));
-        let scenario = Scenario::load(&base.join(&config.scenario))
-            .map_err(|e| ProcessError::Config(e.to_string()))?;
-        if config.robot >= scenario.robots {
-            return Err(ProcessError::Config(format!(
-                "{}: `robot` must be below the scenario's {} robots, got {}",
-                path.display(),
-                scenario.robots,
-                config.robot
-            )));
-        }
-        if config
-            .duration_s
-            .is_some_and(|d| !(d.is_finite() && d > 0.0))
-        {
-            return Err(ProcessError::Config(format!(
-                "{}: `duration_s` must be a finite number > 0",
-                path.display()
-            )));
-        }
-        config.zenoh.validate().map_err(|e| {
-            ProcessError::Config(format!("{}: `zenoh`: {}", path.display(), ErrorChain(&e)))
+        let scenario = Scenario::load(&base.join(&config.scenario)).map_err(|source| {
+            ProcessError::Scenario {
+                path: path.to_path_buf(),
+                source,
+            }
         })?;
+        if config.robot >= scenario.robots {
+            return Err(invalid(ConfigError::new(
+                "robot",
+                format!("must be below the scenario's {} robots", scenario.robots),
+                config.robot,
+            )));
+        }
+        if let Some(d) = config.duration_s {
+            ConfigError::positive("duration_s", d).map_err(invalid)?;
+        }
+        config
+            .zenoh
+            .validate()
+            .map_err(|source| ProcessError::ZenohSettings {
+                path: path.to_path_buf(),
+                source,
+            })?;
         let out = base.join(
             config
                 .out
@@ -149,12 +212,9 @@ impl RobotProcess {
             .as_ref()
             .map(|dir| Sequence::open(&base.join(dir)))
             .transpose()
-            .map_err(|e| {
-                ProcessError::Config(format!(
-                    "{}: `sequence`: {}",
-                    path.display(),
-                    ErrorChain(&e)
-                ))
+            .map_err(|source| ProcessError::Sequence {
+                path: path.to_path_buf(),
+                source,
             })?;
         Ok(RobotProcess {
             config,
@@ -231,19 +291,17 @@ pub async fn run(
             )
         }
         None => {
-            let world = scenario.world.build().map_err(|e| {
-                ProcessError::Run(format!("building the world: {}", ErrorChain(&e)))
-            })?;
+            let world = scenario.world.build().map_err(ProcessError::World)?;
             simulated_robot(scenario, &world, id as usize, journal)
         }
     }
-    .map_err(|e| ProcessError::Run(format!("assembling robot{id}: {}", ErrorChain(&e))))?;
+    .map_err(|source| ProcessError::Assemble { id, source })?;
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
-        .map_err(|e| ProcessError::Run(e.to_string()))?;
+        .map_err(ProcessError::RobotId)?;
     executor.add_tap(move |p: &Publication<'_>| {
         if let Some(o) = p.get(&ODOMETRY) {
             let t = SystemTime::now()
@@ -260,13 +318,20 @@ pub async fn run(
         }
     });
     let transport = Arc::new(
-        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
-            .map_err(|e| ProcessError::Run(format!("opening zenoh: {}", ErrorChain(&e))))?,
+        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
+            |source| ProcessError::Transport {
+                context: "opening the zenoh session",
+                source,
+            },
+        )?,
     );
     let started = Instant::now();
     let handle = executor
         .spawn_with_transport(transport.clone())
-        .map_err(|e| ProcessError::Run(format!("starting the transport: {}", ErrorChain(&e))))?;
+        .map_err(|source| ProcessError::Transport {
+            context: "starting the team link",
+            source,
+        })?;
     tracing::info!(robot = id, "running");
     match process.config.duration_s {
         Some(d) => {
@@ -283,10 +348,7 @@ pub async fn run(
     if let Err(e) = transport.close() {
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
-    let report = reports
-        .into_iter()
-        .next()
-        .ok_or_else(|| ProcessError::Run("the executor reported no robot".into()))?;
+    let report = reports.into_iter().next().ok_or(ProcessError::NoReport)?;
     let trajectory = std::mem::take(
         &mut *trajectory
             .lock()
@@ -314,12 +376,9 @@ pub async fn run(
         transport_errors,
         trajectory_samples: trajectory.len(),
     };
-    write_outputs(&process.out, &summary, &trajectory).map_err(|e| {
-        ProcessError::Run(format!(
-            "writing {}: {}",
-            process.out.display(),
-            ErrorChain(&e)
-        ))
+    write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {
+        path: process.out.clone(),
+        source,
     })?;
     Ok(summary)
 }
@@ -479,7 +538,7 @@ pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, Proces
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| ProcessError::Run(format!("starting the runtime: {}", ErrorChain(&e))))?;
+        .map_err(ProcessError::Runtime)?;
     runtime.block_on(run(process, shutdown_signal()))
 }
 

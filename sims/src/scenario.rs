@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use troupe_comms::simnet::SimNetConfig;
 use troupe_robot::RobotConfig;
+use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
 use crate::camera::CameraParams;
 pub use crate::faults::Fault;
@@ -97,22 +98,10 @@ impl Default for Scenario {
 /// Why a scenario was not accepted.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    /// The file could not be read.
-    #[error("cannot read scenario file `{path}`")]
-    Read {
-        /// File.
-        path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// Not valid TOML, or a key/type problem.
-    #[error("scenario file `{path}`: {message}")]
-    Parse {
-        /// File.
-        path: PathBuf,
-        /// What and where.
-        message: String,
-    },
+    /// The file cannot be read, is not TOML, or has an unknown key or a value of the
+    /// wrong type.
+    #[error(transparent)]
+    File(#[from] TomlFileError),
     /// Parsed, but a value breaks a rule.
     #[error("scenario file `{path}`: key `{key}` {reason}")]
     Invalid {
@@ -128,7 +117,7 @@ pub enum ScenarioError {
 impl Scenario {
     /// Reads and validates a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+        let text = std::fs::read_to_string(path).map_err(|source| TomlFileError::Read {
             path: path.to_owned(),
             source,
         })?;
@@ -137,22 +126,7 @@ impl Scenario {
 
     /// Parses and validates scenario text; `path` is only used in messages.
     pub fn from_toml(text: &str, path: &Path) -> Result<Scenario, ScenarioError> {
-        let parse_error = |message: String| ScenarioError::Parse {
-            path: path.to_owned(),
-            message,
-        };
-        let deserializer =
-            toml::Deserializer::parse(text).map_err(|e| parse_error(describe(&e, text)))?;
-        let scenario: Scenario = serde_path_to_error::deserialize(deserializer).map_err(|e| {
-            let key = e.path().to_string();
-            let inner = describe(e.inner(), text);
-            if key == "." || key.is_empty() {
-                parse_error(inner)
-            } else {
-                parse_error(format!("key `{key}`: {inner}"))
-            }
-        })?;
-        let mut scenario = scenario;
+        let mut scenario: Scenario = parse_toml(text, path)?;
         // A mesh file is named relative to the scenario file.
         let mesh = &mut scenario.world.mesh.path;
         if mesh.is_relative()
@@ -256,20 +230,6 @@ impl Scenario {
                 .map_err(|(key, reason)| invalid(&format!("faults[{i}].{key}"), reason))?;
         }
         Ok(())
-    }
-}
-
-/// A TOML error as one line: "line L, column C: message".
-pub(crate) fn describe(error: &toml::de::Error, text: &str) -> String {
-    let message = error.message().trim_end();
-    match error.span() {
-        Some(span) => {
-            let before = &text[..span.start.min(text.len())];
-            let line = before.matches('\n').count() + 1;
-            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-            format!("line {line}, column {column}: {message}")
-        }
-        None => message.to_string(),
     }
 }
 

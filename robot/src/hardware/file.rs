@@ -9,6 +9,7 @@ use troupe_comms::zenoh::ZenohConfig;
 
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
+use crate::toml_file::{TomlFileError, parse_toml};
 use crate::{AssembleError, ConfigError, RobotConfig};
 
 /// A hardware robot file as written (see the [module docs](crate::hardware) and
@@ -57,22 +58,9 @@ pub struct HardwareRobot {
 /// Why a hardware robot could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum HardwareError {
-    /// The robot file cannot be read.
-    #[error("cannot read the robot file {}", path.display())]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The robot file is not valid TOML of the right shape.
-    #[error("{}: {message}", path.display())]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// Where and what (key, line, column).
-        message: String,
-    },
+    /// The robot file cannot be read or does not have the expected shape.
+    #[error(transparent)]
+    File(#[from] TomlFileError),
     /// A value of the robot file breaks a rule; the source names the dotted key
     /// (`id`, `camera`, `robot.speed_mps`, `mavlink.setpoint_rate_hz`, `ros2.topics.depth`).
     #[error("{}: invalid setting", path.display())]
@@ -131,7 +119,7 @@ pub enum HardwareError {
 impl HardwareRobot {
     /// Reads, checks and resolves a robot file.
     pub fn load(path: &Path) -> Result<Self, HardwareError> {
-        let text = std::fs::read_to_string(path).map_err(|source| HardwareError::Read {
+        let text = std::fs::read_to_string(path).map_err(|source| TomlFileError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -142,13 +130,7 @@ impl HardwareRobot {
     /// Parses and checks a robot file's text; `path` names it in errors and relative
     /// paths are resolved against `base`.
     pub fn from_toml(text: &str, path: &Path, base: &Path) -> Result<Self, HardwareError> {
-        let parse = |message: String| HardwareError::Parse {
-            path: path.to_path_buf(),
-            message,
-        };
-        let de = toml::Deserializer::parse(text).map_err(|e| parse(describe(&e, text)))?;
-        let mut file: HardwareFile = serde_path_to_error::deserialize(de)
-            .map_err(|e| parse(format!("`{}`: {}", e.path(), describe(e.inner(), text))))?;
+        let mut file: HardwareFile = parse_toml(text, path)?;
         resolve_zenoh(&mut file.zenoh, base);
         resolve_zenoh(&mut file.ros2.zenoh, base);
         file.validate(path)?;
@@ -221,20 +203,6 @@ fn resolve_zenoh(zenoh: &mut ZenohConfig, base: &Path) {
     }
     if let Some(dictionary) = zenoh.auth.as_mut().and_then(|a| a.dictionary_path.as_mut()) {
         *dictionary = base.join(&*dictionary);
-    }
-}
-
-/// A TOML error with its line and column.
-fn describe(error: &toml::de::Error, text: &str) -> String {
-    let message = error.message().trim_end();
-    match error.span() {
-        Some(span) => {
-            let before = &text[..span.start.min(text.len())];
-            let line = before.matches('\n').count() + 1;
-            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-            format!("line {line}, column {column}: {message}")
-        }
-        None => message.to_string(),
     }
 }
 
@@ -340,7 +308,7 @@ mod tests {
                 text.replacen("id = 0", "id = 0\nduration_s = -1.0", 1),
                 "`duration_s` must be",
             ),
-            (text.replacen("id = 0", "id = \"zero\"", 1), "`id`: line 8"),
+            (text.replacen("id = 0", "id = \"zero\"", 1), "`id`, line 8"),
             (
                 text.replace("connect = [\"tcp/10", "connect = [\"nowhere\", \"tcp/10"),
                 "invalid `[zenoh]` table",

@@ -1,0 +1,141 @@
+//! Reading the TOML files a user writes (robot, scenario, base, study files) with
+//! errors that name the file, the key, the line and the column.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+
+/// Where in a TOML file something went wrong.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TomlPlace {
+    /// Dotted key (`robot.link.class`), when the problem is a key's value.
+    pub key: Option<String>,
+    /// 1-based line and column, when TOML reports a position.
+    pub line_column: Option<(usize, usize)>,
+}
+
+impl fmt::Display for TomlPlace {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut sep = "";
+        if let Some(key) = &self.key {
+            write!(f, "`{key}`")?;
+            sep = ", ";
+        }
+        if let Some((line, column)) = self.line_column {
+            write!(f, "{sep}line {line}, column {column}")?;
+        }
+        Ok(())
+    }
+}
+
+/// A TOML file that could not be read or does not have the expected shape.
+#[derive(Debug, thiserror::Error)]
+pub enum TomlFileError {
+    /// The file cannot be read.
+    #[error("cannot read {}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Not valid TOML, an unknown key, a missing key or a value of the wrong type.
+    #[error("{}: {place}: {message}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The key and position (boxed to keep the error small).
+        place: Box<TomlPlace>,
+        /// TOML's or serde's description of the problem.
+        message: String,
+    },
+}
+
+/// Reads and deserializes the TOML file at `path`.
+pub fn read_toml<T: DeserializeOwned>(path: &Path) -> Result<T, TomlFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| TomlFileError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_toml(&text, path)
+}
+
+/// Deserializes TOML `text`; `path` names it in errors.
+pub fn parse_toml<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, TomlFileError> {
+    let error = |key: Option<String>, e: &toml::de::Error| TomlFileError::Parse {
+        path: path.to_path_buf(),
+        place: Box::new(TomlPlace {
+            key,
+            line_column: e.span().map(|span| line_column(text, span.start)),
+        }),
+        message: e.message().trim_end().to_owned(),
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| error(None, &e))?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let key = (!key.is_empty() && key != ".").then_some(key);
+        error(key, e.inner())
+    })
+}
+
+/// The 1-based line and column of byte `offset` in `text`.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct File {
+        id: u32,
+        inner: Inner,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        rate_hz: f64,
+    }
+
+    fn parse(text: &str) -> String {
+        parse_toml::<File>(text, Path::new("f.toml"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn errors_name_the_file_key_and_position() {
+        assert!(
+            parse_toml::<File>("id = 1\n[inner]\nrate_hz = 2.0\n", Path::new("f.toml")).is_ok()
+        );
+        let e = parse("id = 1\n[inner]\nrate_hz = \"fast\"\n");
+        assert!(
+            e.starts_with("f.toml: `inner.rate_hz`, line 3, column 11: "),
+            "{e}"
+        );
+        let e = parse("id = 1\nspeed = 2\n[inner]\nrate_hz = 2.0\n");
+        assert!(
+            e.contains("line 2, column 1") && e.contains("unknown field `speed`"),
+            "{e}"
+        );
+        let e = parse("id = 1\n[inner\n");
+        assert!(e.starts_with("f.toml: line 2"), "{e}");
+        let e = parse("id = 1\n");
+        assert!(
+            e.starts_with("f.toml: ") && e.contains("missing field `inner`"),
+            "{e}"
+        );
+        assert!(!e.contains('\n'));
+        let missing = read_toml::<File>(Path::new("/nonexistent/f.toml")).unwrap_err();
+        assert_eq!(missing.to_string(), "cannot read /nonexistent/f.toml");
+    }
+}
