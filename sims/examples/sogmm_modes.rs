@@ -27,11 +27,11 @@ use troupe_actors::mapper::sogmm::{
 };
 use troupe_sims::sequence::Sequence;
 
-/// `(name, depth_intensity)` of every frame asked for.
-fn frames(
-    sequence: Option<&PathBuf>,
-    every: usize,
-) -> Result<Vec<(String, Vec<[f64; 2]>)>, String> {
+/// A named frame's (depth, intensity) data.
+type NamedData = (String, Vec<[f64; 2]>);
+
+/// Every frame asked for.
+fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, String> {
     let base = synthetic::room_pose();
     let views = [
         base,
