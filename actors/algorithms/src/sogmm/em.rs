@@ -2,7 +2,8 @@
 //! Cholesky factors (thesis App. A, Eqs. A.1–A.3).
 //!
 //! **E-step.** `ln γ_nb = ln π_b + ln N(x_n | μ_b, Σ_b) − ln Σ_a π_a N(x_n | μ_a, Σ_a)`
-//! (Eq. A.2), with `ln N` from the lower Cholesky factor (Eq. A.3) and the last term by
+//! (Eq. A.2), with `ln N` from the lower Cholesky factor `L` (Eq. A.3, evaluated as
+//! `|L⁻¹ (x − μ)|²` with `L⁻¹` formed once per iteration) and the last term by
 //! log-sum-exp.
 //!
 //! **M-step.** `N_b = Σ_n γ_nb`, `π_b = N_b / N`, `μ_b = Σ γ x / N_b`,
