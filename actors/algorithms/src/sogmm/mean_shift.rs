@@ -6,7 +6,8 @@
 //! implementation (gira3d/self_organizing_gmm), which is scikit-learn's
 //! `MeanShift(bandwidth=σ, bin_seeding=True)`. Seeds are the occupied bins of a σ grid
 //! (each point rounded to the nearest multiple of σ, ties to even, as `np.round`; the
-//! points themselves when every point has its own bin). Each seed moves to the mean of
+//! points themselves when every point has its own bin, or when no bin centre has a
+//! point within σ, where scikit-learn fails). Each seed moves to the mean of
 //! the *input* points within distance σ (`≤ σ`, Eq. 6.6 with the flat kernel of Eq. 6.7,
 //! the data held fixed) until it moves by at most `tolerance · σ` or after
 //! `max_iterations` moves (default 300); its support is the number of points within σ
@@ -167,57 +168,62 @@ impl MeanShiftModes {
     }
 }
 
-/// Sorted-cell index over 2D points (cell side `h`), with a direct table from the first
-/// cell coordinate to its run of slots.
+/// Sorted-cell index over 2D points (cell side `h`), with the occupied first cell
+/// coordinates and the run of slots of each (no table over the whole range, so far-apart
+/// or huge finite values cost nothing).
 struct CellIndex2 {
     /// Cell key of each slot of `order`, sorted.
     keys: Vec<(i64, i64)>,
     /// Point indices sorted by cell key (stable: by index inside a cell).
     order: Vec<u32>,
-    /// Smallest first key coordinate.
-    kx0: i64,
-    /// `col_start[kx − kx0] .. col_start[kx − kx0 + 1]`: the slots with that first key.
+    /// Distinct first key coordinates, increasing.
+    columns: Vec<i64>,
+    /// `col_start[c] .. col_start[c + 1]`: the slots whose first key is `columns[c]`.
     col_start: Vec<u32>,
 }
 
 impl CellIndex2 {
     fn new(points: &[[f64; 2]], inv_h: f64) -> Self {
+        // `as` saturates: huge or infinite coordinates land in the extreme cells.
         let key = |p: &[f64; 2]| ((p[0] * inv_h).floor() as i64, (p[1] * inv_h).floor() as i64);
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
         order.sort_by_key(|&i| key(&points[i as usize]));
         let keys: Vec<(i64, i64)> = order.iter().map(|&i| key(&points[i as usize])).collect();
-        let kx0 = keys.first().map_or(0, |k| k.0);
-        let kx1 = keys.last().map_or(0, |k| k.0);
-        let span = usize::try_from(kx1 - kx0).unwrap_or(0) + 1;
-        let mut col_start = vec![0u32; span + 1];
-        for k in &keys {
-            col_start[(k.0 - kx0) as usize + 1] += 1;
+        let mut columns = Vec::new();
+        let mut col_start = Vec::new();
+        for (slot, k) in keys.iter().enumerate() {
+            if columns.last() != Some(&k.0) {
+                columns.push(k.0);
+                col_start.push(slot as u32);
+            }
         }
-        for c in 0..span {
-            col_start[c + 1] += col_start[c];
-        }
+        col_start.push(keys.len() as u32);
         Self {
             keys,
             order,
-            kx0,
+            columns,
             col_start,
         }
     }
 
     /// Slots of the cells `(kx, ky − 1 ..= ky + 1)`.
     fn column(&self, kx: i64, ky: i64) -> std::ops::Range<usize> {
-        let c = kx - self.kx0;
-        if c < 0 || c as usize + 1 >= self.col_start.len() {
+        let Ok(c) = self.columns.binary_search(&kx) else {
             return 0..0;
-        }
-        let (a, b) = (
-            self.col_start[c as usize] as usize,
-            self.col_start[c as usize + 1] as usize,
-        );
+        };
+        let (a, b) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
         let run = &self.keys[a..b];
-        let lo = run.partition_point(|k| k.1 < ky - 1);
-        let hi = run.partition_point(|k| k.1 <= ky + 1);
+        let lo = run.partition_point(|k| k.1 < ky.saturating_sub(1));
+        let hi = run.partition_point(|k| k.1 <= ky.saturating_add(1));
         a + lo..a + hi
+    }
+
+    /// Slots of the 3×3 cells around `(kx, ky)`, column by column.
+    fn around(&self, kx: i64, ky: i64) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        [kx.checked_sub(1), Some(kx), kx.checked_add(1)]
+            .into_iter()
+            .flatten()
+            .map(move |x| self.column(x, ky))
     }
 }
 
@@ -322,8 +328,8 @@ fn shift_seed(
             (mean[1] * inv_h).floor() as i64,
         );
         let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
-        for dx in -1..=1 {
-            for q in &pts[index.column(kx + dx, ky)] {
+        for run in index.around(kx, ky) {
+            for q in &pts[run] {
                 let (ex, ey) = (q[0] - mean[0], q[1] - mean[1]);
                 if ex * ex + ey * ey <= s2 {
                     sx += q[0];
@@ -352,11 +358,18 @@ fn reference_modes(points: &[[f64; 2]], sigma: f64, config: &MeanShiftConfig) ->
     let index = CellIndex2::new(points, 1.0 / sigma);
     // The points in slot order, so that a cell's run is contiguous in memory.
     let sorted: Vec<[f64; 2]> = index.order.iter().map(|&i| points[i as usize]).collect();
-    let seeds = bin_seeds(points, sigma);
-    let shifted: Vec<([f64; 2], usize, usize, bool)> = seeds
-        .par_iter()
-        .map(|&s| shift_seed(s, &sorted, &index, sigma, config))
-        .collect();
+    let shift_all = |seeds: &[[f64; 2]]| -> Vec<([f64; 2], usize, usize, bool)> {
+        seeds
+            .par_iter()
+            .map(|&s| shift_seed(s, &sorted, &index, sigma, config))
+            .collect()
+    };
+    let mut shifted = shift_all(&bin_seeds(points, sigma));
+    if shifted.iter().all(|r| r.1 == 0) {
+        // No bin seed has a point within σ (σ below the rounding of the bin centres):
+        // seed from the points themselves, each its own neighbour.
+        shifted = shift_all(points);
+    }
     let iterations = shifted.iter().map(|r| r.2).max().unwrap_or(0);
     let converged = shifted.iter().all(|r| r.3);
     let mut candidates: Vec<([f64; 2], usize)> = shifted
@@ -402,8 +415,8 @@ fn blurring_modes(finite: Vec<[f64; 2]>, sigma: f64, config: &MeanShiftConfig) -
             let p = pts[i as usize];
             let (kx, ky) = index.keys[slot];
             let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
-            for dx in -1..=1 {
-                for s in index.column(kx + dx, ky) {
+            for run in index.around(kx, ky) {
+                for s in run {
                     let j = index.order[s] as usize;
                     let q = pts[j];
                     let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
@@ -469,7 +482,11 @@ fn greedy_merge(candidates: &[[f64; 2]], sigma: f64) -> Vec<Option<usize>> {
             let mut best: Option<(f64, usize)> = None;
             for dx in -1..=1 {
                 for dy in -1..=1 {
-                    for &m in cells.get(&(kx + dx, ky + dy)).into_iter().flatten() {
+                    for &m in cells
+                        .get(&(kx.saturating_add(dx), ky.saturating_add(dy)))
+                        .into_iter()
+                        .flatten()
+                    {
                         let q = kept[m];
                         let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
                         if d2 <= s2 && best.is_none_or(|(bd, bm)| d2 < bd || (d2 == bd && m < bm)) {

@@ -545,6 +545,29 @@ fn reference_mean_shift_m_matches_scikit_learn() {
 }
 
 #[test]
+fn mean_shift_survives_extreme_and_non_finite_values() {
+    let mut data = vec![[1.0, 0.5]; 10];
+    data.extend([
+        [1e300, 1e300],
+        [-1e300, 0.5],
+        [f64::MAX, -f64::MAX],
+        [f64::NAN, 0.5],
+        [1.0, f64::INFINITY],
+    ]);
+    for kind in [MeanShiftKind::Reference, MeanShiftKind::Blurring] {
+        for sigma in [0.02, 1e-300] {
+            let modes = mean_shift_modes(&data, sigma, &MeanShiftConfig::of(kind));
+            // The ten equal points are the strongest mode; NaN/∞ are ignored and the far
+            // finite points are modes of their own at most (whose bins may overflow).
+            assert_eq!(modes.modes[0], [1.0, 0.5], "{kind} σ {sigma}: {modes:?}");
+            assert_eq!(modes.support[0], 10, "{kind} σ {sigma}: {modes:?}");
+            assert!(modes.len() <= 4, "{kind} σ {sigma}: {modes:?}");
+        }
+    }
+    assert!(mean_shift_modes(&[], 0.02, &MeanShiftConfig::default()).is_empty());
+}
+
+#[test]
 fn mean_shift_variant_names_round_trip() {
     for kind in [MeanShiftKind::Reference, MeanShiftKind::Blurring] {
         assert_eq!(kind.name().parse::<MeanShiftKind>().unwrap(), kind);
