@@ -64,7 +64,7 @@ def main():
 
     env = dict(os.environ, RAYON_NUM_THREADS="1")
     subprocess.run(
-        ["cargo", "build", "--release", "-q", "-p", "troupe-actors", "--example", "sogmm_dump"],
+        ["cargo", "build", "--release", "-q", "-p", "troupe-algorithms", "--example", "sogmm_dump"],
         cwd=ROOT, check=True, env=env,
     )
     target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))

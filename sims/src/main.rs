@@ -8,6 +8,7 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use troupe_actors::mapper::MapModel;
+use troupe_actors::mapper::sogmm::MeanShiftKind;
 use troupe_sims::launch::LaunchOptions;
 use troupe_sims::process::{RobotProcess, run_until_signal, shutdown_signal};
 use troupe_sims::report::write_run;
@@ -164,6 +165,10 @@ struct MapArgs {
     /// SOGMM mean-shift bandwidth σ (smaller: more components, finer map).
     #[arg(long, default_value_t = 0.02)]
     bandwidth: f64,
+    /// SOGMM mean shift choosing the number of components: `reference` (the authors'
+    /// published implementation) or `blurring` (the thesis text's, coarser).
+    #[arg(long, value_name = "KIND", default_value_t = MeanShiftKind::Reference)]
+    mean_shift: MeanShiftKind,
     /// Use every N-th frame of the sequence.
     #[arg(long, value_name = "N", default_value_t = 1)]
     stride: usize,
@@ -365,6 +370,7 @@ fn map(args: MapArgs) -> anyhow::Result<()> {
     let options = MapBuildOptions {
         model: args.model,
         bandwidth: args.bandwidth,
+        mean_shift: args.mean_shift,
         frame_stride: args.stride,
         pixel_stride: args.pixel_stride,
         overlap_threshold: args.overlap,

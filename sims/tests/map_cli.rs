@@ -170,6 +170,41 @@ fn missing_or_bad_inputs_name_the_file() {
         "octomap",
     );
     fails(&["map", "seq", "--bandwidth=0", "--out", "o"], "bandwidth");
+    fails(
+        &["map", "seq", "--mean-shift", "gaussian", "--out", "o"],
+        "mean_shift",
+    );
+}
+
+#[test]
+fn mean_shift_option_picks_the_variant() {
+    let dir = tempfile::tempdir().unwrap();
+    record(dir.path());
+    let components = |kind: &str| {
+        let out = troupe(
+            &[
+                "map",
+                "seq",
+                "--mean-shift",
+                kind,
+                "--ply-points",
+                "10",
+                "--out",
+                kind,
+            ],
+            dir.path(),
+        );
+        stats_of(&out)["components"].as_u64().unwrap()
+    };
+    // The reference (non-blurring, bin seeds) mean shift finds more modes than the
+    // blurring one on the same keyframes, and it is the default.
+    let (reference, blurring) = (components("reference"), components("blurring"));
+    assert!(reference > blurring, "{reference} vs {blurring}");
+    let default = stats_of(&troupe(
+        &["map", "seq", "--ply-points", "10", "--out", "default"],
+        dir.path(),
+    ));
+    assert_eq!(default["components"], reference);
 }
 
 #[test]
@@ -180,6 +215,7 @@ fn help_lists_the_map_options() {
     for option in [
         "--model",
         "--bandwidth",
+        "--mean-shift",
         "--stride",
         "--out",
         "SEQUENCE_DIR",

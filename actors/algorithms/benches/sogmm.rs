@@ -1,7 +1,8 @@
 #![allow(missing_docs)]
 //! SOGMM fit of one synthetic 160×120 frame (room corner, box, textured floor) at
-//! σ = 0.02 and 0.03, and its steps. Run single-threaded for the target:
-//! `RAYON_NUM_THREADS=1 cargo bench --bench sogmm`.
+//! σ = 0.02 and 0.03 and of the same view at 320×240, with the reference mean shift
+//! (the default), and its steps (both mean shifts). Run single-threaded for the issue's
+//! target: `RAYON_NUM_THREADS=1 cargo bench --bench sogmm`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
@@ -9,12 +10,16 @@ use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
 
 use troupe_algorithms::sogmm::{
-    EStep, EmConfig, FramePoints, MeanShiftConfig, SogmmConfig, fit_em, fit_points, frame_points,
-    init_from_partition, kmeans_plusplus, mean_shift_modes, synthetic,
+    EStep, EmConfig, FramePoints, MeanShiftConfig, MeanShiftKind, SogmmConfig, fit_em, fit_points,
+    frame_points, init_from_partition, kmeans_plusplus, mean_shift_modes, synthetic,
 };
 
 fn room_frame() -> FramePoints {
-    let intr = synthetic::intrinsics(160, 120);
+    room_frame_of(160, 120)
+}
+
+fn room_frame_of(w: u32, h: u32) -> FramePoints {
+    let intr = synthetic::intrinsics(w, h);
     let pose = synthetic::room_pose();
     let (d, g) = synthetic::Scene::room_corner().render(&intr, &pose);
     frame_points(&d, &g, &intr, &pose).expect("synthetic frame is valid")
@@ -52,21 +57,43 @@ fn bench_fit(c: &mut Criterion) {
         });
     }
     group.finish();
+    let big = room_frame_of(320, 240);
+    let mut group = c.benchmark_group("sogmm_fit_320x240");
+    group.sample_size(10);
+    let fit = fit_points(&big.points, &big.depth_intensity, &SogmmConfig::default()).expect("fit");
+    eprintln!(
+        "320×240, σ = 0.02: M = {}, EM iterations = {}",
+        fit.gmm.len(),
+        fit.report.em.iterations
+    );
+    group.bench_function("fit_sigma_0.02", |b| {
+        b.iter(|| {
+            fit_points(
+                black_box(&big.points),
+                &big.depth_intensity,
+                &SogmmConfig::default(),
+            )
+            .expect("fit")
+        })
+    });
+    group.finish();
 }
 
 fn bench_steps(c: &mut Criterion) {
     let fp = room_frame();
     let mut group = c.benchmark_group("sogmm_steps_160x120_sigma_0.02");
     group.sample_size(10);
-    group.bench_function("mean_shift", |b| {
-        b.iter(|| {
-            mean_shift_modes(
-                black_box(&fp.depth_intensity),
-                0.02,
-                &MeanShiftConfig::default(),
-            )
-        })
-    });
+    for kind in [MeanShiftKind::Reference, MeanShiftKind::Blurring] {
+        group.bench_function(format!("mean_shift_{kind}"), |b| {
+            b.iter(|| {
+                mean_shift_modes(
+                    black_box(&fp.depth_intensity),
+                    0.02,
+                    &MeanShiftConfig::of(kind),
+                )
+            })
+        });
+    }
     let m = mean_shift_modes(&fp.depth_intensity, 0.02, &MeanShiftConfig::default()).len();
     group.bench_function("kmeans_plusplus", |b| {
         b.iter(|| kmeans_plusplus(black_box(&fp.points), m, &mut ChaCha8Rng::seed_from_u64(0)))

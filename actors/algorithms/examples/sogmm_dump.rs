@@ -10,7 +10,7 @@
 //! log-likelihood of the points under the result (dense evaluation), the EM wall time
 //! and iterations. Run with `RAYON_NUM_THREADS=1` for single-threaded timings.
 //!
-//! `cargo run --release -p troupe-actors --example sogmm_dump -- OUT SIGMA...`
+//! `cargo run --release -p troupe-algorithms --example sogmm_dump -- OUT SIGMA...`
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -3,7 +3,7 @@
 //! `fit_points` (thesis Fig. 6.1). Medians of `reps` runs per seed.
 //!
 //! ```sh
-//! RAYON_NUM_THREADS=1 cargo run --release -p troupe-actors --example sogmm_stages -- \
+//! RAYON_NUM_THREADS=1 cargo run --release -p troupe-algorithms --example sogmm_stages -- \
 //!     [sigma=0.02] [seeds=5] [reps=3]
 //! ```
 

@@ -8,7 +8,7 @@ use std::time::Instant;
 use serde::Serialize;
 use troupe_actors::mapper::keyframe::{Frustum, KeyframeSelector};
 use troupe_actors::mapper::mapfile::{GmmMap, MapKeyframe};
-use troupe_actors::mapper::sogmm::SogmmConfig;
+use troupe_actors::mapper::sogmm::{MeanShiftConfig, MeanShiftKind, SogmmConfig};
 use troupe_actors::mapper::windowed::WindowedConfig;
 use troupe_actors::mapper::{MapModel, decimate, fit_keyframe};
 
@@ -21,6 +21,8 @@ pub struct MapBuildOptions {
     pub model: MapModel,
     /// SOGMM mean-shift bandwidth σ (thesis §6: 0.02–0.03).
     pub bandwidth: f64,
+    /// Which mean shift chooses the SOGMM's number of components.
+    pub mean_shift: MeanShiftKind,
     /// Use every `frame_stride`-th frame of the sequence (≥ 1).
     pub frame_stride: usize,
     /// Fit every `pixel_stride`-th pixel in u and v (≥ 1).
@@ -36,12 +38,13 @@ pub struct MapBuildOptions {
 }
 
 impl Default for MapBuildOptions {
-    /// SOGMM at σ = 0.02, every frame, pixel stride 2, λ = 0.5 over 1024 keyframes
+    /// SOGMM at σ = 0.02 with the reference mean shift, every frame, pixel stride 2, λ = 0.5 over 1024 keyframes
     /// (the mapper actor's defaults), seed 0, default windowed settings.
     fn default() -> Self {
         MapBuildOptions {
             model: MapModel::Sogmm,
             bandwidth: 0.02,
+            mean_shift: MeanShiftKind::Reference,
             frame_stride: 1,
             pixel_stride: 2,
             overlap_threshold: 0.5,
@@ -112,6 +115,7 @@ pub fn build_map(
             let sogmm = SogmmConfig {
                 bandwidth: options.bandwidth,
                 seed: options.seed.wrapping_add(k as u64),
+                mean_shift: MeanShiftConfig::of(options.mean_shift),
                 ..SogmmConfig::default()
             };
             let windowed = WindowedConfig {

@@ -2,7 +2,8 @@
 //! Cholesky factors (thesis App. A, Eqs. A.1–A.3).
 //!
 //! **E-step.** `ln γ_nb = ln π_b + ln N(x_n | μ_b, Σ_b) − ln Σ_a π_a N(x_n | μ_a, Σ_a)`
-//! (Eq. A.2), with `ln N` from the lower Cholesky factor (Eq. A.3) and the last term by
+//! (Eq. A.2), with `ln N` from the lower Cholesky factor `L` (Eq. A.3, evaluated as
+//! `|L⁻¹ (x − μ)|²` with `L⁻¹` formed once per iteration) and the last term by
 //! log-sum-exp.
 //!
 //! **M-step.** `N_b = Σ_n γ_nb`, `π_b = N_b / N`, `μ_b = Σ γ x / N_b`,
@@ -44,7 +45,7 @@ use rayon::prelude::*;
 
 use super::SogmmError;
 use super::grid::{CellLists, PointGrid};
-use crate::mixture::{Chol4, Gmm4, MixtureError};
+use crate::mixture::{Gmm4, LN_2PI, MixtureError};
 
 /// `ln 10¹⁰`: components below the best one by more than this are skipped by the
 /// restricted E-step (responsibility < 1e-10 relative).
@@ -183,21 +184,80 @@ impl Partial {
     }
 }
 
-fn factor(params: &Params) -> Result<(Vec<Chol4>, Vec<f64>), SogmmError> {
-    let mut chol = Vec::with_capacity(params.weights.len());
-    let mut logc = Vec::with_capacity(params.weights.len());
-    for (component, ((w, mean), cov)) in params
+/// One component as the E-step evaluates it: its mean, the inverse `U = L⁻¹` of the
+/// lower Cholesky factor of its covariance (packed rows) and `c = ln π + ln N_max`, so
+/// that `ℓ(x) = ln π + ln N(x | μ, Σ) = c − ½ |U (x − μ)|²` (Eq. A.3). The four rows of
+/// `U (x − μ)` are independent products, unlike forward substitution through `L`.
+#[derive(Clone, Copy, Debug)]
+struct Whitened {
+    mean: [f64; 4],
+    u: [f64; 10],
+    logc: f64,
+}
+
+impl Whitened {
+    /// `None` if `cov` is not positive definite (or anything is not finite).
+    fn new(weight: f64, mean: &Vector4<f64>, cov: &Matrix4<f64>) -> Option<Self> {
+        if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let l = cov.cholesky()?.l();
+        let diag = [l[(0, 0)], l[(1, 1)], l[(2, 2)], l[(3, 3)]];
+        if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
+            return None;
+        }
+        let u = l.solve_lower_triangular(&Matrix4::identity())?;
+        if !u.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
+        Some(Self {
+            mean: [mean[0], mean[1], mean[2], mean[3]],
+            u: [
+                u[(0, 0)],
+                u[(1, 0)],
+                u[(1, 1)],
+                u[(2, 0)],
+                u[(2, 1)],
+                u[(2, 2)],
+                u[(3, 0)],
+                u[(3, 1)],
+                u[(3, 2)],
+                u[(3, 3)],
+            ],
+            logc: weight.ln() - 2.0 * LN_2PI - log_det_half,
+        })
+    }
+
+    /// `ℓ(x) = c − ½ |U (x − μ)|²`.
+    #[inline(always)]
+    fn log_density(&self, x: &[f64; 4]) -> f64 {
+        let u = &self.u;
+        let d0 = x[0] - self.mean[0];
+        let d1 = x[1] - self.mean[1];
+        let d2 = x[2] - self.mean[2];
+        let d3 = x[3] - self.mean[3];
+        let y0 = u[0] * d0;
+        let y1 = u[1] * d0 + u[2] * d1;
+        let y2 = u[3] * d0 + u[4] * d1 + u[5] * d2;
+        let y3 = u[6] * d0 + u[7] * d1 + u[8] * d2 + u[9] * d3;
+        self.logc - 0.5 * (y0 * y0 + y1 * y1 + y2 * y2 + y3 * y3)
+    }
+}
+
+fn factor(params: &Params) -> Result<Vec<Whitened>, SogmmError> {
+    params
         .weights
         .iter()
         .zip(&params.means)
         .zip(&params.covs)
         .enumerate()
-    {
-        let c = Chol4::new(mean, cov).ok_or(MixtureError::NotPositiveDefinite { component })?;
-        logc.push(w.ln() + c.log_norm);
-        chol.push(c);
-    }
-    Ok((chol, logc))
+        .map(|(component, ((w, mean), cov))| {
+            Whitened::new(*w, mean, cov).ok_or(SogmmError::Mixture(
+                MixtureError::NotPositiveDefinite { component },
+            ))
+        })
+        .collect()
 }
 
 /// M-step from hard labels: the starting mixture of EM after k-means++ (KInit, Fig. 6.1).
@@ -296,18 +356,18 @@ pub(crate) fn fit_em_anchored(
     let mut evaluated_total = 0usize;
     let mut kept_total = 0usize;
     for _ in 0..config.max_iterations {
-        let (chol, logc) = factor(&params)?;
+        let comps = factor(&params)?;
         let (lists, anchor_ll, threshold) = match config.e_step {
             EStep::Dense => (None, vec![], f64::NEG_INFINITY),
             EStep::Restricted => {
                 let anchor_ll: Vec<f64> = xs
                     .iter()
                     .zip(&anchors)
-                    .map(|(x, &a)| logc[a as usize] - 0.5 * chol[a as usize].mahalanobis2(x))
+                    .map(|(x, &a)| comps[a as usize].log_density(x))
                     .collect();
                 let threshold = quantile(&anchor_ll, ANCHOR_QUANTILE) - LOG_TRUNCATION;
                 let boxes: Vec<Option<([f64; 3], [f64; 3])>> = (0..m)
-                    .map(|k| reach_box(&params.means[k], &params.covs[k], logc[k], threshold))
+                    .map(|k| reach_box(&params.means[k], &params.covs[k], comps[k].logc, threshold))
                     .collect();
                 (Some(grid.component_lists(&boxes)), anchor_ll, threshold)
             }
@@ -315,8 +375,7 @@ pub(crate) fn fit_em_anchored(
         let ctx = PassCtx {
             xs: &xs,
             cells: &cells,
-            chol: &chol,
-            logc: &logc,
+            comps: &comps,
             means: &params.means,
             lists: lists.as_ref(),
             anchor_ll: &anchor_ll,
@@ -437,8 +496,7 @@ fn reach_box(
 struct PassCtx<'a> {
     xs: &'a [[f64; 4]],
     cells: &'a [u32],
-    chol: &'a [Chol4],
-    logc: &'a [f64],
+    comps: &'a [Whitened],
     means: &'a [Vector4<f64>],
     lists: Option<&'a CellLists>,
     anchor_ll: &'a [f64],
@@ -489,7 +547,7 @@ fn chunk_pass(ctx: &PassCtx<'_>, m: usize, range: std::ops::Range<usize>) -> (Pa
         lls.clear();
         let mut best = (f64::NEG_INFINITY, 0u32);
         for &k in candidates {
-            let l = ctx.logc[k as usize] - 0.5 * ctx.chol[k as usize].mahalanobis2(x);
+            let l = ctx.comps[k as usize].log_density(x);
             if l > best.0 {
                 best = (l, k);
             }

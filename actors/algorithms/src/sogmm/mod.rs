@@ -5,8 +5,10 @@
 //! The pipeline of Fig. 6.1, one module per step:
 //!
 //! 1. [`points`]: frame → world-frame 4D points and 2D (depth, intensity) data.
-//! 2. [`mean_shift`]: `M` = number of modes of a flat-kernel blurring mean shift of
-//!    bandwidth σ on the 2D data (Eqs. 6.5–6.7).
+//! 2. [`mean_shift`]: `M` = number of modes of a flat-kernel mean shift of bandwidth σ
+//!    on the 2D data (Eqs. 6.5–6.7): by default the non-blurring one from bin seeds of
+//!    the authors' published implementation, or the thesis text's blurring one
+//!    ([`MeanShiftKind`]).
 //! 3. [`kmeanspp`]: k-means++ steps 1a–1c on the 4D points → hard partition (KInit).
 //! 4. [`em`]: EM with full covariances in log space via Cholesky (Eqs. A.2–A.3), with an
 //!    exact dense E-step and a restricted one that skips components whose
@@ -50,7 +52,7 @@ use rand_chacha::ChaCha8Rng;
 pub use crate::mixture::{Gmm3, Gmm4, IntensityConditional, IntensityEstimate};
 pub use em::{EStep, EmConfig, EmReport, fit_em, init_from_partition};
 pub use kmeanspp::{Seeding, kmeans_plusplus};
-pub use mean_shift::{MeanShiftConfig, MeanShiftModes, mean_shift_modes};
+pub use mean_shift::{MeanShiftConfig, MeanShiftKind, MeanShiftModes, mean_shift_modes};
 pub use points::{FramePoints, frame_points};
 
 use crate::camera::PinholeIntrinsics;
@@ -92,7 +94,7 @@ pub struct SogmmConfig {
 }
 
 impl Default for SogmmConfig {
-    /// σ = 0.02, seed 0, default mean shift and EM.
+    /// σ = 0.02, seed 0, the reference mean shift, default EM.
     fn default() -> Self {
         Self {
             bandwidth: 0.02,

@@ -10,7 +10,9 @@ use serde::{Deserialize, Serialize};
 
 use super::global::{FrameUpdate, GlobalMap, GlobalMapConfig};
 use super::keyframe::{Frustum, KeyframeSelector};
-use super::sogmm::{FramePoints, SogmmConfig, fit_points, frame_points};
+use super::sogmm::{
+    FramePoints, MeanShiftConfig, MeanShiftKind, SogmmConfig, fit_points, frame_points,
+};
 use crate::msgs::{DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, PinholeIntrinsics};
 use troupe_runtime::{
     Actor, ActorError, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
@@ -92,6 +94,10 @@ pub struct MapperConfig {
     pub enabled: bool,
     /// Mean-shift bandwidth σ (thesis §6: 0.02–0.03).
     pub bandwidth: f64,
+    /// Which mean shift chooses the number of components: `"reference"` (the authors'
+    /// published implementation, scikit-learn's `MeanShift(bin_seeding=True)`) or
+    /// `"blurring"` (the thesis text's, coarser); see `sogmm::mean_shift`.
+    pub mean_shift: MeanShiftKind,
     /// Fit every n-th pixel in u and v (the thesis fits 128×96 images).
     pub pixel_stride: u32,
     /// Overlap threshold λ: an observation is a keyframe when less than this fraction
@@ -116,6 +122,7 @@ impl Default for MapperConfig {
         MapperConfig {
             enabled: true,
             bandwidth: 0.03,
+            mean_shift: MeanShiftKind::Reference,
             pixel_stride: 2,
             overlap_threshold: 0.5,
             remembered_keyframes: 1024,
@@ -160,6 +167,17 @@ impl MapperConfig {
         Ok(())
     }
 
+    /// The keyframe and local fits' settings, seeded from `seed`.
+    #[must_use]
+    pub fn sogmm_config(&self, seed: u64) -> SogmmConfig {
+        SogmmConfig {
+            bandwidth: self.bandwidth,
+            seed,
+            mean_shift: MeanShiftConfig::of(self.mean_shift),
+            ..SogmmConfig::default()
+        }
+    }
+
     /// The settings of the global map, with local fits seeded from `seed`.
     #[must_use]
     pub fn global_map_config(&self, seed: u64) -> GlobalMapConfig {
@@ -168,11 +186,7 @@ impl MapperConfig {
             relevance_threshold: self.relevance_threshold,
             min_relevant_points: self.min_relevant_points,
             max_cached_points: self.max_cached_points,
-            sogmm: SogmmConfig {
-                bandwidth: self.bandwidth,
-                seed,
-                ..SogmmConfig::default()
-            },
+            sogmm: self.sogmm_config(seed),
         }
     }
 }
@@ -296,11 +310,9 @@ impl Actor for MapperActor {
         {
             return Ok(());
         }
-        let config = SogmmConfig {
-            bandwidth: self.config.bandwidth,
-            seed: u64::from(self.keyframes) ^ (u64::from(ctx.robot().0) << 32),
-            ..SogmmConfig::default()
-        };
+        let config = self
+            .config
+            .sogmm_config(u64::from(self.keyframes) ^ (u64::from(ctx.robot().0) << 32));
         let started = Instant::now();
         // Back-projected once: the keyframe fit and the global map use the same points.
         let points = frame_points(
@@ -525,6 +537,23 @@ mod tests {
             );
             bad.global_map_config(0).validate().unwrap_err();
         }
+    }
+
+    #[test]
+    fn mean_shift_variant_is_chosen_by_name() {
+        let parse = |text: &str| toml::from_str::<MapperConfig>(text);
+        assert_eq!(MapperConfig::default().mean_shift, MeanShiftKind::Reference);
+        let blurring = parse("mean_shift = \"blurring\"").unwrap();
+        assert_eq!(blurring.mean_shift, MeanShiftKind::Blurring);
+        assert_eq!(
+            blurring.sogmm_config(0).mean_shift,
+            MeanShiftConfig::of(MeanShiftKind::Blurring)
+        );
+        let e = parse("mean_shift = \"gaussian\"").unwrap_err().to_string();
+        assert!(
+            e.contains("mean_shift") && e.contains("reference") && e.contains("gaussian"),
+            "{e}"
+        );
     }
 
     #[test]
