@@ -2,8 +2,10 @@
 //! explored-volume coverage from the frames, collisions and clearance from the
 //! odometry, both checked against the world (never against a robot's map) with
 //! [`surface_distance_m`], the true distance to the surface (a world's SDF is only a
-//! bound).
+//! bound), and per robot the time spent moving without seeing new volume
+//! ([`UnproductiveTime`]).
 
+use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use nalgebra::Point3;
@@ -23,6 +25,88 @@ const PATH_CHECK_STEP_M: f64 = 0.05;
 /// Clearances are measured exactly up to this much beyond the body (larger ones are
 /// reported as this), metres.
 pub const CLEARANCE_REPORTED_M: f64 = 1.0;
+
+/// A robot moving at least this fast can be unproductive, m/s.
+pub const UNPRODUCTIVE_SPEED_MPS: f64 = 0.1;
+
+/// The trailing window over which a robot's newly seen volume is summed, seconds.
+pub const UNPRODUCTIVE_WINDOW_S: f64 = 2.0;
+
+/// A robot whose frames saw less new volume than this over the last
+/// [`UNPRODUCTIVE_WINDOW_S`] is not observing anything new, m³ (eight 0.4 m coverage
+/// cells; a robot flying at 1 m/s into an unseen 2 m tunnel sees about 10 m³/s).
+pub const UNPRODUCTIVE_MIN_NEW_M3: f64 = 0.5;
+
+/// Time a robot spends moving while its camera sees no new volume — dithering,
+/// re-flying seen tunnels — measured on ground-truth coverage.
+///
+/// Fed once per depth frame of the robot ([`UnproductiveTime::frame`]) with the
+/// frame's time, the volume it explored first (cells no robot had seen before, so
+/// re-seeing what a peer saw counts as nothing new) and the robot's latest speed.
+/// At a frame at time `t` the robot *observes nothing new* when its frames in the
+/// trailing window `(t − W, t]` explored less than [`UNPRODUCTIVE_MIN_NEW_M3`]
+/// together (`W` = [`UNPRODUCTIVE_WINDOW_S`]). The time since its previous frame is
+/// *unproductive* when it observes nothing new and its speed is at least
+/// [`UNPRODUCTIVE_SPEED_MPS`]. An *unproductive interval* is the unproductive time
+/// accumulated between two frames that do observe something new: stopping (below the
+/// speed) adds nothing to it but does not end it, so a robot that turns back and forth
+/// in a seen tunnel stays in one interval. Up to `W` seconds after the last new
+/// observation do not count (the window still holds it).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct UnproductiveTime {
+    /// Frames in the window: time, seconds, and new volume, m³.
+    recent: VecDeque<(f64, f64)>,
+    /// Time of the previous frame, seconds.
+    last_frame_s: Option<f64>,
+    /// Unproductive time in the open interval, seconds.
+    current_s: f64,
+    /// Unproductive time over the whole run, seconds.
+    total_s: f64,
+    /// Longest interval so far, seconds.
+    longest_s: f64,
+}
+
+impl UnproductiveTime {
+    /// Accounts for a frame at `time_s` that explored `new_m3` first, with the robot
+    /// moving at `speed_mps`. Frames must come in time order; a frame earlier than the
+    /// previous one, or with non-finite or negative inputs, adds no time.
+    pub fn frame(&mut self, time_s: f64, new_m3: f64, speed_mps: f64) {
+        let new_m3 = if new_m3.is_finite() {
+            new_m3.max(0.0)
+        } else {
+            0.0
+        };
+        self.recent
+            .retain(|(t, _)| *t > time_s - UNPRODUCTIVE_WINDOW_S && *t <= time_s);
+        self.recent.push_back((time_s, new_m3));
+        // A handful of frames (the window times the sensor rate): summed afresh.
+        let recent_m3: f64 = self.recent.iter().map(|(_, v)| v).sum();
+        let step_s = match self.last_frame_s {
+            Some(last) if (time_s - last).is_finite() => (time_s - last).max(0.0),
+            _ => 0.0,
+        };
+        self.last_frame_s = Some(time_s);
+        if recent_m3 >= UNPRODUCTIVE_MIN_NEW_M3 {
+            self.current_s = 0.0;
+        } else if speed_mps >= UNPRODUCTIVE_SPEED_MPS {
+            self.current_s += step_s;
+            self.total_s += step_s;
+            self.longest_s = self.longest_s.max(self.current_s);
+        }
+    }
+
+    /// Unproductive time so far, seconds.
+    #[must_use]
+    pub fn total_s(&self) -> f64 {
+        self.total_s
+    }
+
+    /// The longest unproductive interval so far, seconds (the open one included).
+    #[must_use]
+    pub fn longest_s(&self) -> f64 {
+        self.longest_s
+    }
+}
 
 /// Ground truth about one robot (the serialised fields are what `summary.json` reports).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -61,6 +145,16 @@ pub struct RobotTruth {
     /// Bytes the network delivered to this robot (all classes, fragments and acks
     /// included).
     pub received_bytes: u64,
+    /// Volume this robot's frames saw before any other frame of the team, m³ (the
+    /// robots' shares of the explored volume).
+    pub discovered_m3: f64,
+    /// Time spent moving without seeing new volume, seconds (see [`UnproductiveTime`]).
+    pub unproductive_s: f64,
+    /// The longest unproductive interval, seconds (see [`UnproductiveTime`]).
+    pub longest_unproductive_s: f64,
+    /// The tracker behind `unproductive_s` and `longest_unproductive_s`.
+    #[serde(skip)]
+    pub unproductive: UnproductiveTime,
 }
 
 /// Everything the monitor knows.
@@ -153,7 +247,16 @@ impl Tap for GroundTruthMonitor {
             if frame.valid_pixels() == 0 {
                 robot.empty_frames += 1;
             }
+            let before_m3 = truth.coverage.explored_volume_m3();
             truth.coverage.observe(frame, self.pixel_stride);
+            let new_m3 = truth.coverage.explored_volume_m3() - before_m3;
+            let robot = &mut truth.robots[r];
+            robot.discovered_m3 += new_m3;
+            robot
+                .unproductive
+                .frame(p.time.as_secs_f64(), new_m3, robot.speed_mps);
+            robot.unproductive_s = robot.unproductive.total_s();
+            robot.longest_unproductive_s = robot.unproductive.longest_s();
         } else if let Some(packet) = p.get(&LINK_RX) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.received_bytes += packet.bytes.len() as u64;
@@ -244,5 +347,69 @@ impl Tap for GroundTruthMonitor {
                 truth.in_contact[a * n + b] = touching;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Feeds frames at 4 Hz (exact binary times) from `from_s` to `to_s` (exclusive),
+    /// each seeing `new_m3` while moving at `speed_mps`.
+    fn fly(u: &mut UnproductiveTime, from_s: f64, to_s: f64, new_m3: f64, speed_mps: f64) {
+        let mut t = from_s;
+        while t < to_s {
+            u.frame(t, new_m3, speed_mps);
+            t += 0.25;
+        }
+    }
+
+    #[test]
+    fn moving_without_new_volume_counts_once_the_window_is_empty() {
+        let mut u = UnproductiveTime::default();
+        // 10 s seeing new volume, then 20 s flying through seen space.
+        fly(&mut u, 0.0, 10.0, 1.0, 1.0);
+        assert_eq!(u.total_s(), 0.0);
+        fly(&mut u, 10.0, 30.0, 0.0, 1.0);
+        // The last new frame (9.75 s) leaves the window at 11.75 s, which counts the
+        // step from 11.5 s; the last frame is at 29.75 s.
+        assert_eq!(u.total_s(), 29.75 - 11.5);
+        assert_eq!(u.longest_s(), u.total_s());
+    }
+
+    #[test]
+    fn stopping_adds_nothing_and_new_volume_ends_the_interval() {
+        let mut u = UnproductiveTime::default();
+        fly(&mut u, 0.0, 10.0, 0.0, 1.0); // 9.75 s moving, nothing new
+        fly(&mut u, 10.0, 20.0, 0.0, 0.0); // hovering: no time, same interval
+        fly(&mut u, 20.0, 25.0, 0.0, 1.0); // 5 s more
+        assert_eq!(u.longest_s(), 14.75);
+        fly(&mut u, 25.0, 26.0, 1.0, 1.0); // sees something: the interval ends
+        fly(&mut u, 26.0, 31.0, 0.0, 1.0); // counts from 27.5 s to 30.75 s
+        assert_eq!(u.longest_s(), 14.75, "the earlier interval was longer");
+        assert_eq!(u.total_s(), 14.75 + 3.25);
+    }
+
+    #[test]
+    fn a_trickle_below_the_threshold_is_nothing_new() {
+        let mut u = UnproductiveTime::default();
+        // 0.05 m³ a frame is 0.4 m³ per 2 s window: below the threshold.
+        fly(&mut u, 0.0, 10.0, 0.05, 1.0);
+        assert_eq!(u.total_s(), 9.75);
+        let mut v = UnproductiveTime::default();
+        // 0.08 m³ a frame is 0.64 m³ per window: productive from the 7th frame on
+        // (1.5 s); the steps of frames 2 to 6 counted.
+        fly(&mut v, 0.0, 10.0, 0.08, 1.0);
+        assert_eq!(v.total_s(), 1.25);
+    }
+
+    #[test]
+    fn bad_inputs_add_no_time() {
+        let mut u = UnproductiveTime::default();
+        u.frame(1.0, f64::NAN, 1.0);
+        u.frame(0.5, 0.0, 1.0); // out of order
+        u.frame(2.0, -3.0, f64::NAN);
+        u.frame(3.0, f64::INFINITY, 1.0);
+        assert_eq!(u.total_s(), 1.0, "only 2 s → 3 s, moving with nothing new");
     }
 }

@@ -36,6 +36,9 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "sent_bytes_keyframe",
     "sent_bytes_bulk",
     "received_bytes",
+    "discovered_m3",
+    "unproductive_s",
+    "longest_unproductive_s",
 ];
 
 /// The time series as CSV text.
@@ -47,7 +50,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -64,7 +67,10 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.sent_bytes[1],
             r.sent_bytes[2],
             r.sent_bytes[3],
-            r.received_bytes
+            r.received_bytes,
+            r.discovered_m3,
+            r.unproductive_s,
+            r.longest_unproductive_s
         );
     }
     out
@@ -129,7 +135,7 @@ fn pretty_json<T: serde::Serialize>(value: &T) -> io::Result<String> {
 }
 
 /// The plots of a run, by file stem: coverage, link bytes per class and robot, speeds,
-/// distance to the nearest robot, and the trajectories seen from above.
+/// unproductive time, distance to the nearest robot, and the trajectories seen from above.
 #[must_use]
 pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
     let robots = rows.iter().map(|r| r.robot + 1).max().unwrap_or(0);
@@ -203,6 +209,15 @@ pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
                 x_label: "time (s)".into(),
                 y_label: "speed (m/s)".into(),
                 series: per_robot(&robot_name, &|r| Some((r.time_s, r.speed_mps))),
+            },
+        ),
+        (
+            "unproductive",
+            Chart {
+                title: "Time moving without seeing new volume, cumulative".into(),
+                x_label: "time (s)".into(),
+                y_label: "unproductive time (s)".into(),
+                series: per_robot(&robot_name, &|r| Some((r.time_s, r.unproductive_s))),
             },
         ),
         (

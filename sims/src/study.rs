@@ -446,6 +446,14 @@ pub struct RunRow {
     /// [`crate::og_meter`]).
     #[serde(default)]
     pub og_change_set_bytes: Vec<[f64; 2]>,
+    /// Time the robots spent moving without seeing new volume, seconds, summed over
+    /// robots (see [`crate::monitor::UnproductiveTime`]; `None` in records written
+    /// before it was measured).
+    #[serde(default)]
+    pub unproductive_s: Option<f64>,
+    /// The longest unproductive interval of any robot, seconds (`None` as above).
+    #[serde(default)]
+    pub longest_unproductive_s: Option<f64>,
 }
 
 impl RunRow {
@@ -505,6 +513,13 @@ impl RunRow {
                     [r, bytes as f64]
                 })
                 .collect(),
+            unproductive_s: Some(s.per_robot.iter().map(|r| r.truth.unproductive_s).sum()),
+            longest_unproductive_s: Some(
+                s.per_robot
+                    .iter()
+                    .map(|r| r.truth.longest_unproductive_s)
+                    .fold(0.0, f64::max),
+            ),
         }
     }
 }
@@ -603,6 +618,8 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             "map_bytes_offered",
             "map_bytes_sent",
             "link_bytes_sent",
+            "unproductive_s",
+            "longest_unproductive_s",
             "wall_s",
         ]
         .map(String::from),
@@ -631,6 +648,8 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             r.map_bytes_offered.to_string(),
             r.map_bytes_sent.to_string(),
             r.link_bytes_sent.to_string(),
+            opt(r.unproductive_s),
+            opt(r.longest_unproductive_s),
             format!("{:.3}", r.wall_s),
         ]);
         cells.extend(og_resolutions.iter().map(|res| {
@@ -690,7 +709,8 @@ pub fn groups(rows: &[RunRow]) -> Vec<(Vec<String>, Vec<&RunRow>)> {
         .collect()
 }
 
-/// `aggregate.csv`: per combination of levels, means and 95% intervals over seeds.
+/// `aggregate.csv`: per combination of levels, means and 95% intervals over seeds; the
+/// time to each coverage level over the runs that reached it, with their number.
 #[must_use]
 pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
     let mut header: Vec<String> = study.axes.iter().map(|a| a.name.clone()).collect();
@@ -704,12 +724,16 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
             "map_bytes_sent_ci95",
             "collisions_total",
             "robot_contacts_total",
+            "unproductive_s_mean",
+            "unproductive_s_ci95",
+            "longest_unproductive_s_max",
         ]
         .map(String::from),
     );
     for l in &study.coverage_levels {
         let p = (l * 100.0).round();
         header.push(format!("time_to_{p}pct_s_mean"));
+        header.push(format!("time_to_{p}pct_s_ci95"));
         header.push(format!("reached_{p}pct_runs"));
     }
     let mut out = header.join(",");
@@ -735,23 +759,35 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
                 .sum::<u64>()
                 .to_string(),
         ]);
+        let unproductive: Vec<f64> = group.iter().filter_map(|r| r.unproductive_s).collect();
+        let longest = group
+            .iter()
+            .filter_map(|r| r.longest_unproductive_s)
+            .reduce(f64::max);
+        cells.extend(mean_and_ci95_cells(&unproductive));
+        cells.push(opt(longest));
         for i in 0..study.coverage_levels.len() {
             let reached: Vec<f64> = group
                 .iter()
                 .filter_map(|r| r.time_to_coverage_s[i])
                 .collect();
-            let (m, _) = mean_ci95(&reached);
-            cells.push(if reached.is_empty() {
-                String::new()
-            } else {
-                m.to_string()
-            });
+            cells.extend(mean_and_ci95_cells(&reached));
             cells.push(reached.len().to_string());
         }
         out.push_str(&cells.join(","));
         out.push('\n');
     }
     out
+}
+
+/// The mean and 95% half-width of `values` as two cells, both empty when there are
+/// no values.
+fn mean_and_ci95_cells(values: &[f64]) -> [String; 2] {
+    if values.is_empty() {
+        return [String::new(), String::new()];
+    }
+    let (mean, half) = mean_ci95(values);
+    [mean.to_string(), half.to_string()]
 }
 
 /// Runs every variant, `jobs` at a time; `done` is called after each run with its row
@@ -977,6 +1013,8 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             coverage_over_time: vec![[1.0, 0.1], [2.0, 0.3], [3.0, 0.5]],
             wall_s: 1.5,
             og_change_set_bytes: vec![[0.1, 1000.0]],
+            unproductive_s: Some(12.5),
+            longest_unproductive_s: Some(8.0),
         };
         let run_dir = dir.path().join(&variant.name);
         assert_eq!(
@@ -1055,6 +1093,8 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             coverage_over_time: vec![[1.0, coverage]],
             wall_s: 0.0,
             og_change_set_bytes: Vec::new(),
+            unproductive_s: None,
+            longest_unproductive_s: None,
         }
     }
 
@@ -1093,6 +1133,45 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             }
         }
         assert!(studies >= 6, "{studies} studies");
+    }
+
+    #[test]
+    fn aggregate_has_intervals_on_times_to_coverage_and_counts_the_runs_reaching_them() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(
+            dir.path(),
+            "study.toml",
+            "name = \"s\"\nseeds = [1, 2, 3]\ncoverage_levels = [0.5, 0.9]\n",
+        );
+        let study = Study::load(&path).expect("study");
+        let rows: Vec<RunRow> = [(Some(10.0), 4.0), (Some(20.0), 40.0), (None, 7.0)]
+            .into_iter()
+            .zip(1..)
+            .map(|((t, longest), seed)| RunRow {
+                time_to_coverage_s: vec![t, None],
+                unproductive_s: Some(2.0 * longest),
+                longest_unproductive_s: Some(longest),
+                ..row_with_coverage(seed, 0.6)
+            })
+            .collect();
+        let csv = aggregate_csv(&study, &rows);
+        let lines: Vec<&str> = csv.lines().collect();
+        let column = |name: &str| {
+            let i = lines[0]
+                .split(',')
+                .position(|h| h == name)
+                .unwrap_or_else(|| panic!("no column {name} in {}", lines[0]));
+            lines[1].split(',').nth(i).expect("cell").to_string()
+        };
+        assert_eq!(column("time_to_50pct_s_mean"), "15");
+        let (_, half) = mean_ci95(&[10.0, 20.0]);
+        assert_eq!(column("time_to_50pct_s_ci95"), half.to_string());
+        assert_eq!(column("reached_50pct_runs"), "2");
+        assert_eq!(column("time_to_90pct_s_mean"), "");
+        assert_eq!(column("time_to_90pct_s_ci95"), "");
+        assert_eq!(column("reached_90pct_runs"), "0");
+        assert_eq!(column("unproductive_s_mean"), "34");
+        assert_eq!(column("longest_unproductive_s_max"), "40");
     }
 
     #[test]

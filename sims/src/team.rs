@@ -85,6 +85,13 @@ pub struct SeriesRow {
     pub sent_bytes: [u64; 4],
     /// Link bytes received so far.
     pub received_bytes: u64,
+    /// Volume this robot saw first so far, m³.
+    pub discovered_m3: f64,
+    /// Time spent moving without seeing new volume so far, seconds
+    /// ([`crate::monitor::UnproductiveTime`]).
+    pub unproductive_s: f64,
+    /// The longest unproductive interval so far, seconds.
+    pub longest_unproductive_s: f64,
 }
 
 /// Counters of one actor.
@@ -405,6 +412,9 @@ impl Team {
                     nearest_robot_m,
                     sent_bytes,
                     received_bytes: r.received_bytes,
+                    discovered_m3: r.discovered_m3,
+                    unproductive_s: r.unproductive_s,
+                    longest_unproductive_s: r.longest_unproductive_s,
                 });
             }
             drop(truth);

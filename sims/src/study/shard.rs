@@ -308,6 +308,8 @@ mod tests {
             coverage_over_time: vec![[t, 0.6]],
             wall_s: 0.1,
             og_change_set_bytes: Vec::new(),
+            unproductive_s: None,
+            longest_unproductive_s: None,
         };
         save_finished_run(&run_dir, study, variant, &row).expect("record");
     }

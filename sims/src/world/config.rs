@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::mesh::MeshError;
 use super::{
     CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpenField, OpenFieldParams,
-    OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
+    OpeningScene, Site, TunnelParams, Warehouse, WarehouseParams, WindowParams, tunnels,
 };
 
 /// The kinds of world `troupe run` can build.
@@ -26,6 +26,11 @@ pub enum WorldKind {
     Mesh,
     /// Flat ground with a few boxes; routes cross at the centre (`[world.open_field]`).
     OpenField,
+    /// A tunnel forking into two arms (`[world.tunnel]`, [`tunnels::t_junction`]).
+    TJunction,
+    /// A blind tunnel with a side tunnel behind the start (`[world.tunnel]`,
+    /// [`tunnels::dead_end`]).
+    DeadEnd,
 }
 
 /// The world to explore.
@@ -49,6 +54,14 @@ pub struct WorldConfig {
     pub mesh: MeshParams,
     /// Open field parameters.
     pub open_field: OpenFieldParams,
+    /// Scripted tunnel parameters (not written when default, so that records of
+    /// earlier runs still compare equal).
+    #[serde(skip_serializing_if = "is_default_tunnel")]
+    pub tunnel: TunnelParams,
+}
+
+fn is_default_tunnel(p: &TunnelParams) -> bool {
+    *p == TunnelParams::default()
 }
 
 impl Default for WorldConfig {
@@ -62,6 +75,7 @@ impl Default for WorldConfig {
             door: DoorParams::default(),
             mesh: MeshParams::default(),
             open_field: OpenFieldParams::default(),
+            tunnel: TunnelParams::default(),
         }
     }
 }
@@ -80,6 +94,9 @@ impl WorldConfig {
             WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
             WorldKind::Mesh => self.mesh.validate().map_err(|r| ("mesh", r)),
             WorldKind::OpenField => self.open_field.validate().map_err(|r| ("open_field", r)),
+            WorldKind::TJunction | WorldKind::DeadEnd => {
+                self.tunnel.validate().map_err(|r| ("tunnel", r))
+            }
         }
     }
 
@@ -96,6 +113,8 @@ impl WorldConfig {
             WorldKind::Door => Arc::new(OpeningScene::door(&self.door, self.seed)),
             WorldKind::OpenField => Arc::new(OpenField::generate(&self.open_field, self.seed)),
             WorldKind::Mesh => Arc::new(MeshWorld::load(&self.mesh, self.seed)?),
+            WorldKind::TJunction => Arc::new(tunnels::t_junction(&self.tunnel, self.seed)),
+            WorldKind::DeadEnd => Arc::new(tunnels::dead_end(&self.tunnel, self.seed)),
         })
     }
 }

@@ -11,7 +11,9 @@
 //!
 //! Implementations: [`CaveWorld`] (procedural tunnel network from a seed), [`Warehouse`]
 //! (rows of shelves, thesis §4.2.2), [`OpeningScene`] (the window and door scenes of
-//! §5.2), [`OpenField`] (flat ground and a few boxes, for crossing missions) and [`BoxRoom`] (one analytic box, for tests). [`WorldConfig`] picks one.
+//! §5.2), [`OpenField`] (flat ground and a few boxes, for crossing missions), the scripted
+//! [`tunnels`] (a T-junction and a dead end, for exploration tests) and [`BoxRoom`] (one
+//! analytic box, for tests). [`WorldConfig`] picks one.
 
 mod box_room;
 pub mod cave;
@@ -24,6 +26,7 @@ pub mod open_field;
 pub mod scenes;
 pub mod solids;
 mod triangle_mesh;
+pub mod tunnels;
 pub mod warehouse;
 
 pub use box_room::BoxRoom;
@@ -34,6 +37,7 @@ pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use open_field::{OpenField, OpenFieldParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
 pub use troupe_actors::geometry::Aabb;
+pub use tunnels::TunnelParams;
 pub use warehouse::{Warehouse, WarehouseParams};
 
 use nalgebra::{Point3, Vector3};

@@ -54,7 +54,15 @@ impl CaveWorld {
     #[must_use]
     pub fn generate(params: &CaveParams, seed: u64) -> CaveWorld {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let graph = generate::grow(params, &mut rng);
+        CaveWorld::from_graph(params, generate::grow(params, &mut rng), seed)
+    }
+
+    /// The cave along a given centre-line tree (scripted worlds such as
+    /// [`super::tunnels`]): capsules of each edge's radius, a chamber at every node with a
+    /// `chamber_radius_m`, and walls roughened by `params.wall_noise_*` from `seed`; the
+    /// other fields of `params` are not used. Edge 0 must leave the entrance.
+    #[must_use]
+    pub fn from_graph(params: &CaveParams, graph: CaveGraph, seed: u64) -> CaveWorld {
         let mut prims = Vec::new();
         for e in &graph.edges {
             for w in e.points.windows(2) {

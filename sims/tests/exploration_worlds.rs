@@ -1,0 +1,93 @@
+//! The scripted exploration worlds as a user reaches them: `troupe run` on the shipped
+//! T-junction scenario flies the standard team safely, explores beyond the stem, and
+//! reports each robot's discovered volume and unproductive time consistently.
+
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+
+const TROUPE: &str = env!("CARGO_BIN_EXE_troupe");
+
+/// Simulated seconds flown: enough to reach the fork (10 m ahead) and look into it.
+const DURATION_S: f64 = 30.0;
+
+#[test]
+fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
+    let out = tempfile::tempdir().unwrap();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/t_junction.toml");
+    let run = Command::new(TROUPE)
+        .arg("run")
+        .arg(&scenario)
+        .args(["--duration-s", &DURATION_S.to_string(), "--no-progress"])
+        .arg("--out")
+        .arg(out.path())
+        .env("RUST_LOG", "off")
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dir = out.path().join("t_junction");
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+
+    assert_eq!(summary["world"]["kind"], "t_junction");
+    assert_eq!(summary["collisions"], 0, "collisions with the world");
+    assert_eq!(summary["robot_contacts"], 0, "robot bodies overlapped");
+    let over_time: Vec<f64> = summary["coverage"]["over_time"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s[1].as_f64().unwrap())
+        .collect();
+    assert!(over_time.windows(2).all(|w| w[1] >= w[0]), "{over_time:?}");
+    // The stem is a third of the tunnels: covering more means looking into the arms.
+    let final_fraction = summary["coverage"]["final_fraction"].as_f64().unwrap();
+    assert!(final_fraction > 0.45, "coverage {final_fraction}");
+
+    let robots = summary["per_robot"].as_array().unwrap();
+    assert_eq!(robots.len(), 2);
+    let mut discovered_m3 = 0.0;
+    for r in robots {
+        assert_eq!(r["unsafe_plans"], 0, "{}", r["name"]);
+        let mine = r["discovered_m3"].as_f64().unwrap();
+        let total = r["unproductive_s"].as_f64().unwrap();
+        let longest = r["longest_unproductive_s"].as_f64().unwrap();
+        assert!(mine > 0.0, "{} saw nothing first", r["name"]);
+        assert!(
+            (0.0..=total).contains(&longest) && total <= DURATION_S,
+            "{}: longest {longest} s of {total} s",
+            r["name"]
+        );
+        discovered_m3 += mine;
+    }
+    // Every explored cell was seen first by exactly one robot.
+    let explored_m3 = summary["coverage"]["explored_volume_m3"].as_f64().unwrap();
+    assert!(
+        (discovered_m3 - explored_m3).abs() < 1e-6 * explored_m3,
+        "{discovered_m3} m³ discovered, {explored_m3} m³ explored"
+    );
+
+    // The time series ends on the summary's figures.
+    let csv = std::fs::read_to_string(dir.join("timeseries.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    for (i, r) in robots.iter().enumerate() {
+        let last = rows
+            .iter()
+            .rev()
+            .find(|row| row[column("robot")] == i.to_string())
+            .unwrap();
+        for name in ["discovered_m3", "unproductive_s", "longest_unproductive_s"] {
+            let cell: f64 = last[column(name)].parse().unwrap();
+            assert_eq!(cell, r[name].as_f64().unwrap(), "robot {i} {name}");
+        }
+    }
+}
