@@ -6,16 +6,21 @@
 #![allow(missing_docs)]
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use troupe_sims::camera::CameraBackend;
+use troupe_sims::camera::{CameraBackend, CameraParams};
 use troupe_sims::scenario::Scenario;
 use troupe_sims::team::Team;
 
 fn scenario(duration_s: f64) -> Scenario {
-    let mut s = Scenario::default();
-    s.robots = 1;
-    s.duration_s = duration_s;
-    s.camera.backend = CameraBackend::Cpu;
-    s
+    let defaults = Scenario::default();
+    Scenario {
+        robots: 1,
+        duration_s,
+        camera: CameraParams {
+            backend: CameraBackend::Cpu,
+            ..defaults.camera.clone()
+        },
+        ..defaults
+    }
 }
 
 fn bench_robot_step(c: &mut Criterion) {
