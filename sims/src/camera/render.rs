@@ -44,16 +44,23 @@ struct Hit {
     normal: Vector3<f64>,
 }
 
-/// March from `origin` along unit `dir` up to ray length `t_max_m`.
+/// March from `origin` along unit `dir` up to ray length `t_max_m`; `origin_step_m` is
+/// `world.safe_step_m(origin)` (the same for every pixel, so computed once per frame).
 ///
 /// Steps are over-relaxed by [`OVER_RELAXATION`] while it is safe: after stepping
 /// `ω·r0` from a point with empty radius `r0`, the step is kept only if the new point's
 /// empty ball reaches back to the old one's (`r1 >= (ω - 1)·r0`), so no surface was
 /// skipped; otherwise the march goes back to `t0 + r0` and continues with plain steps.
-fn trace(world: &dyn World, origin: &Point3<f64>, dir: &Vector3<f64>, t_max_m: f64) -> Option<Hit> {
+fn trace(
+    world: &dyn World,
+    origin: &Point3<f64>,
+    origin_step_m: f64,
+    dir: &Vector3<f64>,
+    t_max_m: f64,
+) -> Option<Hit> {
     let mut omega = OVER_RELAXATION;
     let mut t = 0.0;
-    let mut radius = world.safe_step_m(origin);
+    let mut radius = origin_step_m;
     for _ in 0..MAX_TRACE_STEPS {
         if radius < HIT_EPS_M {
             let p = origin + dir * t;
@@ -139,6 +146,7 @@ pub(super) fn render(
     let origin = Point3::from(body_pose.translation.vector);
     let rotation = body_pose.rotation;
     let range_m = cam.range_m;
+    let origin_step_m = world.safe_step_m(&origin);
     let rows = frame
         .depth_m
         .par_chunks_mut(w)
@@ -149,7 +157,8 @@ pub(super) fn render(
                 let unit_depth = k.pixel_ray(col as u32, row as u32);
                 let cos_axis = 1.0 / unit_depth.norm();
                 let dir = rotation * (unit_depth * cos_axis);
-                let Some(hit) = trace(world, &origin, &dir, range_m / cos_axis) else {
+                let Some(hit) = trace(world, &origin, origin_step_m, &dir, range_m / cos_axis)
+                else {
                     continue;
                 };
                 let index = (row * w + col) as u64;

@@ -6,6 +6,13 @@
 //! clamp, so `base` is 1-Lipschitz. Each grid cell lists every primitive whose region grown
 //! by `ROCK_CLAMP_M` reaches the cell; primitives left out are below the clamp everywhere
 //! in the cell, so the indexed evaluation equals the brute-force one exactly.
+//!
+//! [`Field::base_m`] reads a finer second index built from the first: each fine cell keeps
+//! only the primitives that can be the maximum somewhere in it. With `h` the cell's half
+//! diagonal and `c` its centre, primitive `i` is dropped when
+//! `f_i(c) + h < max(-ROCK_CLAMP_M, max_j f_j(c) - h)`: by 1-Lipschitz continuity it is
+//! below another primitive (or the clamp) everywhere in the cell. The maximum over the
+//! kept primitives is the same number as over all of them, bit for bit.
 
 use nalgebra::{Point3, Vector3};
 
@@ -15,8 +22,14 @@ use crate::world::gpu_scene::{GpuCaveField, GpuNoise, GpuPrimitive};
 /// Depth below which rock distances are clamped (a conservative rock distance).
 pub(super) const ROCK_CLAMP_M: f64 = 1.0;
 
-/// Edge of the index cells.
+/// Edge of the index cells (the GPU camera's index).
 const INDEX_CELL_M: f64 = 2.0;
+
+/// Fine index cells per coarse cell edge (fine cells of 0.5 m).
+const FINE_PER_COARSE: usize = 4;
+
+/// Slack added to the pruning bound for rounding in `free_m` (far above its error).
+const PRUNE_SLACK_M: f64 = 1e-9;
 
 /// One convex piece of free space.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,6 +105,11 @@ pub(super) struct Field {
     /// `cell_items[cell_start[c]..cell_start[c + 1]]` are the primitives of cell `c`.
     cell_start: Vec<u32>,
     cell_items: Vec<u32>,
+    /// The fine index (see the module doc): cells of `INDEX_CELL_M / FINE_PER_COARSE`
+    /// from the same origin, laid out as the coarse one.
+    fine_dims: [usize; 3],
+    fine_start: Vec<u32>,
+    fine_items: Vec<u32>,
 }
 
 impl Field {
@@ -148,35 +166,86 @@ impl Field {
                 fill[c] += 1;
             });
         }
-        Self {
+        let mut field = Self {
             prims,
             origin,
             dims,
             cell_start: counts,
             cell_items: items,
+            fine_dims: dims.map(|d| d * FINE_PER_COARSE),
+            fine_start: Vec::new(),
+            fine_items: Vec::new(),
+        };
+        field.build_fine_index();
+        field
+    }
+
+    /// Fills the fine index from the coarse one (see the module doc).
+    fn build_fine_index(&mut self) {
+        let fine_m = INDEX_CELL_M / FINE_PER_COARSE as f64;
+        let half_diag = fine_m * 3f64.sqrt() / 2.0;
+        let [nx, ny, nz] = self.fine_dims;
+        let mut start = Vec::with_capacity(nx * ny * nz + 1);
+        let mut items = Vec::new();
+        let mut values: Vec<(u32, f64)> = Vec::new();
+        start.push(0u32);
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let coarse = x / FINE_PER_COARSE
+                        + self.dims[0]
+                            * (y / FINE_PER_COARSE + self.dims[1] * (z / FINE_PER_COARSE));
+                    let (s, e) = (
+                        self.cell_start[coarse] as usize,
+                        self.cell_start[coarse + 1] as usize,
+                    );
+                    let centre = self.origin
+                        + Vector3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * fine_m;
+                    values.clear();
+                    values.extend(
+                        self.cell_items[s..e]
+                            .iter()
+                            .map(|&i| (i, self.prims[i as usize].free_m(&centre))),
+                    );
+                    let floor = values
+                        .iter()
+                        .map(|(_, v)| v - half_diag)
+                        .fold(-ROCK_CLAMP_M, f64::max);
+                    items.extend(
+                        values
+                            .iter()
+                            .filter(|(_, v)| v + half_diag + PRUNE_SLACK_M >= floor)
+                            .map(|(i, _)| *i),
+                    );
+                    start.push(u32::try_from(items.len()).unwrap_or(u32::MAX));
+                }
+            }
         }
+        self.fine_start = start;
+        self.fine_items = items;
     }
 
     /// The indexed base field (see the module doc).
     #[inline]
     pub(super) fn base_m(&self, p: &Point3<f64>) -> f64 {
         let mut best = -ROCK_CLAMP_M;
-        let rel = (p - self.origin) / INDEX_CELL_M;
+        let rel = (p - self.origin) * (FINE_PER_COARSE as f64 / INDEX_CELL_M);
         let mut cell = 0usize;
         let mut stride = 1usize;
         for k in 0..3 {
-            let f = rel[k].floor();
-            if !(f >= 0.0 && f < self.dims[k] as f64) {
+            let r = rel[k];
+            // For r >= 0 truncation is the floor; false for NaN.
+            if !(r >= 0.0 && r < self.fine_dims[k] as f64) {
                 return best;
             }
-            cell += f as usize * stride;
-            stride *= self.dims[k];
+            cell += r as usize * stride;
+            stride *= self.fine_dims[k];
         }
         let (s, e) = (
-            self.cell_start[cell] as usize,
-            self.cell_start[cell + 1] as usize,
+            self.fine_start[cell] as usize,
+            self.fine_start[cell + 1] as usize,
         );
-        for &i in &self.cell_items[s..e] {
+        for &i in &self.fine_items[s..e] {
             best = best.max(self.prims[i as usize].free_m(p));
         }
         best
@@ -232,6 +301,31 @@ impl Field {
         }
     }
 
+    /// The field through the coarse index alone (the evaluation before the fine index).
+    #[cfg(test)]
+    pub(super) fn base_coarse_m(&self, p: &Point3<f64>) -> f64 {
+        let mut best = -ROCK_CLAMP_M;
+        let rel = (p - self.origin) / INDEX_CELL_M;
+        let mut cell = 0usize;
+        let mut stride = 1usize;
+        for k in 0..3 {
+            let f = rel[k].floor();
+            if !(f >= 0.0 && f < self.dims[k] as f64) {
+                return best;
+            }
+            cell += f as usize * stride;
+            stride *= self.dims[k];
+        }
+        let (s, e) = (
+            self.cell_start[cell] as usize,
+            self.cell_start[cell + 1] as usize,
+        );
+        for &i in &self.cell_items[s..e] {
+            best = best.max(self.prims[i as usize].free_m(p));
+        }
+        best
+    }
+
     /// The same field without the index (slow reference for tests).
     #[cfg(test)]
     pub(super) fn base_brute_m(&self, p: &Point3<f64>) -> f64 {
@@ -248,10 +342,17 @@ impl Field {
         it.fold(first, |acc, b| acc.union(&b))
     }
 
-    /// Mean number of primitives listed per non-empty cell (for diagnostics).
+    /// Mean number of primitives listed per non-empty cell, coarse and fine index (for
+    /// diagnostics).
     #[cfg(test)]
-    pub(super) fn mean_items_per_busy_cell(&self) -> f64 {
-        let busy = self.cell_start.windows(2).filter(|w| w[1] > w[0]).count();
-        self.cell_items.len() as f64 / busy.max(1) as f64
+    pub(super) fn mean_items_per_busy_cell(&self) -> [f64; 2] {
+        let mean = |start: &[u32], items: &[u32]| {
+            let busy = start.windows(2).filter(|w| w[1] > w[0]).count();
+            items.len() as f64 / busy.max(1) as f64
+        };
+        [
+            mean(&self.cell_start, &self.cell_items),
+            mean(&self.fine_start, &self.fine_items),
+        ]
     }
 }

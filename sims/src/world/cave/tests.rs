@@ -61,8 +61,35 @@ fn indexed_field_equals_brute_force() {
         let p = random_point(&mut rng, &b);
         assert_eq!(w.field.base_m(&p), w.field.base_brute_m(&p), "at {p}");
     }
-    let mean = w.field.mean_items_per_busy_cell();
-    assert!(mean < 12.0, "index lists {mean} primitives per cell");
+    // Points near walls and chamber floors too, where the pruning matters.
+    for _ in 0..20_000 {
+        let p = random_point(&mut rng, &w.bounds());
+        if w.field.base_m(&p).abs() < 0.6 {
+            assert_eq!(w.field.base_m(&p), w.field.base_brute_m(&p), "at {p}");
+        }
+    }
+    // The fine index against the coarse one, bit for bit, on many near-wall points.
+    for seed in [0, 1, 2, 3] {
+        let w = cave(seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut near = 0;
+        while near < 200_000 {
+            let p = random_point(&mut rng, &w.bounds());
+            let fine = w.field.base_m(&p);
+            if fine.abs() < 0.5 {
+                near += 1;
+            }
+            assert_eq!(
+                fine.to_bits(),
+                w.field.base_coarse_m(&p).to_bits(),
+                "at {p}"
+            );
+        }
+    }
+    let [coarse, fine] = w.field.mean_items_per_busy_cell();
+    assert!(coarse < 12.0, "index lists {coarse} primitives per cell");
+    assert!(fine < 4.0, "fine index lists {fine} primitives per cell");
+    eprintln!("primitives per busy cell: coarse {coarse:.2}, fine {fine:.2}");
 }
 
 #[test]
