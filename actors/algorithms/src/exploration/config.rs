@@ -19,10 +19,12 @@ pub struct GuidanceConfig {
     /// Fine frontier cells (of the grid window) a memory cell must hold to be a
     /// remembered frontier.
     pub min_frontier_cells: usize,
-    /// Best information (CSQMI, nats) of a round's candidates below which the window
-    /// counts as uninformative and the global frontier reward takes over from the
-    /// window's own.
-    pub information_threshold_nats: f64,
+    /// The frontier reward of a round is measured over the memory (route distance to
+    /// the remembered frontiers) whenever the memory's field reaches the robot. With a
+    /// value here, a round whose best candidate's information (CSQMI, nats) reaches it
+    /// keeps the window's own frontier reward instead, unless the window shows no
+    /// frontier; absent (the default): always the memory's.
+    pub window_reward_above_nats: Option<f64>,
     /// Points sampled from each peer keyframe's GMM (§6.1.5); the rays from the peer's
     /// sensor to them retire the remembered frontiers they cross.
     pub peer_keyframe_samples: usize,
@@ -34,6 +36,9 @@ pub struct GuidanceConfig {
     /// The guided frontier reward measures the route distance this far ahead of a
     /// pose, so that turning to face the route pays, metres.
     pub look_ahead_m: f64,
+    /// Route length taken off the frontier the robot headed for last round (and
+    /// those within two cells of it), so it does not swap between openings, metres.
+    pub commitment_m: f64,
 }
 
 impl Default for GuidanceConfig {
@@ -43,11 +48,12 @@ impl Default for GuidanceConfig {
             cell_m: 1.0,
             max_cells: 262_144,
             min_frontier_cells: 4,
-            information_threshold_nats: 2.0,
+            window_reward_above_nats: None,
             peer_keyframe_samples: 1000,
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
             look_ahead_m: 1.0,
+            commitment_m: 5.0,
         }
     }
 }
@@ -79,12 +85,12 @@ impl GuidanceConfig {
                 self.peer_keyframe_samples,
             ));
         }
-        ConfigError::non_negative(
-            "information_threshold_nats",
-            self.information_threshold_nats,
-        )?;
+        if let Some(nats) = self.window_reward_above_nats {
+            ConfigError::non_negative("window_reward_above_nats", nats)?;
+        }
         ConfigError::non_negative("claim_radius_m", self.claim_radius_m)?;
         ConfigError::non_negative("claim_penalty_m", self.claim_penalty_m)?;
-        ConfigError::non_negative("look_ahead_m", self.look_ahead_m)
+        ConfigError::non_negative("look_ahead_m", self.look_ahead_m)?;
+        ConfigError::non_negative("commitment_m", self.commitment_m)
     }
 }

@@ -21,6 +21,7 @@ pub struct Guide {
     memory: FrontierMemory,
     peers: BTreeMap<RobotId, PeerIntent>,
     retired_by_peers: u64,
+    target: Option<super::CellKey>,
 }
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
@@ -37,6 +38,7 @@ impl Guide {
             memory: FrontierMemory::new(config.cell_m, config.max_cells),
             peers: BTreeMap::new(),
             retired_by_peers: 0,
+            target: None,
         }
     }
 
@@ -92,11 +94,12 @@ impl Guide {
     }
 
     /// Marks the robot's own cell passable and builds the field for a robot at
-    /// `robot_m`, with the peers' claims.
+    /// `robot_m`, with the peers' claims and the robot's commitment to the frontier it
+    /// headed for last time; remembers the frontier the field now leads it to.
     pub fn field(&mut self, robot_m: &Point3<f64>) -> GuidanceField {
         self.memory.mark_body(robot_m);
         let peers: Vec<PeerIntent> = self.peers.values().copied().collect();
-        GuidanceField::build(
+        let field = GuidanceField::build(
             &self.memory,
             robot_m,
             &peers,
@@ -104,14 +107,18 @@ impl Guide {
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
+                committed: self.target,
+                commitment_m: self.config.commitment_m,
             },
-        )
+        );
+        self.target = field.target_of(robot_m);
+        field
     }
 
     /// Whether a round from `root_m` should score the frontier reward over `field`:
-    /// the field reaches the robot, and the window is uninformative — no candidate's
-    /// information reaches [`GuidanceConfig::information_threshold_nats`], or the
-    /// window shows no frontier at all (`local_frontier_m` infinite).
+    /// whenever the field reaches the robot, unless
+    /// [`GuidanceConfig::window_reward_above_nats`] is set, some candidate's information
+    /// reaches it and the window shows a frontier (`local_frontier_m` finite).
     #[must_use]
     pub fn should_guide(
         &self,
@@ -124,6 +131,8 @@ impl Guide {
             return false;
         }
         let best = candidates.iter().map(|c| c.information).fold(0.0, f64::max);
-        best < self.config.information_threshold_nats || !local_frontier_m.is_finite()
+        self.config
+            .window_reward_above_nats
+            .is_none_or(|nats| best < nats || !local_frontier_m.is_finite())
     }
 }

@@ -16,7 +16,7 @@
 //!   penalty, so teammates spread over different openings.
 //! - [`Guide`]: one robot's memory, its peers' intents and the rule for when a round
 //!   follows the field.
-//! - [`GuidanceConfig`]: `[robot.planner.guidance]`.
+//! - [`GuidanceConfig`]: the settings, table `robot.planner.guidance`.
 //!
 //! The planner uses the field when the window is uninformative (see
 //! [`PlanningProblem::guided`](crate::planner::problem::PlanningProblem::guided)); the
