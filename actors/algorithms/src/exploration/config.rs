@@ -36,9 +36,6 @@ pub struct GuidanceConfig {
     /// The guided frontier reward measures the route distance this far ahead of a
     /// pose, so that turning to face the route pays, metres.
     pub look_ahead_m: f64,
-    /// Route length taken off the frontier the robot headed for last round (and
-    /// those within two cells of it), so it does not swap between openings, metres.
-    pub commitment_m: f64,
 }
 
 impl Default for GuidanceConfig {
@@ -53,7 +50,6 @@ impl Default for GuidanceConfig {
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
             look_ahead_m: 1.0,
-            commitment_m: 5.0,
         }
     }
 }
@@ -90,7 +86,6 @@ impl GuidanceConfig {
         }
         ConfigError::non_negative("claim_radius_m", self.claim_radius_m)?;
         ConfigError::non_negative("claim_penalty_m", self.claim_penalty_m)?;
-        ConfigError::non_negative("look_ahead_m", self.look_ahead_m)?;
-        ConfigError::non_negative("commitment_m", self.commitment_m)
+        ConfigError::non_negative("look_ahead_m", self.look_ahead_m)
     }
 }

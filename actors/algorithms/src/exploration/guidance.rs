@@ -30,12 +30,6 @@ pub struct FieldParams {
     pub claim_penalty_m: f64,
     /// How far ahead of a pose [`GuidanceField::pose_distance_m`] measures, metres.
     pub look_ahead_m: f64,
-    /// The frontier the robot headed for last round, if any: it and the frontiers
-    /// within two cells of it are made shorter by `commitment_m`, so that the robot
-    /// does not swap between two openings of about the same distance.
-    pub committed: Option<CellKey>,
-    /// Route length taken off the committed frontier, metres.
-    pub commitment_m: f64,
 }
 
 /// A deterministic hasher: lookups only (the field is never iterated to decide).
@@ -114,11 +108,7 @@ impl GuidanceField {
                 let theirs_m = (centre - peer.goal_m).norm();
                 theirs_m <= params.claim_radius_m && theirs_m < mine_m
             });
-            let committed = params
-                .committed
-                .is_some_and(|c| (0..3).all(|i| (c[i] - f[i]).abs() <= 2));
-            let penalty_m = if claimed { params.claim_penalty_m } else { 0.0 }
-                - if committed { params.commitment_m } else { 0.0 };
+            let penalty_m = if claimed { params.claim_penalty_m } else { 0.0 };
             let mut seeded = false;
             for (n, step) in std::iter::once((f, 0.0)).chain(neighbours(f)) {
                 if memory.record(n).passable {

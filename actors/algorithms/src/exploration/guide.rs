@@ -21,7 +21,6 @@ pub struct Guide {
     memory: FrontierMemory,
     peers: BTreeMap<RobotId, PeerIntent>,
     retired_by_peers: u64,
-    target: Option<super::CellKey>,
 }
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
@@ -38,7 +37,6 @@ impl Guide {
             memory: FrontierMemory::new(config.cell_m, config.max_cells),
             peers: BTreeMap::new(),
             retired_by_peers: 0,
-            target: None,
         }
     }
 
@@ -94,12 +92,11 @@ impl Guide {
     }
 
     /// Marks the robot's own cell passable and builds the field for a robot at
-    /// `robot_m`, with the peers' claims and the robot's commitment to the frontier it
-    /// headed for last time; remembers the frontier the field now leads it to.
+    /// `robot_m`, with the peers' claims.
     pub fn field(&mut self, robot_m: &Point3<f64>) -> GuidanceField {
         self.memory.mark_body(robot_m);
         let peers: Vec<PeerIntent> = self.peers.values().copied().collect();
-        let field = GuidanceField::build(
+        GuidanceField::build(
             &self.memory,
             robot_m,
             &peers,
@@ -107,12 +104,8 @@ impl Guide {
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
-                committed: self.target,
-                commitment_m: self.config.commitment_m,
             },
-        );
-        self.target = field.target_of(robot_m);
-        field
+        )
     }
 
     /// Whether a round from `root_m` should score the frontier reward over `field`:
