@@ -12,9 +12,9 @@
 //!
 //! With guidance on (`[robot.planner.guidance]`, the default) the planner also keeps a
 //! team frontier memory ([`troupe_algorithms::exploration`]): every grid snapshot, the
-//! peers' keyframes ([`PEER_KEYFRAME`]) and plans ([`PEER_PLAN`]) feed it, and a round
-//! whose window is uninformative scores the frontier reward over the route distance to
-//! the remembered frontiers, avoiding those peers are heading to.
+//! peers' keyframes ([`PEER_KEYFRAME`]) and plans ([`PEER_PLAN`]) feed it, and its
+//! rounds score the frontier reward over the route distance to the remembered
+//! frontiers (beyond the window), avoiding those peers are heading to.
 
 use std::sync::Arc;
 use std::time::Duration;
