@@ -259,6 +259,10 @@ impl RobotConfig {
             "planner.round.collision_radius_m",
             self.planner.round.collision_radius_m,
         )?;
+        self.planner
+            .guidance
+            .validate()
+            .map_err(|e| e.within("planner.guidance"))?;
         if !troupe_policies::SELECTIONS.contains(&self.selection.as_str()) {
             return Err(ConfigError::new(
                 "selection",
@@ -324,6 +328,9 @@ mod tests {
         let mut c = RobotConfig::default();
         c.collision.body.semi_axes_m = [0.3, 0.0, 0.1];
         assert_eq!(c.validate().unwrap_err().key, "collision.body");
+        let mut c = RobotConfig::default();
+        c.planner.guidance.cell_m = f64::NAN;
+        assert_eq!(c.validate().unwrap_err().key, "planner.guidance.cell_m");
     }
 
     #[test]

@@ -14,7 +14,8 @@
 //!   [`mapfile`] (map files and PLY export).
 //! - The local occupancy [`grid`] (§3.2.3, §5.1), distance fields and frontiers.
 //! - Planning: motion primitives, libraries, CSQMI reward and planning rounds
-//!   ([`planner`], §4, paper V), sampled [`trajectory`]s, the committed [`plan`].
+//!   ([`planner`], §4, paper V), the team frontier memory and global guidance
+//!   beyond the window ([`exploration`], paper V-B), sampled [`trajectory`]s, the committed [`plan`].
 //! - Safety: ellipsoid distance and collision probability ([`collision`], §7) and
 //!   what is known of teammates ([`team`], §8.2.3).
 //! - [`geometry`]: boxes and voxel lattices.
@@ -37,6 +38,7 @@
 
 pub mod camera;
 pub mod collision;
+pub mod exploration;
 pub mod frame;
 pub mod geometry;
 pub mod global_map;

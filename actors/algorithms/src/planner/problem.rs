@@ -12,6 +12,7 @@ use super::primitives::{Action, FlatState, Primitive};
 pub use super::round::SearchParams;
 use super::round::{Candidate, RoundConfig, pose_of};
 use crate::camera::PinholeIntrinsics;
+use crate::exploration::GuidanceField;
 use crate::grid::GridSnapshot;
 
 /// One round's problem: the round's settings, the grid snapshot and the camera, with
@@ -22,6 +23,7 @@ pub struct PlanningProblem<'a> {
     snapshot: &'a GridSnapshot,
     camera: &'a PinholeIntrinsics,
     actions: Vec<(Action, Option<f64>)>,
+    guidance: Option<&'a GuidanceField>,
 }
 
 impl<'a> PlanningProblem<'a> {
@@ -43,7 +45,66 @@ impl<'a> PlanningProblem<'a> {
             snapshot,
             camera,
             actions,
+            guidance: None,
         }
+    }
+
+    /// The same problem with the frontier-distance reward V = d(ξ₀) − d(ξτ) measured
+    /// over `field` (route distance to the team's remembered frontiers, paper V-B over
+    /// the explored map) instead of the window's Euclidean frontier distance, wherever
+    /// the field reaches both ends of a primitive. Safety checks do not change.
+    #[must_use]
+    pub fn guided(mut self, field: &'a GuidanceField) -> Self {
+        self.guidance = Some(field);
+        self
+    }
+
+    /// Whether the frontier reward comes from a [`GuidanceField`].
+    #[must_use]
+    pub fn is_guided(&self) -> bool {
+        self.guidance.is_some()
+    }
+
+    /// `candidates` (children of `from`, scored by any problem on the same snapshot)
+    /// with their frontier reward and objective scored by this problem; the
+    /// information, which does not depend on the frontier field, is kept.
+    #[must_use]
+    pub fn rescored(&self, from: &FlatState, candidates: Vec<Candidate>) -> Vec<Candidate> {
+        candidates
+            .into_iter()
+            .map(|c| {
+                let (frontier_gain_m, reward) = self.objective(from, &c.primitive, c.information);
+                Candidate {
+                    frontier_gain_m,
+                    reward,
+                    ..c
+                }
+            })
+            .collect()
+    }
+
+    /// The frontier reward V (metres) and the objective I + αV (per second when
+    /// [`RoundConfig::reward_per_second`] is set) of `primitive` from `from`.
+    fn objective(&self, from: &FlatState, primitive: &Primitive, information: f64) -> (f64, f64) {
+        let end_state = primitive.end_state();
+        let distance = |s: &FlatState| {
+            let p = Point3::from(s.position_m());
+            match self.guidance {
+                Some(field) => field.pose_distance_m(&p, s.yaw_rad()),
+                None => self.snapshot.frontier_distance(&p),
+            }
+        };
+        let (d0, d1) = (distance(from), distance(&end_state));
+        let frontier_gain_m = if d0.is_finite() && d1.is_finite() {
+            d0 - d1
+        } else {
+            0.0
+        };
+        let mut reward = information + self.config.frontier_weight * frontier_gain_m;
+        if self.config.reward_per_second {
+            reward /= primitive.duration_s();
+        }
+        (frontier_gain_m, reward)
     }
 
     /// The round's settings.
@@ -105,7 +166,8 @@ impl<'a> PlanningProblem<'a> {
     /// Scores a safe, feasible primitive from `from`: the information reward (at
     /// the end pose, or summed along the primitive, see
     /// [`RoundConfig::information_samples`]) plus α times the frontier-distance
-    /// reward V = d(ξ₀) − d(ξτ) (paper Eq. 8, thesis §4.1.3).
+    /// reward V = d(ξ₀) − d(ξτ) (paper Eq. 8, thesis §4.1.3; over the window, or over
+    /// the [`GuidanceField`] of a [`Self::guided`] problem).
     fn score(
         &self,
         from: &FlatState,
@@ -136,21 +198,7 @@ impl<'a> PlanningProblem<'a> {
                 .sum::<f64>()
                 / samples as f64
         };
-        let start_frontier = self
-            .snapshot
-            .frontier_distance(&Point3::from(from.position_m()));
-        let end_frontier = self
-            .snapshot
-            .frontier_distance(&Point3::from(end.position_m()));
-        let frontier_gain_m = if start_frontier.is_finite() && end_frontier.is_finite() {
-            start_frontier - end_frontier
-        } else {
-            0.0
-        };
-        let mut reward = information + config.frontier_weight * frontier_gain_m;
-        if config.reward_per_second {
-            reward /= primitive.duration_s();
-        }
+        let (frontier_gain_m, reward) = self.objective(from, &primitive, information);
         Candidate {
             action_index: index,
             primitive,

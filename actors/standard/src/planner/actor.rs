@@ -9,6 +9,12 @@
 //! selection's choice first and the rest by decreasing reward, with the stopping
 //! trajectory, and replans from the reference of whatever is committed on [`PLAN`]
 //! (the primitive it carries), as the vehicle follows it.
+//!
+//! With guidance on (`[robot.planner.guidance]`, the default) the planner also keeps a
+//! team frontier memory ([`troupe_algorithms::exploration`]): every grid snapshot, the
+//! peers' keyframes ([`PEER_KEYFRAME`]) and plans ([`PEER_PLAN`]) feed it, and its
+//! rounds score the frontier reward over the route distance to the remembered
+//! frontiers (beyond the window), avoiding those peers are heading to.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -21,9 +27,10 @@ use super::primitives::{FlatState, Primitive};
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
 use crate::msgs::{
-    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, PLAN_CANDIDATES,
-    PinholeIntrinsics, Plan, PlanCandidates,
+    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_PLAN, PLAN,
+    PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
 };
+use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
 };
@@ -75,6 +82,8 @@ pub struct PlannerConfig {
     pub round: RoundConfig,
     /// Spacing of the knots sent to the vehicle, seconds.
     pub knot_step_s: f64,
+    /// Team frontier memory, global guidance and implicit coordination.
+    pub guidance: GuidanceConfig,
 }
 
 impl Default for PlannerConfig {
@@ -83,6 +92,7 @@ impl Default for PlannerConfig {
             rate_hz: 1.0,
             round: RoundConfig::default(),
             knot_step_s: 0.1,
+            guidance: GuidanceConfig::default(),
         }
     }
 }
@@ -96,6 +106,8 @@ pub struct PlanningReport {
     pub candidates: usize,
     /// Reward of the chosen one (`None`: the stopping trajectory was sent).
     pub chosen_reward: Option<f64>,
+    /// Whether the round followed the global guidance field.
+    pub guided: bool,
 }
 impl Message for PlanningReport {}
 
@@ -131,6 +143,7 @@ pub struct PlannerActor<S> {
     committed: Option<Committed>,
     deferred: bool,
     round: u64,
+    guide: Option<Guide>,
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
@@ -151,6 +164,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             committed: None,
             deferred: false,
             round: 0,
+            guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
         }
     }
 
@@ -241,8 +255,17 @@ impl<S: ActionSelection> PlannerActor<S> {
         let now = ctx.now();
         let root = replanning_root(self.committed.as_ref(), now, &odometry.pose);
         let round = &self.config.round;
-        let problem = PlanningProblem::new(round, &snapshot, &self.camera);
-        let candidates = problem.children(&root);
+        let here = nalgebra::Point3::from(root.position_m());
+        let field = self.guide.as_mut().map(|g| g.field(&here));
+        let mut problem = PlanningProblem::new(round, &snapshot, &self.camera);
+        let mut candidates = problem.children(&root);
+        if let (Some(guide), Some(field)) = (&self.guide, &field)
+            && guide.should_guide(field, &here, &candidates, snapshot.frontier_distance(&here))
+        {
+            problem = problem.guided(field);
+            candidates = problem.rescored(&root, candidates);
+        }
+        let guided = problem.is_guided();
         let choice = self
             .selection
             .select_in(&problem, &root, &candidates, ctx.rng());
@@ -252,6 +275,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             candidates = candidates.len(),
             clearance_m = snapshot.clearance_m(&nalgebra::Point3::from(root.position_m())),
             reward = choice.map(|i| candidates[i].reward),
+            guided,
+            frontiers = field.as_ref().map(|f| f.frontier_count()),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );
         if self.deferred {
@@ -261,6 +286,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                     stamp: now,
                     candidates: candidates.len(),
                     chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+                    guided,
                 },
             );
             self.defer(now, &root, &candidates, choice, ctx);
@@ -287,6 +313,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                 stamp: now,
                 candidates: candidates.len(),
                 chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
+                guided,
             },
         );
         let stopping = choice.and_then(|i| candidates.get(i)).is_none();
@@ -310,6 +337,10 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         if self.deferred {
             ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         }
+        if self.guide.is_some() {
+            ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
+            ctx.subscribe(&PEER_PLAN, QueuePolicy::fifo(16));
+        }
         let period_s = self.replan_period().as_secs_f64();
         let phase_s = round_phase_s(ctx.robot().0, period_s);
         if phase_s > 0.0 {
@@ -326,7 +357,19 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.odometry = Some(odometry);
                 } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
+                    if let Some(guide) = self.guide.as_mut() {
+                        let margin_m = self.config.round.margin_m(snapshot.resolution_m());
+                        guide.observe_snapshot(&snapshot, margin_m);
+                    }
                     self.snapshot = Some(snapshot);
+                } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
+                    if let Some(guide) = self.guide.as_mut() {
+                        guide.observe_peer_keyframe(peer);
+                    }
+                } else if let Some(peer) = m.get(&PEER_PLAN) {
+                    if let Some(guide) = self.guide.as_mut() {
+                        guide.observe_peer_plan(peer);
+                    }
                 } else if let Some(plan) = m.get(&PLAN)
                     && let Some(reference) = &plan.reference
                 {

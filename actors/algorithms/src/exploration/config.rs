@@ -1,0 +1,91 @@
+//! Settings of the team frontier memory and global guidance (`[robot.planner.guidance]`).
+
+use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
+
+/// Settings of the frontier memory ([`FrontierMemory`](super::FrontierMemory)), the
+/// global guidance field ([`GuidanceField`](super::GuidanceField)) and implicit
+/// coordination. On by default.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GuidanceConfig {
+    /// Remember frontiers beyond the grid window and steer towards them.
+    pub enabled: bool,
+    /// Edge of a memory cell, metres.
+    pub cell_m: f64,
+    /// Most memory cells held (memory bound: about 64 bytes each); cells beyond it are
+    /// not remembered and counted.
+    pub max_cells: usize,
+    /// Fine frontier cells (of the grid window) a memory cell must hold to be a
+    /// remembered frontier.
+    pub min_frontier_cells: usize,
+    /// The frontier reward of a round is measured over the memory (route distance to
+    /// the remembered frontiers) whenever the memory's field reaches the robot. With a
+    /// value here, a round whose best candidate's information (CSQMI, nats) reaches it
+    /// keeps the window's own frontier reward instead, unless the window shows no
+    /// frontier; absent (the default): always the memory's.
+    pub window_reward_above_nats: Option<f64>,
+    /// Points sampled from each peer keyframe's GMM (§6.1.5); the rays from the peer's
+    /// sensor to them retire the remembered frontiers they cross.
+    pub peer_keyframe_samples: usize,
+    /// A frontier within this distance of where a peer is heading (the end of its
+    /// committed plan), and closer to it than to this robot, is the peer's claim.
+    pub claim_radius_m: f64,
+    /// Route length added to a frontier a peer claims, metres.
+    pub claim_penalty_m: f64,
+    /// The guided frontier reward measures the route distance this far ahead of a
+    /// pose, so that turning to face the route pays, metres.
+    pub look_ahead_m: f64,
+}
+
+impl Default for GuidanceConfig {
+    fn default() -> Self {
+        GuidanceConfig {
+            enabled: true,
+            cell_m: 1.0,
+            max_cells: 262_144,
+            min_frontier_cells: 4,
+            window_reward_above_nats: None,
+            peer_keyframe_samples: 1000,
+            claim_radius_m: 6.0,
+            claim_penalty_m: 30.0,
+            look_ahead_m: 1.0,
+        }
+    }
+}
+
+impl GuidanceConfig {
+    /// Checks the numbers; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.cell_m.is_finite() && (0.2..=10.0).contains(&self.cell_m)) {
+            return Err(ConfigError::new(
+                "cell_m",
+                "must be between 0.2 and 10",
+                self.cell_m,
+            ));
+        }
+        if !(1..=16_777_216).contains(&self.max_cells) {
+            return Err(ConfigError::new(
+                "max_cells",
+                "must be between 1 and 16777216",
+                self.max_cells,
+            ));
+        }
+        if self.min_frontier_cells == 0 {
+            return Err(ConfigError::new("min_frontier_cells", "must be ≥ 1", 0));
+        }
+        if self.peer_keyframe_samples > 100_000 {
+            return Err(ConfigError::new(
+                "peer_keyframe_samples",
+                "must be at most 100000",
+                self.peer_keyframe_samples,
+            ));
+        }
+        if let Some(nats) = self.window_reward_above_nats {
+            ConfigError::non_negative("window_reward_above_nats", nats)?;
+        }
+        ConfigError::non_negative("claim_radius_m", self.claim_radius_m)?;
+        ConfigError::non_negative("claim_penalty_m", self.claim_penalty_m)?;
+        ConfigError::non_negative("look_ahead_m", self.look_ahead_m)
+    }
+}

@@ -1,0 +1,324 @@
+//! The team frontier memory: a coarse world-fixed hash of cells that remembers, beyond
+//! the moving grid window, what was seen, where a robot can be and where frontiers
+//! are (paper V-B's frontiers of the explored map; thesis §6.1.4 for sampling a GMM at
+//! any resolution).
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Point3, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::grid::{CellState, GridSnapshot};
+use crate::keyframe::Keyframe;
+
+/// Integer coordinates of a memory cell: `floor(p / cell_m)` per axis.
+pub type CellKey = [i32; 3];
+
+/// What the memory holds about one cell.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CellRecord {
+    /// Someone observed (part of) it.
+    pub seen: bool,
+    /// A robot centre fits in it with the planner's clearance, or a robot was there.
+    pub passable: bool,
+    /// It holds a frontier: free space next to unknown space, not yet observed beyond.
+    pub frontier: bool,
+}
+
+/// What one update changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryUpdate {
+    /// Cells written.
+    pub cells: usize,
+    /// Frontiers that were remembered and are no more.
+    pub retired: usize,
+    /// New cells not remembered because the memory was full.
+    pub dropped: usize,
+}
+
+/// A sparse, world-fixed map of coarse cells (a `BTreeMap`, so iteration and every
+/// decision built on it are deterministic).
+///
+/// Bounds: at most `max_cells` cells (about 64 bytes each with the map's overhead,
+/// 16 MiB at the default 262 144); [`Self::observe_window`] takes time linear in the
+/// window's fine cells plus `log n` per coarse cell of the window;
+/// [`Self::observe_keyframe`] `samples × (ray length / cell_m) × 4 × log n`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrontierMemory {
+    cell_m: f64,
+    max_cells: usize,
+    cells: BTreeMap<CellKey, CellRecord>,
+    dropped: u64,
+}
+
+/// Per-cell tallies of the fine cells of a window.
+#[derive(Clone, Copy, Default)]
+struct Tally {
+    known: u32,
+    frontier: u32,
+    max_clearance_m: f64,
+}
+
+impl FrontierMemory {
+    /// An empty memory of `cell_m` cells holding at most `max_cells` of them.
+    #[must_use]
+    pub fn new(cell_m: f64, max_cells: usize) -> Self {
+        FrontierMemory {
+            cell_m: if cell_m.is_finite() && cell_m > 0.0 {
+                cell_m
+            } else {
+                1.0
+            },
+            max_cells: max_cells.max(1),
+            cells: BTreeMap::new(),
+            dropped: 0,
+        }
+    }
+
+    /// Edge of a cell, metres.
+    #[must_use]
+    pub fn cell_m(&self) -> f64 {
+        self.cell_m
+    }
+
+    /// The cell holding `p` (`None` for non-finite points or points too far out).
+    #[must_use]
+    pub fn key_of(&self, p: &Point3<f64>) -> Option<CellKey> {
+        let k = p.coords.map(|v| (v / self.cell_m).floor());
+        k.iter()
+            .all(|v| v.is_finite() && v.abs() < 1e9)
+            .then(|| [k.x as i32, k.y as i32, k.z as i32])
+    }
+
+    /// Centre of a cell.
+    #[must_use]
+    pub fn centre(&self, key: CellKey) -> Point3<f64> {
+        Point3::from(Vector3::new(
+            (f64::from(key[0]) + 0.5) * self.cell_m,
+            (f64::from(key[1]) + 0.5) * self.cell_m,
+            (f64::from(key[2]) + 0.5) * self.cell_m,
+        ))
+    }
+
+    /// The record of a cell (default: never seen).
+    #[must_use]
+    pub fn record(&self, key: CellKey) -> CellRecord {
+        self.cells.get(&key).copied().unwrap_or_default()
+    }
+
+    /// Cells held.
+    #[must_use]
+    pub fn cell_count(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// New cells not remembered since the start because the memory was full.
+    #[must_use]
+    pub fn dropped_cells(&self) -> u64 {
+        self.dropped
+    }
+
+    /// The remembered frontier cells, in key order.
+    pub fn frontiers(&self) -> impl Iterator<Item = CellKey> + '_ {
+        self.cells
+            .iter()
+            .filter(|(_, r)| r.frontier)
+            .map(|(k, _)| *k)
+    }
+
+    /// The passable cells, in key order.
+    pub fn passable(&self) -> impl Iterator<Item = CellKey> + '_ {
+        self.cells
+            .iter()
+            .filter(|(_, r)| r.passable)
+            .map(|(k, _)| *k)
+    }
+
+    /// Writes a cell, unless it is new and the memory is full; `true` if written.
+    fn write(&mut self, key: CellKey, record: CellRecord, update: &mut MemoryUpdate) -> bool {
+        let old = self.cells.get(&key).copied();
+        if old.is_none() && self.cells.len() >= self.max_cells {
+            self.dropped += 1;
+            update.dropped += 1;
+            return false;
+        }
+        if old.is_some_and(|o| o.frontier) && !record.frontier {
+            update.retired += 1;
+        }
+        self.cells.insert(key, record);
+        update.cells += 1;
+        true
+    }
+
+    /// Folds a grid snapshot into the memory. Every memory cell that lies wholly inside
+    /// the window takes the window's view of it (the window holds the robot's own
+    /// frames and the peers' keyframes near it, so it is the best knowledge there):
+    /// seen if any fine cell is known, passable if a fine cell keeps `margin_m` from
+    /// unsafe space, a frontier if it holds at least `min_frontier_cells` fine frontier
+    /// cells ([`frontier_mask`](crate::grid::frontier::frontier_mask)). A remembered
+    /// frontier the window no longer shows is retired. Cells beyond the window keep what
+    /// the memory knew.
+    pub fn observe_window(
+        &mut self,
+        snapshot: &GridSnapshot,
+        margin_m: f64,
+        min_frontier_cells: usize,
+    ) -> MemoryUpdate {
+        let grid = &snapshot.grid;
+        let geometry = grid.geometry();
+        let dims = grid.dims();
+        let res = grid.resolution_m();
+        let lo = geometry.origin;
+        let hi = lo + Vector3::from(dims.map(|d| d as f64)) * res;
+        // Memory cells wholly inside the window, per axis (a small tolerance for
+        // lattices that share faces).
+        let eps = 1e-6 * self.cell_m;
+        let range = |i: usize| -> (i64, i64) {
+            let first = ((lo[i] - eps) / self.cell_m).ceil() as i64;
+            let end = ((hi[i] + eps) / self.cell_m).floor() as i64;
+            (first, end.max(first))
+        };
+        let (rx, ry, rz) = (range(0), range(1), range(2));
+        let n = [rx.1 - rx.0, ry.1 - ry.0, rz.1 - rz.0].map(|v| v.max(0) as usize);
+        let mut tallies = vec![Tally::default(); n[0] * n[1] * n[2]];
+        let mut update = MemoryUpdate::default();
+        if tallies.is_empty() {
+            return update;
+        }
+        let values = grid.values();
+        for (i, value) in values.iter().enumerate() {
+            let c = grid.cell_at(i);
+            let p = geometry.cell_centre(c);
+            let k = [
+                (p.x / self.cell_m).floor() as i64 - rx.0,
+                (p.y / self.cell_m).floor() as i64 - ry.0,
+                (p.z / self.cell_m).floor() as i64 - rz.0,
+            ];
+            if (0..3).any(|a| k[a] < 0 || k[a] >= n[a] as i64) {
+                continue;
+            }
+            let t = &mut tallies[k[0] as usize + n[0] * (k[1] as usize + n[1] * k[2] as usize)];
+            if grid.classify(*value) != CellState::Unknown {
+                t.known += 1;
+            }
+            if snapshot
+                .frontier_distance_m
+                .get(i)
+                .is_some_and(|d| *d == 0.0)
+            {
+                t.frontier += 1;
+            }
+            let clearance = snapshot.unsafe_distance_m.get(i).copied().unwrap_or(0.0);
+            t.max_clearance_m = t.max_clearance_m.max(clearance);
+        }
+        for z in 0..n[2] {
+            for y in 0..n[1] {
+                for x in 0..n[0] {
+                    let t = tallies[x + n[0] * (y + n[1] * z)];
+                    let key = [
+                        (rx.0 + x as i64) as i32,
+                        (ry.0 + y as i64) as i32,
+                        (rz.0 + z as i64) as i32,
+                    ];
+                    let record = CellRecord {
+                        seen: t.known > 0,
+                        passable: t.max_clearance_m >= margin_m,
+                        frontier: t.frontier as usize >= min_frontier_cells,
+                    };
+                    if record == CellRecord::default() {
+                        // Nothing known: forget it (a frontier here is retired).
+                        if let Some(old) = self.cells.remove(&key) {
+                            update.retired += usize::from(old.frontier);
+                        }
+                    } else {
+                        self.write(key, record, &mut update);
+                    }
+                }
+            }
+        }
+        update
+    }
+
+    /// Folds a keyframe (a peer's, or any robot's) into the memory: `samples` points
+    /// drawn from its spatial GMM (§6.1.5, with a generator seeded by `seed`, so the
+    /// same keyframe always gives the same points) are the ends of rays from its sensor
+    /// position; every cell a ray crosses or ends in is seen, and a frontier there is
+    /// retired (someone has looked into it). The sensor's cell is passable (a robot was
+    /// there). Keyframes with a non-finite pose or no component change nothing.
+    pub fn observe_keyframe(
+        &mut self,
+        keyframe: &Keyframe,
+        samples: usize,
+        seed: u64,
+    ) -> MemoryUpdate {
+        let mut update = MemoryUpdate::default();
+        let origin = Point3::from(keyframe.pose.translation.vector);
+        let Some(origin_key) = self.key_of(&origin) else {
+            return update;
+        };
+        if keyframe.gmm.is_empty() {
+            return update;
+        }
+        let passable = CellRecord {
+            seen: true,
+            passable: true,
+            ..self.record(origin_key)
+        };
+        self.write(origin_key, passable, &mut update);
+        let spatial = keyframe.gmm.marginal_spatial();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let step_m = self.cell_m / 4.0;
+        let mut crossed: Vec<CellKey> = Vec::new();
+        for end in spatial.sample(samples, &mut rng) {
+            let end = Point3::from(end);
+            let length_m = (end - origin).norm();
+            // A sensor sees a few metres; a sample far beyond is not a ray.
+            if !length_m.is_finite() || length_m > 50.0 {
+                continue;
+            }
+            let steps = (length_m / step_m).ceil().max(1.0) as usize;
+            let mut last = None;
+            for s in 0..=steps {
+                let p = origin + (end - origin) * (s as f64 / steps as f64);
+                let Some(key) = self.key_of(&p) else { break };
+                if last != Some(key) {
+                    crossed.push(key);
+                    last = Some(key);
+                }
+            }
+        }
+        crossed.sort_unstable();
+        crossed.dedup();
+        for key in crossed {
+            let old = self.record(key);
+            let seen = CellRecord {
+                seen: true,
+                frontier: false,
+                ..old
+            };
+            if seen != old {
+                self.write(key, seen, &mut update);
+            }
+        }
+        update
+    }
+
+    /// Marks the cell of a body position passable and seen (a robot is there: own or a
+    /// peer's odometry).
+    pub fn mark_body(&mut self, p: &Point3<f64>) -> MemoryUpdate {
+        let mut update = MemoryUpdate::default();
+        if let Some(key) = self.key_of(p) {
+            let old = self.record(key);
+            let record = CellRecord {
+                seen: true,
+                passable: true,
+                ..old
+            };
+            if record != old {
+                self.write(key, record, &mut update);
+            }
+        }
+        update
+    }
+}

@@ -1,0 +1,36 @@
+//! Exploration beyond the grid window: a team frontier memory, global guidance
+//! towards remembered frontiers and implicit coordination between teammates.
+//!
+//! The local planner (thesis §4.1.3, paper Alg. 1) scores primitives by CSQMI plus the
+//! frontier-distance reward V = d(ξ₀) − d(ξτ) (paper V-B), but its grid is a 20 m
+//! window: once what is left to see lies outside it, nothing pulls a robot there.
+//!
+//! - [`FrontierMemory`]: coarse world-fixed cells (1 m by default) remembering what was
+//!   seen, where a robot fits and where frontiers are. Fed by every grid snapshot (the
+//!   robot's own frames and, inside the window, its peers' keyframes) and by the peers'
+//!   keyframe GMMs sampled at the memory's resolution (thesis §6.1.4–6.1.5: a GMM can
+//!   be resampled at any resolution), which retire the frontiers anyone has looked into.
+//! - [`GuidanceField`]: route distance through known passable cells to the nearest
+//!   remembered frontier (multi-source Dijkstra), the global `d` of V. Frontiers a peer
+//!   is heading to ([`PeerIntent`]: the end of its committed plan) are made longer by a
+//!   penalty, so teammates spread over different openings.
+//! - [`Guide`]: one robot's memory, its peers' intents and the rule for when a round
+//!   follows the field.
+//! - [`GuidanceConfig`]: the settings, table `robot.planner.guidance`.
+//!
+//! The planner uses the field when the window is uninformative (see
+//! [`PlanningProblem::guided`](crate::planner::problem::PlanningProblem::guided)); the
+//! primitives it scores pass the same safety checks as ever.
+
+mod config;
+mod guidance;
+mod guide;
+mod memory;
+
+pub use config::GuidanceConfig;
+pub use guidance::{FieldParams, GuidanceField, PeerIntent};
+pub use guide::Guide;
+pub use memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,316 @@
+//! Tests of the frontier memory, the guidance field and coordination, on synthetic
+//! tunnel worlds whose grid snapshots are built cell by cell.
+
+use nalgebra::{Isometry3, Matrix4, Point3, Vector3, Vector4};
+use troupe_core::{RobotId, Time};
+
+use super::*;
+use crate::grid::{CellState, GridSnapshot, LocalGrid, LogOddsParams};
+use crate::keyframe::Keyframe;
+use crate::planner::primitives::FlatState;
+use crate::planner::problem::PlanningProblem;
+use crate::planner::round::RoundConfig;
+use crate::planner::scenes::{forward_camera, snapshot_of};
+use crate::sogmm::Gmm4;
+use crate::team::PeerKeyframe;
+
+/// A snapshot of a window of `size_m` at 0.2 m centred on `centre`, each cell set to
+/// what `world` says of its centre (known free, occupied, or never seen).
+fn window(
+    centre: Point3<f64>,
+    size_m: [f64; 3],
+    world: impl Fn(&Point3<f64>) -> CellState,
+) -> GridSnapshot {
+    let mut grid = LocalGrid::centred(
+        &centre,
+        &Vector3::from(size_m),
+        0.2,
+        LogOddsParams::default(),
+    );
+    let geometry = grid.geometry();
+    for i in 0..grid.values().len() {
+        let p = geometry.cell_centre(grid.cell_at(i));
+        match world(&p) {
+            CellState::Free => grid.update(i, -10.0),
+            CellState::Occupied => grid.update(i, 10.0),
+            CellState::Unknown => {}
+        }
+    }
+    snapshot_of(grid)
+}
+
+/// A box-shaped tunnel world: inside any of `tunnels` (min, max corners) is air,
+/// rock within 0.5 m of air is a wall; air is known where `known` says so.
+fn tunnels(
+    tunnels: Vec<([f64; 3], [f64; 3])>,
+    known: impl Fn(&Point3<f64>) -> bool,
+) -> impl Fn(&Point3<f64>) -> CellState {
+    move |p| {
+        let gap = |(lo, hi): &([f64; 3], [f64; 3])| -> f64 {
+            (0..3)
+                .map(|i| (lo[i] - p[i]).max(p[i] - hi[i]).max(0.0))
+                .fold(0.0, f64::max)
+        };
+        let nearest = tunnels.iter().map(gap).fold(f64::INFINITY, f64::min);
+        if nearest == 0.0 {
+            if known(p) {
+                CellState::Free
+            } else {
+                CellState::Unknown
+            }
+        } else if nearest < 0.5 {
+            // A wall is known where the air beside it is.
+            if known(p) {
+                CellState::Occupied
+            } else {
+                CellState::Unknown
+            }
+        } else {
+            CellState::Unknown
+        }
+    }
+}
+
+fn keyframe_towards(
+    id: u32,
+    from: Point3<f64>,
+    surface: Point3<f64>,
+    spread_m: [f64; 3],
+) -> Keyframe {
+    let cov = Matrix4::from_diagonal(&Vector4::new(
+        spread_m[0].powi(2),
+        spread_m[1].powi(2),
+        spread_m[2].powi(2),
+        0.01,
+    ));
+    Keyframe {
+        id,
+        stamp: Time::ZERO,
+        pose: Isometry3::translation(from.x, from.y, from.z),
+        support_size: 5000,
+        gmm: Gmm4::new(
+            vec![1.0],
+            vec![Vector4::new(surface.x, surface.y, surface.z, 0.5)],
+            vec![cov],
+        )
+        .expect("valid mixture"),
+    }
+}
+
+#[test]
+fn memory_retires_a_frontier_a_peers_keyframe_sees() {
+    // A tunnel along x, seen up to x = 6 m and open (unknown) beyond.
+    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
+    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let mut guide = Guide::new(GuidanceConfig::default());
+    guide.observe_snapshot(&snapshot, 0.67);
+    let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
+    assert!(!frontiers.is_empty());
+    assert!(
+        frontiers.iter().all(|k| (5..=6).contains(&k[0])),
+        "{frontiers:?}"
+    );
+    // A peer looking the other way (at the tunnel's closed start) retires nothing.
+    let behind = PeerKeyframe {
+        robot: RobotId(1),
+        keyframe: keyframe_towards(
+            0,
+            Point3::new(3.0, 0.0, 0.0),
+            Point3::new(-2.5, 0.0, 0.0),
+            [0.2, 1.0, 0.6],
+        ),
+        received_at: Time::ZERO,
+    };
+    assert_eq!(guide.observe_peer_keyframe(&behind).retired, 0);
+    assert_eq!(guide.memory().frontiers().count(), frontiers.len());
+    // A peer looking down the tunnel, at its walls beyond x = 6 m, sees them all.
+    let ahead = PeerKeyframe {
+        robot: RobotId(1),
+        keyframe: keyframe_towards(
+            1,
+            Point3::new(3.0, 0.0, 0.0),
+            Point3::new(9.0, 0.0, 0.0),
+            [1.0, 1.2, 0.7],
+        ),
+        received_at: Time::ZERO,
+    };
+    let update = guide.observe_peer_keyframe(&ahead);
+    assert_eq!(update.retired, frontiers.len());
+    assert_eq!(guide.memory().frontiers().count(), 0);
+    assert_eq!(guide.retired_by_peers(), frontiers.len() as u64);
+    // The cells it looked through are remembered as seen.
+    assert!(guide.memory().record([8, 0, 0]).seen);
+}
+
+#[test]
+fn a_full_memory_keeps_its_bound_and_counts_what_it_drops() {
+    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
+    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let mut memory = FrontierMemory::new(1.0, 50);
+    let update = memory.observe_window(&snapshot, 0.67, 4);
+    assert_eq!(memory.cell_count(), 50);
+    assert!(update.dropped > 0);
+    assert_eq!(memory.dropped_cells(), update.dropped as u64);
+    // Hostile input changes nothing and does not panic.
+    assert_eq!(
+        memory.mark_body(&Point3::new(f64::NAN, 0.0, 0.0)),
+        MemoryUpdate::default()
+    );
+    let mut bad = keyframe_towards(0, Point3::origin(), Point3::new(3.0, 0.0, 0.0), [1.0; 3]);
+    bad.pose = Isometry3::translation(f64::INFINITY, 0.0, 0.0);
+    assert_eq!(
+        memory.observe_keyframe(&bad, 100, 1),
+        MemoryUpdate::default()
+    );
+}
+
+/// Flies a robot with greedy single-step selection (paper Alg. 1) from `start` through
+/// `world`, one planning period per round, each round seeing a fresh window of the
+/// known world; returns the positions and how many rounds were guided.
+fn fly(
+    guide: &mut Option<Guide>,
+    world: &impl Fn(&Point3<f64>) -> CellState,
+    start: FlatState,
+    rounds: usize,
+) -> (Vec<Point3<f64>>, usize) {
+    let config = RoundConfig::default();
+    let camera = forward_camera();
+    let mut state = start;
+    let mut path = vec![Point3::from(state.position_m())];
+    let mut guided = 0;
+    for _ in 0..rounds {
+        let here = Point3::from(state.position_m());
+        let snapshot = window(here, [20.0, 20.0, 4.0], world);
+        let margin_m = config.margin_m(snapshot.resolution_m());
+        let field = guide.as_mut().map(|g| {
+            g.observe_snapshot(&snapshot, margin_m);
+            g.field(&here)
+        });
+        let mut problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let mut candidates = problem.children(&state);
+        if let (Some(g), Some(f)) = (guide.as_ref(), field.as_ref())
+            && g.should_guide(f, &here, &candidates, snapshot.frontier_distance(&here))
+        {
+            problem = problem.guided(f);
+            candidates = problem.rescored(&state, candidates);
+            guided += 1;
+        }
+        let Some(best) = candidates.iter().max_by(|a, b| {
+            a.reward
+                .total_cmp(&b.reward)
+                .then(b.action_index.cmp(&a.action_index))
+        }) else {
+            break;
+        };
+        // Safe as the planner checks it: the whole period keeps the margin.
+        let switch_s = config.planning_period_s.min(best.primitive.duration_s());
+        for i in 0..=10 {
+            let p = Point3::from(
+                best.primitive
+                    .state_at(switch_s * f64::from(i) / 10.0)
+                    .position_m(),
+            );
+            assert!(snapshot.clearance_m(&p) >= margin_m - 1e-9, "unsafe at {p}");
+        }
+        state = best.primitive.state_at(switch_s);
+        path.push(Point3::from(state.position_m()));
+    }
+    (path, guided)
+}
+
+#[test]
+fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
+    // A 45 m tunnel along x, closed at x = 40 m; everything from x = 0 on has been
+    // seen, what lies before x = 0 has not (the frontier, 36 m from the dead end).
+    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let mut guide = Some(Guide::new(GuidanceConfig::default()));
+    // Remembered from when the robot passed the tunnel's start.
+    if let Some(g) = guide.as_mut() {
+        for x in [4.0, 14.0, 24.0, 34.0] {
+            let here = Point3::new(x, 0.0, 0.0);
+            g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+            g.field(&here);
+        }
+        assert!(g.memory().frontiers().all(|k| k[0] == -1 || k[0] == 0));
+        assert!(g.memory().frontiers().count() > 0);
+    }
+    // Now it hovers at the dead end, facing the end wall: the window holds no frontier
+    // and nothing informative.
+    let start = FlatState::at_rest(Vector3::new(37.0, 0.0, 0.0), 0.0);
+    let (path, guided) = fly(&mut guide, &world, start, 60);
+    let reached = path.iter().position(|p| p.x < 3.0);
+    assert!(
+        reached.is_some(),
+        "never reached the frontier: {:?}",
+        path.last()
+    );
+    assert!(guided > 5, "{guided} guided rounds");
+    // Without the memory the window offers nothing, and the robot stays at the end.
+    let (unguided, _) = fly(&mut None, &world, start, 20);
+    assert!(unguided.iter().all(|p| p.x > 25.0), "{:?}", unguided.last());
+}
+
+#[test]
+fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
+    // A stem along x from x = 0 to the fork at x = 10, two branches along ±y; the left
+    // one was seen up to y = 6.5 m, the right one up to y = −7.5 m: its frontier is the
+    // farther one for both robots.
+    let world = tunnels(
+        vec![
+            ([0.0, -1.8, -1.0], [11.0, 1.8, 1.0]),
+            ([7.5, -14.0, -1.0], [11.0, 14.0, 1.0]),
+        ],
+        |p| p.y < 6.5 && p.y > -7.5,
+    );
+    let mut guides = [
+        Guide::new(GuidanceConfig::default()),
+        Guide::new(GuidanceConfig::default()),
+    ];
+    for g in &mut guides {
+        g.observe_snapshot(
+            &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
+            0.67,
+        );
+    }
+    let left = |k: CellKey| k[1] >= 5;
+    let right = |k: CellKey| k[1] <= -7;
+    assert!(guides[0].memory().frontiers().any(left));
+    assert!(guides[0].memory().frontiers().any(right));
+    // Robot 0 leads, robot 1 follows; alone, both would take the left branch.
+    let (lead, follow) = (Point3::new(8.5, 0.5, 0.0), Point3::new(4.0, 0.0, 0.0));
+    let target = |g: &mut Guide, at: &Point3<f64>| g.field(at).target_of(at).expect("a route");
+    let lead_target = target(&mut guides[0], &lead);
+    assert!(left(lead_target), "{lead_target:?}");
+    assert!(left(target(&mut guides[1], &follow)));
+    // Robot 0 commits towards the left branch; robot 1 hears its plan and takes the
+    // right one, while robot 0, hearing robot 1 head right, keeps left.
+    let plan = |robot: u32, from: Point3<f64>, to: Point3<f64>| crate::team::PeerPlan {
+        robot: RobotId(robot),
+        priority: 0,
+        plan: crate::plan::Plan::new(
+            Time::ZERO,
+            crate::trajectory::Trajectory::new(vec![
+                crate::trajectory::Knot {
+                    time: Time::ZERO,
+                    position_m: from,
+                    yaw_rad: 0.0,
+                },
+                crate::trajectory::Knot {
+                    time: Time::from_nanos(2_000_000_000),
+                    position_m: to,
+                    yaw_rad: 0.0,
+                },
+            ])
+            .expect("a trajectory"),
+        ),
+        received_at: Time::ZERO,
+    };
+    guides[1].observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));
+    let follow_target = target(&mut guides[1], &follow);
+    assert!(right(follow_target), "{follow_target:?}");
+    guides[0].observe_peer_plan(&plan(1, follow, Point3::new(7.0, 0.0, 0.0)));
+    assert!(left(target(&mut guides[0], &lead)));
+    // Deterministic: the same inputs give the same field.
+    let again = target(&mut guides[1], &follow);
+    assert_eq!(again, follow_target);
+}
