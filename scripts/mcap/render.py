@@ -61,7 +61,7 @@ def main():
         reader = make_reader(f)
         end_ns = reader.get_summary().statistics.message_end_time
         until = end_ns if args.time is None else int(args.time * 1e9)
-        for _, channel, message in reader.iter_messages(end_time=until + 1, log_time_order=True):
+        for _, channel, message in reader.iter_messages(ending_at=until, log_time_order=True):
             parts = channel.topic.strip("/").split("/")
             data = json.loads(message.data)
             if channel.topic == "/team/coverage":

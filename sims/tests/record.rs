@@ -19,13 +19,12 @@ fn root() -> PathBuf {
 }
 
 fn troupe(args: &[&str], dir: &Path) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_troupe"))
+    Command::new(env!("CARGO_BIN_EXE_troupe"))
         .args(args)
         .current_dir(dir)
         .env("RUST_LOG", "off")
         .output()
-        .expect("run troupe");
-    out
+        .expect("run troupe")
 }
 
 fn ok(out: Output) -> String {
@@ -66,9 +65,9 @@ fn a_run_is_recorded_without_changing_it_and_reads_back() {
         "recording changed the run"
     );
     assert!(!plain.join("run.mcap").exists());
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("recorded"))
+    let leftovers: Vec<String> = std::fs::read_dir(dir.path().join("recorded"))
         .unwrap()
-        .map(|e| e.unwrap().file_name())
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
         .collect();
     assert_eq!(leftovers, ["default"], "partial files left behind");
 
