@@ -270,6 +270,8 @@ impl Recorder {
             );
             self.write_scene(&format!("/robot{i}/keyframes"), p.time, entity);
         } else if let Some(peer) = p.get(&PEER_KEYFRAME) {
+            // A peer's stamps count from its own start (in processes): what was
+            // received is stamped when it arrived.
             let mut entity = keyframe_entity(
                 peer.robot.0,
                 &peer.keyframe,
@@ -281,8 +283,6 @@ impl Recorder {
                 peer.received_at.as_secs_f64(),
             ));
             self.write_scene(&format!("/robot{i}/peer_keyframes"), p.time, entity);
-            // Peers' stamps count from their own start: entities of received messages
-            // are stamped when they arrived.
         } else if let Some(peer) = p.get(&PEER_PLAN) {
             let j = peer.robot.0;
             let mut entity =

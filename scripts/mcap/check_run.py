@@ -15,6 +15,7 @@
   axes (2 sigma) equals the component's spatial covariance.
 
 Usage: check_run.py RUN_DIR   (prints one JSON line of counts; exits 1 on a mismatch)
+       check_run.py FILE.mcap  (a process or base-station recording: schemas only)
 """
 
 import csv
@@ -39,6 +40,7 @@ SCHEMAS = [
     (r"/robot\d+/link", "troupe.LinkStatus"),
     (r"/robot\d+/sample", "troupe.Sample"),
     (r"/team/coverage", "troupe.Coverage"),
+    (r"/robot\d+/peers/robot\d+/pose", "foxglove.PoseInFrame"),
 ]
 
 
@@ -93,17 +95,12 @@ def ellipsoid_covariance(sphere):
     return [[sum(r[i][k] * var[k] * r[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
 
 
-def check(run_dir):
-    summary = json.loads((run_dir / "summary.json").read_text())
-    with open(run_dir / "timeseries.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    robots = summary["robots"]
-
-    messages = {}  # topic -> [(log_time, decoded)]
-    with open(run_dir / "run.mcap", "rb") as f:
-        reader = make_reader(f)
+def read_checked(path):
+    """Checks every channel's schema and every message; returns topic -> [(log_time, message)]."""
+    messages = {}
+    with open(path, "rb") as f:
         validators = {}
-        for schema, channel, message in reader.iter_messages(log_time_order=True):
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
             topic = channel.topic
             if channel.id not in validators:
                 expect(channel.message_encoding == "json", f"{topic}: encoding {channel.message_encoding}")
@@ -117,6 +114,23 @@ def check(run_dir):
             errors = list(validators[channel.id].iter_errors(decoded))
             expect(not errors, f"{topic}: message at {message.log_time} breaks its schema: {errors[:1]}")
             messages.setdefault(topic, []).append((message.log_time, decoded))
+    expect(messages, f"{path}: no message")
+    return messages
+
+
+def check_schemas(path):
+    return {topic: len(m) for topic, m in read_checked(path).items()}
+
+
+def check(run_dir):
+    summary = json.loads((run_dir / "summary.json").read_text())
+    with open(run_dir / "timeseries.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    robots = summary["robots"]
+
+    messages = read_checked(run_dir / "run.mcap")
+    with open(run_dir / "run.mcap", "rb") as f:
+        reader = make_reader(f)
         attachments = {a.name for a in reader.iter_attachments()}
     expect({"summary.json", "scenario.toml"} <= attachments, f"attachments {attachments}")
 
@@ -201,7 +215,8 @@ def main():
     if len(sys.argv) != 2:
         sys.exit(__doc__)
     try:
-        print(json.dumps(check(Path(sys.argv[1]))))
+        path = Path(sys.argv[1])
+        print(json.dumps(check_schemas(path) if path.suffix == ".mcap" else check(path)))
     except Mismatch as e:
         print(f"check_run: {e}", file=sys.stderr)
         sys.exit(1)
