@@ -1,6 +1,6 @@
 //! The `troupe` command line.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write as _};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -516,11 +516,14 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
 fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     let file = RecordingFile::open(&args.recording)?;
     let summary = file.summary()?;
+    // A closed pipe (`| head`) ends the listing with an error, not a panic.
+    let mut out = std::io::stdout().lock();
     if args.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        writeln!(out, "{}", serde_json::to_string(&summary)?)?;
     } else {
         let [start, end] = summary.span_s.unwrap_or_default();
-        println!(
+        writeln!(
+            out,
             "{}: {} messages on {} channels, {:.3} s ({start:.3} to {end:.3} s){}",
             args.recording.display(),
             summary.messages,
@@ -531,7 +534,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<()> {
             } else {
                 format!("; attached: {}", summary.attachments.join(", "))
             }
-        );
+        )?;
         let width = summary.channels.keys().map(String::len).max().unwrap_or(0);
         for (topic, channel) in &summary.channels {
             println!(
