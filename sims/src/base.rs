@@ -28,7 +28,9 @@
 //! robot's keyframe mixtures), `maps/robot<i>.ply`, `merged_map.troupe` (every
 //! keyframe of the team: their support-weighted union is the merged map of Eq. 3.5),
 //! `merged_map.ply` (points drawn from it, with a `source` property naming the robot)
-//! and `summary.json` ([`BaseSummary`]).
+//! and `summary.json` ([`BaseSummary`]); while it runs it records every robot's pose,
+//! plans and keyframes as received into `out/run.mcap` in wall time (`record = false`
+//! turns it off; `docs/recordings.md`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write as _;
@@ -54,7 +56,10 @@ use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 use troupe_robot::toml_file::{TomlFileError, read_toml};
 
+use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
+
 use crate::maps::merged_points;
+use crate::recording::RUN_RECORDING;
 use crate::scenario::{Scenario, ScenarioError};
 
 /// Default points in `merged_map.ply`.
@@ -81,6 +86,14 @@ pub struct BaseConfig {
     /// The zenoh session.
     #[serde(default)]
     pub zenoh: ZenohConfig,
+    /// Write `run.mcap` into `out`: every robot's pose, plans and keyframes as the base
+    /// received them, in wall time (`docs/recordings.md`); `false` turns it off.
+    #[serde(default = "record_by_default")]
+    pub record: bool,
+}
+
+fn record_by_default() -> bool {
+    true
 }
 
 fn default_ply_points() -> usize {
@@ -404,6 +417,9 @@ pub struct BaseSummary {
     pub rejected: u64,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
+    /// The recording `run.mcap`, when one was written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recording: Option<RecordingStats>,
 }
 
 /// One robot as the base saw it.
@@ -501,6 +517,25 @@ pub async fn run(
             lock(&maps_tap).observe(p, Instant::now());
         }
     });
+    let recorder = if station.config.record {
+        let path = station.out.join(RUN_RECORDING);
+        let recorder = std::fs::create_dir_all(&station.out)
+            .map_err(|source| BaseError::Write {
+                path: station.out.clone(),
+                source,
+            })
+            .and_then(|()| {
+                Recorder::create(&path, Clock::wall_from_now()).map_err(|e| BaseError::Start {
+                    context: "creating the recording",
+                    source: Box::new(e),
+                })
+            })?;
+        let recorder = SharedRecorder::new(recorder.with_peer_poses());
+        executor.add_tap(recorder.clone());
+        Some(recorder)
+    } else {
+        None
+    };
     let transport = Arc::new(
         ZenohTransport::open(&station.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
             |e| BaseError::Start {
@@ -551,6 +586,14 @@ pub async fn run(
     if let Err(e) = transport.close() {
         tracing::warn!(base = id, "closing zenoh: {e}");
     }
+    let recording = match recorder.as_ref().and_then(SharedRecorder::finish) {
+        Some(Ok(stats)) => Some(stats),
+        Some(Err(e)) => {
+            tracing::warn!(base = id, "recording: {}", ErrorChain(&e));
+            None
+        }
+        None => None,
+    };
     let maps = std::mem::take(&mut *lock(&maps));
     let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
     let summary = BaseSummary {
@@ -577,6 +620,7 @@ pub async fn run(
         link: lock(&status).clone(),
         rejected: rejected.load(Ordering::Relaxed),
         zenoh,
+        recording,
     };
     let path = station.out.join("summary.json");
     let mut json = serde_json::to_string_pretty(&summary).map_err(|e| BaseError::Write {

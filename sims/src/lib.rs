@@ -38,6 +38,7 @@ pub mod network;
 pub mod og_meter;
 pub mod plot;
 pub mod process;
+pub mod recording;
 pub mod replay;
 pub mod report;
 pub mod router;

@@ -1,6 +1,6 @@
 //! The `troupe` command line.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write as _};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -9,8 +9,10 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use troupe_actors::mapper::MapModel;
 use troupe_actors::mapper::sogmm::MeanShiftKind;
+use troupe_record::{Clock, Recorder, SharedRecorder};
 use troupe_sims::launch::LaunchOptions;
 use troupe_sims::process::{RobotProcess, run_until_signal, shutdown_signal};
+use troupe_sims::recording::{RUN_RECORDING, RecordingFile, record_outputs};
 use troupe_sims::report::write_run;
 use troupe_sims::router::{Router, settings};
 use troupe_sims::scenario::Scenario;
@@ -66,6 +68,23 @@ enum Command {
     /// `merged_map.ply`, `merged_map.troupe`, `maps/robot<i>.troupe|.ply` and
     /// `summary.json`.
     Base(BaseArgs),
+    /// Read a recording (`run.mcap` of `troupe run`, a robot process or the base
+    /// station): print its channels (schema, messages) and time span, and with
+    /// `--plots DIR` draw a run's plots again from the recording alone.
+    Replay(ReplayArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ReplayArgs {
+    /// The MCAP recording, e.g. `runs/default/run.mcap`.
+    recording: PathBuf,
+    /// Draw the run's plots (coverage, link bytes, speed, nearest robot,
+    /// trajectories) from the recording's samples into this directory.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    /// Print the summary as one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -216,6 +235,9 @@ struct RunArgs {
     /// Never show a progress bar (it is shown only on a terminal anyway).
     #[arg(long)]
     no_progress: bool,
+    /// Do not write `run.mcap` (as `[metrics] record = false`).
+    #[arg(long)]
+    no_record: bool,
 }
 
 fn launch(args: LaunchArgs) -> anyhow::Result<()> {
@@ -330,6 +352,7 @@ fn main() -> ExitCode {
         Command::Robot(args) => robot(args),
         Command::Router(args) => router(args),
         Command::Base(args) => base(args),
+        Command::Replay(args) => replay(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -431,9 +454,27 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(name) = args.name {
         scenario.name = name;
     }
+    if args.no_record {
+        scenario.metrics.record = false;
+    }
     scenario.validate(&source)?;
-    let team = Team::new(&scenario)
+    let mut team = Team::new(&scenario)
         .with_context(|| format!("assembling the robots of {}", source.display()))?;
+    // Written beside the run directory while the run goes, moved into it at the end.
+    let recording = if scenario.metrics.record {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+        let path = args.out.join(format!(
+            ".{}.{RUN_RECORDING}.partial-{}",
+            scenario.name,
+            std::process::id()
+        ));
+        let recorder = SharedRecorder::new(Recorder::create(&path, Clock::Sim)?);
+        team.add_tap(recorder.clone());
+        Some((recorder, path))
+    } else {
+        None
+    };
     let bar = progress_bar(
         (scenario.duration_s * 10.0).round() as u64,
         args.no_progress,
@@ -446,6 +487,21 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let dir = write_run(&args.out, &scenario.name, &output)
         .with_context(|| format!("writing the report under {}", args.out.display()))?;
+    if let Some((recorder, path)) = recording {
+        recorder.with(|r| record_outputs(r, &output, &scenario));
+        let stats = recorder
+            .finish()
+            .context("the recording was finished twice")??;
+        let to = dir.join(RUN_RECORDING);
+        std::fs::rename(&path, &to).with_context(|| format!("moving {}", path.display()))?;
+        let robot_minutes = f64::from(scenario.robots) * scenario.duration_s / 60.0;
+        println!(
+            "recording: {} ({:.1} MB, {:.2} MB per robot-minute)",
+            to.display(),
+            stats.bytes as f64 / 1e6,
+            stats.bytes as f64 / 1e6 / robot_minutes.max(1e-9)
+        );
+    }
     let s = &output.summary;
     println!(
         "{}: {} robots, {:.0} sim s in {:.1} wall s ({:.1}× real time); coverage {:.1}% ({:.0} of {:.0} m³), collisions {}",
@@ -460,6 +516,48 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         s.collisions
     );
     println!("report: {}", dir.display());
+    Ok(())
+}
+
+fn replay(args: ReplayArgs) -> anyhow::Result<()> {
+    let file = RecordingFile::open(&args.recording)?;
+    let summary = file.summary()?;
+    // A closed pipe (`| head`) ends the listing with an error, not a panic.
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        writeln!(out, "{}", serde_json::to_string(&summary)?)?;
+    } else {
+        let [start, end] = summary.span_s.unwrap_or_default();
+        writeln!(
+            out,
+            "{}: {} messages on {} channels, {:.3} s ({start:.3} to {end:.3} s){}",
+            args.recording.display(),
+            summary.messages,
+            summary.channels.len(),
+            summary.duration_s(),
+            if summary.attachments.is_empty() {
+                String::new()
+            } else {
+                format!("; attached: {}", summary.attachments.join(", "))
+            }
+        )?;
+        let width = summary.channels.keys().map(String::len).max().unwrap_or(0);
+        for (topic, channel) in &summary.channels {
+            println!(
+                "  {topic:<width$}  {:>8}  {}",
+                channel.messages, channel.schema
+            );
+        }
+    }
+    if let Some(dir) = &args.plots {
+        let stems = file.render_plots(dir)?;
+        anyhow::ensure!(
+            !stems.is_empty(),
+            "{} has no samples to plot (only `troupe run` records them)",
+            args.recording.display()
+        );
+        eprintln!("plots: {} in {}", stems.join(", "), dir.display());
+    }
     Ok(())
 }
 

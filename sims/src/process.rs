@@ -32,7 +32,9 @@
 //!
 //! On exit (the duration, SIGINT or SIGTERM) the process writes `summary.json`
 //! ([`ProcessSummary`]) and `trajectory.csv` (`unix_time_s,x_m,y_m,z_m`, the ground
-//! truth at every odometry message) into `out`.
+//! truth at every odometry message) into `out`, and while it runs it records what the
+//! robot publishes into `out/run.mcap` in wall time (`record = false` turns it off;
+//! `docs/recordings.md`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -43,13 +45,16 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{
-    ConfigError, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
+    ConfigError, ErrorChain, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
 };
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
 use troupe_robot::AssembleError;
 use troupe_robot::toml_file::{TomlFileError, read_toml};
 
+use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
+
+use crate::recording::RUN_RECORDING;
 use crate::replay::replaying_robot;
 use crate::scenario::{Scenario, ScenarioError};
 use crate::sequence::{Sequence, SequenceError};
@@ -78,6 +83,14 @@ pub struct ProcessConfig {
     /// The zenoh session.
     #[serde(default)]
     pub zenoh: ZenohConfig,
+    /// Write `run.mcap` into `out`: what the robot published, in wall time
+    /// (`docs/recordings.md`); `false` turns it off.
+    #[serde(default = "record_by_default")]
+    pub record: bool,
+}
+
+fn record_by_default() -> bool {
+    true
 }
 
 /// A robot file with its paths resolved and its scenario loaded.
@@ -164,6 +177,9 @@ pub enum ProcessError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The recording could not be created.
+    #[error("creating the recording")]
+    Recording(#[source] troupe_record::RecordError),
     /// The tokio runtime could not start.
     #[error("starting the tokio runtime")]
     Runtime(#[source] std::io::Error),
@@ -244,6 +260,9 @@ pub struct ProcessSummary {
     pub transport_errors: u64,
     /// Odometry samples in `trajectory.csv`.
     pub trajectory_samples: usize,
+    /// The recording `run.mcap`, when one was written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recording: Option<RecordingStats>,
 }
 
 /// One actor's health.
@@ -317,6 +336,20 @@ pub async fn run(
             *last = Some(status.clone());
         }
     });
+    let recorder = if process.config.record {
+        std::fs::create_dir_all(&process.out).map_err(|source| ProcessError::Output {
+            path: process.out.clone(),
+            source,
+        })?;
+        let path = process.out.join(RUN_RECORDING);
+        let recorder =
+            Recorder::create(&path, Clock::wall_from_now()).map_err(ProcessError::Recording)?;
+        let recorder = SharedRecorder::new(recorder);
+        executor.add_tap(recorder.clone());
+        Some(recorder)
+    } else {
+        None
+    };
     let transport = Arc::new(
         ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
             |source| ProcessError::Transport {
@@ -349,6 +382,14 @@ pub async fn run(
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
     let report = reports.into_iter().next().ok_or(ProcessError::NoReport)?;
+    let recording = match recorder.as_ref().and_then(SharedRecorder::finish) {
+        Some(Ok(stats)) => Some(stats),
+        Some(Err(e)) => {
+            tracing::warn!(robot = id, "recording: {}", ErrorChain(&e));
+            None
+        }
+        None => None,
+    };
     let trajectory = std::mem::take(
         &mut *trajectory
             .lock()
@@ -375,6 +416,7 @@ pub async fn run(
         zenoh,
         transport_errors,
         trajectory_samples: trajectory.len(),
+        recording,
     };
     write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {
         path: process.out.clone(),
@@ -462,6 +504,7 @@ fn write_robot_files(
                 out: Some(PathBuf::from(format!("robot{i}"))),
                 sequence: None,
                 zenoh: zenoh(i),
+                record: true,
             };
             let file = dir.join(format!("robot{i}.toml"));
             let text = toml::to_string(&config).map_err(std::io::Error::other)?;

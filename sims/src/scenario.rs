@@ -31,6 +31,10 @@ pub struct MetricsConfig {
     /// Table 8.1: 0.1, 0.05, 0.025 m); reported in `summary.json` as `og_change_sets`.
     /// Empty (the default): not counted. Memory grows with the cells observed.
     pub og_change_set_resolutions_m: Vec<f64>,
+    /// Write `run.mcap`, a recording of the run in Foxglove's schemas
+    /// (`docs/recordings.md`); `false` turns it off. `troupe run` only (a sweep's
+    /// runs are not recorded).
+    pub record: bool,
 }
 
 impl Default for MetricsConfig {
@@ -40,6 +44,7 @@ impl Default for MetricsConfig {
             coverage_pixel_stride: 4,
             sample_period_s: 1.0,
             og_change_set_resolutions_m: Vec::new(),
+            record: true,
         }
     }
 }

@@ -54,8 +54,8 @@ pub struct RunOutput {
     pub maps: Vec<GmmMap>,
 }
 
-/// One row of the time series.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+/// One row of the time series (also recorded in `run.mcap`, and read back from it).
+#[derive(Clone, Debug, Serialize, serde::Deserialize, PartialEq)]
 pub struct SeriesRow {
     /// Sim time, seconds.
     pub time_s: f64,

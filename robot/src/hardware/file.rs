@@ -42,6 +42,14 @@ pub struct HardwareFile {
     /// The team link's zenoh session (the same table as a simulated robot file's).
     #[serde(default)]
     pub zenoh: ZenohConfig,
+    /// Write `out/run.mcap`: what the robot published (poses, plans, keyframes, link
+    /// status) in Foxglove's schemas, in wall time; `false` turns it off.
+    #[serde(default = "record_by_default")]
+    pub record: bool,
+}
+
+fn record_by_default() -> bool {
+    true
 }
 
 /// A checked robot file with its paths resolved.
@@ -106,6 +114,9 @@ pub enum HardwareError {
     /// The runtime could not start.
     #[error("starting the tokio runtime")]
     Runtime(#[source] std::io::Error),
+    /// The recording could not be created.
+    #[error("creating the recording")]
+    Recording(#[source] troupe_record::RecordError),
     /// The outputs could not be written.
     #[error("writing {}", path.display())]
     Output {

@@ -15,6 +15,7 @@ use troupe_actors::runtime::{
 };
 use troupe_actors::sensor::FrameSource;
 use troupe_comms::zenoh::{ZenohStats, ZenohTransport};
+use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 
 use super::file::{HardwareError, HardwareRobot};
 use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
@@ -53,6 +54,9 @@ pub struct HardwareSummary {
     pub topics: BTreeMap<String, TopicStats>,
     /// Per actor: events handled, errors, panics.
     pub actors: Vec<ActorHealth>,
+    /// The recording `run.mcap`, when one was written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recording: Option<RecordingStats>,
 }
 
 /// The MAVLink vehicle's counters at the end of a run.
@@ -251,6 +255,20 @@ async fn fly(
             c.link = Some(status.clone());
         }
     });
+    let recorder = if robot.file.record {
+        std::fs::create_dir_all(&robot.out).map_err(|source| HardwareError::Output {
+            path: robot.out.clone(),
+            source,
+        })?;
+        let path = robot.out.join("run.mcap");
+        let recorder =
+            Recorder::create(&path, Clock::wall_from_now()).map_err(HardwareError::Recording)?;
+        let recorder = SharedRecorder::new(recorder);
+        executor.add_tap(recorder.clone());
+        Some(recorder)
+    } else {
+        None
+    };
     let started_at = Instant::now();
     let handle = executor
         .spawn_with_transport(started.transport.clone())
@@ -272,6 +290,18 @@ async fn fly(
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
     let report = reports.into_iter().next().ok_or(HardwareError::NoReport)?;
+    let recording = match recorder.as_ref().and_then(SharedRecorder::finish) {
+        Some(Ok(stats)) => Some(stats),
+        Some(Err(e)) => {
+            tracing::warn!(
+                robot = id,
+                "recording: {}",
+                troupe_actors::runtime::ErrorChain(&e)
+            );
+            None
+        }
+        None => None,
+    };
     let collected = std::mem::take(&mut *collected.lock().unwrap_or_else(PoisonError::into_inner));
     let count = |name: &str| report.topics.get(name).map_or(0, |t| t.messages);
     let summary = HardwareSummary {
@@ -297,6 +327,7 @@ async fn fly(
                 panics: a.stats.panics,
             })
             .collect(),
+        recording,
     };
     Ok((summary, collected.events))
 }

@@ -1,0 +1,428 @@
+//! The recorder: a [`Tap`] that turns every robot's publications into a recording's
+//! channels. Channel names (per robot `i`):
+//!
+//! | channel | schema | from |
+//! |---|---|---|
+//! | `/tf` | `foxglove.FrameTransform` | `world → robot<i>` at each odometry, `robot<i> → robot<i>/camera` once |
+//! | `/robot<i>/pose` | `foxglove.PoseInFrame` | odometry (body pose in `world`) |
+//! | `/robot<i>/plan` | `foxglove.SceneUpdate` | committed plans (line strip, replaced) |
+//! | `/robot<i>/candidates` | `foxglove.SceneUpdate` | each planning round's candidates, coloured by the collision actor's verdict, reasons in the metadata |
+//! | `/robot<i>/keyframes` | `foxglove.SceneUpdate` | own keyframes as 2σ ellipsoids |
+//! | `/robot<i>/peer_keyframes` | `foxglove.SceneUpdate` | keyframes received from peers (entity `robot<j>/kf<id>`, peer's colour, when received) |
+//! | `/robot<i>/peer_plans` | `foxglove.SceneUpdate` | peers' committed plans as received (entity `robot<j>/plan`) |
+//! | `/robot<i>/link` | `troupe.LinkStatus` | link counters per class (bytes, queue delay, drops) |
+//! | `/robot<i>/peers/robot<j>/pose` | `foxglove.PoseInFrame` | peer odometry as received (only [`Recorder::with_peer_poses`], e.g. the base station) |
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+use troupe_actors::link::LINK_STATUS;
+use troupe_actors::msgs::{
+    KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN, PLAN_CANDIDATES,
+    PLAN_DECISION, PlanCandidates, PlanDecision,
+};
+use troupe_actors::runtime::{Publication, Tap, Time};
+
+use crate::foxglove::{
+    Color, FrameTransform, KeyValuePair, PoseInFrame, SceneEntity, SceneUpdate, Timestamp,
+};
+use crate::scene::{keyframe_entity, robot_color, trajectory_line};
+use crate::schemas::{self, Schema};
+use crate::writer::{RecordError, Recording};
+
+/// What the recording's times count from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// Sim time: a run's `Time` as is (nanoseconds from the start of the run).
+    Sim,
+    /// Wall time: the executor's `Time` (from its start) plus the Unix time of the
+    /// start, nanoseconds.
+    Wall {
+        /// Unix time of the executor's start, nanoseconds.
+        unix_start_ns: u64,
+    },
+}
+
+impl Clock {
+    /// Wall time from now (call just before the executor starts).
+    #[must_use]
+    pub fn wall_from_now() -> Self {
+        let unix_start_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        Clock::Wall { unix_start_ns }
+    }
+
+    /// The recording time of `time`, nanoseconds.
+    #[must_use]
+    pub fn nanos(self, time: Time) -> u64 {
+        match self {
+            Clock::Sim => time.as_nanos(),
+            Clock::Wall { unix_start_ns } => unix_start_ns.saturating_add(time.as_nanos()),
+        }
+    }
+}
+
+/// The camera's optical frame in the body frame: the body looks along +x, the
+/// optical frame along +z with x right and y down.
+fn camera_in_body() -> Isometry3<f64> {
+    let rotation =
+        UnitQuaternion::from_basis_unchecked(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
+    Isometry3::from_parts(Translation3::identity(), rotation)
+}
+
+/// Colour of a candidate the collision actor chose.
+const CHOSEN: Color = Color {
+    r: 0.1,
+    g: 0.8,
+    b: 0.2,
+    a: 1.0,
+};
+/// Colour of a candidate rejected for clearance.
+const REJECTED_CLEARANCE: Color = Color {
+    r: 0.9,
+    g: 0.1,
+    b: 0.1,
+    a: 0.8,
+};
+/// Colour of a candidate rejected because of a peer.
+const REJECTED_PEER: Color = Color {
+    r: 1.0,
+    g: 0.6,
+    b: 0.0,
+    a: 0.8,
+};
+/// Colour of a candidate ranked below the chosen one (never checked).
+const UNCHECKED: Color = Color {
+    r: 0.6,
+    g: 0.6,
+    b: 0.6,
+    a: 0.4,
+};
+
+#[derive(Default)]
+struct RobotState {
+    camera_written: bool,
+    /// The latest round's candidates, until its decision arrives.
+    candidates: Option<PlanCandidates>,
+}
+
+/// Messages written and bytes, at the end of a recording.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct RecordingStats {
+    /// The file.
+    pub path: PathBuf,
+    /// Its size, bytes.
+    pub bytes: u64,
+    /// Messages per channel.
+    pub messages: BTreeMap<String, u64>,
+    /// Publications that could not be recorded (after the first write error the
+    /// recorder stops writing and counts what it would have written).
+    pub failed: u64,
+}
+
+/// Writes a recording from publications (see the module doc for its channels).
+pub struct Recorder {
+    recording: Recording,
+    clock: Clock,
+    robots: BTreeMap<u32, RobotState>,
+    messages: BTreeMap<String, u64>,
+    failed: u64,
+    error: Option<RecordError>,
+    peer_poses: bool,
+}
+
+impl Recorder {
+    /// Creates the recording at `path`.
+    pub fn create(path: &Path, clock: Clock) -> Result<Self, RecordError> {
+        Ok(Recorder {
+            recording: Recording::create(path)?,
+            clock,
+            robots: BTreeMap::new(),
+            messages: BTreeMap::new(),
+            failed: 0,
+            error: None,
+            peer_poses: false,
+        })
+    }
+
+    /// Also records peers' odometry as received (`/robot<i>/peers/robot<j>/pose`):
+    /// for a base station, whose own body does not move; a team's robots would write
+    /// every pose once per receiver.
+    #[must_use]
+    pub fn with_peer_poses(mut self) -> Self {
+        self.peer_poses = true;
+        self
+    }
+
+    /// The recording's clock.
+    #[must_use]
+    pub fn clock(&self) -> Clock {
+        self.clock
+    }
+
+    /// Writes one message (for channels the caller adds, e.g. a simulator's samples).
+    /// After a failed write nothing more is written: the failure is counted and the
+    /// first error returned by [`Recorder::finish`].
+    pub fn write<T: Serialize>(&mut self, topic: &str, schema: &Schema, time: Time, message: &T) {
+        if self.error.is_some() {
+            self.failed += 1;
+            return;
+        }
+        match self
+            .recording
+            .write(topic, schema, self.clock.nanos(time), message)
+        {
+            Ok(()) => *self.messages.entry(topic.to_string()).or_default() += 1,
+            Err(e) => {
+                tracing::warn!(error = %troupe_core::ErrorChain(&e), "recording stopped");
+                self.failed += 1;
+                self.error = Some(e);
+            }
+        }
+    }
+
+    /// Attaches a file of the run (JSON, TOML) to the recording.
+    pub fn attach(&mut self, name: &str, media_type: &str, time: Time, data: &[u8]) {
+        if self.error.is_none()
+            && let Err(e) = self
+                .recording
+                .attach(name, media_type, self.clock.nanos(time), data)
+        {
+            self.failed += 1;
+            self.error = Some(e);
+        }
+    }
+
+    /// Records one publication, if its topic is one the recorder knows.
+    pub fn observe(&mut self, p: &Publication<'_>) {
+        let i = p.robot.0;
+        if let Some(odometry) = p.get(&ODOMETRY) {
+            let stamp = Timestamp::from_nanos(self.clock.nanos(odometry.stamp));
+            let body = format!("robot{i}");
+            let state = self.robots.entry(i).or_default();
+            if !std::mem::replace(&mut state.camera_written, true) {
+                let camera = camera_in_body();
+                self.write(
+                    "/tf",
+                    &schemas::FRAME_TRANSFORM,
+                    p.time,
+                    &FrameTransform {
+                        timestamp: stamp,
+                        parent_frame_id: body.clone(),
+                        child_frame_id: format!("{body}/camera"),
+                        translation: camera.translation.vector.into(),
+                        rotation: camera.rotation.into(),
+                    },
+                );
+            }
+            let pose = &odometry.pose;
+            self.write(
+                "/tf",
+                &schemas::FRAME_TRANSFORM,
+                p.time,
+                &FrameTransform {
+                    timestamp: stamp,
+                    parent_frame_id: "world".into(),
+                    child_frame_id: body,
+                    translation: pose.translation.vector.into(),
+                    rotation: pose.rotation.into(),
+                },
+            );
+            self.write(
+                &format!("/robot{i}/pose"),
+                &schemas::POSE_IN_FRAME,
+                p.time,
+                &PoseInFrame {
+                    timestamp: stamp,
+                    frame_id: "world".into(),
+                    pose: pose.into(),
+                },
+            );
+        } else if let Some(plan) = p.get(&PLAN) {
+            let mut entity =
+                SceneEntity::new(self.stamp(plan.stamp), "world", format!("robot{i}/plan"));
+            entity
+                .lines
+                .push(trajectory_line(&plan.trajectory, robot_color(i, 1.0)));
+            entity.metadata = vec![
+                KeyValuePair::new("robot", i),
+                KeyValuePair::new("stopping", plan.stopping),
+                KeyValuePair::new("knots", plan.trajectory.knots().len()),
+            ];
+            self.write_scene(&format!("/robot{i}/plan"), p.time, entity);
+        } else if let Some(candidates) = p.get(&PLAN_CANDIDATES) {
+            self.robots.entry(i).or_default().candidates = Some(candidates.clone());
+        } else if let Some(decision) = p.get(&PLAN_DECISION) {
+            let candidates = self.robots.entry(i).or_default().candidates.take();
+            if let Some(candidates) = candidates.filter(|c| c.round == decision.round) {
+                let entity = self.candidates_entity(i, &candidates, decision);
+                self.write_scene(&format!("/robot{i}/candidates"), p.time, entity);
+            }
+        } else if let Some(keyframe) = p.get(&KEYFRAME) {
+            let entity = keyframe_entity(
+                i,
+                keyframe,
+                Time::from_nanos(self.clock.nanos(keyframe.stamp)),
+            );
+            self.write_scene(&format!("/robot{i}/keyframes"), p.time, entity);
+        } else if let Some(peer) = p.get(&PEER_KEYFRAME) {
+            // A peer's stamps count from its own start (in processes): what was
+            // received is stamped when it arrived.
+            let mut entity = keyframe_entity(
+                peer.robot.0,
+                &peer.keyframe,
+                Time::from_nanos(self.clock.nanos(p.time)),
+            );
+            entity.metadata.push(KeyValuePair::new("received_by", i));
+            entity.metadata.push(KeyValuePair::new(
+                "received_at_s",
+                peer.received_at.as_secs_f64(),
+            ));
+            self.write_scene(&format!("/robot{i}/peer_keyframes"), p.time, entity);
+        } else if let Some(peer) = p.get(&PEER_PLAN) {
+            let j = peer.robot.0;
+            let mut entity =
+                SceneEntity::new(self.stamp(p.time), "world", format!("robot{j}/plan"));
+            entity
+                .lines
+                .push(trajectory_line(&peer.plan.trajectory, robot_color(j, 0.6)));
+            entity.metadata = vec![
+                KeyValuePair::new("robot", j),
+                KeyValuePair::new("received_by", i),
+                KeyValuePair::new("received_at_s", peer.received_at.as_secs_f64()),
+                KeyValuePair::new("priority", peer.priority),
+            ];
+            self.write_scene(&format!("/robot{i}/peer_plans"), p.time, entity);
+        } else if let Some(peer) = p.get(&PEER_ODOMETRY) {
+            if self.peer_poses {
+                let pose = PoseInFrame {
+                    timestamp: self.stamp(p.time),
+                    frame_id: "world".into(),
+                    pose: (&peer.odometry.pose).into(),
+                };
+                let topic = format!("/robot{i}/peers/robot{}/pose", peer.robot.0);
+                self.write(&topic, &schemas::POSE_IN_FRAME, p.time, &pose);
+            }
+        } else if let Some(status) = p.get(&LINK_STATUS) {
+            self.write(
+                &format!("/robot{i}/link"),
+                &schemas::LINK_STATUS,
+                p.time,
+                status,
+            );
+        }
+    }
+
+    fn stamp(&self, time: Time) -> Timestamp {
+        Timestamp::from_nanos(self.clock.nanos(time))
+    }
+
+    fn write_scene(&mut self, topic: &str, time: Time, entity: SceneEntity) {
+        let update = SceneUpdate {
+            deletions: Vec::new(),
+            entities: vec![entity],
+        };
+        self.write(topic, &schemas::SCENE_UPDATE, time, &update);
+    }
+
+    /// One planning round: every candidate's line in the colour of its verdict, the
+    /// stopping trajectory when nothing was chosen, the reasons in the metadata.
+    fn candidates_entity(
+        &self,
+        i: u32,
+        round: &PlanCandidates,
+        decision: &PlanDecision,
+    ) -> SceneEntity {
+        let mut entity = SceneEntity::new(
+            self.stamp(round.stamp),
+            "world",
+            format!("robot{i}/candidates"),
+        );
+        entity
+            .metadata
+            .push(KeyValuePair::new("round", round.round));
+        let chosen = decision
+            .chosen
+            .map_or("stop".to_string(), |k| k.to_string());
+        entity.metadata.push(KeyValuePair::new("chosen", chosen));
+        for (k, candidate) in round.candidates.iter().enumerate() {
+            let rejection = decision
+                .rejected
+                .iter()
+                .find(|(r, _)| *r == k)
+                .map(|(_, why)| *why);
+            let (color, verdict) = match (rejection, decision.chosen) {
+                (Some(why), _) if why.is_peer() => (REJECTED_PEER, format!("rejected: {why}")),
+                (Some(why), _) => (REJECTED_CLEARANCE, format!("rejected: {why}")),
+                (None, Some(c)) if c == k => (CHOSEN, "chosen".to_string()),
+                _ => (UNCHECKED, "not checked".to_string()),
+            };
+            entity
+                .lines
+                .push(trajectory_line(&candidate.trajectory, color));
+            entity.metadata.push(KeyValuePair::new(
+                &format!("candidate {k}"),
+                format!("{verdict}, reward {:.3}", candidate.reward),
+            ));
+        }
+        if decision.chosen.is_none() {
+            entity.lines.push(trajectory_line(&round.stop, CHOSEN));
+        }
+        entity
+    }
+
+    /// Writes the summary and index and closes the file; fails with the first write
+    /// error if any write failed.
+    pub fn finish(self) -> Result<RecordingStats, RecordError> {
+        if let Some(e) = self.error {
+            return Err(e);
+        }
+        let path = self.recording.finish()?;
+        let bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+        Ok(RecordingStats {
+            path,
+            bytes,
+            messages: self.messages,
+            failed: self.failed,
+        })
+    }
+}
+
+/// A recorder shared between the executor's tap and its owner, who finishes it
+/// after the run.
+#[derive(Clone)]
+pub struct SharedRecorder(Arc<Mutex<Option<Recorder>>>);
+
+impl SharedRecorder {
+    /// Shares `recorder`.
+    #[must_use]
+    pub fn new(recorder: Recorder) -> Self {
+        SharedRecorder(Arc::new(Mutex::new(Some(recorder))))
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Option<Recorder>> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Runs `f` on the recorder unless it was finished.
+    pub fn with<R>(&self, f: impl FnOnce(&mut Recorder) -> R) -> Option<R> {
+        self.lock().as_mut().map(f)
+    }
+
+    /// Finishes the recording (`None` when it was already finished).
+    pub fn finish(&self) -> Option<Result<RecordingStats, RecordError>> {
+        self.lock().take().map(Recorder::finish)
+    }
+}
+
+impl Tap for SharedRecorder {
+    fn on_publish(&mut self, p: &Publication<'_>) {
+        self.with(|r| r.observe(p));
+    }
+}

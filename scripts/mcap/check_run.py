@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""Checks a `troupe run` recording with an independent reader (the `mcap` and
+`jsonschema` packages from PyPI), against the run's own outputs:
+
+- every channel: JSON messages, a `jsonschema` schema of the expected name for its
+  topic, and every message valid under its channel's schema;
+- messages per robot: poses = odometry published, plans = committed plans, own
+  keyframes = the robot's map, received keyframes = `peer/keyframe` deliveries, link
+  statuses = `link/status` publications, samples = rows of `timeseries.csv`
+  (all from `summary.json` / `timeseries.csv`);
+- the pose at each sample time (the last pose logged at or before it) equals the
+  position in `timeseries.csv` within 1e-6 m;
+- the ellipsoids of each own keyframe match `maps/robot<i>.troupe`: one per
+  component, centred on the mean, and the covariance rebuilt from the ellipsoid's
+  axes (2 sigma) equals the component's spatial covariance.
+
+Usage: check_run.py RUN_DIR   (prints one JSON line of counts; exits 1 on a mismatch)
+       check_run.py FILE.mcap  (a process or base-station recording: schemas only)
+"""
+
+import csv
+import json
+import math
+import re
+import struct
+import sys
+from pathlib import Path
+
+import jsonschema
+from mcap.reader import make_reader
+
+POSE_TOLERANCE_M = 1e-6
+SIGMAS = 2.0
+
+# Topic pattern -> schema name.
+SCHEMAS = [
+    (r"/tf", "foxglove.FrameTransform"),
+    (r"/robot\d+/pose", "foxglove.PoseInFrame"),
+    (r"/robot\d+/(plan|candidates|keyframes|peer_keyframes|peer_plans)", "foxglove.SceneUpdate"),
+    (r"/robot\d+/link", "troupe.LinkStatus"),
+    (r"/robot\d+/sample", "troupe.Sample"),
+    (r"/team/coverage", "troupe.Coverage"),
+    (r"/robot\d+/peers/robot\d+/pose", "foxglove.PoseInFrame"),
+]
+
+
+class Mismatch(Exception):
+    pass
+
+
+def expect(condition, message):
+    if not condition:
+        raise Mismatch(message)
+
+
+def read_map(path):
+    """Keyframes of a troupe map file (format in actors/algorithms/src/mapfile.rs)."""
+    data = path.read_bytes()
+    expect(data[:8] == b"TROUPEMP", f"{path}: bad magic")
+    (version,) = struct.unpack_from("<I", data, 8)
+    expect(version == 1, f"{path}: version {version}")
+    (count,) = struct.unpack_from("<I", data, 16)
+    offset = 28
+    keyframes = []
+    for _ in range(count):
+        stamp_s, *pose = struct.unpack_from("<8d", data, offset)
+        offset += 64
+        _support, _free_support, m, f = struct.unpack_from("<QQII", data, offset)
+        offset += 24
+        components = []
+        for _ in range(m):
+            values = struct.unpack_from("<21d", data, offset)
+            offset += 168
+            mean = values[1:4]
+            cov = [[values[5 + 4 * r + c] for c in range(3)] for r in range(3)]
+            components.append((mean, cov))
+        offset += f * 8 * 13
+        keyframes.append((stamp_s, components))
+    return keyframes
+
+
+def rotation(q):
+    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
+    return [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+
+
+def ellipsoid_covariance(sphere):
+    r = rotation(sphere["pose"]["orientation"])
+    size = sphere["size"]
+    var = [(size[k] / (2 * SIGMAS)) ** 2 for k in "xyz"]
+    return [[sum(r[i][k] * var[k] * r[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+
+
+def read_checked(path):
+    """Checks every channel's schema and every message; returns topic -> [(log_time, message)]."""
+    messages = {}
+    with open(path, "rb") as f:
+        validators = {}
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            topic = channel.topic
+            if channel.id not in validators:
+                expect(channel.message_encoding == "json", f"{topic}: encoding {channel.message_encoding}")
+                expect(schema is not None and schema.encoding == "jsonschema", f"{topic}: not a jsonschema schema")
+                wanted = [name for pattern, name in SCHEMAS if re.fullmatch(pattern, topic)]
+                expect(wanted == [schema.name], f"{topic}: schema {schema.name}, expected {wanted}")
+                document = json.loads(schema.data)
+                jsonschema.Draft202012Validator.check_schema(document)
+                validators[channel.id] = jsonschema.Draft202012Validator(document)
+            decoded = json.loads(message.data)
+            errors = list(validators[channel.id].iter_errors(decoded))
+            expect(not errors, f"{topic}: message at {message.log_time} breaks its schema: {errors[:1]}")
+            messages.setdefault(topic, []).append((message.log_time, decoded))
+    expect(messages, f"{path}: no message")
+    return messages
+
+
+def check_schemas(path):
+    return {topic: len(m) for topic, m in read_checked(path).items()}
+
+
+def check(run_dir):
+    summary = json.loads((run_dir / "summary.json").read_text())
+    with open(run_dir / "timeseries.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    robots = summary["robots"]
+
+    messages = read_checked(run_dir / "run.mcap")
+    with open(run_dir / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        attachments = {a.name for a in reader.iter_attachments()}
+    expect({"summary.json", "scenario.toml"} <= attachments, f"attachments {attachments}")
+
+    def count(topic):
+        return len(messages.get(topic, []))
+
+    counts = {}
+    for i in range(robots):
+        stats = summary["per_robot"][i]
+        topics = stats["topics"]
+        published = lambda name: topics.get(name, {}).get("messages", 0)
+        expected = {
+            f"/robot{i}/pose": published("odometry"),
+            f"/robot{i}/plan": published("plan/committed"),
+            f"/robot{i}/keyframes": summary["maps"][i]["keyframes"] if summary["maps"] else 0,
+            f"/robot{i}/peer_keyframes": published("peer/keyframe"),
+            f"/robot{i}/peer_plans": published("peer/plan"),
+            f"/robot{i}/link": published("link/status"),
+            f"/robot{i}/sample": sum(1 for r in rows if int(r["robot"]) == i),
+        }
+        expect(stats["plans"] == published("plan/committed"), f"robot{i}: plans")
+        for topic, n in expected.items():
+            expect(count(topic) == n, f"{topic}: {count(topic)} messages, the run says {n}")
+        expect(count(f"/robot{i}/pose") > 0, f"robot{i}: no pose")
+        expect(count(f"/robot{i}/candidates") > 0, f"robot{i}: no planning round")
+        counts[f"robot{i}"] = {t.split("/")[-1]: n for t, n in expected.items()}
+    expect(count("/tf") == sum(count(f"/robot{i}/pose") + 1 for i in range(robots)), "/tf count")
+
+    # Poses at the sample times equal timeseries.csv.
+    compared = 0
+    for i in range(robots):
+        poses = messages[f"/robot{i}/pose"]
+        csv_rows = {r["time_s"]: r for r in rows if int(r["robot"]) == i}
+        k = -1
+        for log_time, sample in messages[f"/robot{i}/sample"]:
+            while k + 1 < len(poses) and poses[k + 1][0] <= log_time:
+                k += 1
+            expect(k >= 0, f"robot{i}: no pose before the sample at {sample['time_s']} s")
+            row = next(r for t, r in csv_rows.items() if float(t) == sample["time_s"])
+            p = poses[k][1]["pose"]["position"]
+            error = math.dist((p["x"], p["y"], p["z"]), (float(row["x_m"]), float(row["y_m"]), float(row["z_m"])))
+            expect(error <= POSE_TOLERANCE_M, f"robot{i} at {sample['time_s']} s: pose {p} is {error} m from timeseries.csv")
+            compared += 1
+
+    # Own keyframe ellipsoids equal the map files.
+    ellipsoids = 0
+    for i in range(robots):
+        path = run_dir / "maps" / f"robot{i}.troupe"
+        recorded = messages.get(f"/robot{i}/keyframes", [])
+        if not path.exists():
+            expect(not recorded, f"robot{i}: keyframes recorded but no map")
+            continue
+        keyframes = read_map(path)
+        expect(len(keyframes) == len(recorded), f"robot{i}: {len(recorded)} keyframes recorded, {len(keyframes)} in the map")
+        for (stamp_s, components), (_, update) in zip(keyframes, recorded):
+            (entity,) = update["entities"]
+            meta = {kv["key"]: kv["value"] for kv in entity["metadata"]}
+            expect(float(meta["stamp_s"]) == stamp_s, f"robot{i}: keyframe stamp {meta['stamp_s']} vs {stamp_s}")
+            spheres = entity["spheres"]
+            expect(len(spheres) == len(components), f"robot{i}: {len(spheres)} ellipsoids, {len(components)} components")
+            for sphere, (mean, cov) in zip(spheres, components):
+                c = sphere["pose"]["position"]
+                expect(math.dist((c["x"], c["y"], c["z"]), mean) <= 1e-12, f"robot{i}: ellipsoid centre {c} vs {mean}")
+                rebuilt = ellipsoid_covariance(sphere)
+                scale = max(abs(v) for row in cov for v in row)
+                worst = max(abs(rebuilt[r][s] - (cov[r][s] + cov[s][r]) / 2) for r in range(3) for s in range(3))
+                expect(worst <= 1e-6 * scale, f"robot{i}: ellipsoid covariance off by {worst} (scale {scale})")
+                ellipsoids += 1
+    expect(ellipsoids > 0, "no keyframe ellipsoid to compare")
+
+    return {
+        "channels": len(messages),
+        "messages": sum(len(v) for v in messages.values()),
+        "per_robot": counts,
+        "poses_compared": compared,
+        "ellipsoids_compared": ellipsoids,
+        "bytes": (run_dir / "run.mcap").stat().st_size,
+    }
+
+
+def main():
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    try:
+        path = Path(sys.argv[1])
+        print(json.dumps(check_schemas(path) if path.suffix == ".mcap" else check(path)))
+    except Mismatch as e:
+        print(f"check_run: {e}", file=sys.stderr)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
