@@ -13,6 +13,7 @@
 //! (rows of shelves, thesis §4.2.2), [`OpeningScene`] (the window and door scenes of
 //! §5.2), [`OpenField`] (flat ground and a few boxes, for crossing missions) and [`BoxRoom`] (one analytic box, for tests). [`WorldConfig`] picks one.
 
+pub mod artifacts;
 mod box_room;
 pub mod cave;
 mod config;

@@ -1,14 +1,12 @@
 //! The artifact actor (module docs of [`crate::artifacts`]).
 
-use std::sync::Arc;
-
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use troupe_runtime::{Actor, ActorResult, Context, Event, Message, QueuePolicy, Topic};
 
 use super::detect::{ArtifactsConfig, detect};
 use super::list::ArtifactList;
-use crate::link::{SharePolicy, SharedTopic};
+use crate::link::{Peer, SharePolicy, SharedTopic};
 use crate::msgs::DEPTH_FRAME;
 
 /// What a robot tells the team when it has found an artifact.
@@ -47,6 +45,8 @@ pub struct ArtifactActor {
     detecting: bool,
     candidates: Vec<Candidate>,
     list: ArtifactList,
+    /// [`ARTIFACT_REPORTS`]' peer topic (its name is built once).
+    peer_reports: Topic<Peer<ArtifactReport>>,
 }
 
 impl ArtifactActor {
@@ -58,6 +58,7 @@ impl ArtifactActor {
             detecting: true,
             candidates: Vec::new(),
             list: ArtifactList::default(),
+            peer_reports: ARTIFACT_REPORTS.peer_topic(),
         }
     }
 
@@ -132,7 +133,7 @@ impl ArtifactActor {
 impl Actor for ArtifactActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ARTIFACT_REPORTS.share(ctx);
-        ctx.subscribe(&ARTIFACT_REPORTS.peer_topic(), QueuePolicy::fifo(1024));
+        ctx.subscribe(&self.peer_reports, QueuePolicy::fifo(1024));
         if self.detecting {
             ctx.subscribe(&DEPTH_FRAME, QueuePolicy::LATEST);
         }
@@ -143,9 +144,9 @@ impl Actor for ArtifactActor {
         let Event::Message(m) = event else {
             return Ok(());
         };
-        if let Some(frame) = m.get_arc(&DEPTH_FRAME) {
-            self.on_frame(&Arc::clone(&frame), ctx);
-        } else if let Some(peer) = m.get(&ARTIFACT_REPORTS.peer_topic()) {
+        if let Some(frame) = m.get(&DEPTH_FRAME) {
+            self.on_frame(frame, ctx);
+        } else if let Some(peer) = m.get(&self.peer_reports) {
             let position = Point3::from(peer.message.position_m.map(f64::from));
             self.list.add(
                 position,
