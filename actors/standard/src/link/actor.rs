@@ -542,16 +542,16 @@ impl LinkActor {
                 to,
                 stats: SharedStats::default(),
             });
-        if let Some(known) = &entry.codec {
-            if known.version() != codec.version() {
-                tracing::warn!(
-                    robot = ctx.robot_name(),
-                    topic = name,
-                    "shared topic asked for again with version {} (was {}); the new one counts",
-                    codec.version(),
-                    known.version()
-                );
-            }
+        if let Some(known) = &entry.codec
+            && known.version() != codec.version()
+        {
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                topic = name,
+                "shared topic asked for again with version {} (was {}); the new one counts",
+                codec.version(),
+                known.version()
+            );
         }
         if entry.lane.is_none() {
             let lane = self
