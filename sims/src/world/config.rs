@@ -11,6 +11,9 @@ use super::{
     OpeningScene, Site, Warehouse, WarehouseParams, WindowParams,
 };
 
+/// A built world and where its artifacts are ([`WorldConfig::build_with_artifacts`]).
+pub type SiteWithArtifacts = (Arc<dyn Site>, Vec<nalgebra::Point3<f64>>);
+
 /// The kinds of world `troupe run` can build.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -103,9 +106,7 @@ impl WorldConfig {
     /// # Errors
     ///
     /// A mesh file that cannot be read.
-    pub fn build_with_artifacts(
-        &self,
-    ) -> Result<(Arc<dyn Site>, Vec<nalgebra::Point3<f64>>), MeshError> {
+    pub fn build_with_artifacts(&self) -> Result<SiteWithArtifacts, MeshError> {
         let site = self.build_site()?;
         if self.artifacts.count == 0 {
             return Ok((site, Vec::new()));
