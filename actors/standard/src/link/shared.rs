@@ -121,7 +121,7 @@ pub struct Peer<T> {
 impl<T: Message> Message for Peer<T> {}
 
 /// A robot-local topic of type `T` that the link shares with the team (see the
-/// [module docs](self)).
+/// [module docs](crate::link)).
 pub struct SharedTopic<T> {
     name: &'static str,
     version: u16,
