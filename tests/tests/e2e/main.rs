@@ -2,7 +2,6 @@
 
 #![allow(clippy::unwrap_used)]
 
-mod artifacts;
 mod crossing;
 mod keyframes;
 mod map_bytes;
