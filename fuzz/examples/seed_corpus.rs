@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use troupe_comms::wire::{
     self, CellChange, Component3, Component4, Envelope, GridChangeSet, GridDims, Heartbeat,
-    Keyframe, Mixture, Odometry, Payload, Plan, PlanKnot, SensorPose,
+    Keyframe, Mixture, Odometry, Payload, Plan, PlanKnot, SensorPose, UserMessage, Class,
 };
 
 fn keyframe(mixture: Mixture) -> Payload {
@@ -76,6 +76,18 @@ fn payloads() -> Vec<Payload> {
             ],
         }),
     ];
+    for (class, name, to, body) in [
+        (Class::Plan, "artifacts/report", None, vec![1, 2, 3, 4, 5, 6, 7, 8]),
+        (Class::Bulk, "gas/reading", Some(0), vec![]),
+    ] {
+        out.push(Payload::User(UserMessage {
+            class,
+            name: name.into(),
+            version: 1,
+            to,
+            body,
+        }));
+    }
     for mixture in [spatial, spatial_intensity] {
         if let Ok(compact) = mixture.compact() {
             out.push(keyframe(compact));

@@ -4,7 +4,9 @@
 //! - decoding never panics (libFuzzer reports a panic as a crash);
 //! - whatever decodes re-encodes (the encoder accepts everything the decoder
 //!   accepts) and decodes again to an equal envelope;
-//! - the re-encoded bytes are canonical: encoding them once more gives the same bytes.
+//! - the re-encoded bytes are canonical: encoding them once more gives the same bytes;
+//! - a user payload (shared topic) that decodes has a valid name and the class its
+//!   header says (the seed corpus holds two user messages to start from).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -14,6 +16,10 @@ fuzz_target!(|data: &[u8]| {
     let Ok(envelope) = wire::decode(data) else {
         return;
     };
+    if let wire::Payload::User(user) = &envelope.payload {
+        assert!(wire::valid_user_name(&user.name), "accepted a bad name");
+        assert_eq!(user.class, envelope.class, "accepted a class mismatch");
+    }
     let bytes = match wire::encode(&envelope) {
         Ok(bytes) => bytes,
         Err(error) => panic!("decoded envelope does not re-encode: {error}"),

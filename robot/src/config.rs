@@ -1,6 +1,7 @@
 //! A robot's configuration (the `[robot]` table of a scenario, or a robot file).
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::artifacts::ArtifactsConfig;
 use troupe_actors::collision::CollisionActorConfig;
 use troupe_actors::collision::body::BodyConfig;
 use troupe_actors::grid::GridConfig;
@@ -176,6 +177,8 @@ pub struct RobotConfig {
     pub radius_m: f64,
     /// Link settings.
     pub link: LinkConfig,
+    /// The optional artifact reporter (`enabled = true` runs it).
+    pub artifacts: ArtifactsConfig,
     /// Modelled compute latencies.
     pub latency_s: ActorLatencies,
     /// What happens when an actor panics.
@@ -199,6 +202,7 @@ impl Default for RobotConfig {
             sensor_rate_hz: 5.0,
             radius_m: 0.3,
             link: LinkConfig::default(),
+            artifacts: ArtifactsConfig::default(),
             latency_s: ActorLatencies::default(),
             restart: RestartPolicy::default(),
         }
@@ -224,6 +228,9 @@ impl RobotConfig {
         positive("sensor_rate_hz", self.sensor_rate_hz)?;
         positive("radius_m", self.radius_m)?;
         self.link.validate().map_err(|e| e.within("link"))?;
+        self.artifacts
+            .validate()
+            .map_err(|e| e.within("artifacts"))?;
         non_negative("latency_s.vehicle", self.latency_s.vehicle)?;
         non_negative("latency_s.sensor", self.latency_s.sensor)?;
         non_negative("latency_s.explorer", self.latency_s.explorer)?;

@@ -7,7 +7,7 @@
 //! actor with priority avoidance, and link. Route behaviours (`waypoint_route`) and
 //! teleoperation replace the grid + planner pair; the mapper and collision actor can
 //! be switched off (`[robot.mapper] enabled = false`, `[robot.collision] enabled =
-//! false`).
+//! false`), and the artifact reporter switched on (`[robot.artifacts] enabled = true`).
 //!
 //! A robot file overrides the standard robot key by key, and every value is checked
 //! before a robot is assembled:
@@ -36,6 +36,7 @@ pub mod safety;
 pub mod toml_file;
 
 use nalgebra::Point3;
+use troupe_actors::artifacts::ArtifactActor;
 use troupe_actors::collision::CollisionActor;
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
@@ -218,6 +219,13 @@ pub fn assemble(
                 CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
             })
             .with_options(options(config.latency_s.collision)),
+        );
+    }
+    if config.artifacts.enabled {
+        let artifacts = config.artifacts;
+        robot.add(
+            ActorSpec::new("artifacts", move || ArtifactActor::new(artifacts))
+                .with_options(options(0.0)),
         );
     }
     let journal = parts.link_journal;

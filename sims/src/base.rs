@@ -31,6 +31,11 @@
 //! and `summary.json` ([`BaseSummary`]); while it runs it records every robot's pose,
 //! plans and keyframes as received into `out/run.mcap` in wall time (`record = false`
 //! turns it off; `docs/recordings.md`).
+//!
+//! When the team runs the artifact reporter (`[robot.artifacts] enabled = true`), the
+//! base runs a listening [`ArtifactActor`] too: it shares `artifacts/report`, so the
+//! robots' store-and-forward reports reach it (and are acknowledged), and its
+//! deduplicated list is `artifacts` in `summary.json`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write as _;
@@ -40,6 +45,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact, ArtifactActor, ArtifactList};
 use troupe_actors::link::{LINK_STATUS, LinkActor, LinkJournal, LinkStatus};
 use troupe_actors::mapper::MapModel;
 use troupe_actors::mapper::mapfile::{
@@ -420,6 +426,9 @@ pub struct BaseSummary {
     /// The recording `run.mcap`, when one was written.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub recording: Option<RecordingStats>,
+    /// The team's artifacts as reported to the base (with `[robot.artifacts]`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub artifacts: Vec<Artifact>,
 }
 
 /// One robot as the base saw it.
@@ -490,7 +499,7 @@ pub async fn run(
     let journal = LinkJournal::starting_at(first_id);
     let rejected = Arc::new(AtomicU64::new(0));
     let counter = rejected.clone();
-    let robot = RobotSpec::new("base").with(
+    let mut robot = RobotSpec::new("base").with(
         ActorSpec::new("link", move || {
             LinkActor::new(link.clone())?.journaled(journal.clone())
         })
@@ -501,18 +510,27 @@ pub async fn run(
             })
         }),
     );
+    let artifacts_config = scenario.robot.artifacts;
+    if artifacts_config.enabled {
+        robot.add(ActorSpec::new("artifacts", move || {
+            ArtifactActor::listening(artifacts_config)
+        }));
+    }
     let maps: Arc<Mutex<BaseMaps>> = Arc::default();
     let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let artifacts: Arc<Mutex<ArtifactList>> = Arc::default();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
         .map_err(|e| BaseError::Start {
             context: "the base's robot id",
             source: Box::new(e),
         })?;
-    let (maps_tap, status_tap) = (maps.clone(), status.clone());
+    let (maps_tap, status_tap, artifacts_tap) = (maps.clone(), status.clone(), artifacts.clone());
     executor.add_tap(move |p: &Publication<'_>| {
         if let Some(s) = p.get(&LINK_STATUS) {
             *lock(&status_tap) = Some(s.clone());
+        } else if let Some(list) = p.get(&ARTIFACT_LIST) {
+            *lock(&artifacts_tap) = list.clone();
         } else {
             lock(&maps_tap).observe(p, Instant::now());
         }
@@ -621,6 +639,7 @@ pub async fn run(
         rejected: rejected.load(Ordering::Relaxed),
         zenoh,
         recording,
+        artifacts: lock(&artifacts).artifacts.clone(),
     };
     let path = station.out.join("summary.json");
     let mut json = serde_json::to_string_pretty(&summary).map_err(|e| BaseError::Write {

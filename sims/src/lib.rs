@@ -27,6 +27,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod artifact_score;
 pub mod base;
 pub mod camera;
 pub mod coverage;

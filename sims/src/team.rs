@@ -16,6 +16,7 @@ use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
+use crate::artifact_score::{ArtifactCollector, ArtifactScore, ScoredArtifact};
 use crate::camera::{CameraBackend, resolve_backend};
 use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_factory};
 use crate::maps::MapCollector;
@@ -40,6 +41,10 @@ pub struct Team {
     og_meters: Option<OgMeters>,
     network_stats: Arc<Mutex<NetStats>>,
     fault_counters: Vec<Arc<FaultCounters>>,
+    /// Where the world's artifacts are (empty without).
+    artifact_truth: Vec<Point3<f64>>,
+    /// Each robot's latest artifact list.
+    artifact_lists: Arc<Mutex<Vec<troupe_actors::artifacts::ArtifactList>>>,
 }
 
 /// Everything a run produced.
@@ -165,6 +170,14 @@ pub struct Summary {
     pub topics: BTreeMap<String, TopicStats>,
     /// Each robot's map as published by its mapper (empty without a mapper).
     pub maps: Vec<MapSummary>,
+    /// The team's artifact list (the union of the robots' lists), scored against the
+    /// world's artifacts (absent when no robot reported one and none were placed).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub artifacts: Vec<ScoredArtifact>,
+    /// Artifacts found / placed and false reports, for the team and per robot
+    /// (absent when the world has no artifacts).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub artifact_score: Option<ArtifactScore>,
     /// What each robot's own frames would have cost as occupancy-grid change sets at
     /// each of `metrics.og_change_set_resolutions_m` (absent when none).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -269,7 +282,7 @@ impl Team {
         scenario: &Scenario,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
-        let world = scenario.world.build().map_err(|e| {
+        let (world, artifact_truth) = scenario.world.build_with_artifacts().map_err(|e| {
             AssembleError::Config(troupe_robot::ConfigError::new(
                 "world.mesh.path",
                 "must be a readable PLY or OBJ mesh",
@@ -342,6 +355,9 @@ impl Team {
         let map_collector = MapCollector::new(count);
         let maps = map_collector.maps();
         executor.add_tap(map_collector);
+        let artifact_collector = ArtifactCollector::new(count);
+        let artifact_lists = artifact_collector.lists();
+        executor.add_tap(artifact_collector);
         let resolutions_m = &scenario.metrics.og_change_set_resolutions_m;
         let og_meters = (!resolutions_m.is_empty()).then(|| {
             let tap = OgMeterTap::new(count, resolutions_m, &scenario.robot.grid);
@@ -358,6 +374,8 @@ impl Team {
             og_meters,
             network_stats,
             fault_counters,
+            artifact_truth,
+            artifact_lists,
         })
     }
 
@@ -480,6 +498,16 @@ impl Team {
         );
         summary.maps = maps.iter().map(MapSummary::of).collect();
         summary.og_change_sets = self.og_meters.map(|m| m.totals()).unwrap_or_default();
+        let lists = self
+            .artifact_lists
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        (summary.artifacts, summary.artifact_score) = crate::artifact_score::summarise(
+            &lists,
+            &self.artifact_truth,
+            self.scenario.robot.artifacts.merge_radius_m,
+        );
         RunOutput {
             summary,
             timing,
@@ -652,5 +680,7 @@ fn summarise(
         topics,
         maps: Vec::new(),
         og_change_sets: Vec::new(),
+        artifacts: Vec::new(),
+        artifact_score: None,
     }
 }

@@ -28,6 +28,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod artifacts;
 pub mod collision;
 pub mod explorer;
 pub mod grid;

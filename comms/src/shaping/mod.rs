@@ -28,6 +28,12 @@
 //!   fragments while peers are out of step).
 //! - **Counters** ([`ShaperStats`]): drops by reason, queue delay, completion delay
 //!   and age of information per class.
+//! - **Extra lanes** ([`LinkShaper::add_lane`]): a shared topic of a custom actor
+//!   gets its own queue with its own policy and capacity, at the priority of the
+//!   class it names (after that class's own queue, lanes in the order they were
+//!   added), optionally addressed to one peer, with its own [`ClassStats`]
+//!   ([`LinkShaper::lane_stats`]; [`ShaperStats::classes`] counts the classes' own
+//!   queues only).
 //!
 //! The receive side is a [`Reassembler`]: bounded memory, timeouts, duplicate
 //! suppression, counted incomplete and evicted messages.
@@ -63,7 +69,7 @@ mod reassembly;
 mod stats;
 mod store;
 
-use std::collections::VecDeque;
+use std::collections::{BTreeSet, VecDeque};
 use std::sync::Arc;
 
 use thiserror::Error;
@@ -82,6 +88,11 @@ use crate::wire::Class;
 use frame::{ACK_HEADER_BYTES, DATA_HEADER_BYTES, DataHeader};
 use store::{NextFragment, Store};
 
+/// An extra lane of a [`LinkShaper`] ([`LinkShaper::add_lane`]); ids count from 0
+/// in the order lanes were added.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct LaneId(pub u16);
+
 /// Per-link message id, increasing by one per offer (wrapping).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct MessageId(pub u32);
@@ -92,6 +103,8 @@ pub struct MessageId(pub u32);
 pub struct DurableMessage {
     /// Its class (a store-and-forward class when it was accepted).
     pub class: Class,
+    /// The extra lane it was accepted in; `None` = its class's own queue.
+    pub lane: Option<LaneId>,
     /// Its message id (kept, so that a peer that has it already recognises a resend).
     pub id: MessageId,
     /// The encoded envelope.
@@ -199,6 +212,8 @@ struct Pending {
     bytes: Vec<u8>,
     offered_ns: u64,
     count: u16,
+    /// Addressee of its frames; `None` = broadcast.
+    to: Option<u32>,
 }
 
 /// A keep-latest or drop-oldest class: a deque whose front message may be partly
@@ -258,7 +273,16 @@ pub struct LinkShaper {
     config: ShaperConfig,
     chunk_bytes: usize,
     bucket: Bucket,
-    lanes: [Lane; 4],
+    /// The classes' own lanes (indexed by [`Class::index`]), then the extra lanes.
+    lanes: Vec<Lane>,
+    /// The class of each lane.
+    lane_classes: Vec<Class>,
+    /// Lane indices in sending order: by class priority, then by index.
+    order: Vec<usize>,
+    /// Counters of the extra lanes.
+    lane_stats: Vec<ClassStats>,
+    /// Store-and-forward recipients (also for lanes added later).
+    peers: BTreeSet<u32>,
     next_id: u32,
     /// (peer, message id) acknowledgements to send, oldest first.
     pending_acks: VecDeque<(u32, u32)>,
@@ -269,10 +293,10 @@ pub struct LinkShaper {
 enum Next {
     /// Acknowledgements for one peer: that peer and how many ids.
     Ack(u32, usize),
-    /// A fragment of a plain queue's front message: class and frame length.
-    Queued(Class, usize),
-    /// A fragment from a store: class, frame length, and which.
-    Stored(Class, usize, NextFragment),
+    /// A fragment of a plain queue's front message: lane and frame length.
+    Queued(usize, usize),
+    /// A fragment from a store: lane, frame length, and which.
+    Stored(usize, usize, NextFragment),
 }
 
 impl LinkShaper {
@@ -283,7 +307,14 @@ impl LinkShaper {
             config,
             chunk_bytes: config.mtu_bytes - DATA_HEADER_BYTES,
             bucket: Bucket::new(config.rate_bps, config.burst_bytes),
-            lanes: Class::ALL.map(|c| Lane::new(*config.class(c))),
+            lanes: Class::ALL
+                .iter()
+                .map(|c| Lane::new(*config.class(*c)))
+                .collect(),
+            lane_classes: Class::ALL.to_vec(),
+            order: (0..Class::ALL.len()).collect(),
+            lane_stats: Vec::new(),
+            peers: BTreeSet::new(),
             next_id: 0,
             pending_acks: VecDeque::new(),
             stats: ShaperStats::default(),
@@ -297,14 +328,28 @@ impl LinkShaper {
     /// longer store-and-forward in `config` joins that class's queue.
     pub fn restore(config: ShaperConfig, state: &DurableState) -> Result<Self, ConfigError> {
         let mut shaper = LinkShaper::new(config)?;
-        shaper.next_id = state.next_id;
+        shaper.resume(state);
+        Ok(shaper)
+    }
+
+    /// Takes up `state` on a fresh shaper, as [`restore`](Self::restore) does; add
+    /// the extra lanes first, in the same order as before, so that their messages
+    /// return to them (a message of a lane that does not exist joins its class's
+    /// own queue).
+    pub fn resume(&mut self, state: &DurableState) {
+        self.next_id = state.next_id;
         for &peer in &state.peers {
-            shaper.add_peer(peer);
+            self.add_peer(peer);
         }
-        let chunk = shaper.chunk_bytes;
+        let chunk = self.chunk_bytes;
         for m in &state.stored {
             let count = u16::try_from(m.bytes.len().div_ceil(chunk).max(1)).unwrap_or(u16::MAX);
-            match &mut shaper.lanes[m.class.index()] {
+            let lane = m
+                .lane
+                .map(|l| Class::ALL.len() + usize::from(l.0))
+                .filter(|l| *l < self.lanes.len() && self.lane_classes[*l] == m.class)
+                .unwrap_or(m.class.index());
+            match &mut self.lanes[lane] {
                 Lane::Store(store) => store.push_for(
                     m.id.0,
                     m.bytes.clone(),
@@ -319,22 +364,73 @@ impl LinkShaper {
                         bytes: m.bytes.to_vec(),
                         offered_ns: m.offered_ns,
                         count,
+                        to: None,
                     });
                 }
             }
         }
-        Ok(shaper)
+    }
+
+    /// Adds a lane of its own for one kind of message (a shared topic): the
+    /// `config` policy and capacity, at `class`'s priority after that class's own
+    /// queue and the lanes added before it. Offer to it with
+    /// [`offer_to_lane`](Self::offer_to_lane).
+    pub fn add_lane(&mut self, class: Class, config: ClassConfig) -> Result<LaneId, ConfigError> {
+        let id = u16::try_from(self.lane_stats.len())
+            .map_err(|_| ConfigError::new("lanes", "at most 65 536 extra lanes", "more"))?;
+        config.validate("lane")?;
+        let mut lane = Lane::new(config);
+        if let Lane::Store(store) = &mut lane {
+            for peer in self.peers() {
+                store.add_peer(peer);
+            }
+        }
+        self.lanes.push(lane);
+        self.lane_classes.push(class);
+        self.lane_stats.push(ClassStats::default());
+        let classes = &self.lane_classes;
+        self.order = (0..self.lanes.len()).collect();
+        self.order.sort_by_key(|&l| (classes[l].index(), l));
+        Ok(LaneId(id))
+    }
+
+    /// Counters of an extra lane (`None` for a lane that was never added).
+    #[must_use]
+    pub fn lane_stats(&self, lane: LaneId) -> Option<&ClassStats> {
+        self.lane_stats.get(usize::from(lane.0))
+    }
+
+    /// Messages held by an extra lane.
+    #[must_use]
+    pub fn lane_queued_messages(&self, lane: LaneId) -> usize {
+        match self.lanes.get(Class::ALL.len() + usize::from(lane.0)) {
+            Some(Lane::Queue(q)) => q.messages.len(),
+            Some(Lane::Store(s)) => s.len(),
+            None => 0,
+        }
+    }
+
+    /// The counters of a lane by index (a class's own, or an extra one).
+    fn stats_of(&mut self, lane: usize) -> &mut ClassStats {
+        match lane.checked_sub(Class::ALL.len()) {
+            Some(extra) => &mut self.lane_stats[extra],
+            None => &mut self.stats.classes[lane],
+        }
     }
 
     /// What must survive a restart ([`DurableState`]); cheap (message bytes are shared).
     #[must_use]
     pub fn durable_state(&self) -> DurableState {
         let mut stored = Vec::new();
-        for (class, lane) in Class::ALL.iter().zip(&self.lanes) {
+        for (index, (class, lane)) in self.lane_classes.iter().zip(&self.lanes).enumerate() {
             if let Lane::Store(s) = lane {
+                let extra = index
+                    .checked_sub(Class::ALL.len())
+                    .map(|l| LaneId(l as u16));
                 stored.extend(s.snapshot().map(|(id, bytes, offered_ns, missing)| {
                     DurableMessage {
                         class: *class,
+                        lane: extra,
                         id: MessageId(id),
                         bytes,
                         offered_ns,
@@ -405,7 +501,7 @@ impl LinkShaper {
     /// gets the backlog). Store-and-forward messages offered while no peer is
     /// known wait for the first. Returns false if the peer was known already.
     pub fn add_peer(&mut self, peer: u32) -> bool {
-        let mut added = false;
+        let mut added = self.peers.insert(peer);
         for lane in &mut self.lanes {
             if let Lane::Store(s) = lane {
                 added |= s.add_peer(peer);
@@ -419,11 +515,12 @@ impl LinkShaper {
     /// [`DropReason::PeerRemoved`]; messages no other peer misses are released.
     /// Returns how many were given up.
     pub fn remove_peer(&mut self, peer: u32) -> u64 {
+        self.peers.remove(&peer);
         let mut total = 0;
-        for (lane, stats) in self.lanes.iter_mut().zip(&mut self.stats.classes) {
-            if let Lane::Store(s) = lane {
+        for lane in 0..self.lanes.len() {
+            if let Lane::Store(s) = &mut self.lanes[lane] {
                 let given_up = s.remove_peer(peer);
-                stats.drops.peer_removed += given_up;
+                self.stats_of(lane).drops.peer_removed += given_up;
                 total += given_up;
             }
         }
@@ -433,13 +530,13 @@ impl LinkShaper {
     /// The peers store-and-forward messages are kept for.
     #[must_use]
     pub fn peers(&self) -> Vec<u32> {
-        self.lanes
-            .iter()
-            .find_map(|lane| match lane {
-                Lane::Store(s) => Some(s.peers().collect()),
-                Lane::Queue(_) => None,
-            })
-            .unwrap_or_default()
+        let mut peers = self.peers.clone();
+        for lane in &self.lanes {
+            if let Lane::Store(s) = lane {
+                peers.extend(s.peers());
+            }
+        }
+        peers.into_iter().collect()
     }
 
     /// Offers an encoded message (an envelope from [`wire::encode`](crate::wire::encode)).
@@ -449,12 +546,49 @@ impl LinkShaper {
         class: Class,
         message: Vec<u8>,
     ) -> Result<MessageId, Refused> {
+        self.offer_at(now_ns, class.index(), None, message)
+    }
+
+    /// Offers an encoded message to an extra lane ([`add_lane`](Self::add_lane)),
+    /// for every peer or, with `to`, for one (its frames are addressed to it; a
+    /// store-and-forward lane keeps it for that peer only). A lane that was never
+    /// added refuses it as too large for a 0-byte capacity.
+    pub fn offer_to_lane(
+        &mut self,
+        now_ns: u64,
+        lane: LaneId,
+        to: Option<u32>,
+        message: Vec<u8>,
+    ) -> Result<MessageId, Refused> {
+        let index = Class::ALL.len() + usize::from(lane.0);
+        if index >= self.lanes.len() {
+            return Err(Refused::TooLarge {
+                bytes: message.len(),
+                limit: 0,
+            });
+        }
+        self.offer_at(now_ns, index, to, message)
+    }
+
+    fn offer_at(
+        &mut self,
+        now_ns: u64,
+        lane: usize,
+        to: Option<u32>,
+        message: Vec<u8>,
+    ) -> Result<MessageId, Refused> {
         let len = message.len();
         let chunk = self.chunk_bytes;
-        let stats = &mut self.stats.classes[class.index()];
+        let stats = match lane.checked_sub(Class::ALL.len()) {
+            Some(extra) => &mut self.lane_stats[extra],
+            None => &mut self.stats.classes[lane],
+        };
         stats.offered_messages += 1;
         stats.offered_bytes += len as u64;
-        let config = self.config.class(class);
+        let config = match &self.lanes[lane] {
+            Lane::Queue(q) => q.config,
+            Lane::Store(s) => *s.config(),
+        };
         let limit = config.capacity_bytes.min(chunk * usize::from(u16::MAX));
         if len > limit {
             stats.drops.count(DropReason::TooLarge);
@@ -462,13 +596,16 @@ impl LinkShaper {
         }
         let count = len.div_ceil(chunk).max(1) as u16;
         let id = self.next_id;
-        match &mut self.lanes[class.index()] {
+        match &mut self.lanes[lane] {
             Lane::Store(store) => {
                 if !store.has_room(len) {
                     stats.drops.count(DropReason::StoreFull);
                     return Err(Refused::StoreFull);
                 }
-                store.push(id, message.into(), now_ns, count);
+                match to {
+                    None => store.push(id, message.into(), now_ns, count),
+                    Some(peer) => store.push_for(id, message.into(), now_ns, count, [peer].into()),
+                }
             }
             Lane::Queue(queue) => {
                 if queue.config.policy == QueuePolicy::KeepLatest {
@@ -493,6 +630,7 @@ impl LinkShaper {
                     bytes: message,
                     offered_ns: now_ns,
                     count,
+                    to,
                 });
             }
         }
@@ -504,13 +642,13 @@ impl LinkShaper {
     /// sent back). The message leaves the store once every intended recipient has
     /// it. Returns false if no stored message with that id was missing for `peer`.
     pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: MessageId) -> bool {
-        for (lane, stats) in self.lanes.iter_mut().zip(&mut self.stats.classes) {
-            let Lane::Store(store) = lane else {
+        for lane in 0..self.lanes.len() {
+            let Lane::Store(store) = &mut self.lanes[lane] else {
                 continue;
             };
             if let Some(released) = store.acknowledge(now_ns, peer, id.0) {
                 if released {
-                    stats.acknowledged_messages += 1;
+                    self.stats_of(lane).acknowledged_messages += 1;
                 }
                 return true;
             }
@@ -555,19 +693,19 @@ impl LinkShaper {
                 .min(self.max_acks_per_frame());
             return Some(Next::Ack(peer, n));
         }
-        for (class, lane) in Class::ALL.iter().zip(&self.lanes) {
-            match lane {
+        for &index in &self.order {
+            match &self.lanes[index] {
                 Lane::Queue(q) => {
                     if let Some(p) = q.messages.front() {
                         let len = self.fragment_len(p.bytes.len(), q.next_fragment);
-                        return Some(Next::Queued(*class, len));
+                        return Some(Next::Queued(index, len));
                     }
                 }
                 Lane::Store(s) => {
                     if let Some(next) = s.next() {
                         let len =
                             self.fragment_len(s.message(next.index).bytes.len(), next.fragment);
-                        return Some(Next::Stored(*class, len, next));
+                        return Some(Next::Stored(index, len, next));
                     }
                 }
             }
@@ -637,16 +775,24 @@ impl LinkShaper {
                     bytes,
                 })
             }
-            Next::Queued(class, _) => {
-                let stats = &mut self.stats.classes[class.index()];
-                match &mut self.lanes[class.index()] {
+            Next::Queued(lane, _) => {
+                let class = self.lane_classes[lane];
+                let stats = match lane.checked_sub(Class::ALL.len()) {
+                    Some(extra) => &mut self.lane_stats[extra],
+                    None => &mut self.stats.classes[lane],
+                };
+                match &mut self.lanes[lane] {
                     Lane::Queue(q) => Some(send_queued(q, stats, self.chunk_bytes, now_ns, class)),
                     Lane::Store(_) => None,
                 }
             }
-            Next::Stored(class, _, next) => {
-                let stats = &mut self.stats.classes[class.index()];
-                match &mut self.lanes[class.index()] {
+            Next::Stored(lane, _, next) => {
+                let class = self.lane_classes[lane];
+                let stats = match lane.checked_sub(Class::ALL.len()) {
+                    Some(extra) => &mut self.lane_stats[extra],
+                    None => &mut self.stats.classes[lane],
+                };
+                match &mut self.lanes[lane] {
                     Lane::Store(s) => Some(send_stored(
                         s,
                         stats,
@@ -697,7 +843,7 @@ fn send_queued(
         count: p.count,
     };
     let bytes = frame::data_frame(&header, &p.bytes[start..end]);
-    let (id, count, offered_ns) = (p.id, p.count, p.offered_ns);
+    let (id, count, offered_ns, to) = (p.id, p.count, p.offered_ns, p.to);
     stats.sent_frames += 1;
     stats.sent_bytes += bytes.len() as u64;
     if index + 1 == count {
@@ -714,7 +860,7 @@ fn send_queued(
             index,
             count,
         },
-        to: None,
+        to,
         bytes,
     }
 }

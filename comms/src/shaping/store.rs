@@ -103,6 +103,11 @@ impl Store {
         }
     }
 
+    /// The class settings it was built with.
+    pub fn config(&self) -> &ClassConfig {
+        &self.config
+    }
+
     /// Changes whenever [`snapshot`](Self::snapshot) would.
     pub fn generation(&self) -> u64 {
         self.generation

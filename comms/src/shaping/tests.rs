@@ -853,3 +853,82 @@ fn restoring_keeps_stored_messages_beyond_a_smaller_capacity() {
     let queued = LinkShaper::restore(c, &s.durable_state()).unwrap();
     assert_eq!(queued.queued_messages(Class::Keyframe), 5);
 }
+
+/// Extra lanes: a store-and-forward lane at plan priority next to the keep-latest
+/// plan class, under a saturated 100 kbit/s keyframe class.
+#[test]
+fn an_extra_lane_keeps_its_own_policy_priority_counters_and_addressee() {
+    let mut shaper = LinkShaper::new(config(100_000, 1_300, 1_200)).unwrap();
+    shaper.add_peer(1);
+    shaper.add_peer(2);
+    let lane = shaper
+        .add_lane(Class::Plan, ClassConfig::store_and_forward())
+        .unwrap();
+    assert!(shaper.lane_stats(LaneId(1)).is_none());
+    // Keyframes flood the link; 5 reports and 5 plans arrive at once.
+    for _ in 0..20 {
+        shaper.offer(0, Class::Keyframe, vec![2; 5_000]).unwrap();
+    }
+    for i in 0..5u8 {
+        shaper.offer(0, Class::Plan, vec![1; 100]).unwrap();
+        let to = (i == 4).then_some(2);
+        shaper.offer_to_lane(0, lane, to, vec![10 + i; 60]).unwrap();
+    }
+    // Keep-latest plans supersede each other; the lane's stored reports do not.
+    assert_eq!(shaper.stats().class(Class::Plan).drops.superseded, 4);
+    assert_eq!(shaper.lane_queued_messages(lane), 5);
+    let mut frames = Vec::new();
+    let mut now = 0;
+    while frames.len() < 8 {
+        now = shaper.next_send_time(now).unwrap();
+        while let Some(f) = shaper.poll(now) {
+            frames.push(f);
+        }
+    }
+    // The plan goes first (its class's own queue), then the five reports,
+    // before any keyframe fragment.
+    assert_eq!(frames[0].class, Class::Plan);
+    for (i, f) in frames[1..6].iter().enumerate() {
+        assert_eq!(f.class, Class::Plan);
+        assert_eq!(f.bytes.last(), Some(&(10 + i as u8)));
+        assert_eq!(f.to, if i == 4 { Some(2) } else { None });
+    }
+    assert_eq!(frames[6].class, Class::Keyframe);
+    let stats = shaper.lane_stats(lane).unwrap();
+    assert_eq!((stats.offered_messages, stats.sent_messages), (5, 5));
+    assert_eq!(shaper.stats().class(Class::Plan).sent_messages, 1);
+    // The last five reports wait for acks: the addressed one from robot 2 only.
+    let state = shaper.durable_state();
+    assert_eq!(state.stored.len(), 5);
+    assert!(state.stored.iter().all(|m| m.lane == Some(lane)));
+    assert_eq!(state.stored[4].missing, vec![2]);
+    for id in state.stored.iter().map(|m| m.id) {
+        shaper.acknowledge(now, 2, id);
+    }
+    assert_eq!(shaper.lane_queued_messages(lane), 4);
+    assert_eq!(shaper.lane_stats(lane).unwrap().acknowledged_messages, 1);
+    // A restarted shaper with the lane added again takes its messages back.
+    let mut again = LinkShaper::new(config(100_000, 1_300, 1_200)).unwrap();
+    assert_eq!(
+        again
+            .add_lane(Class::Plan, ClassConfig::store_and_forward())
+            .unwrap(),
+        lane
+    );
+    again.resume(&shaper.durable_state());
+    assert_eq!(again.lane_queued_messages(lane), 4);
+    assert_eq!(again.queued_messages(Class::Plan), 0);
+    // Without it, they join the plan class's own queue.
+    let fallback = LinkShaper::restore(config(100_000, 1_300, 1_200), &shaper.durable_state());
+    assert_eq!(fallback.unwrap().queued_messages(Class::Plan), 4);
+    // Bad lane settings are a ConfigError; unknown lanes refuse offers.
+    let bad = ClassConfig {
+        window_messages: 0,
+        ..ClassConfig::store_and_forward()
+    };
+    assert_eq!(
+        shaper.add_lane(Class::Bulk, bad).unwrap_err().key,
+        "lane.window_messages"
+    );
+    assert!(shaper.offer_to_lane(0, LaneId(9), None, vec![1]).is_err());
+}

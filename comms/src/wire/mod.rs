@@ -7,8 +7,9 @@
 //! One module per message class: [`Odometry`] (10 Hz, §8.2.3), [`Plan`]
 //! (committed trajectory + priority, §8.2.3), [`Keyframe`] (GMM + sensor pose +
 //! support size, §8.2.2; exact or [compact](Mixture::compact)), and
-//! [`GridChangeSet`] (the occupancy-grid baseline of §8.2.5). Each module's docs
-//! give its exact encoded size.
+//! [`GridChangeSet`] (the occupancy-grid baseline of §8.2.5), and [`UserMessage`]
+//! (a custom actor's type on a shared topic, in the class its policy names). Each
+//! module's docs give its exact encoded size.
 //!
 //! Postcard is positional: the order of fields and of [`Payload`] variants is the
 //! protocol. New variants go at the end; anything else bumps [`FORMAT_VERSION`].
@@ -18,6 +19,7 @@ pub mod grid;
 pub mod keyframe;
 mod odometry;
 pub mod plan;
+pub mod user;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -29,6 +31,7 @@ pub use keyframe::{
 };
 pub use odometry::Odometry;
 pub use plan::{Plan, PlanKnot};
+pub use user::{MAX_USER_NAME_BYTES, UserMessage, valid_user_name};
 
 /// Version of the wire format. Receivers reject envelopes of any other version.
 pub const FORMAT_VERSION: u16 = 1;
@@ -81,6 +84,9 @@ pub enum Payload {
     /// An occupancy-grid change set, the map-sharing baseline; it competes with
     /// keyframes, so it travels in [`Class::Keyframe`] too.
     GridChanges(GridChangeSet),
+    /// A custom actor's message on a shared topic; it travels in the class its
+    /// share policy names ([`UserMessage::class`]).
+    User(UserMessage),
 }
 
 impl Payload {
@@ -91,6 +97,7 @@ impl Payload {
             Payload::Odometry(_) | Payload::Heartbeat(_) => Class::Odometry,
             Payload::Plan(_) => Class::Plan,
             Payload::Keyframe(_) | Payload::GridChanges(_) => Class::Keyframe,
+            Payload::User(u) => u.class,
         }
     }
 
@@ -106,6 +113,7 @@ impl Payload {
             Payload::Keyframe(k) => k.validate(),
             Payload::Plan(p) => p.validate(),
             Payload::GridChanges(g) => g.validate(),
+            Payload::User(u) => u.validate(),
         }
     }
 }
@@ -265,3 +273,5 @@ mod payload_tests;
 mod tests;
 #[cfg(test)]
 mod testutil;
+#[cfg(test)]
+mod user_tests;

@@ -4,11 +4,15 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::artifacts::{ArtifactParams, WithArtifacts, place};
 use super::mesh::MeshError;
 use super::{
     CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpenField, OpenFieldParams,
     OpeningScene, Site, TunnelParams, Warehouse, WarehouseParams, WindowParams, tunnels,
 };
+
+/// A built world and where its artifacts are ([`WorldConfig::build_with_artifacts`]).
+pub type SiteWithArtifacts = (Arc<dyn Site>, Vec<nalgebra::Point3<f64>>);
 
 /// The kinds of world `troupe run` can build.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -58,6 +62,8 @@ pub struct WorldConfig {
     /// earlier runs still compare equal).
     #[serde(skip_serializing_if = "is_default_tunnel")]
     pub tunnel: TunnelParams,
+    /// Artifacts placed in the world by its seed (`count = 0`: none).
+    pub artifacts: ArtifactParams,
 }
 
 fn is_default_tunnel(p: &TunnelParams) -> bool {
@@ -76,6 +82,7 @@ impl Default for WorldConfig {
             mesh: MeshParams::default(),
             open_field: OpenFieldParams::default(),
             tunnel: TunnelParams::default(),
+            artifacts: ArtifactParams::default(),
         }
     }
 }
@@ -87,6 +94,7 @@ impl WorldConfig {
     ///
     /// `(key, reason)`: the table of the selected world and what is wrong in it.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        self.artifacts.validate().map_err(|r| ("artifacts", r))?;
         match self.kind {
             WorldKind::Cave => self.cave.validate().map_err(|r| ("cave", r)),
             WorldKind::Warehouse => self.warehouse.validate().map_err(|r| ("warehouse", r)),
@@ -106,6 +114,30 @@ impl WorldConfig {
     ///
     /// A mesh file that cannot be read.
     pub fn build(&self) -> Result<Arc<dyn Site>, MeshError> {
+        Ok(self.build_with_artifacts()?.0)
+    }
+
+    /// Like [`build`](Self::build), and where the artifacts are (the ground truth
+    /// an artifact score compares with; empty with `artifacts.count = 0`).
+    ///
+    /// # Errors
+    ///
+    /// A mesh file that cannot be read.
+    pub fn build_with_artifacts(&self) -> Result<SiteWithArtifacts, MeshError> {
+        let site = self.build_site()?;
+        if self.artifacts.count == 0 {
+            return Ok((site, Vec::new()));
+        }
+        let world: &dyn super::World = site.as_ref();
+        let centres = place(world, &self.artifacts, self.seed);
+        let radius_m = self.artifacts.radius_m;
+        Ok((
+            Arc::new(WithArtifacts::new(site, centres.clone(), radius_m)),
+            centres,
+        ))
+    }
+
+    fn build_site(&self) -> Result<Arc<dyn Site>, MeshError> {
         Ok(match self.kind {
             WorldKind::Cave => Arc::new(CaveWorld::generate(&self.cave, self.seed)),
             WorldKind::Warehouse => Arc::new(Warehouse::generate(&self.warehouse, self.seed)),

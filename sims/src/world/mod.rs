@@ -15,6 +15,7 @@
 //! [`tunnels`] (a T-junction and a dead end, for exploration tests) and [`BoxRoom`] (one
 //! analytic box, for tests). [`WorldConfig`] picks one.
 
+pub mod artifacts;
 mod box_room;
 pub mod cave;
 mod config;

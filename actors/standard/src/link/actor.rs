@@ -7,10 +7,11 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use troupe_comms::shaping::{
-    DurableState, Incoming, LinkShaper, MessageId, Reassembler, ReassemblyStats, ShaperStats,
+    ClassConfig, ClassStats, DurableState, Incoming, LaneId, LinkShaper, MessageId, Reassembler,
+    ReassemblyStats, ShaperStats,
 };
 use troupe_comms::transport::TransportStats;
-use troupe_comms::wire::{self, Envelope, Payload};
+use troupe_comms::wire::{self, Class, Envelope, Payload, UserMessage, valid_user_name};
 
 use crate::msgs::{
     GRID_CHANGES, KEYFRAME, ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_ODOMETRY,
@@ -19,12 +20,13 @@ use crate::msgs::{
 
 use troupe_runtime::{
     Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TRANSPORT, LINK_TX,
-    LinkTx, Message, QueuePolicy, RobotId, Time, TimerId, Topic,
+    LinkTx, Message, QueuePolicy, Received, RobotId, Time, TimerId, Topic,
 };
 
 use super::config::{KeyframeEncoding, LinkConfig};
 use super::convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
 use super::frames::{PeerFrame, transform_keyframe, transform_plan};
+use super::shared::{SHARE_REQUESTS, ShareRequest, ShareTo, SharedCodec};
 /// The link's counters, published every second.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LinkStatus {
@@ -40,8 +42,55 @@ pub struct LinkStatus {
     /// The process's network transport counters, when it has one (robot processes
     /// over zenoh; `None` in simulation), as last published on `link/transport`.
     pub transport: Option<TransportStats>,
+    /// Per shared topic (by name): what went out in its lane and what came in,
+    /// including names this robot does not share (`registered = false`).
+    pub shared: BTreeMap<String, SharedStats>,
 }
 impl Message for LinkStatus {}
+
+/// Counters of one shared topic ([`SharedTopic`](super::SharedTopic)).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SharedStats {
+    /// Whether this robot shares the topic (else every message of it that
+    /// arrives is rejected as `unknown_name`).
+    pub registered: bool,
+    /// Its traffic class and schema version here.
+    pub class: Option<Class>,
+    /// The schema version of the topic's type here.
+    pub version: u16,
+    /// Outgoing: its lane's counters (offered, sent, drops, queue delay, age).
+    pub sent: ClassStats,
+    /// Local messages that could not be serialised.
+    pub unencodable: u64,
+    /// Messages received, decoded and published on the peer topic.
+    pub received: u64,
+    /// Rejected: this robot does not share the name.
+    pub unknown_name: u64,
+    /// Rejected: the sender's schema version is older than ours.
+    pub older_version: u64,
+    /// Rejected: the sender's schema version is newer than ours.
+    pub newer_version: u64,
+    /// Rejected: the bytes are not a valid message of our type.
+    pub undecodable: u64,
+    /// Dropped: addressed to another robot.
+    pub not_addressed: u64,
+}
+
+/// Most distinct unknown names counted one by one; more are counted under
+/// [`OTHER_UNKNOWN_NAMES`] (a hostile peer cannot grow the table without bound).
+pub const MAX_UNKNOWN_NAMES: usize = 32;
+/// The counter name for unknown names beyond [`MAX_UNKNOWN_NAMES`].
+pub const OTHER_UNKNOWN_NAMES: &str = "(other unknown names)";
+
+/// A shared topic as the link keeps it.
+struct SharedEntry {
+    /// `None` while known only from the journal (not yet asked for again).
+    codec: Option<Arc<dyn SharedCodec>>,
+    class: Class,
+    lane: Option<LaneId>,
+    to: ShareTo,
+    stats: SharedStats,
+}
 
 /// Link counters.
 pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
@@ -62,6 +111,19 @@ pub struct LinkJournal(Arc<Mutex<JournalEntry>>);
 struct JournalEntry {
     shaper: Option<DurableState>,
     sequence: u64,
+    /// The shared topics' lanes in the order they were added.
+    lanes: Vec<JournaledLane>,
+}
+
+/// A shared topic's lane as the journal keeps it: a new link adds the lanes again
+/// in the same order (so stored messages return to them) and keeps sharing the
+/// topics without the actors asking again.
+#[derive(Clone, Debug)]
+struct JournaledLane {
+    name: String,
+    class: Class,
+    config: ClassConfig,
+    request: Option<ShareRequest>,
 }
 
 impl LinkJournal {
@@ -77,6 +139,7 @@ impl LinkJournal {
                 ..DurableState::default()
             }),
             sequence: 0,
+            lanes: Vec::new(),
         })))
     }
 
@@ -118,6 +181,12 @@ pub struct LinkActor {
     share_keyframes: bool,
     /// Where the durable part of the link is kept ([`LinkJournal`]).
     journal: LinkJournal,
+    /// Shared topics by name, and unknown names that arrived.
+    shared: BTreeMap<String, SharedEntry>,
+    /// Lanes added so far, in order (what the journal keeps).
+    lanes: Vec<JournaledLane>,
+    /// Whether `lanes` changed since the journal was written.
+    lanes_changed: bool,
     /// The shaper's store generation last written to the journal.
     journaled_generation: Option<u64>,
 }
@@ -145,6 +214,9 @@ impl LinkActor {
             share_keyframes: true,
             journal: LinkJournal::default(),
             journaled_generation: None,
+            shared: BTreeMap::new(),
+            lanes: Vec::new(),
+            lanes_changed: false,
         })
     }
 
@@ -153,8 +225,42 @@ impl LinkActor {
     pub fn journaled(mut self, journal: LinkJournal) -> Result<Self, ActorError> {
         let entry = journal.entry().clone();
         if let Some(state) = &entry.shaper {
-            self.shaper = LinkShaper::restore(self.config.shaper, state)
+            self.shaper = LinkShaper::new(self.config.shaper)
                 .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
+            // The shared topics' lanes come back first, in their order, so that
+            // their stored messages return to them.
+            for journaled in &entry.lanes {
+                let name = &journaled.name;
+                let lane = self
+                    .shaper
+                    .add_lane(journaled.class, journaled.config)
+                    .map_err(|e| ActorError::msg(format!("link lane {name}: {e}")))?;
+                let codec = journaled.request.as_ref().map(|r| r.0.clone());
+                let to = self
+                    .config
+                    .shared
+                    .get(name)
+                    .and_then(|c| c.to)
+                    .unwrap_or(ShareTo::Peers);
+                let stats = SharedStats {
+                    registered: codec.is_some(),
+                    class: Some(journaled.class),
+                    version: codec.as_ref().map_or(0, |c| c.version()),
+                    ..SharedStats::default()
+                };
+                self.shared.insert(
+                    name.clone(),
+                    SharedEntry {
+                        codec,
+                        class: journaled.class,
+                        lane: Some(lane),
+                        to,
+                        stats,
+                    },
+                );
+            }
+            self.lanes = entry.lanes.clone();
+            self.shaper.resume(state);
             if !state.stored.is_empty() {
                 tracing::info!(
                     stored = state.stored.len(),
@@ -184,6 +290,10 @@ impl LinkActor {
             }
         }
         entry.sequence = self.sequence;
+        if self.lanes_changed {
+            entry.lanes = self.lanes.clone();
+            self.lanes_changed = false;
+        }
     }
 
     /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
@@ -203,8 +313,20 @@ impl LinkActor {
             .map(PeerFrame::transform)
     }
 
-    /// Encodes and offers one payload to the shaper.
+    /// Encodes and offers one payload to the shaper (its class's queue).
     fn send(&mut self, payload: Payload, stamp: Time, ctx: &mut Context<'_>) -> ActorResult {
+        self.send_in(payload, stamp, None, ctx)
+    }
+
+    /// Encodes and offers one payload to its class's queue or to a shared
+    /// topic's lane (with its addressee).
+    fn send_in(
+        &mut self,
+        payload: Payload,
+        stamp: Time,
+        lane: Option<(LaneId, Option<u32>)>,
+        ctx: &mut Context<'_>,
+    ) -> ActorResult {
         let class = payload.class();
         let envelope = Envelope::new(
             self.config.team,
@@ -216,7 +338,12 @@ impl LinkActor {
         let bytes = wire::encode(&envelope)
             .map_err(|e| ActorError::with_source("encoding a message", e))?;
         self.sequence += 1;
-        if let Err(refused) = self.shaper.offer(ctx.now().as_nanos(), class, bytes) {
+        let now = ctx.now().as_nanos();
+        let offered = match lane {
+            None => self.shaper.offer(now, class, bytes),
+            Some((lane, to)) => self.shaper.offer_to_lane(now, lane, to, bytes),
+        };
+        if let Err(refused) = offered {
             tracing::debug!(
                 robot = ctx.robot_name(),
                 ?class,
@@ -386,6 +513,181 @@ impl LinkActor {
         }
     }
 
+    /// An actor asked to share a topic ([`SharedTopic::share`](super::SharedTopic::share)):
+    /// the topic gets its lane (the declared policy with the robot file's
+    /// overrides, or the lane the journal kept) and the link subscribes to it.
+    fn register(&mut self, request: &ShareRequest, ctx: &mut Context<'_>) -> ActorResult {
+        let codec = request.0.clone();
+        let name = codec.name().to_owned();
+        if !valid_user_name(&name) {
+            return Err(ActorError::msg(format!(
+                "cannot share topic {name:?}: a name is 1 to 64 ASCII letters, digits and / _ - ."
+            )));
+        }
+        let (class, lane_config, to) = self
+            .config
+            .shared
+            .get(&name)
+            .copied()
+            .unwrap_or_default()
+            .apply(codec.policy());
+        let class = Class::from(class);
+        let entry = self
+            .shared
+            .entry(name.clone())
+            .or_insert_with(|| SharedEntry {
+                codec: None,
+                class,
+                lane: None,
+                to,
+                stats: SharedStats::default(),
+            });
+        if let Some(known) = &entry.codec
+            && known.version() != codec.version()
+        {
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                topic = name,
+                "shared topic asked for again with version {} (was {}); the new one counts",
+                codec.version(),
+                known.version()
+            );
+        }
+        if entry.lane.is_none() {
+            let lane = self
+                .shaper
+                .add_lane(class, lane_config)
+                .map_err(|e| ActorError::with_source(format!("cannot share topic {name}"), e))?;
+            entry.lane = Some(lane);
+            entry.class = class;
+            self.lanes.push(JournaledLane {
+                name: name.clone(),
+                class,
+                config: lane_config,
+                request: None,
+            });
+        }
+        if let Some(journaled) = self.lanes.iter_mut().find(|l| l.name == name) {
+            journaled.request = Some(request.clone());
+            self.lanes_changed = true;
+        }
+        entry.stats.registered = true;
+        entry.stats.class = Some(entry.class);
+        entry.stats.version = codec.version();
+        codec.subscribe(ctx);
+        entry.codec = Some(codec);
+        tracing::debug!(robot = ctx.robot_name(), topic = name, "sharing a topic");
+        Ok(())
+    }
+
+    /// A local message on a shared topic goes out in its lane; `None` when the
+    /// message is not on a shared topic.
+    fn send_shared(&mut self, received: &Received, ctx: &mut Context<'_>) -> Option<ActorResult> {
+        let entry = self.shared.get_mut(received.topic())?;
+        let codec = entry.codec.as_ref()?;
+        let body = match codec.encode(received)? {
+            Ok(body) => body,
+            Err(e) => {
+                entry.stats.unencodable += 1;
+                return Some(Err(ActorError::with_source(
+                    format!("cannot serialise a message of {}", received.topic()),
+                    e,
+                )));
+            }
+        };
+        let to = match entry.to {
+            ShareTo::Peers => None,
+            ShareTo::Robot(r) => Some(r),
+        };
+        let payload = Payload::User(UserMessage {
+            class: entry.class,
+            name: received.topic().to_owned(),
+            version: codec.version(),
+            to,
+            body,
+        });
+        let lane = entry.lane.map(|l| (l, to));
+        Some(self.send_in(payload, received.published_at(), lane, ctx))
+    }
+
+    /// A peer's message on a shared topic: checked against this robot's
+    /// registration, decoded and published as `Peer<T>`, or counted and dropped.
+    fn receive_shared(
+        &mut self,
+        from: RobotId,
+        stamp: Time,
+        message: &UserMessage,
+        ctx: &mut Context<'_>,
+    ) -> ActorResult {
+        let me = ctx.robot().0;
+        let name = if self.shared.contains_key(&message.name)
+            || self.shared.len() < MAX_UNKNOWN_NAMES + self.lanes.len()
+        {
+            message.name.as_str()
+        } else {
+            OTHER_UNKNOWN_NAMES
+        };
+        let entry = self
+            .shared
+            .entry(name.to_owned())
+            .or_insert_with(|| SharedEntry {
+                codec: None,
+                class: message.class,
+                lane: None,
+                to: ShareTo::Peers,
+                stats: SharedStats::default(),
+            });
+        let stats = &mut entry.stats;
+        let Some(codec) = &entry.codec else {
+            stats.unknown_name += 1;
+            return Ok(());
+        };
+        if message.to.is_some_and(|to| to != me) {
+            stats.not_addressed += 1;
+            return Ok(());
+        }
+        if message.version != codec.version() {
+            if message.version < codec.version() {
+                stats.older_version += 1;
+            } else {
+                stats.newer_version += 1;
+            }
+            return Err(ActorError::msg(format!(
+                "rejected {} from {from}: version {}, this robot speaks {}",
+                message.name,
+                message.version,
+                codec.version()
+            )));
+        }
+        match codec.clone().publish(from, stamp, &message.body, ctx) {
+            Ok(()) => {
+                entry.stats.received += 1;
+                Ok(())
+            }
+            Err(e) => {
+                entry.stats.undecodable += 1;
+                Err(ActorError::with_source(
+                    format!("rejected {} from {from}", message.name),
+                    e,
+                ))
+            }
+        }
+    }
+
+    /// Per shared topic counters, with each lane's current stats.
+    fn shared_stats(&self) -> BTreeMap<String, SharedStats> {
+        self.shared
+            .iter()
+            .map(|(name, entry)| {
+                let mut stats = entry.stats.clone();
+                if let Some(lane) = entry.lane.and_then(|l| self.shaper.lane_stats(l)) {
+                    stats.sent = *lane;
+                }
+                (name.clone(), stats)
+            })
+            .collect()
+    }
+
     fn receive_message(
         &mut self,
         from: RobotId,
@@ -405,6 +707,9 @@ impl LinkActor {
                 "rejected a message from {from}: envelope names robot{} as its sender",
                 envelope.sender
             )));
+        }
+        if let Payload::User(message) = &envelope.payload {
+            return self.receive_shared(from, Time::from_nanos(envelope.stamp_ns), message, ctx);
         }
         let frame = self.frame_of(from);
         if let Payload::Keyframe(keyframe) = &envelope.payload {
@@ -491,6 +796,12 @@ impl Actor for LinkActor {
         }
         ctx.subscribe(&GRID_CHANGES, QueuePolicy::fifo(64));
         ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+        ctx.subscribe(&SHARE_REQUESTS, QueuePolicy::fifo(64));
+        for entry in self.shared.values() {
+            if let Some(codec) = &entry.codec {
+                codec.subscribe(ctx);
+            }
+        }
         let me = ctx.robot().0;
         for &peer in self.config.peers.iter().filter(|p| **p != me) {
             self.shaper.add_peer(peer);
@@ -533,6 +844,7 @@ impl LinkActor {
                         reassembly: *self.reassembler.stats(),
                         rejected_messages: self.rejected,
                         transport: self.transport,
+                        shared: self.shared_stats(),
                     },
                 );
                 Ok(())
@@ -568,8 +880,10 @@ impl LinkActor {
                     )
                 } else if let Some(rx) = m.get(&LINK_RX) {
                     self.receive_frame(rx.from, &rx.bytes, ctx)
+                } else if let Some(request) = m.get(&SHARE_REQUESTS) {
+                    self.register(request, ctx)
                 } else {
-                    Ok(())
+                    self.send_shared(m, ctx).unwrap_or(Ok(()))
                 }
             }
         }

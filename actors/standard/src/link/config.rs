@@ -1,10 +1,14 @@
 //! Link settings.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
-use troupe_comms::shaping::{ReassemblyConfig, ShaperConfig};
+use troupe_comms::shaping::{ClassConfig, QueuePolicy, ReassemblyConfig, ShaperConfig};
+use troupe_comms::wire::valid_user_name;
 use troupe_runtime::ConfigError;
 
 use super::frames::PeerFrame;
+use super::shared::{ShareClass, SharePolicy, ShareTo};
 
 /// Link settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -35,6 +39,57 @@ pub struct LinkConfig {
     pub peer_frames: Vec<PeerFrame>,
     /// How keyframe mixtures go on the wire.
     pub keyframe_encoding: KeyframeEncoding,
+    /// Per shared topic (by name), what overrides the policy its
+    /// [`SharedTopic`](super::SharedTopic) declares.
+    pub shared: BTreeMap<String, SharedConfig>,
+}
+
+/// Overrides for one shared topic (`[link.shared."artifacts/report"]`); what is
+/// left out keeps the topic's declared [`SharePolicy`].
+///
+/// ```
+/// use troupe_actors::link::LinkConfig;
+/// let config: LinkConfig = toml::from_str(r#"
+///     [shared."artifacts/report"]
+///     class = "plan"
+///     policy = "store_and_forward"
+///     capacity_messages = 500
+/// "#).unwrap();
+/// config.validate().unwrap();
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SharedConfig {
+    /// Priority class: `odometry`, `plan`, `keyframe` or `bulk`.
+    pub class: Option<ShareClass>,
+    /// `keep_latest`, `drop_oldest` or `store_and_forward`.
+    pub policy: Option<QueuePolicy>,
+    /// `"peers"` or `{ robot = 2 }`.
+    pub to: Option<ShareTo>,
+    /// Most messages waiting or stored in the topic's lane.
+    pub capacity_messages: Option<usize>,
+    /// Most bytes waiting or stored in the topic's lane.
+    pub capacity_bytes: Option<usize>,
+}
+
+impl SharedConfig {
+    /// The declared policy with these overrides: the class, the lane's settings
+    /// and the addressee.
+    #[must_use]
+    pub fn apply(&self, declared: SharePolicy) -> (ShareClass, ClassConfig, ShareTo) {
+        let defaults = ClassConfig::default();
+        let lane = ClassConfig {
+            policy: self.policy.unwrap_or(declared.policy),
+            capacity_messages: self.capacity_messages.unwrap_or(defaults.capacity_messages),
+            capacity_bytes: self.capacity_bytes.unwrap_or(defaults.capacity_bytes),
+            ..defaults
+        };
+        (
+            self.class.unwrap_or(declared.class),
+            lane,
+            self.to.unwrap_or(declared.to),
+        )
+    }
 }
 
 /// How keyframe mixtures are encoded ([`troupe_comms::wire::Mixture`]).
@@ -64,6 +119,7 @@ impl Default for LinkConfig {
             peer_timeout_s: 0.0,
             peer_frames: Vec::new(),
             keyframe_encoding: KeyframeEncoding::default(),
+            shared: BTreeMap::new(),
         }
     }
 }
@@ -75,6 +131,20 @@ impl LinkConfig {
         ConfigError::non_negative("plan_rate_hz", self.plan_rate_hz)?;
         ConfigError::non_negative("peer_timeout_s", self.peer_timeout_s)?;
         self.shaper.validate().map_err(|e| e.within("shaper"))?;
+        for (name, shared) in &self.shared {
+            let key = format!("shared.\"{name}\"");
+            if !valid_user_name(name) {
+                return Err(ConfigError::new(
+                    key,
+                    "must be 1 to 64 ASCII letters, digits and / _ - .",
+                    name,
+                ));
+            }
+            shared
+                .apply(SharePolicy::store_and_forward_in_plan_class())
+                .1
+                .validate(&key)?;
+        }
         self.reassembly
             .validate()
             .map_err(|e| e.within("reassembly"))

@@ -13,13 +13,24 @@
 //! team, or whose envelope sender disagrees with the network's sender is rejected
 //! with a reason and counted (as an actor error). Every second the shaper and
 //! reassembler counters are published on [`LINK_STATUS`].
+//!
+//! Custom actors share their own topics with the team through the link: see
+//! [`SharedTopic`] (per-name lanes, policies and counters, `Peer<T>` on the
+//! receivers).
 
 mod actor;
 mod config;
 mod convert;
 mod frames;
+mod shared;
 
-pub use actor::{LINK_STATUS, LinkActor, LinkJournal, LinkStatus};
-pub use config::{KeyframeEncoding, LinkConfig};
+pub use actor::{
+    LINK_STATUS, LinkActor, LinkJournal, LinkStatus, MAX_UNKNOWN_NAMES, OTHER_UNKNOWN_NAMES,
+    SharedStats,
+};
+pub use config::{KeyframeEncoding, LinkConfig, SharedConfig};
 pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
+pub use shared::{
+    Peer, SHARE_REQUESTS, ShareClass, SharePolicy, ShareRequest, ShareTo, SharedTopic,
+};

@@ -603,3 +603,6 @@ fn robot_ids_must_match_the_robots_and_be_distinct() {
             .is_ok()
     );
 }
+
+#[path = "shared_tests.rs"]
+mod shared_tests;
