@@ -2,6 +2,7 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod artifacts;
 mod crossing;
 mod keyframes;
 mod map_bytes;
