@@ -210,9 +210,10 @@ fn faults_strike_are_reported_and_lose_nothing_accepted_into_store_and_forward()
     };
     scenario.robot.link.shaper.keyframe = ClassConfig::store_and_forward();
     scenario.robot.link.peers = vec![0, 1];
-    // (robot, stamp) of every keyframe published, and of every one received.
-    type Seen = Arc<Mutex<Vec<(u32, u64)>>>;
-    let (published, received): (Seen, Seen) = Default::default();
+    // (robot, stamp, publication time) of every keyframe published, and (robot,
+    // stamp) of every one received.
+    let published: Arc<Mutex<Vec<(u32, u64, u64)>>> = Arc::default();
+    let received: Arc<Mutex<Vec<(u32, u64)>>> = Arc::default();
     let mut team = Team::new(&scenario).expect("assemble");
     let (tap_published, tap_received) = (published.clone(), received.clone());
     team.add_tap(move |p: &Publication<'_>| {
@@ -220,7 +221,7 @@ fn faults_strike_are_reported_and_lose_nothing_accepted_into_store_and_forward()
             tap_published
                 .lock()
                 .unwrap()
-                .push((p.robot.0, k.stamp.as_nanos()));
+                .push((p.robot.0, k.stamp.as_nanos(), p.time.as_nanos()));
         } else if let Some(k) = p.get(&PEER_KEYFRAME) {
             assert_ne!(k.robot, p.robot);
             tap_received
@@ -256,29 +257,38 @@ fn faults_strike_are_reported_and_lose_nothing_accepted_into_store_and_forward()
 
     // Store-and-forward: what each link accepted reached the other robot.
     let secs = |t: u64| t as f64 * 1e-9;
-    let not_accepted = |robot: u32, t: f64| match robot {
-        1 => (14.5..25.5).contains(&t), // robot 1 was down
-        _ => (34.5..36.0).contains(&t), // robot 0's link panicked at 35 s
+    // Robot 1 was down from 15 s to 25 s: a keyframe its mapper publishes then (from
+    // a frame it began fitting before the crash) reaches no link. Robot 0's link
+    // panicked at 35 s with what it was handling.
+    let not_accepted = |robot: u32, stamp_s: f64, published_s: f64| match robot {
+        1 => (15.0..25.5).contains(&published_s),
+        _ => (34.5..36.0).contains(&stamp_s),
     };
     let received = received.lock().unwrap();
     let published = published.lock().unwrap();
     let mut lost_to_the_panic = 0;
     for robot in [0, 1] {
-        let mine: Vec<u64> = published
+        let mine: Vec<(u64, u64)> = published
             .iter()
-            .filter(|(r, t)| *r == robot && secs(*t) < 60.0)
-            .map(|(_, t)| *t)
+            .filter(|(r, t, _)| *r == robot && secs(*t) < 60.0)
+            .map(|&(_, t, at)| (t, at))
             .collect();
         assert!(mine.len() >= 8, "robot {robot}: {} keyframes", mine.len());
-        let missing: Vec<f64> = mine
+        let missing: Vec<(f64, f64)> = mine
             .iter()
-            .filter(|t| !received.contains(&(robot, **t)))
-            .map(|t| secs(*t))
+            .filter(|(t, _)| !received.contains(&(robot, *t)))
+            .map(|&(t, at)| (secs(t), secs(at)))
             .collect();
-        for t in &missing {
+        let keyframes = s.per_robot[robot as usize]
+            .truth
+            .link
+            .as_ref()
+            .map(|l| l.shaper.class(Class::Keyframe).clone());
+        for &(t, at) in &missing {
             assert!(
-                not_accepted(robot, *t),
-                "robot {robot}'s keyframe of {t:.2} s never reached its peer"
+                not_accepted(robot, t, at),
+                "robot {robot}'s keyframe of {t:.2} s (published at {at:.2} s) never reached \
+                 its peer ({keyframes:?})"
             );
         }
         if robot == 0 {
