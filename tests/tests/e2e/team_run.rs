@@ -283,7 +283,7 @@ fn faults_strike_are_reported_and_lose_nothing_accepted_into_store_and_forward()
             .truth
             .link
             .as_ref()
-            .map(|l| l.shaper.class(Class::Keyframe).clone());
+            .map(|l| *l.shaper.class(Class::Keyframe));
         for &(t, at) in &missing {
             assert!(
                 not_accepted(robot, t, at),
