@@ -583,17 +583,7 @@ pub async fn run(
             }
         }
     };
-    let until = async {
-        match station.config.duration_s {
-            Some(d) => {
-                tokio::select! {
-                    () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
-                    () = stop => {}
-                }
-            }
-            None => stop.await,
-        }
-    };
+    let until = troupe_robot::hardware::run_for(station.config.duration_s, stop);
     tokio::select! {
         () = until => {}
         () = print_status => {}

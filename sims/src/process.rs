@@ -39,7 +39,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
@@ -50,6 +50,8 @@ use troupe_actors::runtime::{
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
 use troupe_robot::AssembleError;
+use troupe_robot::hardware::run_for;
+pub use troupe_robot::hardware::shutdown_signal;
 use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
@@ -366,15 +368,7 @@ pub async fn run(
             source,
         })?;
     tracing::info!(robot = id, "running");
-    match process.config.duration_s {
-        Some(d) => {
-            tokio::select! {
-                () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
-                () = stop => {}
-            }
-        }
-        None => stop.await,
-    }
+    run_for(process.config.duration_s, stop).await;
     let transport_errors = handle.transport_errors();
     let reports = handle.shutdown().await;
     let zenoh = transport.stats();
@@ -583,27 +577,4 @@ pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, Proces
         .build()
         .map_err(ProcessError::Runtime)?;
     runtime.block_on(run(process, shutdown_signal()))
-}
-
-/// Resolves on Ctrl-C or SIGTERM.
-pub async fn shutdown_signal() {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {}
-                    _ = term.recv() => {}
-                }
-            }
-            Err(_) => {
-                let _ = tokio::signal::ctrl_c().await;
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = tokio::signal::ctrl_c().await;
-    }
 }

@@ -274,15 +274,7 @@ async fn fly(
         .spawn_with_transport(started.transport.clone())
         .map_err(HardwareError::Transport)?;
     tracing::info!(robot = id, "running");
-    match robot.file.duration_s {
-        Some(d) => {
-            tokio::select! {
-                () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
-                () = stop => {}
-            }
-        }
-        None => stop.await,
-    }
+    run_for(robot.file.duration_s, stop).await;
     let transport_errors = handle.transport_errors();
     let reports = handle.shutdown().await;
     let zenoh = started.transport.stats();
@@ -354,6 +346,20 @@ fn write_outputs(
     }
     let path = dir.join("events.csv");
     std::fs::write(&path, csv).map_err(err(&path))
+}
+
+/// Resolves after `duration_s` seconds (never, when `None`) or when `stop` resolves,
+/// whichever comes first: how long a robot or base process runs.
+pub async fn run_for(duration_s: Option<f64>, stop: impl std::future::Future<Output = ()>) {
+    match duration_s {
+        Some(d) => {
+            tokio::select! {
+                () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
+                () = stop => {}
+            }
+        }
+        None => stop.await,
+    }
 }
 
 /// Resolves on SIGINT (Ctrl-C) or SIGTERM.
