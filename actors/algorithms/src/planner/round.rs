@@ -118,42 +118,65 @@ pub fn pose_of(state: &FlatState) -> Isometry3<f64> {
     )
 }
 
-/// The clearance every sample of a trajectory starting `start_clearance_m` from
-/// unsafe space must keep, for a required `margin_m`: the margin itself, or — when the
-/// start is already inside the margin — the start's own clearance, so that a robot the
-/// map has closed in on (new occupied or unknown cells within the margin) may turn in
-/// place or back away but never come closer than where it hovers; a trajectory that
-/// keeps this is no less safe than hovering. The thesis sends the stopping trajectory
-/// whenever nothing keeps the margin (§4.1.3); from inside the margin that would stop
-/// the robot for good, since every candidate starts there. `None` when the start is in
-/// unsafe space itself (clearance 0): nothing may leave.
-#[must_use]
-pub fn required_clearance_m(margin_m: f64, start_clearance_m: f64) -> Option<f64> {
-    if start_clearance_m >= margin_m {
-        Some(margin_m)
-    } else if start_clearance_m > 0.0 {
-        Some(start_clearance_m)
-    } else {
-        None
-    }
-}
+/// Largest distance from its start a path may stray and still count as hovering
+/// (turning in place), metres: see [`clear_path`].
+pub const HOVER_TOLERANCE_M: f64 = 0.05;
 
-/// Whether every sample of `primitive` on `[0, until_s]` keeps `margin_m` from unsafe space.
-pub(super) fn safe(
-    primitive: &Primitive,
-    until_s: f64,
+/// Whether a path, given as positions in time order (the first is its start), keeps
+/// clear of unsafe (occupied or unknown) space in `snapshot` for a required
+/// clearance `margin_m` (thesis §4.1.3: a candidate is kept only if it and its
+/// stopping trajectory are collision-free).
+///
+/// From a start with at least `margin_m` clearance, every position must keep it.
+/// A start the map has closed in on (new occupied or unknown cells within the
+/// margin) would stop the robot for good under that rule, since every candidate
+/// starts there (the thesis then sends the stopping trajectory); from such a start
+/// a path is clear when no position comes closer to unsafe space than the start
+/// *and* the path either hovers (every position within [`HOVER_TOLERANCE_M`] of the
+/// start: turning in place) or ends at least one cell farther from unsafe space than
+/// it started (or at the margin): it backs away. Keeping the start's clearance alone
+/// is not enough — the distance field is measured between cell centres, so a path
+/// can keep the same field value while coming up to half a cell diagonal closer to
+/// the rock, and round after round a robot inside the margin could creep into it.
+/// `false` when the start is in unsafe space itself, or when there is no position.
+pub fn clear_path(
+    positions: impl IntoIterator<Item = Point3<f64>>,
     snapshot: &GridSnapshot,
     margin_m: f64,
-    step_s: f64,
 ) -> bool {
+    let mut positions = positions.into_iter();
+    let Some(start) = positions.next() else {
+        return false;
+    };
+    let start_clearance_m = snapshot.clearance_m(&start);
+    if start_clearance_m <= 0.0 {
+        return false;
+    }
+    if start_clearance_m >= margin_m {
+        return positions.all(|p| snapshot.clearance_m(&p) >= margin_m);
+    }
+    let mut hovers = true;
+    let mut end_clearance_m = start_clearance_m;
+    for p in positions {
+        end_clearance_m = snapshot.clearance_m(&p);
+        if end_clearance_m < start_clearance_m {
+            return false;
+        }
+        hovers &= (p - start).norm() <= HOVER_TOLERANCE_M;
+    }
+    let backs_away_m = (start_clearance_m + snapshot.resolution_m()).min(margin_m);
+    hovers || end_clearance_m >= backs_away_m
+}
+
+/// Positions of `primitive` on `[0, until_s]`, at most `step_s` apart (both ends included).
+fn samples(primitive: &Primitive, until_s: f64, step_s: f64) -> impl Iterator<Item = Point3<f64>> {
     let n = (until_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
-    (0..=n).all(|i| {
-        let p = Point3::from(
+    (0..=n).map(move |i| {
+        Point3::from(
             primitive
                 .state_at(until_s * i as f64 / n as f64)
                 .position_m(),
-        );
-        snapshot.clearance_m(&p) >= margin_m
+        )
     })
 }
 
@@ -182,36 +205,20 @@ impl RoundConfig {
         }
     }
 
-    /// Checks a primitive and its stopping primitive against the snapshot; returns
-    /// the stopping primitive when both are safe.
-    ///
-    /// Both must keep [`Self::margin_m`] from unsafe space, or — when the primitive
-    /// starts inside that margin — never come closer to unsafe space than its start
-    /// ([`required_clearance_m`]).
+    /// Checks a primitive (up to the planning period) followed by its stopping
+    /// primitive against the snapshot, as one path ([`clear_path`] with
+    /// [`Self::margin_m`]); returns the stopping primitive when the path is clear.
     #[must_use]
     pub fn safe_with_stop(
         &self,
         primitive: &Primitive,
         snapshot: &GridSnapshot,
     ) -> Option<Primitive> {
-        let start = Point3::from(primitive.state_at(0.0).position_m());
-        let margin = required_clearance_m(
-            self.margin_m(snapshot.grid.resolution_m()),
-            snapshot.clearance_m(&start),
-        )?;
         let switch = self.planning_period_s.min(primitive.duration_s());
-        if !safe(primitive, switch, snapshot, margin, self.check_step_s) {
-            return None;
-        }
         let stopping = self.limits.stopping(&primitive.state_at(switch))?;
-        safe(
-            &stopping,
-            stopping.duration_s(),
-            snapshot,
-            margin,
-            self.check_step_s,
-        )
-        .then_some(stopping)
+        let path = samples(primitive, switch, self.check_step_s)
+            .chain(samples(&stopping, stopping.duration_s(), self.check_step_s).skip(1));
+        clear_path(path, snapshot, self.margin_m(snapshot.grid.resolution_m())).then_some(stopping)
     }
 }
 
@@ -247,13 +254,71 @@ impl Default for SearchParams {
 
 #[cfg(test)]
 mod tests {
-    use super::required_clearance_m;
+    use nalgebra::Point3;
+
+    use super::clear_path;
+    use crate::planner::scenes::corridor;
+
+    fn line(from: [f64; 3], to: [f64; 3], n: usize) -> Vec<Point3<f64>> {
+        let (a, b) = (Point3::from(from), Point3::from(to));
+        (0..=n)
+            .map(|i| a + (b - a) * (i as f64 / n as f64))
+            .collect()
+    }
 
     #[test]
-    fn required_clearance_is_the_margin_or_the_start_inside_it() {
-        assert_eq!(required_clearance_m(0.6, 1.2), Some(0.6));
-        assert_eq!(required_clearance_m(0.6, 0.6), Some(0.6));
-        assert_eq!(required_clearance_m(0.6, 0.4), Some(0.4));
-        assert_eq!(required_clearance_m(0.6, 0.0), None);
+    fn outside_the_margin_every_position_keeps_it() {
+        let snapshot = corridor(8.0, 1.5, 1.5);
+        let margin_m = 0.8;
+        assert!(snapshot.clearance_m(&Point3::origin()) >= margin_m);
+        assert!(clear_path(
+            line([0.0; 3], [4.0, 0.0, 0.0], 40),
+            &snapshot,
+            margin_m
+        ));
+        assert!(!clear_path(
+            line([0.0; 3], [0.0, 1.4, 0.0], 40),
+            &snapshot,
+            margin_m
+        ));
+        assert!(!clear_path(Vec::new(), &snapshot, margin_m));
+    }
+
+    #[test]
+    fn inside_the_margin_a_path_hovers_or_backs_away_but_never_creeps_along() {
+        let snapshot = corridor(8.0, 1.5, 1.5);
+        let margin_m = 1.2;
+        // Near the +y wall, inside the margin.
+        let start = [1.0, 0.9, 0.0];
+        let c0 = snapshot.clearance_m(&Point3::from(start));
+        assert!(c0 > 0.0 && c0 < margin_m, "{c0}");
+        // Along the wall the field value stays the same: the old rule (never closer
+        // than the start) let a robot creep on like this round after round.
+        let along = line(start, [3.0, 0.9, 0.0], 20);
+        assert!(along.iter().all(|p| snapshot.clearance_m(p) >= c0));
+        assert!(!clear_path(along, &snapshot, margin_m));
+        // Turning in place is as safe as hovering.
+        assert!(clear_path(vec![start.into(); 5], &snapshot, margin_m));
+        // Backing away to the corridor's axis is clear.
+        assert!(clear_path(
+            line(start, [1.0, 0.0, 0.0], 20),
+            &snapshot,
+            margin_m
+        ));
+        // Coming closer is not.
+        assert!(!clear_path(
+            line(start, [1.0, 1.2, 0.0], 20),
+            &snapshot,
+            margin_m
+        ));
+    }
+
+    #[test]
+    fn nothing_leaves_unsafe_space() {
+        let snapshot = corridor(8.0, 1.5, 1.5);
+        // Beyond the far end: unknown.
+        let start = [9.5, 0.0, 0.0];
+        assert!(snapshot.clearance_m(&Point3::from(start)) <= 0.0);
+        assert!(!clear_path(line(start, [0.0; 3], 40), &snapshot, 0.5));
     }
 }

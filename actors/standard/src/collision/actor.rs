@@ -8,7 +8,7 @@
 //!    primitive, every `check_step_s`) keeps the body's bounding radius plus the
 //!    field's discretisation slack from unsafe space in the latest [`GridSnapshot`]
 //!    — or, when the candidate starts inside that clearance, never comes closer to
-//!    unsafe space than its start ([`required_clearance_m`]) — (skipped when the robot
+//!    unsafe space than its start and hovers or backs away ([`clear_path`]) — (skipped when the robot
 //!    has no local grid, e.g. route-following robots);
 //! 2. the inter-robot check of a [`PeerAvoidance`] policy against peers' odometry and
 //!    plans (priority-based, §8.2.3);
@@ -20,6 +20,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use nalgebra::Point3;
+
 use serde::{Deserialize, Serialize};
 
 use super::body::{BodyConfig, BodyError};
@@ -28,7 +30,7 @@ use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection,
 };
-use crate::planner::round::required_clearance_m;
+use crate::planner::round::clear_path;
 use crate::trajectory::Trajectory;
 use troupe_runtime::{
     Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
@@ -91,10 +93,9 @@ impl Message for CollisionStatus {}
 /// The collision actor's counters.
 pub const COLLISION_STATUS: Topic<CollisionStatus> = Topic::new("collision/status");
 
-/// Whether every sample of `trajectory` from `from` to its end (every `step_s`) has at
-/// least `clearance_m` in `snapshot`'s distance field to unsafe space — or, when its
-/// state at `from` is already closer than that, at least that state's own clearance
-/// ([`required_clearance_m`]).
+/// Whether `trajectory`, sampled every `step_s` from `from` to its end, is clear of
+/// unsafe space in `snapshot` for a required `clearance_m` ([`clear_path`]: keeps it,
+/// or — from a start the map has closed in on — hovers or backs away).
 #[must_use]
 pub fn clear_of_unsafe_space(
     trajectory: &Trajectory,
@@ -103,22 +104,17 @@ pub fn clear_of_unsafe_space(
     clearance_m: f64,
     step_s: f64,
 ) -> bool {
-    let Some(start) = trajectory.state_at(from) else {
-        return false;
-    };
-    let Some(clearance_m) =
-        required_clearance_m(clearance_m, snapshot.clearance_m(&start.position_m))
-    else {
-        return false;
-    };
     let span_s = trajectory.end_time().saturating_since(from).as_secs_f64();
     let n = (span_s / step_s.max(1e-3)).ceil().max(1.0) as usize;
-    (0..=n).all(|i| {
+    let mut positions = Vec::with_capacity(n + 1);
+    for i in 0..=n {
         let t = from + Duration::from_secs_f64(span_s * i as f64 / n as f64);
-        trajectory
-            .state_at(t)
-            .is_some_and(|s| snapshot.clearance_m(&s.position_m) >= clearance_m)
-    })
+        let Some(state) = trajectory.state_at(t) else {
+            return false;
+        };
+        positions.push(Point3::from(state.position_m));
+    }
+    clear_path(positions, snapshot, clearance_m)
 }
 
 /// Commits the first candidate of each planning round that passes the checks (see `actors::collision`).
