@@ -36,6 +36,15 @@ pub struct GuidanceConfig {
     /// The guided frontier reward measures the route distance this far ahead of a
     /// pose, so that turning to face the route pays, metres.
     pub look_ahead_m: f64,
+    /// A remembered frontier that stays a frontier while this robot spends this long
+    /// within [`Self::give_up_radius_m`] of it is given up by this robot (no longer
+    /// pulls it), seconds: what the camera cannot see from anywhere the robot can fly —
+    /// pockets under the floor, crevices behind boulders — would otherwise hold the
+    /// robot for the rest of the run. `None` never gives up.
+    pub give_up_after_s: Option<f64>,
+    /// How close the robot must be for time to count towards giving a frontier up,
+    /// metres (about the camera's useful range).
+    pub give_up_radius_m: f64,
 }
 
 impl Default for GuidanceConfig {
@@ -50,6 +59,8 @@ impl Default for GuidanceConfig {
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
             look_ahead_m: 1.0,
+            give_up_after_s: Some(10.0),
+            give_up_radius_m: 3.0,
         }
     }
 }
@@ -86,6 +97,10 @@ impl GuidanceConfig {
         }
         ConfigError::non_negative("claim_radius_m", self.claim_radius_m)?;
         ConfigError::non_negative("claim_penalty_m", self.claim_penalty_m)?;
+        if let Some(s) = self.give_up_after_s {
+            ConfigError::positive("give_up_after_s", s)?;
+        }
+        ConfigError::non_negative("give_up_radius_m", self.give_up_radius_m)?;
         ConfigError::non_negative("look_ahead_m", self.look_ahead_m)
     }
 }

@@ -4,7 +4,7 @@
 //! with frontiers that peers are heading to made longer (implicit coordination).
 
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::{BTreeSet, BinaryHeap, HashMap};
 use std::hash::BuildHasherDefault;
 
 use nalgebra::Point3;
@@ -90,18 +90,20 @@ fn neighbours(key: CellKey) -> impl Iterator<Item = (CellKey, f64)> {
 }
 
 impl GuidanceField {
-    /// The field over `memory` for a robot at `robot_m`, with the `peers`' claims.
+    /// The field over `memory` for a robot at `robot_m`, with the `peers`' claims;
+    /// the frontiers in `given_up` do not seed it.
     #[must_use]
     pub fn build(
         memory: &FrontierMemory,
         robot_m: &Point3<f64>,
         peers: &[PeerIntent],
+        given_up: &BTreeSet<CellKey>,
         params: &FieldParams,
     ) -> Self {
         let cell_m = memory.cell_m();
         let mut heap = BinaryHeap::new();
         let mut frontiers = 0;
-        for f in memory.frontiers() {
+        for f in memory.frontiers().filter(|f| !given_up.contains(f)) {
             let centre = memory.centre(f);
             let mine_m = (centre - robot_m).norm();
             let claimed = peers.iter().any(|peer| {

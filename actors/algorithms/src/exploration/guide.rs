@@ -1,14 +1,14 @@
 //! One robot's guide: its frontier memory, what it knows of where its peers are
 //! heading, and the rule that decides when a planning round follows the global field.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use nalgebra::Point3;
-use troupe_core::RobotId;
+use troupe_core::{RobotId, Time};
 
 use super::config::GuidanceConfig;
 use super::guidance::{FieldParams, GuidanceField, PeerIntent};
-use super::memory::{FrontierMemory, MemoryUpdate};
+use super::memory::{CellKey, FrontierMemory, MemoryUpdate};
 use crate::grid::GridSnapshot;
 use crate::planner::round::Candidate;
 use crate::team::{PeerKeyframe, PeerPlan};
@@ -21,6 +21,11 @@ pub struct Guide {
     memory: FrontierMemory,
     peers: BTreeMap<RobotId, PeerIntent>,
     retired_by_peers: u64,
+    /// Seconds spent near each remembered frontier while it stayed one.
+    watched_s: BTreeMap<CellKey, f64>,
+    /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired.
+    given_up: BTreeSet<CellKey>,
+    last_field: Option<Time>,
 }
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
@@ -37,6 +42,9 @@ impl Guide {
             memory: FrontierMemory::new(config.cell_m, config.max_cells),
             peers: BTreeMap::new(),
             retired_by_peers: 0,
+            watched_s: BTreeMap::new(),
+            given_up: BTreeSet::new(),
+            last_field: None,
         }
     }
 
@@ -91,21 +99,60 @@ impl Guide {
         );
     }
 
-    /// Marks the robot's own cell passable and builds the field for a robot at
-    /// `robot_m`, with the peers' claims.
-    pub fn field(&mut self, robot_m: &Point3<f64>) -> GuidanceField {
+    /// Remembered frontiers this robot has given up (watched for
+    /// [`GuidanceConfig::give_up_after_s`] from nearby without seeing into them).
+    #[must_use]
+    pub fn given_up(&self) -> &BTreeSet<CellKey> {
+        &self.given_up
+    }
+
+    /// Marks the robot's own cell passable, counts the time since the last call
+    /// towards the frontiers near `robot_m` (giving up those watched too long) and
+    /// builds the field for a robot there at `now`, with the peers' claims.
+    pub fn field(&mut self, robot_m: &Point3<f64>, now: Time) -> GuidanceField {
         self.memory.mark_body(robot_m);
+        self.watch(robot_m, now);
         let peers: Vec<PeerIntent> = self.peers.values().copied().collect();
         GuidanceField::build(
             &self.memory,
             robot_m,
             &peers,
+            &self.given_up,
             &FieldParams {
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
             },
         )
+    }
+
+    /// Adds the time since the last call (at most 2 s, so a pause does not count) to
+    /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
+    /// `robot_m`; a frontier watched for [`GuidanceConfig::give_up_after_s`] is given
+    /// up. Frontiers retired since are forgotten by both (bounded by the memory).
+    fn watch(&mut self, robot_m: &Point3<f64>, now: Time) {
+        let dt_s = self.last_field.map_or(0.0, |last| {
+            now.saturating_since(last).as_secs_f64().min(2.0)
+        });
+        self.last_field = Some(now);
+        let Some(limit_s) = self.config.give_up_after_s else {
+            return;
+        };
+        let memory = &self.memory;
+        self.watched_s.retain(|k, _| memory.record(*k).frontier);
+        self.given_up.retain(|k| memory.record(*k).frontier);
+        for f in memory.frontiers() {
+            if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
+                || self.given_up.contains(&f)
+            {
+                continue;
+            }
+            let watched_s = self.watched_s.entry(f).or_insert(0.0);
+            *watched_s += dt_s;
+            if *watched_s >= limit_s {
+                self.given_up.insert(f);
+            }
+        }
     }
 
     /// Whether a round from `root_m` should score the frontier reward over `field`:

@@ -178,13 +178,14 @@ fn fly(
     let mut state = start;
     let mut path = vec![Point3::from(state.position_m())];
     let mut guided = 0;
-    for _ in 0..rounds {
+    for round in 0..rounds {
+        let now = Time::from_nanos(1_000_000_000 * round as u64);
         let here = Point3::from(state.position_m());
         let snapshot = window(here, [20.0, 20.0, 4.0], world);
         let margin_m = config.margin_m(snapshot.resolution_m());
         let field = guide.as_mut().map(|g| {
             g.observe_snapshot(&snapshot, margin_m);
-            g.field(&here)
+            g.field(&here, now)
         });
         let mut problem = PlanningProblem::new(&config, &snapshot, &camera);
         let mut candidates = problem.children(&state);
@@ -229,7 +230,7 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
         for x in [4.0, 14.0, 24.0, 34.0] {
             let here = Point3::new(x, 0.0, 0.0);
             g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
-            g.field(&here);
+            g.field(&here, Time::ZERO);
         }
         assert!(g.memory().frontiers().all(|k| k[0] == -1 || k[0] == 0));
         assert!(g.memory().frontiers().count() > 0);
@@ -278,7 +279,8 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     assert!(guides[0].memory().frontiers().any(right));
     // Robot 0 leads, robot 1 follows; alone, both would take the left branch.
     let (lead, follow) = (Point3::new(8.5, 0.5, 0.0), Point3::new(4.0, 0.0, 0.0));
-    let target = |g: &mut Guide, at: &Point3<f64>| g.field(at).target_of(at).expect("a route");
+    let target =
+        |g: &mut Guide, at: &Point3<f64>| g.field(at, Time::ZERO).target_of(at).expect("a route");
     let lead_target = target(&mut guides[0], &lead);
     assert!(left(lead_target), "{lead_target:?}");
     assert!(left(target(&mut guides[1], &follow)));
@@ -313,4 +315,51 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     // Deterministic: the same inputs give the same field.
     let again = target(&mut guides[1], &follow);
     assert_eq!(again, follow_target);
+}
+
+#[test]
+fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
+    // The tunnel of the dead-end test: seen from x = 0 on, the frontier at x ≈ 0.
+    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let config = GuidanceConfig::default();
+    let limit_s = config.give_up_after_s.expect("on by default");
+    let mut guide = Guide::new(config);
+    let near = Point3::new(2.0, 0.0, 0.0);
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    let frontiers = guide.memory().frontiers().count();
+    assert!(frontiers > 0);
+    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
+    // Far away, time does not count.
+    let far = Point3::new(10.0, 0.0, 0.0);
+    for s in 0..30 {
+        assert!(
+            guide
+                .field(&far, second(f64::from(s)))
+                .distance_m(&far)
+                .is_finite()
+        );
+    }
+    assert!(guide.given_up().is_empty());
+    // Hovering nearby (the camera never sees into it: nothing retires it), the pull
+    // lasts `give_up_after_s`, then the frontiers within reach stop pulling.
+    let mut when = None;
+    for s in 30..60 {
+        let field = guide.field(&near, second(f64::from(s)));
+        if when.is_none() && field.frontier_count() < frontiers {
+            when = Some(f64::from(s) - 30.0);
+        }
+    }
+    let when = when.expect("never given up");
+    // (The first near round counts the second since the last far one.)
+    assert!(
+        (limit_s - 1.0..=limit_s + 1.0).contains(&when),
+        "given up after {when} s"
+    );
+    assert!(!guide.given_up().is_empty());
+    // A new look that no longer shows them a frontier forgets them; a frontier that
+    // opens again later is watched afresh.
+    let seen_all = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |_| true);
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67);
+    guide.field(&near, second(61.0));
+    assert!(guide.given_up().is_empty());
 }

@@ -256,7 +256,7 @@ impl<S: ActionSelection> PlannerActor<S> {
         let root = replanning_root(self.committed.as_ref(), now, &odometry.pose);
         let round = &self.config.round;
         let here = nalgebra::Point3::from(root.position_m());
-        let field = self.guide.as_mut().map(|g| g.field(&here));
+        let field = self.guide.as_mut().map(|g| g.field(&here, now));
         let mut problem = PlanningProblem::new(round, &snapshot, &self.camera);
         let mut candidates = problem.children(&root);
         if let (Some(guide), Some(field)) = (&self.guide, &field)
@@ -277,6 +277,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             reward = choice.map(|i| candidates[i].reward),
             guided,
             frontiers = field.as_ref().map(|f| f.frontier_count()),
+            route_m = field.as_ref().map(|f| f.distance_m(&here)),
+            target = ?field.as_ref().and_then(|f| f.target_of(&here)).zip(self.guide.as_ref()).map(|(k, g)| g.memory().centre(k).coords.as_slice().to_vec()),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );
         if self.deferred {
