@@ -8,7 +8,7 @@ use troupe_core::{RobotId, Time};
 
 use super::config::GuidanceConfig;
 use super::guidance::{FieldParams, GuidanceField, PeerIntent};
-use super::memory::{CellKey, FrontierMemory, MemoryUpdate};
+use super::memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
 use crate::grid::GridSnapshot;
 use crate::planner::round::Candidate;
 use crate::team::{PeerKeyframe, PeerPlan};
@@ -128,8 +128,10 @@ impl Guide {
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
-    /// `robot_m`; a frontier watched for [`GuidanceConfig::give_up_after_s`] is given
-    /// up. Frontiers retired since are forgotten by both (bounded by the memory).
+    /// `robot_m`; a frontier watched for [`GuidanceConfig::give_up_after_s`] in all is
+    /// given up. The count survives a frontier's flicker (the window's frontier mask
+    /// drops and restores cells at a surface's edge as rays accumulate); cells the
+    /// memory forgets are forgotten here too, so both stay bounded by the memory.
     fn watch(&mut self, robot_m: &Point3<f64>, now: Time) {
         let dt_s = self.last_field.map_or(0.0, |last| {
             now.saturating_since(last).as_secs_f64().min(2.0)
@@ -139,8 +141,9 @@ impl Guide {
             return;
         };
         let memory = &self.memory;
-        self.watched_s.retain(|k, _| memory.record(*k).frontier);
-        self.given_up.retain(|k| memory.record(*k).frontier);
+        let known = |k: &CellKey| memory.record(*k) != CellRecord::default();
+        self.watched_s.retain(|k, _| known(k));
+        self.given_up.retain(known);
         for f in memory.frontiers() {
             if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
                 || self.given_up.contains(&f)

@@ -356,10 +356,14 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
         "given up after {when} s"
     );
     assert!(!guide.given_up().is_empty());
-    // A new look that no longer shows them a frontier forgets them; a frontier that
-    // opens again later is watched afresh.
+    // A look that no longer shows them as frontiers, then one that shows them again
+    // (a frontier's flicker at a surface's edge): they stay given up.
+    let given_up = guide.given_up().clone();
     let seen_all = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |_| true);
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67);
     guide.field(&near, second(61.0));
-    assert!(guide.given_up().is_empty());
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    let field = guide.field(&near, second(62.0));
+    assert_eq!(guide.given_up(), &given_up);
+    assert!(field.frontier_count() < frontiers);
 }
