@@ -289,3 +289,136 @@ pub struct SceneUpdate {
     /// Entities.
     pub entities: Vec<SceneEntity>,
 }
+
+/// Bytes of a Foxglove `bytes` field, written as base64 text (the JSON encoding of
+/// `bytes` that Foxglove decodes).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bytes(pub Vec<u8>);
+
+impl Serialize for Bytes {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use base64::Engine as _;
+        serializer.serialize_str(&base64::engine::general_purpose::STANDARD.encode(&self.0))
+    }
+}
+
+/// `foxglove.NumericType` of a 32-bit float.
+pub const FLOAT32: u8 = 7;
+
+/// `foxglove.PackedElementField`: one field of each point of a [`PointCloud`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PackedElementField {
+    /// Field name (`x`, `y`, `z` place the point; others colour it).
+    pub name: String,
+    /// Byte offset within a point.
+    pub offset: u32,
+    /// `foxglove.NumericType` ([`FLOAT32`]).
+    #[serde(rename = "type")]
+    pub kind: u8,
+}
+
+/// `foxglove.PointCloud`: points packed as little-endian `f32` `x, y, z, intensity`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PointCloud {
+    /// When.
+    pub timestamp: Timestamp,
+    /// Frame of the points.
+    pub frame_id: String,
+    /// Origin of the points in the frame.
+    pub pose: Pose,
+    /// Bytes per point.
+    pub point_stride: u32,
+    /// The fields of a point.
+    pub fields: Vec<PackedElementField>,
+    /// The points.
+    pub data: Bytes,
+}
+
+impl PointCloud {
+    /// Bytes per point: four `f32`.
+    pub const STRIDE: u32 = 16;
+
+    /// A cloud in `frame_id` of `(position, intensity)` points.
+    pub fn xyzi(
+        timestamp: Timestamp,
+        frame_id: &str,
+        points: impl IntoIterator<Item = (Point3<f64>, f64)>,
+    ) -> Self {
+        let mut data = Vec::new();
+        for (p, intensity) in points {
+            for v in [p.x, p.y, p.z, intensity] {
+                data.extend_from_slice(&(v as f32).to_le_bytes());
+            }
+        }
+        let fields = ["x", "y", "z", "intensity"]
+            .iter()
+            .zip(0..)
+            .map(|(name, k)| PackedElementField {
+                name: (*name).into(),
+                offset: 4 * k,
+                kind: FLOAT32,
+            })
+            .collect();
+        PointCloud {
+            timestamp,
+            frame_id: frame_id.into(),
+            pose: Pose::default(),
+            point_stride: Self::STRIDE,
+            fields,
+            data: Bytes(data),
+        }
+    }
+
+    /// Points in the cloud.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.data.0.len() / Self::STRIDE as usize
+    }
+
+    /// Whether the cloud has no point.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.data.0.is_empty()
+    }
+}
+
+/// `foxglove.RawImage`: an uncompressed image.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RawImage {
+    /// When.
+    pub timestamp: Timestamp,
+    /// Frame of the camera.
+    pub frame_id: String,
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Pixel encoding (`32FC1`: one little-endian `f32` per pixel).
+    pub encoding: String,
+    /// Bytes per row.
+    pub step: u32,
+    /// Row-major pixels.
+    pub data: Bytes,
+}
+
+impl RawImage {
+    /// A `32FC1` image of row-major `values` (e.g. depth in metres).
+    #[must_use]
+    pub fn float32(
+        timestamp: Timestamp,
+        frame_id: &str,
+        width: u32,
+        height: u32,
+        values: &[f32],
+    ) -> Self {
+        RawImage {
+            timestamp,
+            frame_id: frame_id.into(),
+            width,
+            height,
+            encoding: "32FC1".into(),
+            step: 4 * width,
+            data: Bytes(values.iter().flat_map(|v| v.to_le_bytes()).collect()),
+        }
+    }
+}
