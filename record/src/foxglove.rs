@@ -422,3 +422,43 @@ impl RawImage {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use base64::Engine as _;
+
+    #[test]
+    fn a_point_cloud_packs_little_endian_f32_points_as_base64() {
+        let cloud = PointCloud::xyzi(
+            Timestamp::from_nanos(1_500_000_000),
+            "world",
+            [
+                (Point3::new(1.0, -2.0, 0.5), 0.25),
+                (Point3::new(0.0, 3.0, -1.0), 1.0),
+            ],
+        );
+        assert_eq!(cloud.len(), 2);
+        let json = serde_json::to_value(&cloud).expect("serialises");
+        assert_eq!(json["point_stride"], 16);
+        assert_eq!(json["fields"][3]["name"], "intensity");
+        assert_eq!(json["fields"][3]["offset"], 12);
+        assert_eq!(json["fields"][3]["type"], FLOAT32);
+        let data = base64::engine::general_purpose::STANDARD
+            .decode(json["data"].as_str().expect("a string"))
+            .expect("base64");
+        let values: Vec<f32> = data
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        assert_eq!(values, [1.0, -2.0, 0.5, 0.25, 0.0, 3.0, -1.0, 1.0]);
+        assert!(PointCloud::xyzi(Timestamp::default(), "world", []).is_empty());
+    }
+
+    #[test]
+    fn a_depth_image_is_32fc1_rows() {
+        let image = RawImage::float32(Timestamp::default(), "robot0/camera", 3, 2, &[1.0; 6]);
+        assert_eq!((image.step, image.encoding.as_str()), (12, "32FC1"));
+        assert_eq!(image.data.0.len(), 24);
+    }
+}

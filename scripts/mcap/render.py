@@ -77,6 +77,7 @@ def main():
                 coverage.append((data["time_s"], 100 * data["fraction"]))
             elif channel.topic == "/world":
                 world = data["entities"][0]["triangles"][0]["points"]
+                continue
             elif len(parts) != 2 or not parts[0].startswith("robot"):
                 continue
             robot, kind = parts
@@ -101,7 +102,7 @@ def main():
             top.scatter(*zip(*rock), s=1, color="0.75", lw=0, label="rock (/world, robots' height)")
     for robot in sorted(poses):
         colour = rgba(plans[robot]["color"]) if robot in plans else None
-        for kind, marker, size in (("grid", ".", 1), ("frontiers", "x", 6), ("remembered_frontiers", "s", 10)):
+        for kind, marker, size in (("grid", ".", 2), ("frontiers", "x", 8), ("remembered_frontiers", "s", 12)):
             points = clouds.get((robot, kind), [])
             if points:
                 xs, ys, _ = zip(*points)
@@ -109,7 +110,7 @@ def main():
                             lw=0.6 if kind == "frontiers" else 0, label=f"{robot} {kind.replace('_', ' ')}")
         for sphere in keyframes.get(robot, []):
             centre, w, h, angle = projected_ellipse(sphere)
-            top.add_patch(Ellipse(centre, w, h, angle=angle, color=rgba(sphere["color"]), alpha=0.25, lw=0))
+            top.add_patch(Ellipse(centre, w, h, angle=angle, color=rgba(sphere["color"]), alpha=0.12, lw=0))
         for line in candidates.get(robot, []):
             xs = [p["x"] for p in line["points"]]
             ys = [p["y"] for p in line["points"]]

@@ -146,7 +146,9 @@ pub fn world_surface(world: &dyn World) -> SurfaceMesh {
         for j in 1..ny - 1 {
             for i in 1..nx - 1 {
                 let here = free(i, j, k);
-                // Edges along x, y, z from (i, j, k); the cubes around each, in turn.
+                // Edges along x, y, z from (i, j, k); the cubes around each, counter-
+                // clockwise seen from the edge's far end (a quad facing +axis, turned
+                // round when the free side is the near one).
                 let edges = [
                     (
                         free(i + 1, j, k),
@@ -169,7 +171,7 @@ pub fn world_surface(world: &dyn World) -> SurfaceMesh {
                     if v.contains(&u32::MAX) {
                         continue;
                     }
-                    let (q0, q1, q2, q3) = if here {
+                    let (q0, q1, q2, q3) = if !here {
                         (v[0], v[1], v[2], v[3])
                     } else {
                         (v[0], v[3], v[2], v[1])
@@ -416,12 +418,27 @@ mod tests {
     fn the_surface_of_a_room_lies_on_its_walls_and_faces_into_it() {
         let room = BoxRoom::new(Aabb::new(
             Point3::new(0.0, 0.0, 0.0),
-            Point3::new(8.3, 5.6, 3.2),
+            Point3::new(20.3, 15.6, 6.2),
         ));
         let mesh = world_surface(&room);
         assert!(mesh.triangles.len() > 100, "{}", mesh.triangles.len());
+        // On a flat wall the interpolated crossings are exact; at edges and corners
+        // the vertex is their mean, inside its 1 m cube.
+        let on_walls = mesh
+            .vertices
+            .iter()
+            .filter(|v| room.sdf_m(v).abs() < 1e-9)
+            .count();
+        assert!(
+            on_walls * 10 >= mesh.vertices.len() * 7,
+            "{on_walls} of {}",
+            mesh.vertices.len()
+        );
         for v in &mesh.vertices {
-            assert!(room.sdf_m(v).abs() < 0.5, "vertex {v} off the walls");
+            assert!(
+                room.sdf_m(v).abs() < WORLD_SURFACE_CELL_M,
+                "vertex {v} off the walls"
+            );
         }
         for t in &mesh.triangles {
             let [a, b, c] = t.map(|k| mesh.vertices[k as usize]);
@@ -433,7 +450,7 @@ mod tests {
                 "triangle {t:?} faces the rock"
             );
         }
-        let sides = [8.3 * 5.6, 8.3 * 3.2, 5.6 * 3.2];
+        let sides = [20.3 * 15.6, 20.3 * 6.2, 15.6 * 6.2];
         let area: f64 = mesh
             .triangles
             .iter()
