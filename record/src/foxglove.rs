@@ -289,3 +289,176 @@ pub struct SceneUpdate {
     /// Entities.
     pub entities: Vec<SceneEntity>,
 }
+
+/// Bytes of a Foxglove `bytes` field, written as base64 text (the JSON encoding of
+/// `bytes` that Foxglove decodes).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bytes(pub Vec<u8>);
+
+impl Serialize for Bytes {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use base64::Engine as _;
+        serializer.serialize_str(&base64::engine::general_purpose::STANDARD.encode(&self.0))
+    }
+}
+
+/// `foxglove.NumericType` of a 32-bit float.
+pub const FLOAT32: u8 = 7;
+
+/// `foxglove.PackedElementField`: one field of each point of a [`PointCloud`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PackedElementField {
+    /// Field name (`x`, `y`, `z` place the point; others colour it).
+    pub name: String,
+    /// Byte offset within a point.
+    pub offset: u32,
+    /// `foxglove.NumericType` ([`FLOAT32`]).
+    #[serde(rename = "type")]
+    pub kind: u8,
+}
+
+/// `foxglove.PointCloud`: points packed as little-endian `f32` `x, y, z, intensity`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PointCloud {
+    /// When.
+    pub timestamp: Timestamp,
+    /// Frame of the points.
+    pub frame_id: String,
+    /// Origin of the points in the frame.
+    pub pose: Pose,
+    /// Bytes per point.
+    pub point_stride: u32,
+    /// The fields of a point.
+    pub fields: Vec<PackedElementField>,
+    /// The points.
+    pub data: Bytes,
+}
+
+impl PointCloud {
+    /// Bytes per point: four `f32`.
+    pub const STRIDE: u32 = 16;
+
+    /// A cloud in `frame_id` of `(position, intensity)` points.
+    pub fn xyzi(
+        timestamp: Timestamp,
+        frame_id: &str,
+        points: impl IntoIterator<Item = (Point3<f64>, f64)>,
+    ) -> Self {
+        let mut data = Vec::new();
+        for (p, intensity) in points {
+            for v in [p.x, p.y, p.z, intensity] {
+                data.extend_from_slice(&(v as f32).to_le_bytes());
+            }
+        }
+        let fields = ["x", "y", "z", "intensity"]
+            .iter()
+            .zip(0..)
+            .map(|(name, k)| PackedElementField {
+                name: (*name).into(),
+                offset: 4 * k,
+                kind: FLOAT32,
+            })
+            .collect();
+        PointCloud {
+            timestamp,
+            frame_id: frame_id.into(),
+            pose: Pose::default(),
+            point_stride: Self::STRIDE,
+            fields,
+            data: Bytes(data),
+        }
+    }
+
+    /// Points in the cloud.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.data.0.len() / Self::STRIDE as usize
+    }
+
+    /// Whether the cloud has no point.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.data.0.is_empty()
+    }
+}
+
+/// `foxglove.RawImage`: an uncompressed image.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RawImage {
+    /// When.
+    pub timestamp: Timestamp,
+    /// Frame of the camera.
+    pub frame_id: String,
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Pixel encoding (`32FC1`: one little-endian `f32` per pixel).
+    pub encoding: String,
+    /// Bytes per row.
+    pub step: u32,
+    /// Row-major pixels.
+    pub data: Bytes,
+}
+
+impl RawImage {
+    /// A `32FC1` image of row-major `values` (e.g. depth in metres).
+    #[must_use]
+    pub fn float32(
+        timestamp: Timestamp,
+        frame_id: &str,
+        width: u32,
+        height: u32,
+        values: &[f32],
+    ) -> Self {
+        RawImage {
+            timestamp,
+            frame_id: frame_id.into(),
+            width,
+            height,
+            encoding: "32FC1".into(),
+            step: 4 * width,
+            data: Bytes(values.iter().flat_map(|v| v.to_le_bytes()).collect()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use base64::Engine as _;
+
+    #[test]
+    fn a_point_cloud_packs_little_endian_f32_points_as_base64() {
+        let cloud = PointCloud::xyzi(
+            Timestamp::from_nanos(1_500_000_000),
+            "world",
+            [
+                (Point3::new(1.0, -2.0, 0.5), 0.25),
+                (Point3::new(0.0, 3.0, -1.0), 1.0),
+            ],
+        );
+        assert_eq!(cloud.len(), 2);
+        let json = serde_json::to_value(&cloud).expect("serialises");
+        assert_eq!(json["point_stride"], 16);
+        assert_eq!(json["fields"][3]["name"], "intensity");
+        assert_eq!(json["fields"][3]["offset"], 12);
+        assert_eq!(json["fields"][3]["type"], FLOAT32);
+        let data = base64::engine::general_purpose::STANDARD
+            .decode(json["data"].as_str().expect("a string"))
+            .expect("base64");
+        let values: Vec<f32> = data
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        assert_eq!(values, [1.0, -2.0, 0.5, 0.25, 0.0, 3.0, -1.0, 1.0]);
+        assert!(PointCloud::xyzi(Timestamp::default(), "world", []).is_empty());
+    }
+
+    #[test]
+    fn a_depth_image_is_32fc1_rows() {
+        let image = RawImage::float32(Timestamp::default(), "robot0/camera", 3, 2, &[1.0; 6]);
+        assert_eq!((image.step, image.encoding.as_str()), (12, "32FC1"));
+        assert_eq!(image.data.0.len(), 24);
+    }
+}

@@ -12,5 +12,5 @@ pub mod scene;
 pub mod schemas;
 pub mod writer;
 
-pub use recorder::{Clock, Recorder, RecordingStats, SharedRecorder};
+pub use recorder::{Clock, RecordOptions, Recorder, RecordingStats, SharedRecorder};
 pub use writer::{RecordError, Recording};

@@ -8,10 +8,17 @@
 //! | `/robot<i>/plan` | `foxglove.SceneUpdate` | committed plans (line strip, replaced) |
 //! | `/robot<i>/candidates` | `foxglove.SceneUpdate` | each planning round's candidates, coloured by the collision actor's verdict, reasons in the metadata |
 //! | `/robot<i>/keyframes` | `foxglove.SceneUpdate` | own keyframes as 2σ ellipsoids |
+//! | `/robot<i>/keyframe_points` | `foxglove.PointCloud` | points drawn from each own keyframe's mixture, `intensity` as it predicts |
 //! | `/robot<i>/peer_keyframes` | `foxglove.SceneUpdate` | keyframes received from peers (entity `robot<j>/kf<id>`, peer's colour, when received) |
+//! | `/robot<i>/peer_keyframe_points` | `foxglove.PointCloud` | points drawn from each received keyframe's mixture |
+//! | `/robot<i>/grid` | `foxglove.PointCloud` | the local grid's occupied cells (centres, `intensity` = occupancy probability), at most once per [`RecordOptions::grid_period_s`] |
+//! | `/robot<i>/frontiers` | `foxglove.PointCloud` | the local grid's frontier cells, with each `/robot<i>/grid` message |
+//! | `/robot<i>/remembered_frontiers` | `foxglove.PointCloud` | the team frontier memory's frontier cells (planner, guidance on), at most once per [`RecordOptions::grid_period_s`] |
+//! | `/robot<i>/depth` | `foxglove.RawImage` | depth frames (`32FC1`, metres), only with [`RecordOptions::depth_period_s`], at most once per it |
 //! | `/robot<i>/peer_plans` | `foxglove.SceneUpdate` | peers' committed plans as received (entity `robot<j>/plan`) |
 //! | `/robot<i>/link` | `troupe.LinkStatus` | link counters per class (bytes, queue delay, drops) |
 //! | `/robot<i>/peers/robot<j>/pose` | `foxglove.PoseInFrame` | peer odometry as received (only [`Recorder::with_peer_poses`], e.g. the base station) |
+//! | `/world` | `foxglove.SceneUpdate` | a triangle mesh of the world's surface, once ([`Recorder::write_world`], simulated runs) |
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -21,15 +28,20 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use troupe_actors::link::LINK_STATUS;
 use troupe_actors::msgs::{
-    KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN, PLAN_CANDIDATES,
-    PLAN_DECISION, PlanCandidates, PlanDecision,
+    DEPTH_FRAME, GRID_SNAPSHOT, KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN,
+    PLAN_CANDIDATES, PLAN_DECISION, PlanCandidates, PlanDecision,
 };
+use troupe_actors::planner::REMEMBERED_FRONTIERS;
 use troupe_actors::runtime::{Publication, Tap, Time};
 
 use crate::foxglove::{
-    Color, FrameTransform, KeyValuePair, PoseInFrame, SceneEntity, SceneUpdate, Timestamp,
+    Color, FrameTransform, KeyValuePair, PointCloud, PoseInFrame, RawImage, SceneEntity,
+    SceneUpdate, Timestamp,
 };
-use crate::scene::{keyframe_entity, robot_color, trajectory_line};
+use crate::scene::{
+    frontier_cloud, keyframe_cloud, keyframe_entity, mesh_entity, occupied_cloud, robot_color,
+    trajectory_line,
+};
 use crate::schemas::{self, Schema};
 use crate::writer::{RecordError, Recording};
 
@@ -103,11 +115,54 @@ const UNCHECKED: Color = Color {
     a: 0.4,
 };
 
+/// What a recorder writes of the bulky topics, and how often. With the defaults the
+/// default scenario's recording is 16 MB per robot-minute, under the 20 MB budget
+/// (`docs/recordings.md`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordOptions {
+    /// Least time between two recorded grids (occupied cells and frontiers) of a
+    /// robot, and between two of its remembered-frontier sets, seconds; `None`
+    /// records none.
+    pub grid_period_s: Option<f64>,
+    /// Points drawn from each keyframe's mixture, own or received (0: no clouds).
+    pub keyframe_points: usize,
+    /// Least time between two recorded depth frames of a robot, seconds; `None`
+    /// records none (a 160 × 120 frame is about 100 kB in the file).
+    pub depth_period_s: Option<f64>,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        RecordOptions {
+            grid_period_s: Some(1.0),
+            keyframe_points: 500,
+            depth_period_s: None,
+        }
+    }
+}
+
+/// Whether a period is set and at least that long passed since `last` (then `last`
+/// becomes `now`).
+fn due(last: &mut Option<Time>, now: Time, period_s: Option<f64>) -> bool {
+    let Some(period_s) = period_s else {
+        return false;
+    };
+    let ready = last.is_none_or(|t| (now.as_secs_f64() - t.as_secs_f64()) >= period_s - 1e-9);
+    if ready {
+        *last = Some(now);
+    }
+    ready
+}
+
 #[derive(Default)]
 struct RobotState {
     camera_written: bool,
     /// The latest round's candidates, until its decision arrives.
     candidates: Option<PlanCandidates>,
+    /// When the last grid, remembered frontiers and depth frame were recorded.
+    last_grid: Option<Time>,
+    last_memory: Option<Time>,
+    last_depth: Option<Time>,
 }
 
 /// Messages written and bytes, at the end of a recording.
@@ -133,6 +188,7 @@ pub struct Recorder {
     failed: u64,
     error: Option<RecordError>,
     peer_poses: bool,
+    options: RecordOptions,
 }
 
 impl Recorder {
@@ -146,7 +202,28 @@ impl Recorder {
             failed: 0,
             error: None,
             peer_poses: false,
+            options: RecordOptions::default(),
         })
+    }
+
+    /// Records the bulky topics as `options` say (default: [`RecordOptions::default`]).
+    #[must_use]
+    pub fn with_options(mut self, options: RecordOptions) -> Self {
+        self.options = options;
+        self
+    }
+
+    /// Writes the world's surface (`vertices`, three indices per triangle) on `/world`
+    /// at time zero, in grey: the rock the 3D view shows around the robots.
+    pub fn write_world(&mut self, vertices: &[nalgebra::Point3<f64>], triangles: &[[u32; 3]]) {
+        let color = Color {
+            r: 0.55,
+            g: 0.5,
+            b: 0.45,
+            a: 0.35,
+        };
+        let entity = mesh_entity("world", vertices, triangles, color, self.stamp(Time::ZERO));
+        self.write_scene("/world", Time::ZERO, entity);
     }
 
     /// Also records peers' odometry as received (`/robot<i>/peers/robot<j>/pose`):
@@ -268,7 +345,12 @@ impl Recorder {
                 keyframe,
                 Time::from_nanos(self.clock.nanos(keyframe.stamp)),
             );
+            let stamp = entity.timestamp;
             self.write_scene(&format!("/robot{i}/keyframes"), p.time, entity);
+            if self.options.keyframe_points > 0 {
+                let cloud = keyframe_cloud(i, keyframe, self.options.keyframe_points, stamp);
+                self.write_cloud(&format!("/robot{i}/keyframe_points"), p.time, &cloud);
+            }
         } else if let Some(peer) = p.get(&PEER_KEYFRAME) {
             // A peer's stamps count from its own start (in processes): what was
             // received is stamped when it arrived.
@@ -282,7 +364,13 @@ impl Recorder {
                 "received_at_s",
                 peer.received_at.as_secs_f64(),
             ));
+            let stamp = entity.timestamp;
             self.write_scene(&format!("/robot{i}/peer_keyframes"), p.time, entity);
+            if self.options.keyframe_points > 0 {
+                let n = self.options.keyframe_points;
+                let cloud = keyframe_cloud(peer.robot.0, &peer.keyframe, n, stamp);
+                self.write_cloud(&format!("/robot{i}/peer_keyframe_points"), p.time, &cloud);
+            }
         } else if let Some(peer) = p.get(&PEER_PLAN) {
             let j = peer.robot.0;
             let mut entity =
@@ -307,6 +395,59 @@ impl Recorder {
                 let topic = format!("/robot{i}/peers/robot{}/pose", peer.robot.0);
                 self.write(&topic, &schemas::POSE_IN_FRAME, p.time, &pose);
             }
+        } else if let Some(snapshot) = p.get(&GRID_SNAPSHOT) {
+            let period_s = self.options.grid_period_s;
+            if due(
+                &mut self.robots.entry(i).or_default().last_grid,
+                p.time,
+                period_s,
+            ) {
+                let stamp = self.stamp(snapshot.stamp);
+                let occupied = occupied_cloud(snapshot, stamp);
+                self.write_cloud(&format!("/robot{i}/grid"), p.time, &occupied);
+                let frontiers = frontier_cloud(snapshot, stamp);
+                self.write_cloud(&format!("/robot{i}/frontiers"), p.time, &frontiers);
+            }
+        } else if let Some(memory) = p.get(&REMEMBERED_FRONTIERS) {
+            let period_s = self.options.grid_period_s;
+            if due(
+                &mut self.robots.entry(i).or_default().last_memory,
+                p.time,
+                period_s,
+            ) {
+                let cloud = PointCloud::xyzi(
+                    self.stamp(memory.stamp),
+                    "world",
+                    memory.centres_m.iter().map(|c| (*c, memory.cell_m)),
+                );
+                self.write_cloud(&format!("/robot{i}/remembered_frontiers"), p.time, &cloud);
+            }
+        } else if let Some(frame) = p.get(&DEPTH_FRAME) {
+            let period_s = self.options.depth_period_s;
+            if due(
+                &mut self.robots.entry(i).or_default().last_depth,
+                p.time,
+                period_s,
+            ) {
+                let k = &frame.intrinsics;
+                if frame.depth_m.len() == k.width as usize * k.height as usize {
+                    let image = RawImage::float32(
+                        self.stamp(frame.stamp),
+                        &format!("robot{i}/camera"),
+                        k.width,
+                        k.height,
+                        &frame.depth_m,
+                    );
+                    self.write(
+                        &format!("/robot{i}/depth"),
+                        &schemas::RAW_IMAGE,
+                        p.time,
+                        &image,
+                    );
+                } else {
+                    self.failed += 1;
+                }
+            }
         } else if let Some(status) = p.get(&LINK_STATUS) {
             self.write(
                 &format!("/robot{i}/link"),
@@ -319,6 +460,10 @@ impl Recorder {
 
     fn stamp(&self, time: Time) -> Timestamp {
         Timestamp::from_nanos(self.clock.nanos(time))
+    }
+
+    fn write_cloud(&mut self, topic: &str, time: Time, cloud: &PointCloud) {
+        self.write(topic, &schemas::POINT_CLOUD, time, cloud);
     }
 
     fn write_scene(&mut self, topic: &str, time: Time, entity: SceneEntity) {
@@ -424,5 +569,24 @@ impl SharedRecorder {
 impl Tap for SharedRecorder {
     fn on_publish(&mut self, p: &Publication<'_>) {
         self.with(|r| r.observe(p));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_period_lets_through_at_most_one_message_per_period() {
+        let mut last = None;
+        let at = |s: f64| Time::from_secs_f64(s);
+        let passed: Vec<f64> = [0.0, 0.4, 0.99, 1.0, 1.5, 2.2, 2.9, 3.2]
+            .into_iter()
+            .filter(|&t| due(&mut last, at(t), Some(1.0)))
+            .collect();
+        assert_eq!(passed, [0.0, 1.0, 2.2, 3.2]);
+        let mut never = None;
+        assert!(!due(&mut never, at(5.0), None));
+        assert_eq!(never, None);
     }
 }

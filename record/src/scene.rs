@@ -1,14 +1,20 @@
 //! Plain conversions of robot messages into Foxglove scene primitives: keyframe
-//! mixtures as ellipsoids, trajectories as line strips, robot colours.
+//! mixtures as ellipsoids and as sampled point clouds, the local grid's occupied and
+//! frontier cells as point clouds, trajectories as line strips, a triangle mesh as a
+//! triangle list, robot colours.
 
 use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen, UnitQuaternion, Vector4};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use troupe_actors::grid::{CellState, GridSnapshot};
 use troupe_actors::msgs::Keyframe;
 use troupe_actors::runtime::Time;
 use troupe_actors::trajectory::Trajectory;
+use troupe_algorithms::mapfile::sample_surface;
 
 use crate::foxglove::{
-    Color, KeyValuePair, LINE_STRIP, LinePrimitive, Pose, SceneEntity, SpherePrimitive, Timestamp,
-    Vector3,
+    Color, KeyValuePair, LINE_STRIP, LinePrimitive, PointCloud, Pose, SceneEntity, SpherePrimitive,
+    Timestamp, TriangleListPrimitive, Vector3,
 };
 
 /// Half-axes of a keyframe ellipsoid, in standard deviations of its component.
@@ -122,6 +128,98 @@ pub fn trajectory_line(trajectory: &Trajectory, color: Color) -> LinePrimitive {
         colors: Vec::new(),
         indices: Vec::new(),
     }
+}
+
+/// Points drawn from a keyframe's mixture (thesis §6.1.5, Eq. 6.11: a component by
+/// weight, a position from its spatial marginal, the intensity that component
+/// predicts there), `n` of them at most its support size, as a cloud whose
+/// `intensity` field is the predicted intensity in [0, 1]. The draw is seeded by the
+/// owner and keyframe id, so a recording is the same from run to run and the robots'
+/// own random streams are untouched.
+#[must_use]
+pub fn keyframe_cloud(owner: u32, keyframe: &Keyframe, n: usize, stamp: Timestamp) -> PointCloud {
+    let n = n.min(keyframe.support_size as usize);
+    let seed = (u64::from(owner) << 32) | u64::from(keyframe.id);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let points = if keyframe.gmm.is_empty() || n == 0 {
+        Vec::new()
+    } else {
+        sample_surface(&keyframe.gmm, n, &mut rng)
+    };
+    PointCloud::xyzi(
+        stamp,
+        "world",
+        points
+            .iter()
+            .filter(|s| s.position.iter().all(|v| v.is_finite()))
+            .map(|s| (Point3::from(s.position), s.intensity)),
+    )
+}
+
+/// The occupied cells of a grid snapshot (cell centres), with the cell's occupancy
+/// probability as `intensity`.
+#[must_use]
+pub fn occupied_cloud(snapshot: &GridSnapshot, stamp: Timestamp) -> PointCloud {
+    let grid = &snapshot.grid;
+    let geometry = grid.geometry();
+    PointCloud::xyzi(
+        stamp,
+        "world",
+        grid.values()
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| grid.classify(**v) == CellState::Occupied)
+            .map(|(k, _)| {
+                let c = grid.cell_at(k);
+                (geometry.cell_centre(c), grid.probability(c))
+            }),
+    )
+}
+
+/// The frontier cells of a grid snapshot (distance to the nearest frontier zero), with
+/// the cell's height above the grid's floor as `intensity`.
+#[must_use]
+pub fn frontier_cloud(snapshot: &GridSnapshot, stamp: Timestamp) -> PointCloud {
+    let grid = &snapshot.grid;
+    let geometry = grid.geometry();
+    PointCloud::xyzi(
+        stamp,
+        "world",
+        snapshot
+            .frontier_distance_m
+            .iter()
+            .enumerate()
+            .filter(|(_, d)| **d == 0.0)
+            .map(|(k, _)| {
+                let p = geometry.cell_centre(grid.cell_at(k));
+                (p, p.z - geometry.origin.z)
+            }),
+    )
+}
+
+/// A triangle mesh (`vertices`, three indices per triangle) as one entity `id` in
+/// `world`, shown for the whole recording.
+#[must_use]
+pub fn mesh_entity(
+    id: &str,
+    vertices: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    color: Color,
+    stamp: Timestamp,
+) -> SceneEntity {
+    let mut entity = SceneEntity::new(stamp, "world", id.into());
+    entity.triangles.push(TriangleListPrimitive {
+        pose: Pose::default(),
+        points: vertices.iter().map(|p| Vector3::from(*p)).collect(),
+        color,
+        colors: Vec::new(),
+        indices: triangles.iter().flatten().copied().collect(),
+    });
+    entity.metadata = vec![
+        KeyValuePair::new("vertices", vertices.len()),
+        KeyValuePair::new("triangles", triangles.len()),
+    ];
+    entity
 }
 
 #[cfg(test)]

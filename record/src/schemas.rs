@@ -136,6 +136,43 @@ pub const SCENE_UPDATE: Schema = Schema {
     document: || object(json!({"deletions": array(json!({})), "entities": array(scene_entity())})),
 };
 
+/// `foxglove.PointCloud` (`data`: base64 of the packed points).
+pub const POINT_CLOUD: Schema = Schema {
+    name: "foxglove.PointCloud",
+    document: || {
+        let count = json!({"type": "integer", "minimum": 0});
+        object(json!({
+            "timestamp": time(),
+            "frame_id": string(),
+            "pose": pose(),
+            "point_stride": count,
+            "fields": array(object(json!({
+                "name": string(),
+                "offset": count,
+                "type": {"type": "integer", "minimum": 0, "maximum": 8},
+            }))),
+            "data": {"type": "string", "contentEncoding": "base64"},
+        }))
+    },
+};
+
+/// `foxglove.RawImage` (`data`: base64 of the pixels).
+pub const RAW_IMAGE: Schema = Schema {
+    name: "foxglove.RawImage",
+    document: || {
+        let count = json!({"type": "integer", "minimum": 0});
+        object(json!({
+            "timestamp": time(),
+            "frame_id": string(),
+            "width": count,
+            "height": count,
+            "encoding": string(),
+            "step": count,
+            "data": {"type": "string", "contentEncoding": "base64"},
+        }))
+    },
+};
+
 /// `troupe.LinkStatus`: the link actor's counters (per class offered, sent, dropped,
 /// queue delay; reassembly; rejected messages), as `summary.json` reports them.
 pub const LINK_STATUS: Schema = Schema {
@@ -187,10 +224,12 @@ pub const COVERAGE: Schema = Schema {
 };
 
 /// Every schema a recording may use.
-pub const ALL: [Schema; 6] = [
+pub const ALL: [Schema; 8] = [
     FRAME_TRANSFORM,
     POSE_IN_FRAME,
     SCENE_UPDATE,
+    POINT_CLOUD,
+    RAW_IMAGE,
     LINK_STATUS,
     SAMPLE,
     COVERAGE,

@@ -12,18 +12,28 @@
   position in `timeseries.csv` within 1e-6 m;
 - the ellipsoids of each own keyframe match `maps/robot<i>.troupe`: one per
   component, centred on the mean, and the covariance rebuilt from the ellipsoid's
-  axes (2 sigma) equals the component's spatial covariance.
+  axes (2 sigma) equals the component's spatial covariance;
+- the point cloud drawn from each keyframe (own and received) lies within 6 sigma of
+  one of that keyframe's ellipsoids, with intensities in [0, 1];
+- the local grid clouds: occupied cells on one lattice of the grid's resolution,
+  frontier cells none of them, at most `[metrics] record_grid_hz` a second; the
+  remembered frontiers on the memory's 1 m lattice; depth images only when
+  `[metrics] record_depth_hz` asks, each `32FC1` of the camera's size;
+- the world surface (`/world`): one message at time 0, a triangle list whose
+  indices all name a vertex, and every robot pose inside its bounds.
 
 Usage: check_run.py RUN_DIR   (prints one JSON line of counts; exits 1 on a mismatch)
        check_run.py FILE.mcap  (a process or base-station recording: schemas only)
 """
 
+import base64
 import csv
 import json
 import math
 import re
 import struct
 import sys
+import tomllib
 from pathlib import Path
 
 import jsonschema
@@ -41,7 +51,12 @@ SCHEMAS = [
     (r"/robot\d+/sample", "troupe.Sample"),
     (r"/team/coverage", "troupe.Coverage"),
     (r"/robot\d+/peers/robot\d+/pose", "foxglove.PoseInFrame"),
+    (r"/robot\d+/(keyframe_points|peer_keyframe_points|grid|frontiers|remembered_frontiers)", "foxglove.PointCloud"),
+    (r"/robot\d+/depth", "foxglove.RawImage"),
+    (r"/world", "foxglove.SceneUpdate"),
 ]
+CLOUD_FIELDS = [("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("intensity", 12, 7)]
+CLOUD_SIGMAS = 6.0
 
 
 class Mismatch(Exception):
@@ -118,6 +133,124 @@ def read_checked(path):
     return messages
 
 
+def cloud_points(cloud, what):
+    """The (x, y, z, intensity) points of a foxglove.PointCloud as troupe writes it."""
+    fields = [(f["name"], f["offset"], f["type"]) for f in cloud["fields"]]
+    expect(fields == CLOUD_FIELDS and cloud["point_stride"] == 16, f"{what}: fields {fields}")
+    data = base64.b64decode(cloud["data"], validate=True)
+    expect(len(data) % 16 == 0, f"{what}: {len(data)} bytes is not whole points")
+    points = [struct.unpack_from("<4f", data, k) for k in range(0, len(data), 16)]
+    expect(all(math.isfinite(v) for p in points for v in p), f"{what}: a non-finite point")
+    return points
+
+
+def mahalanobis2(p, sphere):
+    """Squared Mahalanobis distance of p from an ellipsoid's Gaussian (2 sigma axes)."""
+    r = rotation(sphere["pose"]["orientation"])
+    c = sphere["pose"]["position"]
+    d = (p[0] - c["x"], p[1] - c["y"], p[2] - c["z"])
+    local = [sum(r[i][k] * d[i] for i in range(3)) for k in range(3)]
+    sigma = [sphere["size"][k] / (2 * SIGMAS) for k in "xyz"]
+    return sum((local[k] / sigma[k]) ** 2 for k in range(3))
+
+
+def check_keyframe_clouds(messages, ellipsoid_topic, cloud_topic):
+    """Each keyframe's cloud (one per keyframe message, in order) lies near its ellipsoids."""
+    updates = messages.get(ellipsoid_topic, [])
+    clouds = messages.get(cloud_topic, [])
+    expect(len(clouds) == len(updates), f"{cloud_topic}: {len(clouds)} clouds for {len(updates)} keyframes")
+    points = 0
+    for (t_e, update), (t_c, cloud) in zip(updates, clouds):
+        expect(t_e == t_c, f"{cloud_topic}: cloud at {t_c}, keyframe at {t_e}")
+        (entity,) = update["entities"]
+        spheres = entity["spheres"]
+        for p in cloud_points(cloud, cloud_topic):
+            expect(0.0 <= p[3] <= 1.0, f"{cloud_topic}: intensity {p[3]}")
+            nearest = min(mahalanobis2(p, s) for s in spheres)
+            expect(nearest <= CLOUD_SIGMAS**2, f"{cloud_topic}: point {p} is {math.sqrt(nearest):.1f} sigma from {entity['id']}")
+            points += 1
+    return points
+
+
+def on_lattice(points, cell_m, what):
+    """All points are cell centres of one lattice of edge cell_m."""
+    if not points:
+        return
+    x0 = points[0]
+    for p in points:
+        for k in range(3):
+            steps = (p[k] - x0[k]) / cell_m
+            expect(abs(steps - round(steps)) < 1e-2, f"{what}: {p} is off the {cell_m} m lattice of {x0}")
+
+
+def check_grids(messages, robots, scenario, duration_s):
+    metrics = scenario.get("metrics", {})
+    grid_hz = metrics.get("record_grid_hz", 1.0)
+    depth_hz = metrics.get("record_depth_hz", 0.0)
+    resolution_m = scenario.get("robot", {}).get("grid", {}).get("resolution_m", 0.2)
+    camera = scenario.get("camera", {})
+    counts = {}
+    for i in range(robots):
+        grids = messages.get(f"/robot{i}/grid", [])
+        frontiers = messages.get(f"/robot{i}/frontiers", [])
+        memory = messages.get(f"/robot{i}/remembered_frontiers", [])
+        depth = messages.get(f"/robot{i}/depth", [])
+        most = math.floor(duration_s * grid_hz) + 1
+        if grid_hz > 0:
+            expect(0 < len(grids) <= most, f"robot{i}: {len(grids)} grids in {duration_s} s at {grid_hz} Hz")
+            expect(0 < len(memory) <= most, f"robot{i}: {len(memory)} remembered-frontier sets")
+        else:
+            expect(not grids and not memory, f"robot{i}: grids recorded with record_grid_hz = 0")
+        expect(len(frontiers) == len(grids), f"robot{i}: {len(frontiers)} frontier clouds, {len(grids)} grids")
+        occupied_total = 0
+        for (t, grid), (t_f, front) in zip(grids, frontiers):
+            expect(t == t_f, f"robot{i}: frontiers at {t_f}, grid at {t}")
+            occupied = cloud_points(grid, f"/robot{i}/grid")
+            expect(all(0.5 < p[3] <= 1.0 for p in occupied), f"robot{i}: an occupied cell with probability <= 0.5")
+            cells = cloud_points(front, f"/robot{i}/frontiers")
+            on_lattice(occupied + cells, resolution_m, f"robot{i} grid at {t}")
+            key = lambda p: tuple(round(v / resolution_m) for v in p[:3])
+            expect(not {key(p) for p in occupied} & {key(p) for p in cells}, f"robot{i}: a frontier cell is occupied at {t}")
+            occupied_total += len(occupied)
+        expect(grid_hz == 0 or occupied_total > 0, f"robot{i}: no occupied cell recorded")
+        remembered = 0
+        for t, cloud in memory:
+            cells = cloud_points(cloud, f"/robot{i}/remembered_frontiers")
+            if cells:
+                on_lattice(cells, cells[0][3], f"robot{i} remembered frontiers at {t}")
+            remembered += len(cells)
+        if depth_hz > 0:
+            expect(0 < len(depth) <= math.floor(duration_s * depth_hz) + 1, f"robot{i}: {len(depth)} depth frames")
+        else:
+            expect(not depth, f"robot{i}: depth frames recorded with record_depth_hz = 0")
+        for t, image in depth:
+            w, h = image["width"], image["height"]
+            expect((w, h) == (camera.get("width", w), camera.get("height", h)), f"robot{i}: depth image {w} x {h}")
+            expect(image["encoding"] == "32FC1" and image["step"] == 4 * w, f"robot{i}: depth encoding")
+            data = base64.b64decode(image["data"], validate=True)
+            expect(len(data) == 4 * w * h, f"robot{i}: depth image of {len(data)} bytes")
+        counts[i] = {"grids": len(grids), "occupied_cells": occupied_total, "remembered_frontiers": remembered, "depth": len(depth)}
+    return counts
+
+
+def check_world(messages):
+    worlds = messages.get("/world", [])
+    expect(len(worlds) == 1 and worlds[0][0] == 0, f"/world: {[t for t, _ in worlds]}")
+    (entity,) = worlds[0][1]["entities"]
+    (mesh,) = entity["triangles"]
+    points, indices = mesh["points"], mesh["indices"]
+    expect(points and len(indices) % 3 == 0 and indices, f"/world: {len(points)} points, {len(indices)} indices")
+    expect(all(0 <= k < len(points) for k in indices), "/world: an index names no vertex")
+    low = [min(p[a] for p in points) for a in "xyz"]
+    high = [max(p[a] for p in points) for a in "xyz"]
+    for topic, poses in messages.items():
+        if re.fullmatch(r"/robot\d+/pose", topic):
+            for _, pose in poses:
+                p = pose["pose"]["position"]
+                expect(all(low[k] <= p[a] <= high[k] for k, a in enumerate("xyz")), f"{topic}: {p} outside the world")
+    return len(indices) // 3
+
+
 def check_schemas(path):
     return {topic: len(m) for topic, m in read_checked(path).items()}
 
@@ -133,6 +266,9 @@ def check(run_dir):
         reader = make_reader(f)
         attachments = {a.name for a in reader.iter_attachments()}
     expect({"summary.json", "scenario.toml"} <= attachments, f"attachments {attachments}")
+    with open(run_dir / "run.mcap", "rb") as f:
+        (scenario_text,) = [a.data for a in make_reader(f).iter_attachments() if a.name == "scenario.toml"]
+    scenario = tomllib.loads(scenario_text.decode())
 
     def count(topic):
         return len(messages.get(topic, []))
@@ -201,12 +337,23 @@ def check(run_dir):
                 ellipsoids += 1
     expect(ellipsoids > 0, "no keyframe ellipsoid to compare")
 
+    cloud_points_checked = 0
+    for i in range(robots):
+        for own, cloud in [("keyframes", "keyframe_points"), ("peer_keyframes", "peer_keyframe_points")]:
+            cloud_points_checked += check_keyframe_clouds(messages, f"/robot{i}/{own}", f"/robot{i}/{cloud}")
+    expect(cloud_points_checked > 0, "no keyframe cloud point to check")
+    grids = check_grids(messages, robots, scenario, summary["duration_s"])
+    world_triangles = check_world(messages)
+
     return {
         "channels": len(messages),
         "messages": sum(len(v) for v in messages.values()),
         "per_robot": counts,
         "poses_compared": compared,
         "ellipsoids_compared": ellipsoids,
+        "cloud_points_checked": cloud_points_checked,
+        "grids": grids,
+        "world_triangles": world_triangles,
         "bytes": (run_dir / "run.mcap").stat().st_size,
     }
 

@@ -12,7 +12,9 @@ use troupe_actors::mapper::sogmm::MeanShiftKind;
 use troupe_record::{Clock, Recorder, SharedRecorder};
 use troupe_sims::launch::LaunchOptions;
 use troupe_sims::process::{RobotProcess, run_until_signal, shutdown_signal};
-use troupe_sims::recording::{RUN_RECORDING, RecordingFile, record_outputs};
+use troupe_sims::recording::{
+    RUN_RECORDING, RecordingFile, record_options, record_outputs, record_world,
+};
 use troupe_sims::report::write_run;
 use troupe_sims::router::{Router, settings};
 use troupe_sims::scenario::Scenario;
@@ -469,7 +471,10 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             scenario.name,
             std::process::id()
         ));
-        let recorder = SharedRecorder::new(Recorder::create(&path, Clock::Sim)?);
+        let mut recorder =
+            Recorder::create(&path, Clock::Sim)?.with_options(record_options(&scenario.metrics));
+        record_world(&mut recorder, team.world());
+        let recorder = SharedRecorder::new(recorder);
         team.add_tap(recorder.clone());
         Some((recorder, path))
     } else {

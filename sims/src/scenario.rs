@@ -35,6 +35,12 @@ pub struct MetricsConfig {
     /// (`docs/recordings.md`); `false` turns it off. `troupe run` only (a sweep's
     /// runs are not recorded).
     pub record: bool,
+    /// Recorded local grids (occupied cells, frontiers) and remembered frontiers per
+    /// robot per second; 0 records none.
+    pub record_grid_hz: f64,
+    /// Recorded depth frames per robot per second (`foxglove.RawImage`, about 100 kB
+    /// each at the default 160 × 120); 0, the default, records none.
+    pub record_depth_hz: f64,
 }
 
 impl Default for MetricsConfig {
@@ -45,6 +51,8 @@ impl Default for MetricsConfig {
             sample_period_s: 1.0,
             og_change_set_resolutions_m: Vec::new(),
             record: true,
+            record_grid_hz: 1.0,
+            record_depth_hz: 0.0,
         }
     }
 }
@@ -220,6 +228,17 @@ impl Scenario {
                 "metrics.sample_period_s",
                 format!("must be ≥ 0.01 s, got {}", m.sample_period_s),
             ));
+        }
+        for (key, hz) in [
+            ("metrics.record_grid_hz", m.record_grid_hz),
+            ("metrics.record_depth_hz", m.record_depth_hz),
+        ] {
+            if !(hz.is_finite() && (0.0..=30.0).contains(&hz)) {
+                return Err(invalid(
+                    key,
+                    format!("must be between 0 and 30 Hz, got {hz}"),
+                ));
+            }
         }
         for (i, r) in m.og_change_set_resolutions_m.iter().enumerate() {
             if !(r.is_finite() && *r >= 0.01) {

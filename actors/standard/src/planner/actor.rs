@@ -114,6 +114,26 @@ impl Message for PlanningReport {}
 /// Planning reports.
 pub const PLANNING_REPORT: Topic<PlanningReport> = Topic::new("planner/report");
 
+/// The team frontier memory's remembered frontiers at a planning round (guidance on),
+/// for recordings and monitors: nothing in a robot subscribes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RememberedFrontiers {
+    /// When (the round's time).
+    pub stamp: Time,
+    /// Edge of a memory cell, metres.
+    pub cell_m: f64,
+    /// Centres of the remembered frontier cells, world frame, metres.
+    pub centres_m: Vec<nalgebra::Point3<f64>>,
+}
+impl Message for RememberedFrontiers {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + 24 * self.centres_m.len()
+    }
+}
+
+/// Remembered frontiers, one message per planning round.
+pub const REMEMBERED_FRONTIERS: Topic<RememberedFrontiers> = Topic::new("planner/frontiers");
+
 const REPLAN: TimerId = TimerId(0);
 /// One-shot delay before the first round (see [`round_phase_s`]).
 const PHASE: TimerId = TimerId(1);
@@ -257,6 +277,17 @@ impl<S: ActionSelection> PlannerActor<S> {
         let round = &self.config.round;
         let here = nalgebra::Point3::from(root.position_m());
         let field = self.guide.as_mut().map(|g| g.field(&here, now));
+        if let Some(guide) = &self.guide {
+            let memory = guide.memory();
+            ctx.publish(
+                &REMEMBERED_FRONTIERS,
+                RememberedFrontiers {
+                    stamp: now,
+                    cell_m: memory.cell_m(),
+                    centres_m: memory.frontiers().map(|k| memory.centre(k)).collect(),
+                },
+            );
+        }
         let mut problem = PlanningProblem::new(round, &snapshot, &self.camera);
         let mut candidates = problem.children(&root);
         if let (Some(guide), Some(field)) = (&self.guide, &field)

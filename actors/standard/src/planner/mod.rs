@@ -9,7 +9,10 @@
 mod actor;
 mod teleop_actor;
 
-pub use actor::{ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport};
+pub use actor::{
+    ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
+    REMEMBERED_FRONTIERS, RememberedFrontiers,
+};
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
 };
