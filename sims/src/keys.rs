@@ -171,18 +171,15 @@ pub fn write_team_keys(dir: &Path, robots: u32) -> Result<TeamKeys, KeysError> {
              connect = []  # tls/<host>:<port> of the others (or of the router)\n\
              \n\
              [zenoh.tls]\n\
-             root_ca_path = \"{ca}\"\n\
-             cert_path = \"{cert}\"\n\
-             key_path = \"{key}\"\n\
+             root_ca_path = \"ca.pem\"\n\
+             cert_path = \"{stem}.pem\"\n\
+             key_path = \"{stem}.key\"\n\
              mutual = true\n\
              \n\
              [zenoh.access]  # robot<id> may publish only as <id>\n\
              ids = [{ids}]\n\
              routers = [\"{ROUTER_NAME}\"]\n",
             name = member.name,
-            ca = "ca.pem",
-            cert = format!("{stem}.pem"),
-            key = format!("{stem}.key"),
             ids = ids.join(", "),
         );
         write(

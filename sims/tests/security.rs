@@ -71,7 +71,7 @@ type Seen = Arc<Mutex<Vec<(u32, Vec<u8>)>>>;
 fn recording_sink(seen: &Seen) -> PacketSink {
     let seen = seen.clone();
     Arc::new(move |p: ReceivedPacket<'_>| {
-        seen.lock().unwrap().push((p.from, p.bytes.to_vec()));
+        seen.lock().expect("lock").push((p.from, p.bytes.to_vec()));
     })
 }
 
@@ -164,7 +164,10 @@ fn attack_two_robots(
     wait_for("robot 1's frames at robot 0", || {
         robots[1].send(1, None, &genuine).expect("send");
         std::thread::sleep(Duration::from_millis(50));
-        seen.lock().unwrap().iter().any(|(from, _)| *from == 1)
+        seen.lock()
+            .expect("lock")
+            .iter()
+            .any(|(from, _)| *from == 1)
     });
     let marked = odometry_frame(0xEE);
     let payload = dir.join("marked.frame");
@@ -193,14 +196,14 @@ fn attack_two_robots(
         ));
     }
     std::thread::sleep(Duration::from_millis(300));
-    let seen = seen.lock().unwrap();
+    let seen = seen.lock().expect("lock");
     let marked_from: Vec<u32> = seen
         .iter()
         .filter(|(_, b)| *b == marked)
         .map(|(from, _)| *from)
         .collect();
     assert!(
-        marked_from.iter().any(|from| *from == 2),
+        marked_from.contains(&2),
         "the control (robot 2 under its own id) must arrive, else the attack proves \
          nothing: {reports:?}"
     );

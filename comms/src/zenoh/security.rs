@@ -1,13 +1,13 @@
 //! Security checks and zenoh access control for a [`ZenohConfig`] (issue 23).
 //!
-//! - **Secure defaults** ([`check`]): a listening endpoint off loopback must
+//! - **Secure defaults** (checked by [`ZenohConfig::validate`]): a listening endpoint off loopback must
 //!   authenticate its peers (mutual TLS on a `tls/` endpoint, or a user/password
 //!   dictionary) and bind identities to ids (`[zenoh.access]`), unless the settings
 //!   say `insecure = true`; `auth` on a listening session needs a usable dictionary;
 //!   `access` needs a name for every session (mutual TLS; or users on a session
 //!   that only listens, such as a router: zenoh's user/password check names only
 //!   the side that connects).
-//! - **Identity bound by zenoh** ([`access_control_json5`]): zenoh's access control
+//! - **Identity bound by zenoh** (with `[zenoh.access]`, in [`ZenohConfig::to_zenoh`]): zenoh's access control
 //!   with `default_permission = "deny"`. The session named `robot<id>`
 //!   ([`identity_name`]: its certificate's common name under mutual TLS, its user
 //!   under `auth`) may put only under `troupe/*/<id>/*`; the routers named in
