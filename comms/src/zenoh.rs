@@ -15,13 +15,21 @@
 //! - **Sessions**: peer mode with explicit listen/connect endpoints, or client
 //!   mode towards a router; multicast scouting off by default (a session with no
 //!   endpoints and no scouting opens no socket); optional TLS (root CA,
-//!   certificate, key files) and user/password authentication.
+//!   certificate, key files; client certificates required by default) and
+//!   user/password authentication.
+//! - **Security** ([`security`], issue 23, `docs/security.md`): with
+//!   `[zenoh.access]`, zenoh's access control lets the session named `robot<id>`
+//!   (certificate common name or user) publish only under its own id; a session
+//!   listening off loopback without authentication refuses to open unless it says
+//!   `insecure = true`; zenoh drops any message larger than `max_message_bytes`
+//!   (troupe's message limit by default) while receiving it, before it is buffered
+//!   whole.
 //! - **Never blocking the robot**: [`PacketTransport::send`] puts the frame in a
 //!   bounded queue drained by a sender thread (full queue: dropped and counted).
 //!   Shaping happens above, in the link actor, so the same study runs over zenoh
 //!   and the simulated network.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
@@ -36,7 +44,9 @@ use crate::shaping::frame::{self, ParsedFrame};
 use crate::transport::{
     PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
 };
-use crate::wire::Class;
+use crate::wire::{Class, MAX_MESSAGE_BYTES};
+
+pub mod security;
 
 /// Session mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -59,9 +69,31 @@ pub struct ZenohTls {
     pub cert_path: PathBuf,
     /// This process's private key.
     pub key_path: PathBuf,
-    /// Require and check a client certificate on listening endpoints (mutual TLS).
-    #[serde(default)]
+    /// Require and check a client certificate on listening endpoints (mutual TLS;
+    /// on by default: without it anyone can connect to a `tls/` endpoint).
+    #[serde(default = "mutual_by_default")]
     pub mutual: bool,
+}
+
+fn mutual_by_default() -> bool {
+    true
+}
+
+/// Who may publish under which id (a `[zenoh.access]` table, written by
+/// `troupe keys`): zenoh's access control, enforced by zenoh on every message in
+/// and out of the session ([`security`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ZenohAccess {
+    /// The team's link ids, robots and base station: the session named
+    /// `robot<id>` ([`security::identity_name`]; its certificate's common name under
+    /// mutual TLS, its user under `auth`) may publish only under
+    /// `troupe/<team>/<id>/`. Sessions with other names may publish nothing.
+    pub ids: Vec<u32>,
+    /// Names (certificate common names, users) of zenoh routers trusted to forward
+    /// every id's frames (`troupe keys` names its router `router`).
+    #[serde(default)]
+    pub routers: Vec<String>,
 }
 
 /// User/password authentication of zenoh sessions.
@@ -114,11 +146,24 @@ pub struct ZenohConfig {
     pub tls: Option<ZenohTls>,
     /// User/password authentication.
     pub auth: Option<ZenohAuth>,
+    /// Who may publish under which id (zenoh's access control).
+    pub access: Option<ZenohAccess>,
+    /// Accept a listening endpoint off loopback without authentication or access
+    /// control (anyone who reaches the port can pose as any robot).
+    pub insecure: bool,
+    /// Largest message zenoh receives, bytes; larger ones are dropped while they
+    /// arrive, before they are buffered whole (zenoh's
+    /// `transport/link/rx/max_message_size`). 0: troupe's message limit
+    /// ([`MAX_MESSAGE_BYTES`]; the link's frames are far smaller).
+    pub max_message_bytes: usize,
     /// Frames waiting for the sender thread before new ones are dropped.
     pub send_queue_frames: usize,
 }
 
 const DEFAULT_SEND_QUEUE_FRAMES: usize = 4096;
+
+/// The smallest `max_message_bytes`: one frame of the largest MTU with headroom.
+const MIN_MAX_MESSAGE_BYTES: usize = 64 * 1024;
 
 fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
     TransportError::Config {
@@ -128,8 +173,33 @@ fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
 }
 
 impl ZenohConfig {
+    /// Makes the relative TLS and dictionary paths relative to `dir` (the
+    /// directory of the file the settings were read from).
+    pub fn resolve_paths(&mut self, dir: &Path) {
+        if let Some(tls) = &mut self.tls {
+            for p in [&mut tls.root_ca_path, &mut tls.cert_path, &mut tls.key_path] {
+                *p = dir.join(&*p);
+            }
+        }
+        if let Some(dictionary) = self.auth.as_mut().and_then(|a| a.dictionary_path.as_mut()) {
+            *dictionary = dir.join(&*dictionary);
+        }
+    }
+
+    /// `max_message_bytes`, with 0 meaning troupe's message limit.
+    #[must_use]
+    pub fn max_message_bytes(&self) -> usize {
+        if self.max_message_bytes == 0 {
+            MAX_MESSAGE_BYTES
+        } else {
+            self.max_message_bytes
+        }
+    }
+
     /// Checks the settings (endpoint syntax, TLS files present when needed,
-    /// client mode has a router to connect to).
+    /// client mode has a router to connect to) and the secure defaults
+    /// ([`security`]: authentication off loopback, a usable password dictionary,
+    /// access control with names).
     pub fn validate(&self) -> Result<(), TransportError> {
         for (key, endpoints) in [("listen", &self.listen), ("connect", &self.connect)] {
             for e in endpoints {
@@ -189,7 +259,13 @@ impl ZenohConfig {
                 ));
             }
         }
-        Ok(())
+        if self.max_message_bytes != 0 && self.max_message_bytes < MIN_MAX_MESSAGE_BYTES {
+            return Err(config_error(
+                "max_message_bytes",
+                format!("must be at least {MIN_MAX_MESSAGE_BYTES} (one frame), or 0"),
+            ));
+        }
+        security::check(self)
     }
 
     /// The zenoh configuration these settings stand for.
@@ -213,6 +289,10 @@ impl ZenohConfig {
         set("connect/endpoints", json(&self.connect))?;
         set("scouting/multicast/enabled", json(&self.multicast_scouting))?;
         set("scouting/gossip/enabled", json(&self.multicast_scouting))?;
+        set(
+            "transport/link/rx/max_message_size",
+            self.max_message_bytes().to_string(),
+        )?;
         if let Some(tls) = &self.tls {
             let path = |p: &PathBuf| json(&p.display().to_string());
             set(
@@ -233,6 +313,9 @@ impl ZenohConfig {
                 path(&tls.key_path),
             )?;
             set("transport/link/tls/enable_mtls", json(&tls.mutual))?;
+            // Certificates name robots, not hosts: the team's CA vouches for the
+            // name, and the access control binds the name to an id.
+            set("transport/link/tls/verify_name_on_connect", json(&false))?;
         }
         if let Some(auth) = &self.auth {
             set("transport/auth/usrpwd/user", json(&auth.user))?;
@@ -243,6 +326,9 @@ impl ZenohConfig {
                     json(&path.display().to_string()),
                 )?;
             }
+        }
+        if let Some(acl) = security::access_control_json5(self) {
+            set("access_control", acl)?;
         }
         Ok(c)
     }
@@ -256,6 +342,11 @@ mod erased {
     impl Json for bool {
         fn json(&self) -> String {
             self.to_string()
+        }
+    }
+    impl Json for str {
+        fn json(&self) -> String {
+            quote(self)
         }
     }
     impl Json for &str {

@@ -179,7 +179,7 @@ pub enum BaseError {
 impl BaseStation {
     /// Reads and checks a base file and its scenario.
     pub fn load(path: &Path) -> Result<Self, BaseError> {
-        let config: BaseConfig = read_toml(path)?;
+        let mut config: BaseConfig = read_toml(path)?;
         let invalid = |source: ConfigError| BaseError::Config {
             path: path.to_path_buf(),
             source,
@@ -200,6 +200,7 @@ impl BaseStation {
         if let Some(d) = config.duration_s {
             ConfigError::positive("duration_s", d).map_err(invalid)?;
         }
+        config.zenoh.resolve_paths(dir);
         config
             .zenoh
             .validate()

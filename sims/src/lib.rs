@@ -32,6 +32,7 @@ pub mod base;
 pub mod camera;
 pub mod coverage;
 pub mod faults;
+pub mod keys;
 pub mod launch;
 pub mod maps;
 pub mod monitor;

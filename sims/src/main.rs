@@ -64,6 +64,11 @@ enum Command {
     /// (`[zenoh] mode = "client"`, `connect = ["tcp/<this host>:7447"]`) reach each
     /// other through it instead of connecting to every other robot.
     Router(RouterArgs),
+    /// Write a team's credentials for mutual TLS with access control
+    /// (`docs/security.md`): a CA, one certificate and key per robot, for the base
+    /// station and for a router, each named by its link id (`robot<i>`), and the
+    /// `[zenoh]` tables that use them (`<member>.zenoh.toml`).
+    Keys(KeysArgs),
     /// Run the base station: join the team over zenoh without flying, collect every
     /// robot's keyframes, odometry and plans, print one status line per robot per
     /// second, and on exit (end of `duration_s`, Ctrl-C or SIGTERM) write
@@ -113,12 +118,34 @@ struct RobotArgs {
 
 #[derive(Debug, clap::Args)]
 struct RouterArgs {
-    /// Endpoint to listen on (repeat for several).
-    #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7447")]
+    /// Endpoint to listen on (repeat for several); default `tcp/0.0.0.0:7447`
+    /// without `--config`.
+    #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// Another router to connect to (repeat for several).
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
+    /// A file with the router's `[zenoh]` table (TLS, users, access control; e.g.
+    /// `router.zenoh.toml` of `troupe keys`); `--listen`/`--connect` add endpoints.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Listen off loopback without authentication (anyone who reaches the port
+    /// can join the team and pose as any robot).
+    #[arg(long)]
+    insecure: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct KeysArgs {
+    /// The team's scenario (its number of robots); or give `--team-size`.
+    #[arg(required_unless_present = "team_size", conflicts_with = "team_size")]
+    scenario: Option<PathBuf>,
+    /// Robots in the team (ids 0..N; the base station is id N).
+    #[arg(long, value_name = "N")]
+    team_size: Option<u32>,
+    /// Directory that receives the files.
+    #[arg(long, default_value = "keys")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -328,11 +355,19 @@ fn base(args: BaseArgs) -> anyhow::Result<()> {
 }
 
 fn router(args: RouterArgs) -> anyhow::Result<()> {
-    let router = Router::open(&settings(args.listen.clone(), args.connect))?;
+    let mut zenoh = match &args.config {
+        Some(path) => troupe_sims::router::read_settings(path)?,
+        None if args.listen.is_empty() => settings(vec!["tcp/0.0.0.0:7447".into()], Vec::new()),
+        None => settings(Vec::new(), Vec::new()),
+    };
+    zenoh.listen.extend(args.listen);
+    zenoh.connect.extend(args.connect);
+    zenoh.insecure |= args.insecure;
+    let router = Router::open(&zenoh)?;
     println!(
         "zenoh router {} listening on {}",
         router.zid(),
-        args.listen.join(", ")
+        zenoh.listen.join(", ")
     );
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -340,6 +375,24 @@ fn router(args: RouterArgs) -> anyhow::Result<()> {
         .context("starting the runtime")?
         .block_on(shutdown_signal());
     router.close()?;
+    Ok(())
+}
+
+fn keys(args: KeysArgs) -> anyhow::Result<()> {
+    let robots = match (&args.scenario, args.team_size) {
+        (Some(path), _) => Scenario::load(path)?.robots,
+        (None, Some(n)) => n,
+        (None, None) => anyhow::bail!("give a scenario or --team-size"),
+    };
+    let keys = troupe_sims::keys::write_team_keys(&args.out, robots)?;
+    println!(
+        "{} robots (ids 0..{}), base station id {}: {} files in {} (keep ca.key off the robots)",
+        keys.robots,
+        keys.robots,
+        keys.robots,
+        keys.files.len(),
+        keys.dir.display()
+    );
     Ok(())
 }
 
@@ -353,6 +406,7 @@ fn main() -> ExitCode {
         Command::Launch(args) => launch(args),
         Command::Robot(args) => robot(args),
         Command::Router(args) => router(args),
+        Command::Keys(args) => keys(args),
         Command::Base(args) => base(args),
         Command::Replay(args) => replay(args),
     };
@@ -772,11 +826,24 @@ mod tests {
         assert!(parse(&["robot"]).is_err(), "--config is required");
         match parse(&["router"]).expect("router").command {
             Command::Router(a) => {
-                assert_eq!(a.listen, ["tcp/0.0.0.0:7447"]);
-                assert!(a.connect.is_empty());
+                // tcp/0.0.0.0:7447 when there is no --config either.
+                assert!(a.listen.is_empty() && a.connect.is_empty());
+                assert!(a.config.is_none() && !a.insecure);
             }
             other => panic!("{other:?}"),
         }
+        match parse(&["keys", "--team-size", "3", "--out", "k"])
+            .expect("keys")
+            .command
+        {
+            Command::Keys(a) => {
+                assert_eq!((a.scenario, a.team_size), (None, Some(3)));
+                assert_eq!(a.out, PathBuf::from("k"));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(parse(&["keys"]).is_err(), "a scenario or --team-size");
+        assert!(parse(&["keys", "t.toml", "--team-size", "3"]).is_err());
         match parse(&[
             "router",
             "--listen",

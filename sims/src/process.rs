@@ -190,7 +190,7 @@ pub enum ProcessError {
 impl RobotProcess {
     /// Reads and checks a robot file and its scenario.
     pub fn load(path: &Path) -> Result<Self, ProcessError> {
-        let config: ProcessConfig = read_toml(path)?;
+        let mut config: ProcessConfig = read_toml(path)?;
         let invalid = |source: ConfigError| ProcessError::Config {
             path: path.to_path_buf(),
             source,
@@ -212,6 +212,7 @@ impl RobotProcess {
         if let Some(d) = config.duration_s {
             ConfigError::positive("duration_s", d).map_err(invalid)?;
         }
+        config.zenoh.resolve_paths(base);
         config
             .zenoh
             .validate()

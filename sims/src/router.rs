@@ -9,8 +9,13 @@
 //! (`connect`), e.g. one per site.
 //!
 //! This module only opens the session: routing is zenoh's. The settings are the same
-//! [`ZenohConfig`] a robot uses (endpoints, scouting, TLS, authentication), with the
-//! mode set to router.
+//! [`ZenohConfig`] a robot uses (endpoints, scouting, TLS, authentication, access
+//! control), with the mode set to router; `troupe router --config FILE` reads them
+//! from a file's `[zenoh]` table ([`read_settings`], e.g. `router.zenoh.toml` of
+//! `troupe keys`, whose `[zenoh.access]` makes the router accept from `robot<id>`
+//! only frames under its own id, `docs/security.md`).
+
+use std::path::Path;
 
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::ZenohConfig;
@@ -19,6 +24,9 @@ use zenoh::Wait as _;
 /// Why a router could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum RouterError {
+    /// The settings file cannot be read or does not have the expected shape.
+    #[error(transparent)]
+    File(#[from] troupe_robot::toml_file::TomlFileError),
     /// The settings are invalid (an endpoint's syntax, a missing TLS file).
     #[error("router settings")]
     Config(#[source] TransportError),
@@ -87,6 +95,22 @@ impl Router {
                 source,
             })
     }
+}
+
+/// A router file: one `[zenoh]` table.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RouterFile {
+    zenoh: ZenohConfig,
+}
+
+/// Reads the `[zenoh]` table of the router file `path`, its TLS and dictionary
+/// paths made relative to the file.
+pub fn read_settings(path: &Path) -> Result<ZenohConfig, RouterError> {
+    let file: RouterFile = troupe_robot::toml_file::read_toml(path)?;
+    let mut zenoh = file.zenoh;
+    zenoh.resolve_paths(path.parent().unwrap_or(Path::new(".")));
+    Ok(zenoh)
 }
 
 /// Router settings listening on `listen` and connecting to the routers `connect`,

@@ -176,3 +176,146 @@ fn two_sessions_on_loopback_exchange_frames_and_reject_bad_ones() {
         Err(TransportError::Closed)
     ));
 }
+
+#[test]
+fn loopback_endpoints_are_told_apart_from_the_network() {
+    for a in [
+        "127.0.0.1:7447",
+        "127.3.2.1:1",
+        "[::1]:7447",
+        "localhost:7447",
+    ] {
+        assert!(security::is_loopback(a), "{a}");
+    }
+    for a in [
+        "0.0.0.0:7447",
+        "[::]:7447",
+        "10.0.0.2:7447",
+        "robot1.local:7447",
+        "127.0.0.1.example:7447",
+    ] {
+        assert!(!security::is_loopback(a), "{a}");
+    }
+    assert!(security::is_loopback("127.0.0.1:7447#iface=lo"));
+}
+
+/// A file in the temp directory, unique to this process and `name`.
+fn temp_file(name: &str, text: &str) -> PathBuf {
+    let path = std::env::temp_dir().join(format!("troupe-zenoh-{}-{name}", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn secure_defaults_refuse_open_doors_and_unusable_credentials() {
+    let users = temp_file("users.txt", "robot0:a\n\nrobot1 : b\n");
+    let bad_users = temp_file("bad-users.txt", "robot0\n");
+    let empty_users = temp_file("empty-users.txt", "\n");
+    let with = |text: &str| {
+        let text = text
+            .replace("USERS", &users.display().to_string())
+            .replace("BAD", &bad_users.display().to_string())
+            .replace("EMPTY", &empty_users.display().to_string());
+        toml::from_str::<ZenohConfig>(&text).unwrap().validate()
+    };
+    let key = |r: Result<(), TransportError>| match r {
+        Err(TransportError::Config { key, reason }) => {
+            assert!(!reason.contains('\n'), "one line: {reason}");
+            key
+        }
+        other => panic!("{other:?}"),
+    };
+    // Loopback, and connect-only sessions, need nothing.
+    with(r#"listen = ["tcp/127.0.0.1:7447"]"#).unwrap();
+    with(r#"connect = ["tcp/10.0.0.1:7447"]"#).unwrap();
+    // Off loopback without authentication: refused unless insecure.
+    assert_eq!(key(with(r#"listen = ["tcp/0.0.0.0:7447"]"#)), "listen");
+    with("listen = [\"tcp/0.0.0.0:7447\"]\ninsecure = true").unwrap();
+    // auth on a listening session needs a usable dictionary.
+    let auth = "[auth]\nuser = \"robot0\"\npassword = \"a\"\n";
+    assert_eq!(
+        key(with(&format!("listen = [\"tcp/127.0.0.1:1\"]\n{auth}"))),
+        "auth.dictionary_path"
+    );
+    with(&format!("connect = [\"tcp/10.0.0.1:1\"]\n{auth}")).unwrap();
+    for bad in ["BAD", "EMPTY"] {
+        assert_eq!(
+            key(with(&format!(
+                "listen = [\"tcp/127.0.0.1:1\"]\n{auth}dictionary_path = \"{bad}\""
+            ))),
+            "auth.dictionary_path"
+        );
+    }
+    let users_auth = format!("{auth}dictionary_path = \"USERS\"\n");
+    // Off loopback with users but no access control: anyone of the team could
+    // speak for anyone.
+    assert_eq!(
+        key(with(&format!("listen = [\"tcp/0.0.0.0:1\"]\n{users_auth}"))),
+        "access"
+    );
+    with(&format!(
+        "listen = [\"tcp/0.0.0.0:1\"]\n{users_auth}[access]\nids = [0, 1]"
+    ))
+    .unwrap();
+    // Access control needs names, and each id once.
+    assert_eq!(
+        key(with(
+            "listen = [\"tcp/127.0.0.1:1\"]\n[access]\nids = [0, 1]"
+        )),
+        "access"
+    );
+    assert_eq!(
+        key(with(&format!(
+            "listen = [\"tcp/127.0.0.1:1\"]\n{users_auth}[access]\nids = [0, 0]"
+        ))),
+        "access.ids"
+    );
+    assert_eq!(key(with("max_message_bytes = 100")), "max_message_bytes");
+    // TLS requires client certificates unless told otherwise.
+    let tls: ZenohTls =
+        toml::from_str("root_ca_path = \"a\"\ncert_path = \"b\"\nkey_path = \"c\"").unwrap();
+    assert!(tls.mutual);
+    for p in [users, bad_users, empty_users] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+#[test]
+fn relative_paths_resolve_against_the_file() {
+    let mut c: ZenohConfig = toml::from_str(
+        "[tls]\nroot_ca_path = \"keys/ca.pem\"\ncert_path = \"/abs/c.pem\"\nkey_path = \"k.pem\"\n\
+         [auth]\nuser = \"u\"\npassword = \"p\"\ndictionary_path = \"users.txt\"",
+    )
+    .unwrap();
+    c.resolve_paths(Path::new("/robots"));
+    let tls = c.tls.as_ref().unwrap();
+    assert_eq!(tls.root_ca_path, Path::new("/robots/keys/ca.pem"));
+    assert_eq!(tls.cert_path, Path::new("/abs/c.pem"));
+    assert_eq!(tls.key_path, Path::new("/robots/k.pem"));
+    assert_eq!(
+        c.auth.as_ref().unwrap().dictionary_path.as_deref(),
+        Some(Path::new("/robots/users.txt"))
+    );
+}
+
+#[test]
+fn access_control_and_size_limit_reach_zenohs_configuration() {
+    let users = temp_file("acl-users.txt", "robot0:a\nrobot1:b\n");
+    let c: ZenohConfig = toml::from_str(&format!(
+        "listen = [\"tcp/0.0.0.0:1\"]\n[auth]\nuser = \"robot0\"\npassword = \"a\"\n\
+         dictionary_path = \"{}\"\n[access]\nids = [0, 1]\nrouters = [\"router\"]",
+        users.display()
+    ))
+    .unwrap();
+    let z = c.to_zenoh().unwrap();
+    let acl = z.get_json("access_control").unwrap();
+    assert!(acl.contains("\"default_permission\":\"deny\""), "{acl}");
+    assert!(acl.contains("troupe/*/1/*"), "{acl}");
+    assert!(acl.contains("\"usernames\":[\"robot1\"]"), "{acl}");
+    assert!(!acl.contains("\"cert_common_names\":["), "{acl}");
+    assert_eq!(
+        z.get_json("transport/link/rx/max_message_size").unwrap(),
+        MAX_MESSAGE_BYTES.to_string()
+    );
+    let _ = std::fs::remove_file(users);
+}

@@ -207,14 +207,7 @@ impl HardwareFile {
 
 /// Makes the TLS and password-file paths of a zenoh table relative to `base`.
 fn resolve_zenoh(zenoh: &mut ZenohConfig, base: &Path) {
-    if let Some(tls) = &mut zenoh.tls {
-        for p in [&mut tls.root_ca_path, &mut tls.cert_path, &mut tls.key_path] {
-            *p = base.join(&*p);
-        }
-    }
-    if let Some(dictionary) = zenoh.auth.as_mut().and_then(|a| a.dictionary_path.as_mut()) {
-        *dictionary = base.join(&*dictionary);
-    }
+    zenoh.resolve_paths(base);
 }
 
 #[cfg(test)]

@@ -1,0 +1,73 @@
+"""A hostile zenoh client (eclipse-zenoh from PyPI) for sims/tests/security.rs.
+
+Connects in client mode to ENDPOINT with the credentials given (none, TLS files,
+user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY, 20 ms
+apart, or (with --size-mb) one payload of that many megabytes. Prints one JSON
+line: whether the session opened, and how many puts zenoh accepted locally.
+"""
+
+import argparse
+import json
+import sys
+import time
+
+import zenoh
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("endpoint")
+    ap.add_argument("--ca")
+    ap.add_argument("--cert")
+    ap.add_argument("--key")
+    ap.add_argument("--user")
+    ap.add_argument("--password")
+    ap.add_argument("--put", action="append", default=[], metavar="KEY")
+    ap.add_argument("--payload-file")
+    ap.add_argument("--count", type=int, default=50)
+    ap.add_argument("--size-mb", type=int)
+    a = ap.parse_args()
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([a.endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if a.ca:
+        tls = "transport/link/tls/"
+        conf.insert_json5(tls + "root_ca_certificate", json.dumps(a.ca))
+        conf.insert_json5(tls + "verify_name_on_connect", "false")
+        if a.cert:
+            conf.insert_json5(tls + "enable_mtls", "true")
+            conf.insert_json5(tls + "connect_certificate", json.dumps(a.cert))
+            conf.insert_json5(tls + "connect_private_key", json.dumps(a.key))
+    if a.user:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(a.user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(a.password))
+    try:
+        session = zenoh.open(conf)
+    except Exception as e:  # refused: no session, nothing to inject
+        print(json.dumps({"opened": False, "error": str(e)[:200], "puts": 0}))
+        return 0
+    puts = 0
+    block = zenoh.CongestionControl.BLOCK
+    if a.size_mb:
+        key = a.put[0]
+        # Blocking, so that no fragment is dropped on the way: the robot gets it all.
+        session.put(key, bytes(a.size_mb * 1_000_000), congestion_control=block)
+        puts += 1
+        time.sleep(2.0)
+    else:
+        payload = open(a.payload_file, "rb").read()
+        for _ in range(a.count):
+            for key in a.put:
+                session.put(key, payload, congestion_control=block)
+                puts += 1
+            time.sleep(0.02)
+        time.sleep(0.5)
+    session.close()
+    print(json.dumps({"opened": True, "puts": puts}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
