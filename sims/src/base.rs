@@ -186,7 +186,18 @@ impl BaseStation {
         };
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
-        let base_id = config.base_id.unwrap_or(scenario.robots);
+        let team_base_id = scenario.robot.link.base_id.unwrap_or(scenario.robots);
+        let base_id = config.base_id.unwrap_or(team_base_id);
+        if base_id != team_base_id {
+            return Err(invalid(ConfigError::new(
+                "base_id",
+                format!(
+                    "must be the base id the robots accept ({team_base_id}, the scenario's \
+                     `[robot.link] base_id` or its team size)"
+                ),
+                base_id,
+            )));
+        }
         if base_id < scenario.robots {
             return Err(invalid(ConfigError::new(
                 "base_id",
@@ -491,7 +502,7 @@ pub async fn run(
 ) -> Result<BaseSummary, BaseError> {
     let scenario = &station.scenario;
     let id = station.base_id;
-    let link = scenario.robot.link.clone();
+    let link = scenario.robot.link.clone().with_team(scenario.robots);
     // As a robot process: message ids start somewhere new in every run.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
