@@ -711,8 +711,7 @@ fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
         });
         exec.run_until(Time::from_secs_f64(until_s));
         drop(exec); // no clean shutdown: what is on disk is what survives
-        let got = log.lock().unwrap().clone();
-        got
+        log.lock().unwrap().clone()
     };
     let first = run(true, 12.0);
     let expected: Vec<(RobotId, u32)> = (0..8).map(|id| (RobotId(1), id)).collect();
