@@ -429,8 +429,9 @@ pub struct BaseSummary {
     /// The link's last counters (`rejected_messages`: frames that failed decoding or
     /// validation).
     pub link: Option<LinkStatus>,
-    /// Frames and messages the link rejected (bad bytes, another team, a sender that
-    /// disagrees with the zenoh key), logged at the 1st, 2nd, 4th, 8th, …
+    /// Frames and messages the link rejected (a sender outside the roster, bad
+    /// bytes, another team, a sender that disagrees with the zenoh key; per reason in
+    /// `link.rejections`), and other errors of its handler.
     pub rejected: u64,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
@@ -637,7 +638,10 @@ pub async fn run(
         merged_keyframes: maps.robots.values().map(|r| r.map.keyframes.len()).sum(),
         merged_points: written.values().sum(),
         link: lock(&status).clone(),
-        rejected: rejected.load(Ordering::Relaxed),
+        // The link counts (and logs, rate-limited) what it rejects itself; other
+        // handler errors are counted here.
+        rejected: rejected.load(Ordering::Relaxed)
+            + lock(&status).as_ref().map_or(0, |l| l.rejections.total()),
         zenoh,
         recording,
         artifacts: lock(&artifacts).artifacts.clone(),
