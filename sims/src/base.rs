@@ -616,6 +616,7 @@ pub async fn run(
     };
     let maps = std::mem::take(&mut *lock(&maps));
     let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
+    let link = lock(&status).clone();
     let summary = BaseSummary {
         base_id: id,
         wall_s: started.elapsed().as_secs_f64(),
@@ -637,11 +638,11 @@ pub async fn run(
             .collect(),
         merged_keyframes: maps.robots.values().map(|r| r.map.keyframes.len()).sum(),
         merged_points: written.values().sum(),
-        link: lock(&status).clone(),
         // The link counts (and logs, rate-limited) what it rejects itself; other
         // handler errors are counted here.
         rejected: rejected.load(Ordering::Relaxed)
-            + lock(&status).as_ref().map_or(0, |l| l.rejections.total()),
+            + link.as_ref().map_or(0, |l| l.rejections.total()),
+        link,
         zenoh,
         recording,
         artifacts: lock(&artifacts).artifacts.clone(),
