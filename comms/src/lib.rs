@@ -9,6 +9,9 @@
 //!   queue policies (keep-latest, drop-oldest, store-and-forward) and their
 //!   counters; the [`shaping::Reassembler`] on the receive side. Runtime-free,
 //!   driven by explicit time.
+//! - [`journal`]: a link's durable state on disk for robot processes (an fsync'd
+//!   append-only log with CRC-32 per record): stored messages, acknowledgements,
+//!   the next message id, messages received.
 //! - [`simnet`]: a deterministic simulated network (latency, jitter, random and
 //!   bursty loss, reordering, duplication, range, partitions) for sim-time teams.
 //! - [`transport`]: the runtime-free [`transport::PacketTransport`] trait an
@@ -27,6 +30,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod journal;
 pub mod shaping;
 pub mod simnet;
 pub mod transport;

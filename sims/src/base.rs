@@ -186,7 +186,18 @@ impl BaseStation {
         };
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
-        let base_id = config.base_id.unwrap_or(scenario.robots);
+        let team_base_id = scenario.robot.link.base_id.unwrap_or(scenario.robots);
+        let base_id = config.base_id.unwrap_or(team_base_id);
+        if base_id != team_base_id {
+            return Err(invalid(ConfigError::new(
+                "base_id",
+                format!(
+                    "must be the base id the robots accept ({team_base_id}, the scenario's \
+                     `[robot.link] base_id` or its team size)"
+                ),
+                base_id,
+            )));
+        }
         if base_id < scenario.robots {
             return Err(invalid(ConfigError::new(
                 "base_id",
@@ -419,8 +430,9 @@ pub struct BaseSummary {
     /// The link's last counters (`rejected_messages`: frames that failed decoding or
     /// validation).
     pub link: Option<LinkStatus>,
-    /// Frames and messages the link rejected (bad bytes, another team, a sender that
-    /// disagrees with the zenoh key), logged at the 1st, 2nd, 4th, 8th, …
+    /// Frames and messages the link rejected (a sender outside the roster, bad
+    /// bytes, another team, a sender that disagrees with the zenoh key; per reason in
+    /// `link.rejections`), and other errors of its handler.
     pub rejected: u64,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
@@ -492,7 +504,7 @@ pub async fn run(
 ) -> Result<BaseSummary, BaseError> {
     let scenario = &station.scenario;
     let id = station.base_id;
-    let link = scenario.robot.link.clone();
+    let link = scenario.robot.link.clone().with_team(scenario.robots);
     // As a robot process: message ids start somewhere new in every run.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -605,6 +617,7 @@ pub async fn run(
     };
     let maps = std::mem::take(&mut *lock(&maps));
     let written = maps.write(&station.out, station.config.ply_points, scenario.seed)?;
+    let link = lock(&status).clone();
     let summary = BaseSummary {
         base_id: id,
         wall_s: started.elapsed().as_secs_f64(),
@@ -626,8 +639,11 @@ pub async fn run(
             .collect(),
         merged_keyframes: maps.robots.values().map(|r| r.map.keyframes.len()).sum(),
         merged_points: written.values().sum(),
-        link: lock(&status).clone(),
-        rejected: rejected.load(Ordering::Relaxed),
+        // The link counts (and logs, rate-limited) what it rejects itself; other
+        // handler errors are counted here.
+        rejected: rejected.load(Ordering::Relaxed)
+            + link.as_ref().map_or(0, |l| l.rejections.total()),
+        link,
         zenoh,
         recording,
         artifacts: lock(&artifacts).artifacts.clone(),

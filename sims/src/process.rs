@@ -30,6 +30,11 @@
 //! connect = ["tcp/10.0.0.1:7447"]
 //! ```
 //!
+//! The link keeps its journal in `out/state/link.journal` (`[robot.link]
+//! journal_dir`; `docs/link-durability.md`): a process killed and started again
+//! resends what its peers had not acknowledged, gets back the peers' messages it
+//! had, and never reuses a message id.
+//!
 //! On exit (the duration, SIGINT or SIGTERM) the process writes `summary.json`
 //! ([`ProcessSummary`]) and `trajectory.csv` (`unix_time_s,x_m,y_m,z_m`, the ground
 //! truth at every odometry message) into `out`, and while it runs it records what the
@@ -185,6 +190,12 @@ pub enum ProcessError {
     /// The tokio runtime could not start.
     #[error("starting the tokio runtime")]
     Runtime(#[source] std::io::Error),
+    /// The link's journal could not be opened.
+    #[error("opening the link journal")]
+    Journal {
+        /// Why (names the file).
+        source: troupe_comms::journal::JournalError,
+    },
 }
 
 impl RobotProcess {
@@ -289,13 +300,16 @@ pub async fn run(
 ) -> Result<ProcessSummary, ProcessError> {
     let scenario = &process.scenario;
     let id = process.config.robot;
-    // Nothing of the link outlives the process: start the message ids somewhere
-    // new, so that peers who remember a previous run's ids (their duplicate filter)
-    // do not drop this run's first messages as repeats.
+    // The link's journal outlives the process (`kill -9` included): what it
+    // accepted and what it acknowledged, and its message ids, which a new journal
+    // starts somewhere new, so that peers who remember ids of an earlier run (their
+    // duplicate filter) do not drop this run's first messages as repeats.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u32);
-    let journal = LinkJournal::starting_at(first_id);
+    let journal_dir = scenario.robot.link.journal_dir_in(&process.out);
+    let journal = LinkJournal::on_disk(&journal_dir, first_id)
+        .map_err(|source| ProcessError::Journal { source })?;
     let robot = match &process.sequence {
         Some(sequence) => {
             tracing::info!(
@@ -304,9 +318,11 @@ pub async fn run(
                 "replaying {}",
                 sequence.dir().display()
             );
+            let mut config = scenario.robot.clone();
+            config.link = config.link.with_team(scenario.robots);
             replaying_robot(
                 &format!("robot{id}"),
-                &scenario.robot,
+                &config,
                 sequence.clone(),
                 scenario.vehicle.odometry_rate_hz,
                 journal,

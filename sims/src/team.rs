@@ -573,7 +573,9 @@ pub fn simulated_robot(
         camera: scenario.camera.intrinsics(),
         link_journal,
     };
-    assemble(&format!("robot{i}"), &scenario.robot, parts)
+    let mut config = scenario.robot.clone();
+    config.link = config.link.with_team(scenario.robots);
+    assemble(&format!("robot{i}"), &config, parts)
 }
 
 /// Applies one scheduled fault to robot `index` (faults aimed elsewhere, and network

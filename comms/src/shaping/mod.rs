@@ -21,9 +21,10 @@
 //!   mtu_bytes = 1200` at 250 kbit/s that is 41.6 ms for odometry and 61.7 ms for
 //!   a plan, against 193 ms for one unfragmented 6 kB keyframe (tested).
 //! - **Queue policies** per class ([`QueuePolicy`]): keep-latest, drop-oldest,
-//!   store-and-forward (bounded store that refuses rather than drops; a message
-//!   stays until every intended peer acknowledged it; per-peer in-order go-back-N,
-//!   see [`LinkShaper::add_peer`] and the `store` module). Frames carry their
+//!   store-and-forward (a message stays until every intended peer acknowledged
+//!   it; each peer's pending set bounded on its own, so a silent peer cannot make
+//!   the store refuse messages for the others; per-peer in-order go-back-N, see
+//!   [`LinkShaper::add_peer`], [`LinkShaper::suspend_peer`] and the `store` module). Frames carry their
 //!   addressee ([`Frame::to`]): broadcast, or one peer (acks, and store-and-forward
 //!   fragments while peers are out of step).
 //! - **Counters** ([`ShaperStats`]): drops by reason, queue delay, completion delay
@@ -86,7 +87,7 @@ pub use stats::{
 
 use crate::wire::Class;
 use frame::{ACK_HEADER_BYTES, DATA_HEADER_BYTES, DataHeader};
-use store::{NextFragment, Store};
+use store::{NextFragment, Store, StoreAck};
 
 /// An extra lane of a [`LinkShaper`] ([`LinkShaper::add_lane`]); ids count from 0
 /// in the order lanes were added.
@@ -132,6 +133,27 @@ pub struct DurableState {
     pub stored: Vec<DurableMessage>,
 }
 
+/// What [`LinkShaper::acknowledge`] made of an acknowledgement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AckOutcome {
+    /// The peer was missing the message and now has it.
+    Recorded,
+    /// A stored message the peer misses, but it was never sent to that peer: the
+    /// acknowledgement is not real (bytes that guessed an id) and is ignored.
+    NotSent,
+    /// No stored message with that id is missing for the peer (a repeated
+    /// acknowledgement, or an unknown id): nothing changes.
+    Unknown,
+}
+
+impl AckOutcome {
+    /// Whether it was recorded.
+    #[must_use]
+    pub fn recorded(self) -> bool {
+        self == AckOutcome::Recorded
+    }
+}
+
 /// Why an offer was not accepted (also counted in [`ClassStats::drops`]).
 #[derive(Clone, Copy, Debug, Error, PartialEq, Eq)]
 pub enum Refused {
@@ -143,7 +165,8 @@ pub enum Refused {
         /// The limit it broke.
         limit: usize,
     },
-    /// Store-and-forward store full; nothing stored was dropped.
+    /// Store-and-forward: no recipient's pending set has room; nothing stored
+    /// was dropped.
     #[error("store-and-forward store is full")]
     StoreFull,
 }
@@ -499,7 +522,8 @@ impl LinkShaper {
     /// Adds a peer as a recipient of store-and-forward messages: of every message
     /// offered from now on, and of everything still stored (a newly heard peer
     /// gets the backlog). Store-and-forward messages offered while no peer is
-    /// known wait for the first. Returns false if the peer was known already.
+    /// known wait for the first. A [suspended](Self::suspend_peer) peer rejoins
+    /// and gets what it missed. Returns false if the peer was known and active.
     pub fn add_peer(&mut self, peer: u32) -> bool {
         let mut added = self.peers.insert(peer);
         for lane in &mut self.lanes {
@@ -525,6 +549,42 @@ impl LinkShaper {
             }
         }
         total
+    }
+
+    /// Stops sending store-and-forward messages to `peer` (silent for too long)
+    /// while keeping, within its own bounds, what it misses: it rejoins with
+    /// [`add_peer`](Self::add_peer) and then gets its backlog, oldest first.
+    /// Returns false if it was not an active recipient.
+    pub fn suspend_peer(&mut self, peer: u32) -> bool {
+        let mut suspended = false;
+        for lane in &mut self.lanes {
+            if let Lane::Store(s) = lane {
+                suspended |= s.suspend_peer(peer);
+            }
+        }
+        suspended
+    }
+
+    /// The suspended peers ([`suspend_peer`](Self::suspend_peer)).
+    #[must_use]
+    pub fn suspended_peers(&self) -> Vec<u32> {
+        let mut peers = BTreeSet::new();
+        for lane in &self.lanes {
+            if let Lane::Store(s) = lane {
+                peers.extend(s.suspended());
+            }
+        }
+        peers.into_iter().collect()
+    }
+
+    /// Messages and bytes a class's store holds for `peer` (its pending set, bounded
+    /// by the class capacity on its own); (0, 0) for a class that is not stored.
+    #[must_use]
+    pub fn pending_for(&self, class: Class, peer: u32) -> (usize, usize) {
+        match &self.lanes[class.index()] {
+            Lane::Store(s) => s.pending(peer),
+            Lane::Queue(_) => (0, 0),
+        }
     }
 
     /// The peers store-and-forward messages are kept for.
@@ -598,14 +658,12 @@ impl LinkShaper {
         let id = self.next_id;
         match &mut self.lanes[lane] {
             Lane::Store(store) => {
-                if !store.has_room(len) {
+                let Some(admission) = store.admit(len, to) else {
                     stats.drops.count(DropReason::StoreFull);
                     return Err(Refused::StoreFull);
-                }
-                match to {
-                    None => store.push(id, message.into(), now_ns, count),
-                    Some(peer) => store.push_for(id, message.into(), now_ns, count, [peer].into()),
-                }
+                };
+                stats.drops.peer_full += admission.skipped;
+                store.push_for(id, message.into(), now_ns, count, admission.recipients);
             }
             Lane::Queue(queue) => {
                 if queue.config.policy == QueuePolicy::KeepLatest {
@@ -640,20 +698,25 @@ impl LinkShaper {
 
     /// Records that `peer` has a store-and-forward message (from an ack frame it
     /// sent back). The message leaves the store once every intended recipient has
-    /// it. Returns false if no stored message with that id was missing for `peer`.
-    pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: MessageId) -> bool {
+    /// it. Only a message already sent to `peer` can be acknowledged by it.
+    pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: MessageId) -> AckOutcome {
+        let mut outcome = AckOutcome::Unknown;
         for lane in 0..self.lanes.len() {
             let Lane::Store(store) = &mut self.lanes[lane] else {
                 continue;
             };
-            if let Some(released) = store.acknowledge(now_ns, peer, id.0) {
-                if released {
-                    self.stats_of(lane).acknowledged_messages += 1;
+            match store.acknowledge(now_ns, peer, id.0) {
+                StoreAck::Recorded(released) => {
+                    if released {
+                        self.stats_of(lane).acknowledged_messages += 1;
+                    }
+                    return AckOutcome::Recorded;
                 }
-                return true;
+                StoreAck::NotSent => outcome = AckOutcome::NotSent,
+                StoreAck::Unknown => {}
             }
         }
-        false
+        outcome
     }
 
     /// Queues an acknowledgement for `peer` (of a message it sent with the

@@ -7,6 +7,9 @@ use super::frame::{self, DataHeader, FrameError, ParsedFrame};
 use super::stats::ReassemblyStats;
 use crate::wire::Class;
 
+/// What one fragment slot of a partial message costs before its fragment arrives.
+const FRAGMENT_SLOT_BYTES: usize = std::mem::size_of::<Option<Vec<u8>>>();
+
 /// A complete message.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ReassembledMessage {
@@ -53,6 +56,7 @@ struct Partial {
     header: DataHeader,
     fragments: Vec<Option<Vec<u8>>>,
     received: usize,
+    /// Bytes held: the fragments' and the fragment table's.
     bytes: usize,
     arrival: u64,
     last_ns: u64,
@@ -167,13 +171,21 @@ impl Reassembler {
             self.stats.malformed_frames += 1;
             return Err(FrameError::Inconsistent(header.message_id));
         }
-        if chunk.len() > self.config.max_bytes {
+        // A new partial message costs its fragment table too (up to 65 535 slots:
+        // 1.5 MiB announced by one small frame), so it counts against the budget.
+        let table = if self.partial.contains_key(&key) {
+            0
+        } else {
+            usize::from(header.count) * FRAGMENT_SLOT_BYTES
+        };
+        let needed = chunk.len() + table;
+        if needed > self.config.max_bytes {
             self.stats.too_large += 1;
             self.drop_partial(key);
             return Ok(None);
         }
         // Make room: evict the oldest partial messages (not this one).
-        while self.held_bytes + chunk.len() > self.config.max_bytes
+        while self.held_bytes + needed > self.config.max_bytes
             || (!self.partial.contains_key(&key) && self.partial.len() >= self.config.max_messages)
         {
             let oldest = self
@@ -196,10 +208,11 @@ impl Reassembler {
             header,
             fragments: vec![None; usize::from(header.count)],
             received: 0,
-            bytes: 0,
+            bytes: table,
             arrival,
             last_ns: now_ns,
         });
+        self.held_bytes += table;
         self.arrivals += 1;
         p.last_ns = now_ns;
         let slot = &mut p.fragments[usize::from(header.index)];
@@ -218,11 +231,29 @@ impl Reassembler {
             return Ok(None);
         };
         self.held_bytes -= p.bytes;
-        let mut bytes = Vec::with_capacity(p.bytes);
+        let mut bytes = Vec::with_capacity(p.bytes - p.fragments.len() * FRAGMENT_SLOT_BYTES);
         for f in p.fragments.into_iter().flatten() {
             bytes.extend_from_slice(&f);
         }
         Ok(Some(self.complete(source, header, bytes)))
+    }
+
+    /// Remembers message `message_id` of `source` as completed (one held from
+    /// before a restart): a copy of it is a duplicate.
+    pub fn remember(&mut self, source: u32, message_id: u32) {
+        self.record_completed(source, message_id);
+    }
+
+    /// Forgets that message `message_id` of `source` was completed, so that a later
+    /// copy is delivered again instead of dropped as a duplicate: for a message that
+    /// failed validation above the reassembler (bytes that prove nothing about the
+    /// sender must not shadow its real message with that id).
+    pub fn forget(&mut self, source: u32, message_id: u32) {
+        if let Some(done) = self.completed.get_mut(&source)
+            && done.set.remove(&message_id)
+        {
+            done.order.retain(|id| *id != message_id);
+        }
     }
 
     fn drop_partial(&mut self, key: (u32, u32)) {
@@ -233,15 +264,7 @@ impl Reassembler {
 
     fn complete(&mut self, source: u32, header: DataHeader, bytes: Vec<u8>) -> Incoming {
         self.stats.completed += 1;
-        let done = self.completed.entry(source).or_default();
-        if done.set.insert(header.message_id) {
-            done.order.push_back(header.message_id);
-            while done.order.len() > self.config.dedup_window {
-                if let Some(old) = done.order.pop_front() {
-                    done.set.remove(&old);
-                }
-            }
-        }
+        self.record_completed(source, header.message_id);
         Incoming::Message(ReassembledMessage {
             source,
             message_id: header.message_id,
@@ -249,6 +272,18 @@ impl Reassembler {
             ack_requested: header.ack_requested,
             bytes,
         })
+    }
+
+    fn record_completed(&mut self, source: u32, message_id: u32) {
+        let done = self.completed.entry(source).or_default();
+        if done.set.insert(message_id) {
+            done.order.push_back(message_id);
+            while done.order.len() > self.config.dedup_window {
+                if let Some(old) = done.order.pop_front() {
+                    done.set.remove(&old);
+                }
+            }
+        }
     }
 
     /// Drops partial messages that received nothing for `timeout_s` (counted as

@@ -12,13 +12,16 @@ pub enum DropReason {
     Superseded,
     /// Drop-oldest: pushed out of a full queue by a newer message.
     Overflow,
-    /// Store-and-forward: refused because the store was full.
+    /// Store-and-forward: refused because no recipient's pending set had room.
     StoreFull,
     /// Refused: larger than the class capacity or than 65 535 fragments.
     TooLarge,
     /// Store-and-forward: given up for one peer because that peer was removed
     /// (counted once per message and peer; see `LinkShaper::remove_peer`).
     PeerRemoved,
+    /// Store-and-forward: stored for the other recipients but not for one whose
+    /// pending set was full (counted once per message and skipped peer).
+    PeerFull,
 }
 
 /// Drops of one class, by reason.
@@ -34,6 +37,8 @@ pub struct DropCounts {
     pub too_large: u64,
     /// See [`DropReason::PeerRemoved`].
     pub peer_removed: u64,
+    /// See [`DropReason::PeerFull`].
+    pub peer_full: u64,
 }
 
 impl DropCounts {
@@ -44,13 +49,19 @@ impl DropCounts {
             DropReason::StoreFull => self.store_full += 1,
             DropReason::TooLarge => self.too_large += 1,
             DropReason::PeerRemoved => self.peer_removed += 1,
+            DropReason::PeerFull => self.peer_full += 1,
         }
     }
 
     /// All drops together.
     #[must_use]
     pub fn total(&self) -> u64 {
-        self.superseded + self.overflow + self.store_full + self.too_large + self.peer_removed
+        self.superseded
+            + self.overflow
+            + self.store_full
+            + self.too_large
+            + self.peer_removed
+            + self.peer_full
     }
 }
 

@@ -19,6 +19,27 @@
 //! once to all of them (a broadcast frame, the common case on a healthy link);
 //! otherwise fragments go to one peer at a time, oldest message first, so that a
 //! lagging peer never hears a newer message before an older one it still misses.
+//!
+//! **Per-peer bounds** (issue 23): the class's `capacity_messages` and
+//! `capacity_bytes` bound each recipient's *pending set* (the stored messages it
+//! misses) on its own. A new message is stored for every recipient whose pending
+//! set has room for it; a recipient without room is skipped for that message
+//! (counted as [`DropReason::PeerFull`](super::DropReason::PeerFull)), so a peer
+//! that never acknowledges holds at most its own bound and cannot make the store
+//! refuse messages for the others. The store refuses (back-pressure) only when no
+//! recipient has room. It holds at most `capacity × recipients`; with no recipient
+//! known yet, messages wait for the first within one capacity.
+//!
+//! **Silent peers** are [suspended](Store::suspend_peer): they get only a probe —
+//! their oldest pending message, one at a time, every `retransmit_timeout_max_s` —
+//! and frames for the others go addressed to them (a suspended peer that comes back
+//! never hears a newer message before its backlog). They stay recipients (within
+//! their bound), so when heard again (the probe's acknowledgement, or anything
+//! else) they [rejoin](Store::add_peer) and get what they missed, oldest first,
+//! paced by the window and the token bucket.
+//!
+//! **Acknowledgements** count only for a message that was sent to that peer:
+//! bytes that merely guess an id cannot release a message before it left.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
@@ -42,6 +63,8 @@ pub(super) struct Stored {
     sent_once: bool,
     /// Intended recipients that have not acknowledged it yet.
     missing: BTreeSet<u32>,
+    /// Peers its last fragment went to (an acknowledgement before that is not real).
+    sent_to: BTreeSet<u32>,
 }
 
 /// One peer's go-back-N state.
@@ -53,6 +76,8 @@ struct Cursor {
     next_fragment: u16,
     deadline_ns: Option<u64>,
     timeout_ns: u64,
+    /// False while the peer is suspended (silent for too long).
+    active: bool,
 }
 
 impl Cursor {
@@ -63,6 +88,7 @@ impl Cursor {
             next_fragment: 0,
             deadline_ns: None,
             timeout_ns: s_to_ns(config.retransmit_timeout_s),
+            active: true,
         }
     }
 }
@@ -76,6 +102,26 @@ pub(super) struct NextFragment {
     pub fragment: u16,
     /// `None`: every known peer (one broadcast frame); `Some(p)`: peer `p` only.
     pub to: Option<u32>,
+}
+
+/// What [`Store::acknowledge`] made of an acknowledgement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum StoreAck {
+    /// The peer had it now; `true`: nobody misses it any more and it left.
+    Recorded(bool),
+    /// The store holds it for that peer but never sent it there.
+    NotSent,
+    /// Not held for that peer (an unknown id, or a repeat).
+    Unknown,
+}
+
+/// Whom a new message is stored for ([`Store::admit`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct Admission {
+    /// Recipients whose pending set has room for it.
+    pub recipients: BTreeSet<u32>,
+    /// Recipients skipped: their pending set is full.
+    pub skipped: u64,
 }
 
 /// See the [module docs](self).
@@ -133,16 +179,43 @@ impl Store {
         self.bytes
     }
 
-    /// Would a message of `len` bytes fit?
-    pub fn has_room(&self, len: usize) -> bool {
-        self.messages.len() < self.config.capacity_messages
-            && self.bytes + len <= self.config.capacity_bytes
+    /// Messages and bytes `peer` misses (its pending set).
+    pub fn pending(&self, peer: u32) -> (usize, usize) {
+        self.messages
+            .iter()
+            .filter(|m| m.missing.contains(&peer))
+            .fold((0, 0), |(n, b), m| (n + 1, b + m.bytes.len()))
     }
 
-    /// Stores a message for every known peer (call [`has_room`](Self::has_room) first).
-    pub fn push(&mut self, id: u32, bytes: Arc<[u8]>, offered_ns: u64, count: u16) {
-        let missing = self.peers.keys().copied().collect();
-        self.push_for(id, bytes, offered_ns, count, missing);
+    fn has_room(&self, (messages, bytes): (usize, usize), len: usize) -> bool {
+        messages < self.config.capacity_messages && bytes + len <= self.config.capacity_bytes
+    }
+
+    /// Whom a message of `len` bytes would be stored for, among `wanted` (`None`:
+    /// every known peer): those whose pending set has room; `None` when nobody has
+    /// room (or, with no peer known, when the store is full).
+    pub fn admit(&self, len: usize, wanted: Option<u32>) -> Option<Admission> {
+        if self.peers.is_empty() {
+            let room = self.has_room((self.messages.len(), self.bytes), len);
+            return room.then(|| Admission {
+                recipients: wanted.into_iter().collect(),
+                skipped: 0,
+            });
+        }
+        let candidates: Vec<u32> = match wanted {
+            Some(peer) => vec![peer],
+            None => self.peers.keys().copied().collect(),
+        };
+        let recipients: BTreeSet<u32> = candidates
+            .iter()
+            .copied()
+            .filter(|p| self.has_room(self.pending(*p), len))
+            .collect();
+        let skipped = (candidates.len() - recipients.len()) as u64;
+        (!recipients.is_empty()).then_some(Admission {
+            recipients,
+            skipped,
+        })
     }
 
     /// Stores a message for the given recipients (a restored one, see
@@ -172,16 +245,22 @@ impl Store {
             transmissions: 0,
             sent_once: false,
             missing,
+            sent_to: BTreeSet::new(),
         });
         self.next_seq += 1;
         self.generation += 1;
     }
 
     /// Adds a recipient: it becomes an intended recipient of everything still
-    /// stored. Returns false if it was known already.
+    /// stored. A suspended peer rejoins: its cursor goes back to the oldest
+    /// message it misses. Returns false if it was known and active already.
     pub fn add_peer(&mut self, peer: u32) -> bool {
-        if self.peers.contains_key(&peer) {
-            return false;
+        if let Some(c) = self.peers.get_mut(&peer) {
+            if c.active {
+                return false;
+            }
+            *c = Cursor::new(&self.config);
+            return true;
         }
         self.peers.insert(peer, Cursor::new(&self.config));
         for m in &mut self.messages {
@@ -206,19 +285,46 @@ impl Store {
         given_up
     }
 
+    /// Stops sending to `peer` (silent for too long) without giving up what it
+    /// misses; [`add_peer`](Self::add_peer) resumes it. Returns false if it was
+    /// unknown or suspended already.
+    pub fn suspend_peer(&mut self, peer: u32) -> bool {
+        match self.peers.get_mut(&peer) {
+            Some(c) if c.active => {
+                c.active = false;
+                c.timeout_ns = s_to_ns(self.config.retransmit_timeout_max_s);
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// The known peers.
     pub fn peers(&self) -> impl Iterator<Item = u32> + '_ {
         self.peers.keys().copied()
     }
 
-    /// Records `peer`'s acknowledgement of message `id`. Returns `Some(released)`
-    /// if the peer was missing it (`released`: nobody misses it any more and it
-    /// left the store), `None` otherwise (unknown id or peer, or a repeat).
-    pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: u32) -> Option<bool> {
-        let index = self.messages.iter().position(|m| m.id == id)?;
-        if !self.messages[index].missing.remove(&peer) {
-            return None;
+    /// The suspended peers.
+    pub fn suspended(&self) -> impl Iterator<Item = u32> + '_ {
+        self.peers
+            .iter()
+            .filter(|(_, c)| !c.active)
+            .map(|(p, _)| *p)
+    }
+
+    /// Records `peer`'s acknowledgement of message `id` (see [`StoreAck`]).
+    pub fn acknowledge(&mut self, now_ns: u64, peer: u32, id: u32) -> StoreAck {
+        let Some(index) = self.messages.iter().position(|m| m.id == id) else {
+            return StoreAck::Unknown;
+        };
+        let m = &mut self.messages[index];
+        if !m.missing.contains(&peer) {
+            return StoreAck::Unknown;
         }
+        if !m.sent_to.contains(&peer) {
+            return StoreAck::NotSent;
+        }
+        m.missing.remove(&peer);
         self.generation += 1;
         let initial = s_to_ns(self.config.retransmit_timeout_s);
         let in_flight = self.in_flight(peer);
@@ -231,7 +337,7 @@ impl Store {
         if released {
             self.release_complete();
         }
-        Some(released)
+        StoreAck::Recorded(released)
     }
 
     /// Drops every message that no recipient misses. With no peer known at all,
@@ -277,6 +383,9 @@ impl Store {
                     c.next_seq = 0;
                     c.next_fragment = 0;
                     c.timeout_ns = c.timeout_ns.saturating_mul(2).min(max);
+                    if !c.active {
+                        c.timeout_ns = max;
+                    }
                 }
             }
         }
@@ -289,7 +398,13 @@ impl Store {
 
     /// `peer`'s next (message index, fragment), if its window allows one.
     fn next_for(&self, peer: u32, c: &Cursor) -> Option<(usize, u16)> {
-        if self.in_flight(peer) >= self.config.window_messages {
+        // A suspended peer is probed with one message at a time.
+        let window = if c.active {
+            self.config.window_messages
+        } else {
+            1
+        };
+        if self.in_flight(peer) >= window {
             return None;
         }
         let index = self
@@ -316,6 +431,7 @@ impl Store {
             .iter()
             .filter_map(|(p, c)| self.next_for(*p, c).map(|n| (*p, n)))
             .collect();
+
         let (peer, best) = wanted
             .iter()
             .min_by_key(|(_, n)| (self.messages[n.0].sent_once, *n))
@@ -350,6 +466,7 @@ impl Store {
                 continue;
             }
             if last {
+                m.sent_to.insert(*peer);
                 c.next_seq = seq + 1;
                 c.next_fragment = 0;
                 if c.deadline_ns.is_none() {

@@ -17,6 +17,28 @@ fn config(rate_bps: u64, burst_bytes: u64, mtu_bytes: usize) -> ShaperConfig {
 }
 
 /// Transmission time of `bytes` at `rate_bps`, ns (rounded up).
+/// Sends everything the shaper has from `now` on (at most 10 s of it); returns the
+/// frames and the time it stopped.
+fn drain(s: &mut LinkShaper, mut now: u64) -> (Vec<Frame>, u64) {
+    let mut frames = Vec::new();
+    let end = now + 10 * S;
+    while let Some(next) = s.next_send_time(now) {
+        if next > end {
+            break;
+        }
+        now = next;
+        match s.poll(now) {
+            Some(f) => frames.push(f),
+            None if s.next_send_time(now) == Some(now) => break,
+            None => {}
+        }
+        if frames.len() > 10_000 {
+            break;
+        }
+    }
+    (frames, now)
+}
+
 fn tx_ns(bytes: usize, rate_bps: u64) -> u64 {
     (bytes as u64 * 8 * S).div_ceil(rate_bps)
 }
@@ -407,10 +429,13 @@ fn removing_a_peer_gives_its_messages_up_and_counts_them() {
     assert!(s.add_peer(2));
     assert!(!s.add_peer(2));
     s.offer(0, Class::Keyframe, vec![2; 100]).unwrap();
-    assert!(s.acknowledge(0, 1, MessageId(0)));
-    assert!(s.acknowledge(0, 1, MessageId(1)));
+    // Not sent yet: an acknowledgement cannot be real.
+    assert_eq!(s.acknowledge(0, 1, MessageId(0)), AckOutcome::NotSent);
+    drain(&mut s, 0);
+    assert!(s.acknowledge(0, 1, MessageId(0)).recorded());
+    assert!(s.acknowledge(0, 1, MessageId(1)).recorded());
     assert_eq!(s.queued_messages(Class::Keyframe), 2, "robot 2 misses both");
-    assert!(s.acknowledge(0, 2, MessageId(0)));
+    assert!(s.acknowledge(0, 2, MessageId(0)).recorded());
     assert_eq!(s.queued_messages(Class::Keyframe), 1);
     assert_eq!(s.remove_peer(2), 1);
     assert_eq!(s.queued_messages(Class::Keyframe), 0);
@@ -449,8 +474,8 @@ fn a_full_store_refuses_and_keeps_what_it_accepted() {
         s.offer(t, Class::Keyframe, vec![9; 100]),
         Err(Refused::StoreFull)
     );
-    assert!(s.acknowledge(t, 1, MessageId(0)));
-    assert!(!s.acknowledge(t, 1, MessageId(0)));
+    assert!(s.acknowledge(t, 1, MessageId(0)).recorded());
+    assert!(!s.acknowledge(t, 1, MessageId(0)).recorded());
     assert!(s.offer(t, Class::Keyframe, vec![9; 100]).is_ok());
     let st = s.stats().class(Class::Keyframe);
     assert_eq!(st.drops.store_full, 2);
@@ -775,6 +800,7 @@ fn a_restored_shaper_delivers_what_was_stored_and_continues_the_ids() {
         before.offer(0, Class::Keyframe, vec![i; 3_000]).unwrap();
     }
     assert_ne!(before.store_generation(), generation);
+    drain(&mut before, 0);
     // Both robots acknowledge the first keyframe; robot 1 also receives the second
     // but its acknowledgement is lost; then the link restarts.
     before.acknowledge(0, 1, MessageId(1));
@@ -931,4 +957,132 @@ fn an_extra_lane_keeps_its_own_policy_priority_counters_and_addressee() {
         "lane.window_messages"
     );
     assert!(shaper.offer_to_lane(0, LaneId(9), None, vec![1]).is_err());
+}
+
+/// Issue 23: a peer that never acknowledges holds at most its own bound and cannot
+/// make the store refuse keyframes for the others; suspended, it stops holding back
+/// broadcast frames; heard again, it gets what it missed.
+#[test]
+fn a_silent_peer_cannot_block_the_others_and_catches_up_when_heard_again() {
+    let mut c = config(1_000_000, 4_000, 1_200);
+    c.keyframe = ClassConfig {
+        capacity_messages: 5,
+        ..ClassConfig::store_and_forward()
+    };
+    let mut s = LinkShaper::new(c).unwrap();
+    s.add_peer(1);
+    s.add_peer(9); // never acknowledges
+    let mut now = 0;
+    for k in 0..20u8 {
+        assert!(
+            s.offer(now, Class::Keyframe, vec![k; 300]).is_ok(),
+            "keyframe {k}"
+        );
+        let (frames, t) = drain(&mut s, now);
+        now = t + 100 * MS;
+        // Robot 1 acknowledges everything it was sent.
+        for f in &frames {
+            if let FrameKind::Data {
+                message_id,
+                index,
+                count,
+            } = f.kind
+                && index + 1 == count
+                && f.to.is_none_or(|to| to == 1)
+            {
+                s.acknowledge(now, 1, MessageId(message_id));
+            }
+        }
+        let (pending, _) = s.pending_for(Class::Keyframe, 9);
+        assert!(pending <= 5, "robot 9 holds {pending}");
+        assert_eq!(s.pending_for(Class::Keyframe, 1).0, 0);
+    }
+    let st = *s.stats().class(Class::Keyframe);
+    assert_eq!(st.drops.store_full, 0);
+    assert_eq!(
+        st.drops.peer_full, 15,
+        "15 keyframes skipped for robot 9 only"
+    );
+    // Robot 9 times out: it is only probed with its oldest message, one at a time,
+    // every `retransmit_timeout_max_s` (8 s); its 5 stay.
+    assert!(s.suspend_peer(9));
+    assert_eq!(s.suspended_peers(), vec![9]);
+    let (frames, t) = drain(&mut s, now);
+    let probes: Vec<u32> = frames
+        .iter()
+        .filter_map(|f| match f.kind {
+            FrameKind::Data { message_id, .. } if f.to != Some(1) => Some(message_id),
+            _ => None,
+        })
+        .collect();
+    assert!(!probes.is_empty() && probes.len() <= 2, "{probes:?}");
+    assert!(probes.iter().all(|id| *id == probes[0]), "{probes:?}");
+    now = t;
+    assert_eq!(s.pending_for(Class::Keyframe, 9).0, 5);
+    // A new keyframe goes out to robot 1, addressed (robot 9 must not hear it
+    // before its backlog), and is skipped for robot 9 (full).
+    s.offer(now, Class::Keyframe, vec![99; 300]).unwrap();
+    let (frames, t) = drain(&mut s, now);
+    now = t;
+    assert!(
+        frames
+            .iter()
+            .any(|f| f.to == Some(1) && f.class == Class::Keyframe)
+    );
+    assert_eq!(s.stats().class(Class::Keyframe).drops.peer_full, 16);
+    // Heard again: it rejoins and gets its five, oldest first.
+    assert!(s.add_peer(9));
+    assert!(s.suspended_peers().is_empty());
+    let (frames, _) = drain(&mut s, now);
+    let to_nine: Vec<u32> = frames
+        .iter()
+        .filter_map(|f| match f.kind {
+            FrameKind::Data { message_id, .. } if f.to == Some(9) => Some(message_id),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(&to_nine[..5], &[0, 1, 2, 3, 4]);
+}
+
+/// Issue 23 effect (b): an acknowledgement of a stored message that was never sent
+/// to that peer (bytes that guessed the id) releases nothing.
+#[test]
+fn an_ack_for_a_message_not_yet_sent_releases_nothing() {
+    let mut c = config(1_000, 1_200, 1_200); // slow: the second waits
+    c.keyframe = ClassConfig::store_and_forward();
+    let mut s = LinkShaper::new(c).unwrap();
+    s.add_peer(1);
+    s.offer(0, Class::Keyframe, vec![1; 1_000]).unwrap();
+    s.offer(0, Class::Keyframe, vec![2; 1_000]).unwrap();
+    assert!(s.poll(0).is_some());
+    assert_eq!(s.acknowledge(0, 1, MessageId(1)), AckOutcome::NotSent);
+    assert_eq!(s.acknowledge(0, 1, MessageId(7)), AckOutcome::Unknown);
+    assert_eq!(s.acknowledge(0, 1, MessageId(0)), AckOutcome::Recorded);
+    assert_eq!(s.acknowledge(0, 1, MessageId(0)), AckOutcome::Unknown);
+    assert_eq!(s.queued_messages(Class::Keyframe), 1);
+}
+
+/// A frame announcing 65 535 fragments costs its fragment table: a flood of such
+/// frames stays within `max_bytes`, evicting (and counting) the oldest.
+#[test]
+fn announced_fragment_tables_count_against_the_reassembly_budget() {
+    let mut r = Reassembler::new(ReassemblyConfig {
+        max_bytes: 4 << 20,
+        ..ReassemblyConfig::default()
+    })
+    .unwrap();
+    for id in 0..200u32 {
+        let header = frame::DataHeader {
+            class: Class::Keyframe,
+            ack_requested: false,
+            message_id: id,
+            index: 0,
+            count: u16::MAX,
+        };
+        let bytes = frame::data_frame(&header, &[0; 10]);
+        assert_eq!(r.push(0, 1, &bytes).unwrap(), None);
+        assert!(r.held_bytes() <= 4 << 20, "{}", r.held_bytes());
+    }
+    assert!(r.stats().evicted > 150, "{:?}", r.stats());
+    assert!(r.partial_messages() < 5);
 }

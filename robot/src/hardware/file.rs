@@ -125,6 +125,12 @@ pub enum HardwareError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The link's journal could not be opened.
+    #[error("opening the link journal")]
+    Journal {
+        /// Why (names the file).
+        source: troupe_comms::journal::JournalError,
+    },
 }
 
 impl HardwareRobot {

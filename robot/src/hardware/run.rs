@@ -171,11 +171,15 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
         path: robot.path.clone(),
         source: e.within("mavlink"),
     })?;
-    // Nothing of the link outlives the process: start its message ids somewhere new,
-    // as a simulated robot process does, so peers do not drop them as repeats.
+    // The link's journal outlives the process (docs/link-durability.md); a new
+    // one starts its message ids somewhere new, as a simulated robot process does,
+    // so peers do not drop them as repeats.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u32);
+    let journal_dir = file.robot.link.journal_dir_in(&robot.out);
+    let link_journal = LinkJournal::on_disk(&journal_dir, first_id)
+        .map_err(|source| HardwareError::Journal { source })?;
     let source_inputs = inputs.clone();
     let parts = RobotParts {
         frame_source: Box::new(move || Box::new(source_inputs.frame_source())),
@@ -183,9 +187,11 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
         route: Vec::new(),
         depart_at_s: 0.0,
         camera,
-        link_journal: LinkJournal::starting_at(first_id),
+        link_journal,
     };
-    let mut spec = assemble(&format!("robot{}", file.id), &file.robot, parts)?;
+    let mut config = file.robot.clone();
+    config.link = config.link.with_team(file.team_size);
+    let mut spec = assemble(&format!("robot{}", file.id), &config, parts)?;
     if file.mavlink.odometry_source == OdometrySource::External {
         let odometry = inputs.clone();
         spec.add(ActorSpec::new("ros2_odometry", move || {

@@ -1,14 +1,15 @@
 //! The link actor (module docs of [`crate::link`]).
 
-use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex, PoisonError};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 use std::time::Duration;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
+use troupe_comms::journal::{JournalError, ReceivedMessage};
 use troupe_comms::shaping::{
-    ClassConfig, ClassStats, DurableState, Incoming, LaneId, LinkShaper, MessageId, Reassembler,
-    ReassemblyStats, ShaperStats,
+    AckOutcome, ClassStats, Incoming, LaneId, LinkShaper, MessageId, Reassembler, ReassemblyStats,
+    ShaperStats,
 };
 use troupe_comms::transport::TransportStats;
 use troupe_comms::wire::{self, Class, Envelope, Payload, UserMessage, valid_user_name};
@@ -19,13 +20,15 @@ use crate::msgs::{
 };
 
 use troupe_runtime::{
-    Actor, ActorError, ActorResult, Context, Destination, Event, LINK_RX, LINK_TRANSPORT, LINK_TX,
-    LinkTx, Message, QueuePolicy, Received, RobotId, Time, TimerId, Topic,
+    Actor, ActorError, ActorResult, Context, Destination, ErrorChain, Event, LINK_RX,
+    LINK_TRANSPORT, LINK_TX, LinkTx, Message, QueuePolicy, Received, RobotId, Time, TimerId, Topic,
 };
 
 use super::config::{KeyframeEncoding, LinkConfig};
 use super::convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
 use super::frames::{PeerFrame, transform_keyframe, transform_plan};
+use super::journal::{JournaledLane, LinkJournal};
+use super::rejections::{RateLimitedLog, Rejection, RejectionCounts};
 use super::shared::{SHARE_REQUESTS, ShareRequest, ShareTo, SharedCodec};
 /// The link's counters, published every second.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -37,8 +40,17 @@ pub struct LinkStatus {
     pub shaper: ShaperStats,
     /// Incoming: frames, completed messages, duplicates, timeouts, evictions.
     pub reassembly: ReassemblyStats,
-    /// Messages rejected after reassembly (decode errors, wrong team or sender).
+    /// Messages rejected after reassembly (decode errors, wrong team or sender,
+    /// invalid payloads).
     pub rejected_messages: u64,
+    /// Frames and messages rejected, per reason (roster, own id, malformed frames,
+    /// envelopes, payloads, acknowledgements of messages not held).
+    pub rejections: RejectionCounts,
+    /// Store-and-forward recipients suspended now: silent for longer than
+    /// `peer_timeout_s` (what they miss is kept for them, within their bounds).
+    pub silent_peers: Vec<u32>,
+    /// How many times a recipient was suspended for its silence.
+    pub peer_timeouts: u64,
     /// The process's network transport counters, when it has one (robot processes
     /// over zenoh; `None` in simulation), as last published on `link/transport`.
     pub transport: Option<TransportStats>,
@@ -95,69 +107,11 @@ struct SharedEntry {
 /// Link counters.
 pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
 
-/// The link's non-volatile storage: what it must not forget when it restarts (an
-/// actor restart after a panic, or a reboot of the whole robot). It holds the
-/// shaper's [`DurableState`] — the next message id and every store-and-forward
-/// message not yet acknowledged by all its recipients — and the envelope sequence.
-/// A [`LinkActor::journaled`] link writes it after every event it handles and
-/// resumes from it when built again, so nothing accepted into a store-and-forward
-/// class is lost and peers never see a reused message id (they would drop the
-/// message as a duplicate). The robot assembly gives each robot one, outside the
-/// actors' factories; clones share the storage.
-#[derive(Clone, Debug, Default)]
-pub struct LinkJournal(Arc<Mutex<JournalEntry>>);
-
-#[derive(Clone, Debug, Default)]
-struct JournalEntry {
-    shaper: Option<DurableState>,
-    sequence: u64,
-    /// The shared topics' lanes in the order they were added.
-    lanes: Vec<JournaledLane>,
-}
-
-/// A shared topic's lane as the journal keeps it: a new link adds the lanes again
-/// in the same order (so stored messages return to them) and keeps sharing the
-/// topics without the actors asking again.
-#[derive(Clone, Debug)]
-struct JournaledLane {
-    name: String,
-    class: Class,
-    config: ClassConfig,
-    request: Option<ShareRequest>,
-}
-
-impl LinkJournal {
-    /// An empty journal whose first message id is `first_id`. A robot process that
-    /// keeps no journal across its own restarts starts each run at a different id
-    /// (e.g. from the clock) so that peers who remember the previous run's ids do
-    /// not take new messages for repeats.
-    #[must_use]
-    pub fn starting_at(first_id: u32) -> Self {
-        LinkJournal(Arc::new(Mutex::new(JournalEntry {
-            shaper: Some(DurableState {
-                next_id: first_id,
-                ..DurableState::default()
-            }),
-            sequence: 0,
-            lanes: Vec::new(),
-        })))
-    }
-
-    fn entry(&self) -> std::sync::MutexGuard<'_, JournalEntry> {
-        self.0.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
-    /// Store-and-forward messages kept (accepted, not acknowledged by every recipient).
-    #[must_use]
-    pub fn stored_messages(&self) -> usize {
-        self.entry().shaper.as_ref().map_or(0, |s| s.stored.len())
-    }
-}
-
 const SEND_ODOMETRY: TimerId = TimerId(0);
 const PUMP: TimerId = TimerId(1);
 const STATUS: TimerId = TimerId(2);
 const SEND_PLAN: TimerId = TimerId(3);
+const REPLAY: TimerId = TimerId(4);
 
 /// See the [module docs](crate::link).
 pub struct LinkActor {
@@ -175,6 +129,13 @@ pub struct LinkActor {
     /// When each store-and-forward recipient was last heard.
     last_heard: BTreeMap<u32, Time>,
     rejected: u64,
+    /// Suspensions of silent recipients so far.
+    peer_timeouts: u64,
+    /// Who may talk to us (empty: anyone but ourselves).
+    roster: BTreeSet<u32>,
+    /// Rejections per reason, and their rate-limited log.
+    rejections: RejectionCounts,
+    rejection_log: RateLimitedLog<Rejection>,
     /// The latest transport counters from the executor (`link/transport`).
     transport: Option<TransportStats>,
     /// Whether this robot's keyframes go to peers ([`LinkActor::without_keyframes`]).
@@ -189,6 +150,8 @@ pub struct LinkActor {
     lanes_changed: bool,
     /// The shaper's store generation last written to the journal.
     journaled_generation: Option<u64>,
+    /// Messages received before a process restart, to publish again at start.
+    replay: Vec<ReceivedMessage>,
 }
 
 impl LinkActor {
@@ -198,6 +161,7 @@ impl LinkActor {
             .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
         let reassembler = Reassembler::new(config.reassembly)
             .map_err(|e| ActorError::msg(format!("link reassembly: {e}")))?;
+        let roster = config.roster.iter().copied().collect();
         Ok(LinkActor {
             config,
             shaper,
@@ -210,6 +174,10 @@ impl LinkActor {
             plans_sent: 0,
             last_heard: BTreeMap::new(),
             rejected: 0,
+            peer_timeouts: 0,
+            roster,
+            rejections: RejectionCounts::default(),
+            rejection_log: RateLimitedLog::new(Duration::from_secs(1)),
             transport: None,
             share_keyframes: true,
             journal: LinkJournal::default(),
@@ -217,19 +185,24 @@ impl LinkActor {
             shared: BTreeMap::new(),
             lanes: Vec::new(),
             lanes_changed: false,
+            replay: Vec::new(),
         })
     }
 
     /// Keeps the link's durable state in `journal` and resumes from what it holds
     /// (see [`LinkJournal`]); fails if the stored state does not fit the settings.
     pub fn journaled(mut self, journal: LinkJournal) -> Result<Self, ActorError> {
-        let entry = journal.entry().clone();
-        if let Some(state) = &entry.shaper {
+        let (shaper, lanes, sequence) = {
+            let entry = journal.entry();
+            (entry.shaper.clone(), entry.lanes.clone(), entry.sequence)
+        };
+        self.replay = journal.take_received();
+        if let Some(state) = &shaper {
             self.shaper = LinkShaper::new(self.config.shaper)
                 .map_err(|e| ActorError::msg(format!("link shaper: {e}")))?;
             // The shared topics' lanes come back first, in their order, so that
             // their stored messages return to them.
-            for journaled in &entry.lanes {
+            for journaled in &lanes {
                 let name = &journaled.name;
                 let lane = self
                     .shaper
@@ -259,7 +232,7 @@ impl LinkActor {
                     },
                 );
             }
-            self.lanes = entry.lanes.clone();
+            self.lanes = lanes;
             self.shaper.resume(state);
             if !state.stored.is_empty() {
                 tracing::info!(
@@ -269,31 +242,41 @@ impl LinkActor {
                 );
             }
         }
-        self.sequence = entry.sequence;
+        self.sequence = sequence;
         self.journal = journal;
         self.journaled_generation = None;
         Ok(self)
     }
 
     /// Writes the durable state to the journal: the stored messages when they
-    /// changed (bytes are shared, not copied), the counters always.
-    fn save(&mut self) {
+    /// changed (bytes are shared, not copied), the counters always; a journal on
+    /// disk gets what changed, fsync'd.
+    fn save(&mut self) -> Result<(), JournalError> {
         let generation = self.shaper.store_generation();
         let mut entry = self.journal.entry();
-        match &mut entry.shaper {
+        let entry = &mut *entry;
+        let changed = match &mut entry.shaper {
             Some(state) if self.journaled_generation == Some(generation) => {
                 state.next_id = self.shaper.next_id().0;
+                false
             }
             slot => {
                 *slot = Some(self.shaper.durable_state());
                 self.journaled_generation = Some(generation);
+                true
             }
-        }
+        };
         entry.sequence = self.sequence;
         if self.lanes_changed {
             entry.lanes = self.lanes.clone();
             self.lanes_changed = false;
         }
+        if let (Some(disk), Some(state)) = (&mut entry.disk, &entry.shaper)
+            && (changed || disk.ceiling_reached(state.next_id, entry.sequence))
+        {
+            disk.sync(state, entry.sequence)?;
+        }
+        Ok(())
     }
 
     /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
@@ -434,15 +417,26 @@ impl LinkActor {
     /// recipient of store-and-forward messages (with the stored backlog) and its
     /// silence clock restarts.
     fn heard(&mut self, peer: RobotId, ctx: &mut Context<'_>) {
+        let silent = !self.last_heard.contains_key(&peer.0);
         self.last_heard.insert(peer.0, ctx.now());
+        let suspended = silent && self.shaper.suspended_peers().contains(&peer.0);
         if self.shaper.add_peer(peer.0) {
-            tracing::debug!(robot = ctx.robot_name(), %peer, "store-and-forward peer added");
+            if suspended {
+                tracing::info!(
+                    robot = ctx.robot_name(),
+                    %peer,
+                    "store-and-forward peer heard again: it rejoins and gets what it missed"
+                );
+            } else {
+                tracing::debug!(robot = ctx.robot_name(), %peer, "store-and-forward peer added");
+            }
             self.pump(ctx);
         }
     }
 
-    /// Removes peers silent for longer than `peer_timeout_s` from the
-    /// store-and-forward recipients (what they missed is given up and counted).
+    /// Suspends peers silent for longer than `peer_timeout_s`: nothing more is sent
+    /// to them and they no longer hold back the others; what they miss is kept for
+    /// them (within their own bounds) until they are heard again.
     fn expire_peers(&mut self, ctx: &mut Context<'_>) {
         if self.config.peer_timeout_s <= 0.0 {
             return;
@@ -457,37 +451,123 @@ impl LinkActor {
             .collect();
         for peer in silent {
             self.last_heard.remove(&peer);
-            let given_up = self.shaper.remove_peer(peer);
-            tracing::warn!(
-                robot = ctx.robot_name(),
-                peer,
-                given_up,
-                "peer silent for more than {} s: store-and-forward gave up its backlog",
-                self.config.peer_timeout_s
-            );
+            if self.shaper.suspend_peer(peer) {
+                self.peer_timeouts += 1;
+                let (pending, pending_bytes) = self.shaper.pending_for(Class::Keyframe, peer);
+                tracing::warn!(
+                    robot = ctx.robot_name(),
+                    peer,
+                    pending,
+                    pending_bytes,
+                    "peer silent for more than {} s: suspended as a store-and-forward \
+                     recipient until heard again",
+                    self.config.peer_timeout_s
+                );
+            }
         }
         self.pump(ctx);
     }
 
+    /// Counts a rejection and logs it, at most one line per reason per second
+    /// (with the count since the last line).
+    fn reject(
+        &mut self,
+        reason: Rejection,
+        from: RobotId,
+        detail: impl std::fmt::Display,
+        ctx: &mut Context<'_>,
+    ) {
+        self.rejections.count(reason);
+        if let Some(count) = self.rejection_log.note(reason, ctx.now()) {
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                reason = reason.name(),
+                count,
+                "link rejected {count} since the last line; latest from {from}: {detail}"
+            );
+        }
+    }
+
+    /// Logs the rejections held back by the rate limit (on the status timer).
+    fn flush_rejection_log(&mut self, ctx: &mut Context<'_>) {
+        for (reason, count) in self.rejection_log.flush(ctx.now()) {
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                reason = reason.name(),
+                count,
+                "link rejected {count} since the last line"
+            );
+        }
+    }
+
+    /// Whether `from` may talk to us: in the roster and not our own id. Nothing of
+    /// a frame that fails is kept (no reassembly, no recipient, no silence clock).
+    fn admits(&mut self, from: RobotId, ctx: &mut Context<'_>) -> bool {
+        if from == ctx.robot() {
+            self.reject(
+                Rejection::OwnId,
+                from,
+                "a frame claims this robot's id",
+                ctx,
+            );
+            false
+        } else if !self.roster.is_empty() && !self.roster.contains(&from.0) {
+            self.reject(Rejection::NotInRoster, from, "not in the team roster", ctx);
+            false
+        } else {
+            true
+        }
+    }
+
     fn receive_frame(&mut self, from: RobotId, bytes: &[u8], ctx: &mut Context<'_>) -> ActorResult {
+        if !self.admits(from, ctx) {
+            return Ok(());
+        }
         let now = ctx.now().as_nanos();
-        let incoming = self
-            .reassembler
-            .push(now, from.0, bytes)
-            .map_err(|e| ActorError::with_source(format!("rejected a frame from {from}"), e))?;
+        let incoming = match self.reassembler.push(now, from.0, bytes) {
+            Ok(incoming) => incoming,
+            Err(e) => {
+                self.reject(Rejection::MalformedFrame, from, ErrorChain(&e), ctx);
+                return Ok(());
+            }
+        };
         match incoming {
             None => Ok(()),
             Some(Incoming::Message(message)) => {
+                let envelope = match self.open_envelope(from, &message.bytes) {
+                    Ok(envelope) => envelope,
+                    Err((reason, e)) => {
+                        // Not a valid envelope of our team from this sender: it proves
+                        // nothing, so it is neither acknowledged nor remembered as
+                        // received (junk carrying a peer's next message ids must not
+                        // make us drop that peer's real messages as repeats, nor
+                        // acknowledge them in its name).
+                        self.reassembler.forget(from.0, message.message_id);
+                        self.rejected += 1;
+                        self.reject(reason, from, ErrorChain(&e), ctx);
+                        return Ok(());
+                    }
+                };
+                // A valid envelope is acknowledged even when its payload is unusable
+                // (a retransmission would not make it usable); on disk, only once
+                // it is journaled (an ack promises the message survives a crash).
                 if message.ack_requested {
+                    if let Err(e) =
+                        self.journal
+                            .record_received(from.0, message.message_id, &message.bytes)
+                    {
+                        self.reassembler.forget(from.0, message.message_id);
+                        return Err(ActorError::with_source("writing the link journal", e));
+                    }
                     self.shaper.queue_ack(from.0, message.message_id);
                     self.pump(ctx);
                 }
-                let result = self.receive_message(from, &message.bytes, ctx);
-                match result {
-                    Ok(()) => self.heard(from, ctx),
-                    Err(_) => self.rejected += 1,
+                if let Err(e) = self.deliver(from, envelope, ctx) {
+                    self.rejected += 1;
+                    self.reject(Rejection::InvalidPayload, from, ErrorChain(&e), ctx);
                 }
-                result
+                self.heard(from, ctx);
+                Ok(())
             }
             Some(Incoming::Duplicate {
                 message_id,
@@ -505,7 +585,14 @@ impl LinkActor {
                 // that peer only (the store keeps it until every peer has it).
                 self.heard(from, ctx);
                 for id in ids {
-                    self.shaper.acknowledge(now, from.0, MessageId(id));
+                    if self.shaper.acknowledge(now, from.0, MessageId(id)) == AckOutcome::NotSent {
+                        self.reject(
+                            Rejection::UnheldAck,
+                            from,
+                            format_args!("acknowledges message {id}, not yet sent to it"),
+                            ctx,
+                        );
+                    }
                 }
                 self.pump(ctx);
                 Ok(())
@@ -688,26 +775,68 @@ impl LinkActor {
             .collect()
     }
 
-    fn receive_message(
-        &mut self,
+    /// Publishes again what the journal received before the process restarted
+    /// (the team map of a restarted robot is whole again).
+    fn replay_received(&mut self, ctx: &mut Context<'_>) {
+        let replay = std::mem::take(&mut self.replay);
+        let count = replay.len();
+        for m in replay {
+            let from = RobotId(m.source);
+            let result = self
+                .open_envelope(from, &m.bytes)
+                .map_err(|(_, e)| e)
+                .and_then(|envelope| self.deliver(from, envelope, ctx));
+            if let Err(e) = result {
+                tracing::debug!(
+                    robot = ctx.robot_name(),
+                    "journaled message not replayed: {}",
+                    ErrorChain(&e)
+                );
+            }
+        }
+        tracing::info!(
+            robot = ctx.robot_name(),
+            count,
+            "replayed the messages received before the restart"
+        );
+    }
+
+    /// Decodes a reassembled message and checks its team and sender.
+    fn open_envelope(
+        &self,
         from: RobotId,
         bytes: &[u8],
-        ctx: &mut Context<'_>,
-    ) -> ActorResult {
-        let envelope = wire::decode(bytes)
-            .map_err(|e| ActorError::with_source(format!("rejected a message from {from}"), e))?;
+    ) -> Result<Envelope, (Rejection, ActorError)> {
+        let envelope = wire::decode(bytes).map_err(|e| {
+            (
+                Rejection::Undecodable,
+                ActorError::with_source(format!("rejected a message from {from}"), e),
+            )
+        })?;
         if envelope.team != self.config.team {
-            return Err(ActorError::msg(format!(
-                "rejected a message from {from}: team {} is not ours ({})",
-                envelope.team, self.config.team
-            )));
+            return Err((
+                Rejection::WrongTeam,
+                ActorError::msg(format!(
+                    "rejected a message from {from}: team {} is not ours ({})",
+                    envelope.team, self.config.team
+                )),
+            ));
         }
         if envelope.sender != from.0 {
-            return Err(ActorError::msg(format!(
-                "rejected a message from {from}: envelope names robot{} as its sender",
-                envelope.sender
-            )));
+            return Err((
+                Rejection::WrongSender,
+                ActorError::msg(format!(
+                    "rejected a message from {from}: envelope names robot{} as its sender",
+                    envelope.sender
+                )),
+            ));
         }
+        Ok(envelope)
+    }
+
+    /// Publishes a checked envelope's payload on the peer topics; an invalid
+    /// payload is an error.
+    fn deliver(&mut self, from: RobotId, envelope: Envelope, ctx: &mut Context<'_>) -> ActorResult {
         if let Payload::User(message) = &envelope.payload {
             return self.receive_shared(from, Time::from_nanos(envelope.stamp_ns), message, ctx);
         }
@@ -814,14 +943,24 @@ impl Actor for LinkActor {
             );
         }
         ctx.set_timer(STATUS, Duration::from_secs(1));
-        self.save();
-        Ok(())
+        if !self.replay.is_empty() {
+            // What this robot held before its process restarted: known (resends
+            // are duplicates), and published again once the other actors listen.
+            for m in &self.replay {
+                self.reassembler.remember(m.source, m.id);
+            }
+            ctx.set_timer(REPLAY, Duration::from_millis(100));
+        }
+        self.save()
+            .map_err(|e| ActorError::with_source("writing the link journal", e))
     }
 
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         let result = self.handle_event(event, ctx);
-        self.save();
-        result
+        let saved = self
+            .save()
+            .map_err(|e| ActorError::with_source("writing the link journal", e));
+        result.and(saved)
     }
 }
 
@@ -834,8 +973,13 @@ impl LinkActor {
                 self.pump(ctx);
                 Ok(())
             }
+            Event::Timer(REPLAY) => {
+                self.replay_received(ctx);
+                Ok(())
+            }
             Event::Timer(_) => {
                 self.expire_peers(ctx);
+                self.flush_rejection_log(ctx);
                 ctx.publish(
                     &LINK_STATUS,
                     LinkStatus {
@@ -843,6 +987,9 @@ impl LinkActor {
                         shaper: *self.shaper.stats(),
                         reassembly: *self.reassembler.stats(),
                         rejected_messages: self.rejected,
+                        rejections: self.rejections,
+                        silent_peers: self.shaper.suspended_peers(),
+                        peer_timeouts: self.peer_timeouts,
                         transport: self.transport,
                         shared: self.shared_stats(),
                     },

@@ -1,6 +1,7 @@
 //! Link settings.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use troupe_comms::shaping::{ClassConfig, QueuePolicy, ReassemblyConfig, ShaperConfig};
@@ -29,12 +30,29 @@ pub struct LinkConfig {
     /// Incoming reassembly limits.
     pub reassembly: ReassemblyConfig,
     /// Team members known in advance (robot indices; our own is ignored): they
-    /// are store-and-forward recipients from the start. Other peers become
-    /// recipients when first heard.
+    /// are store-and-forward recipients from the start. Other roster members
+    /// become recipients when first heard.
     pub peers: Vec<u32>,
-    /// A store-and-forward recipient silent for longer than this is removed and
-    /// what it missed is given up (counted as `peer_removed`), seconds; 0 = never.
+    /// The robot ids that may talk to this robot. A frame from any other id, or
+    /// claiming this robot's own id, is rejected and counted before anything else
+    /// looks at it (it never becomes a recipient or gets per-peer state). Empty:
+    /// filled in by the robot's assembly from the team ([`with_team`](Self::with_team):
+    /// ids `0..team size` and the base station's [`base_id`](Self::base_id)); a link
+    /// built with an empty roster hears every id but its own.
+    pub roster: Vec<u32>,
+    /// The base station's id on the link (thesis §8.2.6), in the roster; absent:
+    /// the team size, as in a base file.
+    pub base_id: Option<u32>,
+    /// A store-and-forward recipient silent for longer than this leaves the set
+    /// the link sends to (reported in the log and in [`LinkStatus`](super::LinkStatus)):
+    /// what it misses is still kept for it, within its own bounds, and resent when
+    /// it is heard again; seconds, 0 = never.
     pub peer_timeout_s: f64,
+    /// Robot processes (`troupe robot`, `troupe-robot`): where the link's journal
+    /// lives (`link.journal`: stored messages, acknowledgements, the next message
+    /// id, messages received), relative to the robot's output directory; absent:
+    /// `state/` in it. Simulated teams keep their journal in memory.
+    pub journal_dir: Option<PathBuf>,
     /// Peers whose world frame differs from ours (Eq. 8.1); others share our frame.
     pub peer_frames: Vec<PeerFrame>,
     /// How keyframe mixtures go on the wire.
@@ -116,7 +134,10 @@ impl Default for LinkConfig {
             shaper: ShaperConfig::default(),
             reassembly: ReassemblyConfig::default(),
             peers: Vec::new(),
-            peer_timeout_s: 0.0,
+            roster: Vec::new(),
+            base_id: None,
+            journal_dir: None,
+            peer_timeout_s: DEFAULT_PEER_TIMEOUT_S,
             peer_frames: Vec::new(),
             keyframe_encoding: KeyframeEncoding::default(),
             shared: BTreeMap::new(),
@@ -124,7 +145,37 @@ impl Default for LinkConfig {
     }
 }
 
+/// Default [`LinkConfig::peer_timeout_s`]: 100 periods of 10 Hz odometry.
+pub const DEFAULT_PEER_TIMEOUT_S: f64 = 10.0;
+
 impl LinkConfig {
+    /// Fills an empty [`roster`](Self::roster) with the team of `team_size`
+    /// robots (ids `0..team_size`) and the base station ([`base_id`](Self::base_id),
+    /// default `team_size`); a roster given in the file is kept as written.
+    ///
+    /// ```
+    /// use troupe_actors::link::LinkConfig;
+    /// let config = LinkConfig::default().with_team(3);
+    /// assert_eq!(config.roster, vec![0, 1, 2, 3]);
+    /// ```
+    #[must_use]
+    pub fn with_team(mut self, team_size: u32) -> Self {
+        if self.roster.is_empty() {
+            self.roster = (0..team_size)
+                .chain([self.base_id.unwrap_or(team_size)])
+                .collect();
+            self.roster.sort_unstable();
+            self.roster.dedup();
+        }
+        self
+    }
+
+    /// The journal directory of a robot process whose outputs go to `out`.
+    #[must_use]
+    pub fn journal_dir_in(&self, out: &std::path::Path) -> PathBuf {
+        out.join(self.journal_dir.as_deref().unwrap_or("state".as_ref()))
+    }
+
     /// Checks the settings; the error names the key (relative to the link table).
     pub fn validate(&self) -> Result<(), ConfigError> {
         ConfigError::non_negative("odometry_rate_hz", self.odometry_rate_hz)?;

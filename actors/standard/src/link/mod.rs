@@ -22,15 +22,18 @@ mod actor;
 mod config;
 mod convert;
 mod frames;
+mod journal;
+mod rejections;
 mod shared;
 
 pub use actor::{
-    LINK_STATUS, LinkActor, LinkJournal, LinkStatus, MAX_UNKNOWN_NAMES, OTHER_UNKNOWN_NAMES,
-    SharedStats,
+    LINK_STATUS, LinkActor, LinkStatus, MAX_UNKNOWN_NAMES, OTHER_UNKNOWN_NAMES, SharedStats,
 };
-pub use config::{KeyframeEncoding, LinkConfig, SharedConfig};
+pub use config::{DEFAULT_PEER_TIMEOUT_S, KeyframeEncoding, LinkConfig, SharedConfig};
 pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
+pub use journal::{LinkJournal, MAX_RECEIVED_BYTES};
+pub use rejections::{RateLimitedLog, Rejection, RejectionCounts};
 pub use shared::{
     Peer, SHARE_REQUESTS, ShareClass, SharePolicy, ShareRequest, ShareTo, SharedTopic,
 };

@@ -199,12 +199,14 @@ fn shared_topics_arrive_typed_and_bad_ones_are_counted_per_name() {
         "frames went to robot 1 only"
     );
     assert_eq!(at(4, "test/report").undecodable, 5);
-    // Version and decoding rejections are actor errors (with reasons); unknown
-    // names are only counted (a team may mix robots with and without an actor).
+    // Version and decoding rejections are counted as invalid payloads (and logged,
+    // rate-limited), not actor errors; unknown names are only counted (a team may
+    // mix robots with and without an actor).
     let errors =
         |robot: usize| -> u64 { reports[robot].actors.iter().map(|a| a.stats.errors).sum() };
-    assert_eq!([errors(0), errors(1), errors(2)], [0, 0, 0]);
-    assert_eq!([errors(3), errors(4)], [5, 5]);
+    assert_eq!((0..5).map(errors).collect::<Vec<_>>(), [0; 5]);
+    let invalid = |robot: u32| status[&RobotId(robot)].rejections.invalid_payload;
+    assert_eq!((0..5).map(invalid).collect::<Vec<_>>(), [0, 0, 0, 5, 5]);
     for report in &reports {
         assert!(report.actors.iter().all(|a| a.stats.panics == 0));
     }

@@ -606,3 +606,126 @@ fn robot_ids_must_match_the_robots_and_be_distinct() {
 
 #[path = "shared_tests.rs"]
 mod shared_tests;
+
+/// Issue 23: a robot outside the roster (robot 3, a real link sending keyframes and
+/// acknowledging ours) is rejected and counted before anything else looks at its
+/// frames: nothing of it is published, it never becomes a recipient, and the team's
+/// own keyframe delivery is unchanged.
+#[test]
+fn a_robot_outside_the_roster_is_rejected_and_counted() {
+    let mut config = LinkConfig::default();
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig::store_and_forward();
+    config.roster = vec![0, 1, 2];
+    config.peers = vec![0, 1, 2];
+    let stranger = LinkConfig {
+        roster: Vec::new(),
+        peers: vec![0, 1, 2, 3],
+        ..config.clone()
+    };
+    let keyframes = || ActorSpec::new("keyframes", || KeyframeSource { next: 0, count: 20 });
+    let team = vec![
+        RobotSpec::new("r0").with(link(&config)).with(keyframes()),
+        RobotSpec::new("r1").with(link(&config)),
+        RobotSpec::new("r2").with(link(&config)),
+        RobotSpec::new("r3").with(link(&stranger)).with(keyframes()),
+    ];
+    type Log = Vec<(RobotId, RobotId, u32)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let status: Arc<Mutex<BTreeMap<RobotId, LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 4);
+    let (tap_log, tap_status) = (log.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(k) = p.get(&PEER_KEYFRAME) {
+            tap_log
+                .lock()
+                .unwrap()
+                .push((p.robot, k.robot, k.keyframe.id));
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            tap_status.lock().unwrap().insert(p.robot, s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(30.0));
+    exec.finish();
+    let log = log.lock().unwrap();
+    for robot in [RobotId(0), RobotId(1), RobotId(2)] {
+        assert!(
+            !log.iter()
+                .any(|(r, from, _)| *r == robot && *from == RobotId(3)),
+            "{robot} published something of robot 3"
+        );
+    }
+    for robot in [RobotId(1), RobotId(2)] {
+        let ids: Vec<u32> = log
+            .iter()
+            .filter(|(r, from, _)| *r == robot && *from == RobotId(0))
+            .map(|(_, _, id)| *id)
+            .collect();
+        assert_eq!(ids, (0..20).collect::<Vec<_>>(), "{robot}");
+    }
+    let status = status.lock().unwrap();
+    for robot in [RobotId(0), RobotId(1), RobotId(2)] {
+        let r = status[&robot].rejections;
+        assert!(r.not_in_roster > 0, "{robot}: {r:?}");
+        assert_eq!(r.total(), r.not_in_roster, "{robot}: {r:?}");
+        // Its frames never reached the reassembler.
+        assert_eq!(status[&robot].reassembly.malformed_frames, 0);
+    }
+    // Robot 0 stored nothing for robot 3: every keyframe was released once robots
+    // 1 and 2 had it (the stranger's acks did not make it a recipient).
+    assert_eq!(status[&RobotId(0)].shaper.classes[2].drops.total(), 0);
+}
+
+/// Issue 23, item 4: robots whose links keep their journal on disk, "killed" (the
+/// executor dropped mid-run) and started again from the files: the restarted
+/// receiver publishes the peer's keyframes it had before (its team map is whole),
+/// once each, and takes the sender's resends for duplicates.
+#[test]
+fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
+    let dirs = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+    let mut config = LinkConfig::default();
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig::store_and_forward();
+    config.peers = vec![0, 1];
+    let journaled = |robot: usize| {
+        let config = config.clone();
+        let journal = LinkJournal::on_disk(dirs[robot].path(), 1_000).unwrap();
+        ActorSpec::new("link", move || {
+            LinkActor::new(config.clone())?.journaled(journal.clone())
+        })
+    };
+    let run = |with_source: bool, until_s: f64| {
+        let mut r0 = RobotSpec::new("r0").with(journaled(0));
+        if with_source {
+            r0 = r0.with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 8,
+            }));
+        }
+        let team = vec![r0, RobotSpec::new("r1").with(journaled(1))];
+        let log: Arc<Mutex<Vec<(RobotId, u32)>>> = Arc::default();
+        let mut exec = SimExecutor::new(team, 2);
+        let tap_log = log.clone();
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(k) = p.get(&PEER_KEYFRAME) {
+                tap_log.lock().unwrap().push((p.robot, k.keyframe.id));
+            }
+        });
+        exec.run_until(Time::from_secs_f64(until_s));
+        drop(exec); // no clean shutdown: what is on disk is what survives
+        log.lock().unwrap().clone()
+    };
+    let first = run(true, 12.0);
+    let expected: Vec<(RobotId, u32)> = (0..8).map(|id| (RobotId(1), id)).collect();
+    assert_eq!(first, expected);
+    let second = run(false, 5.0);
+    assert_eq!(
+        second, expected,
+        "replayed from robot 1's journal, once each"
+    );
+    assert!(
+        std::fs::metadata(dirs[1].path().join("link.journal"))
+            .unwrap()
+            .len()
+            > 8 * 1_000,
+        "the received keyframes are on disk"
+    );
+}
