@@ -491,8 +491,8 @@ impl Actor for CountRejections {
     }
 }
 
-/// Shares [`BASE_COMMAND`] and publishes the operator's commands on it as they
-/// arrive from the standard-input reader ([`read_commands`]).
+/// Publishes the operator's commands on [`BASE_COMMAND`] (which the base's link shares
+/// from its start) as they arrive from the standard-input reader ([`read_commands`]).
 struct Commander {
     commands: Arc<Mutex<std::sync::mpsc::Receiver<BaseCommand>>>,
 }
@@ -501,7 +501,6 @@ const POLL_COMMANDS: TimerId = TimerId(0);
 
 impl Actor for Commander {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
-        BASE_COMMAND.share(ctx);
         ctx.set_timer(POLL_COMMANDS, Duration::from_millis(50));
         Ok(())
     }
@@ -570,7 +569,11 @@ pub async fn run(
     let counter = rejected.clone();
     let mut robot = RobotSpec::new("base").with(
         ActorSpec::new("link", move || {
-            LinkActor::new(link.clone())?.journaled(journal.clone())
+            // The link sends the operator's commands: it subscribes to them from its
+            // start (the real-time executor takes subscriptions only in `start`).
+            Ok(LinkActor::new(link.clone())?
+                .journaled(journal.clone())?
+                .sharing(BASE_COMMAND.request()))
         })
         .wrap(move |inner| {
             Box::new(CountRejections {

@@ -141,4 +141,12 @@ fn the_base_holds_and_resumes_a_robot_over_the_link() {
         "moving while held: {text:?}"
     );
     assert!(moved_again, "robot 0 did not move after resume: {text:?}");
+    // Both commands crossed the link and robot 0 acknowledged them.
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("station/summary.json")).expect("summary"),
+    )
+    .expect("json");
+    let lane = &summary["link"]["shared"]["base/command"]["sent"];
+    assert_eq!(lane["offered_messages"].as_u64(), Some(2), "{summary}");
+    assert_eq!(lane["acknowledged_messages"].as_u64(), Some(2), "{summary}");
 }

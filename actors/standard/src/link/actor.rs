@@ -185,6 +185,8 @@ pub struct LinkActor {
     shared: BTreeMap<String, SharedEntry>,
     /// Lanes added so far, in order (what the journal keeps).
     lanes: Vec<JournaledLane>,
+    /// Topics to share from `start` on ([`LinkActor::sharing`]).
+    sharing_from_start: Vec<ShareRequest>,
     /// Whether `lanes` changed since the journal was written.
     lanes_changed: bool,
     /// The shaper's store generation last written to the journal.
@@ -217,6 +219,7 @@ impl LinkActor {
             shared: BTreeMap::new(),
             lanes: Vec::new(),
             lanes_changed: false,
+            sharing_from_start: Vec::new(),
         })
     }
 
@@ -294,6 +297,16 @@ impl LinkActor {
             entry.lanes = self.lanes.clone();
             self.lanes_changed = false;
         }
+    }
+
+    /// Shares a topic from the start, as if an actor had asked in its `start`
+    /// ([`SharedTopic::request`](super::SharedTopic::request)). The real-time executor
+    /// takes subscriptions only in `start`, so a link that must *send* a shared topic
+    /// there (the base station's commands) is built with it.
+    #[must_use]
+    pub fn sharing(mut self, request: ShareRequest) -> Self {
+        self.sharing_from_start.push(request);
+        self
     }
 
     /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
@@ -801,6 +814,9 @@ impl Actor for LinkActor {
             if let Some(codec) = &entry.codec {
                 codec.subscribe(ctx);
             }
+        }
+        for request in std::mem::take(&mut self.sharing_from_start) {
+            self.register(&request, ctx)?;
         }
         let me = ctx.robot().0;
         for &peer in self.config.peers.iter().filter(|p| **p != me) {
