@@ -141,8 +141,9 @@ pub const OPERATOR_HOLD: Topic<OperatorHold> = Topic::new("operator/hold");
 
 const REPUBLISH: TimerId = TimerId(0);
 
-/// Applies the base's commands addressed to this robot (see the [module
-/// docs](self)).
+/// Applies the base's commands addressed to this robot: `hold` and `resume` on
+/// [`OPERATOR_HOLD`] (republished every second while held), `velocity` on
+/// [`TELEOP_COMMAND`]; only commands with an id above the last one applied.
 #[derive(Debug, Default)]
 pub struct OperatorActor {
     last_id: Option<u64>,
