@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::ArtifactsConfig;
 use troupe_actors::collision::CollisionActorConfig;
 use troupe_actors::collision::body::BodyConfig;
+use troupe_actors::collision::geofence::GeofenceConfig;
 use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
 use troupe_actors::mapper::MapperConfig;
@@ -71,6 +72,14 @@ pub struct CollisionConfig {
     pub margin_m: f64,
     /// Spacing of the distance-field samples, seconds.
     pub check_step_s: f64,
+    /// The box no committed plan may leave (`geofence = { min_m = [x, y, z], max_m =
+    /// [x, y, z] }`, world frame, metres); absent: none. A hardware robot takes it
+    /// from `[mavlink.geofence]`, which also clamps its setpoints.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geofence: Option<GeofenceConfig>,
+    /// Take the base station's hold / resume / velocity commands for this robot
+    /// (`troupe base`, docs/base-station.md): adds the operator actor; off by default.
+    pub operator_commands: bool,
     /// Inter-robot avoidance (`[robot.collision.peers]`): priority, cylinder size,
     /// check radius, sample cap, stale-plan age. Its priority is also the one the link
     /// sends with this robot's plans.
@@ -85,6 +94,8 @@ impl Default for CollisionConfig {
             body: check.body,
             margin_m: check.margin_m,
             check_step_s: check.check_step_s,
+            geofence: check.geofence,
+            operator_commands: false,
             peers: PriorityConfig::default(),
         }
     }
@@ -98,6 +109,7 @@ impl CollisionConfig {
             body: self.body.clone(),
             margin_m: self.margin_m,
             check_step_s: self.check_step_s,
+            geofence: self.geofence,
         }
     }
 }
@@ -239,6 +251,13 @@ impl RobotConfig {
         non_negative("latency_s.planner", self.latency_s.planner)?;
         non_negative("latency_s.mapper", self.latency_s.mapper)?;
         non_negative("latency_s.collision", self.latency_s.collision)?;
+        if self.collision.operator_commands && !self.collision.enabled {
+            return Err(ConfigError::new(
+                "collision.operator_commands",
+                "needs the collision actor (`collision.enabled = true`), which holds the robot",
+                true,
+            ));
+        }
         self.collision
             .actor()
             .validate()

@@ -37,7 +37,7 @@ pub mod toml_file;
 
 use nalgebra::Point3;
 use troupe_actors::artifacts::ArtifactActor;
-use troupe_actors::collision::CollisionActor;
+use troupe_actors::collision::{CollisionActor, OperatorActor};
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
 use troupe_actors::link::{LinkActor, LinkJournal};
@@ -105,7 +105,8 @@ impl FrameSource for BoxedSource {
 /// (`behaviour = "planner"`) or the local grid and teleoperation
 /// (`behaviour = "teleop"`), the collision actor if enabled (then the explorer or
 /// planner offers candidates to it and it commits plans; the link sends the collision
-/// priority with them), then the link.
+/// priority with them) with the operator actor if `operator_commands` is on, then
+/// the link.
 pub fn assemble(
     name: &str,
     config: &RobotConfig,
@@ -214,12 +215,21 @@ pub fn assemble(
     if collision {
         let check = config.collision.actor();
         let peers = config.collision.peers;
+        let operator = config.collision.operator_commands;
         robot.add(
             ActorSpec::new("collision", move || {
-                CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
+                let actor = CollisionActor::new(check.clone(), PriorityAvoidance::new(peers));
+                if operator {
+                    actor.obeying_operator()
+                } else {
+                    actor
+                }
             })
             .with_options(options(config.latency_s.collision)),
         );
+        if config.collision.operator_commands {
+            robot.add(ActorSpec::new("operator", OperatorActor::new).with_options(options(0.0)));
+        }
     }
     if config.artifacts.enabled {
         let artifacts = config.artifacts;

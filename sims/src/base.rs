@@ -32,6 +32,12 @@
 //! plans and keyframes as received into `out/run.mcap` in wall time (`record = false`
 //! turns it off; `docs/recordings.md`).
 //!
+//! An operator types commands on the base's standard input, one per line —
+//! `robot1 hold`, `all hold`, `robot1 resume`, `robot1 velocity 0.5 0 0.1` — which
+//! go to the robots as [`BaseCommand`]s on the shared topic [`BASE_COMMAND`]
+//! (store-and-forward, highest priority; robots with `[robot.collision]
+//! operator_commands = true` apply them, see docs/base-station.md).
+//!
 //! When the team runs the artifact reporter (`[robot.artifacts] enabled = true`), the
 //! base runs a listening [`ArtifactActor`] too: it shares `artifacts/report`, so the
 //! robots' store-and-forward reports reach it (and are acknowledged), and its
@@ -46,6 +52,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact, ArtifactActor, ArtifactList};
+use troupe_actors::collision::{BASE_COMMAND, BaseCommand};
 use troupe_actors::link::{LINK_STATUS, LinkActor, LinkJournal, LinkStatus};
 use troupe_actors::mapper::MapModel;
 use troupe_actors::mapper::mapfile::{
@@ -56,7 +63,7 @@ use troupe_actors::mapper::sogmm::SogmmError;
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
 use troupe_actors::runtime::{
     Actor, ActorResult, ActorSpec, ConfigError, Context, ErrorChain, Event, LINK_RX, Publication,
-    RealtimeExecutor, RobotId, RobotSpec,
+    RealtimeExecutor, RobotId, RobotSpec, TimerId,
 };
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
@@ -246,6 +253,8 @@ pub struct RobotRecord {
     pub last_odometry: Option<Instant>,
     /// Committed plans received.
     pub plans: u64,
+    /// Speed of the last odometry, m/s.
+    pub speed_mps: Option<f64>,
 }
 
 impl Default for RobotRecord {
@@ -261,6 +270,7 @@ impl Default for RobotRecord {
             odometry: 0,
             last_odometry: None,
             plans: 0,
+            speed_mps: None,
         }
     }
 }
@@ -306,6 +316,7 @@ impl BaseMaps {
             let record = self.robots.entry(o.robot.0).or_default();
             record.odometry += 1;
             record.last_odometry = Some(now);
+            record.speed_mps = Some(o.odometry.velocity_mps.norm());
         } else if let Some(plan) = p.get(&PEER_PLAN) {
             self.robots.entry(plan.robot.0).or_default().plans += 1;
         }
@@ -313,7 +324,7 @@ impl BaseMaps {
 
     /// One status line per robot (every robot of `team` first, then any other sender
     /// heard), e.g. `robot0 keyframes=12 components=3456 bytes=812345
-    /// odometry_age_s=0.08 plans=9` (`odometry_age_s=none` before the first).
+    /// odometry_age_s=0.08 plans=9 speed_mps=0.42` (`none` before the first odometry).
     #[must_use]
     pub fn status_lines(&self, team: u32, now: Instant) -> Vec<String> {
         let ids: BTreeSet<u32> = (0..team).chain(self.robots.keys().copied()).collect();
@@ -324,8 +335,10 @@ impl BaseMaps {
                 let age = r.last_odometry.map_or("none".into(), |t| {
                     format!("{:.2}", now.saturating_duration_since(t).as_secs_f64())
                 });
+                let speed = r.speed_mps.map_or("none".into(), |v| format!("{v:.2}"));
                 format!(
-                    "robot{id} keyframes={} components={} bytes={} odometry_age_s={age} plans={}",
+                    "robot{id} keyframes={} components={} bytes={} odometry_age_s={age} plans={} \
+                     speed_mps={speed}",
                     r.map.keyframes.len(),
                     r.map.occupied_components(),
                     r.bytes,
@@ -491,16 +504,71 @@ impl Actor for CountRejections {
     }
 }
 
+/// Publishes the operator's commands on [`BASE_COMMAND`] (which the base's link shares
+/// from its start) as they arrive from the standard-input reader ([`read_commands`]).
+struct Commander {
+    commands: Arc<Mutex<std::sync::mpsc::Receiver<BaseCommand>>>,
+}
+
+const POLL_COMMANDS: TimerId = TimerId(0);
+
+impl Actor for Commander {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(POLL_COMMANDS, Duration::from_millis(50));
+        Ok(())
+    }
+
+    fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        let commands: Vec<BaseCommand> = lock(&self.commands).try_iter().collect();
+        for command in commands {
+            ctx.publish(&BASE_COMMAND.topic(), command);
+        }
+        Ok(())
+    }
+}
+
+/// Reads operator lines from `input` until it ends, answering each on `out`
+/// (`command robot1 hold: sent (id …)`, or why the line is not a command) and
+/// sending the commands to `to`. Ids start at the wall clock in microseconds and grow
+/// by at least one per command, so a restarted base's commands are newer.
+pub fn read_commands(
+    input: impl std::io::BufRead,
+    mut out: impl std::io::Write,
+    to: &std::sync::mpsc::Sender<BaseCommand>,
+) {
+    let mut last_id = 0u64;
+    for line in input.lines() {
+        let Ok(line) = line else { return };
+        let now_us = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
+        let id = now_us.max(last_id + 1);
+        let answer = match BaseCommand::parse(&line, id) {
+            Ok(None) => continue,
+            Ok(Some(command)) => {
+                last_id = id;
+                if to.send(command).is_err() {
+                    return;
+                }
+                format!("command {}: sent (id {id})", line.trim())
+            }
+            Err(e) => format!("command {}: not sent: {e}", line.trim()),
+        };
+        let _ = writeln!(out, "{answer}");
+    }
+}
+
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// Runs the base until its duration is over or `stop` resolves, printing the status
-/// lines every second, then writes the outputs; must be called inside a
-/// multi-threaded tokio runtime.
+/// lines every second and sending the operator's `commands` to the robots, then
+/// writes the outputs; must be called inside a multi-threaded tokio runtime.
 pub async fn run(
     station: &BaseStation,
     stop: impl std::future::Future<Output = ()>,
+    commands: std::sync::mpsc::Receiver<BaseCommand>,
 ) -> Result<BaseSummary, BaseError> {
     let scenario = &station.scenario;
     let id = station.base_id;
@@ -514,7 +582,11 @@ pub async fn run(
     let counter = rejected.clone();
     let mut robot = RobotSpec::new("base").with(
         ActorSpec::new("link", move || {
-            LinkActor::new(link.clone())?.journaled(journal.clone())
+            // The link sends the operator's commands: it subscribes to them from its
+            // start (the real-time executor takes subscriptions only in `start`).
+            Ok(LinkActor::new(link.clone())?
+                .journaled(journal.clone())?
+                .sharing(BASE_COMMAND.request()))
         })
         .wrap(move |inner| {
             Box::new(CountRejections {
@@ -529,6 +601,10 @@ pub async fn run(
             ArtifactActor::listening(artifacts_config)
         }));
     }
+    let commands = Arc::new(Mutex::new(commands));
+    robot.add(ActorSpec::new("commander", move || Commander {
+        commands: commands.clone(),
+    }));
     let maps: Arc<Mutex<BaseMaps>> = Arc::default();
     let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let artifacts: Arc<Mutex<ArtifactList>> = Arc::default();
@@ -659,7 +735,8 @@ pub async fn run(
 }
 
 /// Runs the base on a new multi-threaded tokio runtime until its duration is over,
-/// Ctrl-C or SIGTERM (`troupe base`), then writes the outputs.
+/// Ctrl-C or SIGTERM (`troupe base`), with the operator's commands read from standard
+/// input ([`read_commands`]), then writes the outputs.
 pub fn run_until_signal(station: &BaseStation) -> Result<BaseSummary, BaseError> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -668,5 +745,49 @@ pub fn run_until_signal(station: &BaseStation) -> Result<BaseSummary, BaseError>
             context: "starting the tokio runtime",
             source: Box::new(e),
         })?;
-    runtime.block_on(run(station, crate::process::shutdown_signal()))
+    let (to, commands) = std::sync::mpsc::channel();
+    // Detached: a blocking read of stdin cannot be cancelled; it ends with the
+    // process or at the end of the input.
+    std::thread::spawn(move || read_commands(std::io::stdin().lock(), std::io::stdout(), &to));
+    runtime.block_on(run(station, crate::process::shutdown_signal(), commands))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_actors::collision::OperatorCommand;
+
+    #[test]
+    fn reads_operator_lines_into_commands_with_growing_ids() {
+        let input = "robot1 hold\n\nrobot1 fly\nall resume\nrobot0 vel 0.5 0 0.1\n";
+        let (to, from) = std::sync::mpsc::channel();
+        let mut out = Vec::new();
+        read_commands(input.as_bytes(), &mut out, &to);
+        let sent: Vec<BaseCommand> = from.try_iter().collect();
+        let targets: Vec<_> = sent.iter().map(|c| (c.robot, c.command)).collect();
+        assert_eq!(
+            targets,
+            [
+                (Some(1), OperatorCommand::Hold),
+                (None, OperatorCommand::Resume),
+                (
+                    Some(0),
+                    OperatorCommand::Velocity {
+                        vx_mps: 0.5,
+                        vz_mps: 0.0,
+                        yaw_rate_rad_s: 0.1
+                    }
+                ),
+            ]
+        );
+        assert!(sent.windows(2).all(|w| w[0].id < w[1].id));
+        let out = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = out.lines().collect();
+        assert_eq!(lines.len(), 4, "{out}");
+        assert!(lines[0].starts_with("command robot1 hold: sent (id "));
+        assert!(
+            lines[1].starts_with("command robot1 fly: not sent: `fly` is not a command"),
+            "{out}"
+        );
+    }
 }

@@ -148,6 +148,10 @@ impl HardwareRobot {
     /// paths are resolved against `base`.
     pub fn from_toml(text: &str, path: &Path, base: &Path) -> Result<Self, HardwareError> {
         let mut file: HardwareFile = parse_toml(text, path)?;
+        share_geofence(&mut file).map_err(|source| HardwareError::Config {
+            path: path.to_path_buf(),
+            source,
+        })?;
         resolve_zenoh(&mut file.zenoh, base);
         resolve_zenoh(&mut file.ros2.zenoh, base);
         file.validate(path)?;
@@ -211,6 +215,22 @@ impl HardwareFile {
     }
 }
 
+/// The one fence of a robot file, `[mavlink.geofence]`, feeds both the MAVLink
+/// vehicle's setpoint clamp and the collision actor's plan check
+/// (`robot.collision.geofence`), which may therefore be left out or repeat it.
+fn share_geofence(file: &mut HardwareFile) -> Result<(), ConfigError> {
+    let fence = file.mavlink.geofence;
+    match file.robot.collision.geofence.replace(fence) {
+        Some(other) if other != fence => Err(ConfigError::new(
+            "robot.collision.geofence",
+            "must be left out: a hardware robot's fence is `[mavlink.geofence]` (it \
+             feeds both the plan check and the setpoint clamp)",
+            format!("min_m = {:?}, max_m = {:?}", other.min_m, other.max_m),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Makes the TLS and password-file paths of a zenoh table relative to `base`.
 fn resolve_zenoh(zenoh: &mut ZenohConfig, base: &Path) {
     zenoh.resolve_paths(base);
@@ -257,6 +277,8 @@ mod tests {
         let camera = f.camera.unwrap();
         assert_eq!((camera.width, camera.height), (848, 480));
         assert!(f.mavlink.setpoint_rate_hz >= 20.0);
+        // The one fence feeds the plan check too.
+        assert_eq!(f.robot.collision.geofence, Some(f.mavlink.geofence));
         assert!(
             robot
                 .out
@@ -326,6 +348,13 @@ mod tests {
             (
                 text.replace("odometry = \"/odom\"", ""),
                 "missing field `odometry`",
+            ),
+            (
+                text.replace(
+                    "[robot.collision]\n",
+                    "[robot.collision]\ngeofence = { min_m = [0.0, 0.0, 0.0], max_m = [1.0, 1.0, 1.0] }\n",
+                ),
+                "`robot.collision.geofence` must be left out",
             ),
         ];
         for (text, expected) in cases {

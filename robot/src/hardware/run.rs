@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::Serialize;
+use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN, PinholeIntrinsics};
 use troupe_actors::runtime::{
@@ -40,6 +41,9 @@ pub struct HardwareSummary {
     pub plans: u64,
     /// What the MAVLink vehicle did, from its last status.
     pub vehicle: Option<VehicleSummary>,
+    /// The collision actor's last counters (rounds, stops, rejections by reason —
+    /// `rejected_geofence` for candidates leaving the fence — and operator holds).
+    pub collision: Option<CollisionStatus>,
     /// The team link's last counters.
     pub link: Option<LinkStatus>,
     /// The team link's zenoh counters.
@@ -68,6 +72,9 @@ pub struct VehicleSummary {
     pub holds: u64,
     /// Holds because the plan's reference was outside the geofence.
     pub fence_holds: u64,
+    /// Committed plans that left the geofence (none should: the collision actor
+    /// checks the same fence before committing).
+    pub plans_leaving_fence: u64,
     /// Setpoint ticks with nothing sent (no autopilot heartbeat).
     pub silent: u64,
     /// Whether the autopilot said it was armed.
@@ -86,6 +93,7 @@ impl From<&AutopilotStatus> for VehicleSummary {
             setpoints: s.guard.tracked + s.guard.held,
             holds: s.guard.held,
             fence_holds: s.guard.fence_holds,
+            plans_leaving_fence: s.guard.plans_leaving_fence,
             silent: s.guard.silent,
             armed: s.armed,
             mode: s.mode.clone(),
@@ -114,6 +122,7 @@ struct Collected {
     /// `(unix_time_s, event)` for every depth frame and committed plan.
     events: Vec<(f64, &'static str)>,
     vehicle: Option<VehicleSummary>,
+    collision: Option<CollisionStatus>,
     link: Option<LinkStatus>,
 }
 
@@ -259,6 +268,8 @@ async fn fly(
             c.vehicle = Some(status.into());
         } else if let Some(status) = p.get(&LINK_STATUS) {
             c.link = Some(status.clone());
+        } else if let Some(status) = p.get(&COLLISION_STATUS) {
+            c.collision = Some(status.clone());
         }
     });
     let recorder = if robot.file.record {
@@ -309,6 +320,7 @@ async fn fly(
         keyframes: count(KEYFRAME.name()),
         plans: count(PLAN.name()),
         vehicle: collected.vehicle,
+        collision: collected.collision,
         link: collected.link,
         zenoh,
         transport_errors,

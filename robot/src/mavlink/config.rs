@@ -1,11 +1,10 @@
 //! The `[mavlink]` configuration section and its validation.
 
 use mavlink::ConnectionAddress;
-use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use crate::ConfigError;
-use crate::safety::Geofence;
+use crate::safety::{Geofence, GeofenceConfig};
 
 /// Where the robot's odometry comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -19,16 +18,6 @@ pub enum OdometrySource {
     /// watches it. Its world frame must be the autopilot's local frame (ENU), as when
     /// the VIO estimate is also fed to the autopilot.
     External,
-}
-
-/// The geofence box (`[mavlink.geofence]`), world frame (ENU), metres.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct GeofenceConfig {
-    /// Low corner `[x, y, z]`.
-    pub min_m: [f64; 3],
-    /// High corner `[x, y, z]`.
-    pub max_m: [f64; 3],
 }
 
 /// The `[mavlink]` section: how to reach the autopilot and the safety limits.
@@ -224,20 +213,7 @@ impl MavlinkConfig {
             60.0,
             "must be in [0.05, 60] s",
         )?;
-        let geofence = Geofence::new(
-            Point3::from(self.geofence.min_m),
-            Point3::from(self.geofence.max_m),
-        )
-        .map_err(|_| {
-            ConfigError::new(
-                "geofence",
-                "must have finite corners with min_m below max_m on every axis",
-                format!(
-                    "min_m = {:?}, max_m = {:?}",
-                    self.geofence.min_m, self.geofence.max_m
-                ),
-            )
-        })?;
+        let geofence = self.geofence.fence().map_err(|e| e.within("geofence"))?;
         Ok(MavlinkSettings {
             connection: self.connection.clone(),
             source_system_id: self.source_system_id,
@@ -257,6 +233,7 @@ impl MavlinkConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Point3;
 
     const EXAMPLE: &str = r#"
         connection = "udpin:0.0.0.0:14540"

@@ -27,9 +27,9 @@ mod setpoint;
 mod status;
 mod vehicle;
 
+pub use crate::safety::GeofenceConfig;
 pub use config::{
-    GeofenceConfig, MAX_SETPOINT_RATE_HZ, MIN_SETPOINT_RATE_HZ, MavlinkConfig, MavlinkSettings,
-    OdometrySource,
+    MAX_SETPOINT_RATE_HZ, MIN_SETPOINT_RATE_HZ, MavlinkConfig, MavlinkSettings, OdometrySource,
 };
 pub use link::{
     INBOUND_CAPACITY, Inbound, LinkStats, MavlinkLink, OUTBOUND_CAPACITY, Outbound,

@@ -513,7 +513,7 @@ mod tests {
         let mut g = fenced_guard(5.0);
         let mut changes = Vec::new();
         // The plan leaves the fence (x max 5) at t = 5.
-        assert_eq!(g.plan(eastward_plan()).unwrap_err().knot, 1);
+        assert_eq!(g.plan(eastward_plan()).unwrap_err().time, t(10.0));
         assert_eq!(g.counters().plans_leaving_fence, 1);
         let fence = g.config.geofence;
         let mut fence_holds = 0;

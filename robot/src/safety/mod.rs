@@ -3,7 +3,9 @@
 //! - [`Watchdog`]: notices when an input (depth frames, odometry, the autopilot's
 //!   heartbeat) stops arriving, reports the loss once and the recovery once.
 //! - [`Geofence`]: an axis-aligned box in the world frame (ENU) that no setpoint may
-//!   leave, with a check of whole trajectories.
+//!   leave, with a check of whole trajectories (defined with the collision cores,
+//!   `troupe_actors::collision::geofence`, whose collision actor checks plans against
+//!   the same box before committing them).
 //! - [`SetpointGuard`]: combines them with the committed plan into the one setpoint a
 //!   vehicle driver may stream at each tick (track, hold, or nothing).
 //!
@@ -11,13 +13,14 @@
 //! input makes it hold still, a lost heartbeat makes it stop streaming, and a setpoint
 //! outside the fence is replaced by a hold inside it.
 
-mod geofence;
 mod guard;
 mod watchdog;
 
-pub use geofence::{Geofence, GeofenceError, GeofenceViolation};
 pub use guard::{
     GuardConfig, GuardCounters, GuardInput, HoldReason, Reference, Setpoint, SetpointGuard,
     reference_at,
+};
+pub use troupe_actors::collision::geofence::{
+    Geofence, GeofenceConfig, GeofenceError, GeofenceViolation,
 };
 pub use watchdog::{Watchdog, WatchdogChange};

@@ -4,6 +4,7 @@
 //!   enclosing ellipsoid of given points (Khachiyan), placed at a pose.
 //! - [`ellipsoid`]: ellipsoids, the pair distance of Proposition 1 (Eq. 7.4) and its
 //!   gradient (Eq. 7.7), through secular equations instead of 2q × 2q eigenproblems.
+//! - [`geofence`]: the box a robot must stay in, checked on plans and setpoints.
 //! - [`peers`]: what is known of teammates (odometry, plans, priorities) and the
 //!   [`peers::PeerAvoidance`] trait of the inter-robot check (§8.2.3).
 //! - [`probability`]: collision probability under Gaussian uncertainty of the robot
@@ -13,6 +14,7 @@
 
 pub mod body;
 pub mod ellipsoid;
+pub mod geofence;
 pub mod peers;
 pub mod probability;
 pub mod surface;

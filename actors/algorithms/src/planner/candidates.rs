@@ -59,6 +59,8 @@ pub enum Rejection {
     PeerPlan,
     /// Conflicts with a peer's stopping envelope (stale or missing plan).
     PeerEnvelope,
+    /// Leaves the robot's geofence box.
+    Geofence,
 }
 
 impl Rejection {
@@ -69,13 +71,14 @@ impl Rejection {
             Rejection::Clearance => "clearance",
             Rejection::PeerPlan => "peer_plan",
             Rejection::PeerEnvelope => "peer_envelope",
+            Rejection::Geofence => "geofence",
         }
     }
 
     /// Whether a peer, not the map, caused it.
     #[must_use]
     pub fn is_peer(self) -> bool {
-        !matches!(self, Rejection::Clearance)
+        !matches!(self, Rejection::Clearance | Rejection::Geofence)
     }
 }
 

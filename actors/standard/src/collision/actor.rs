@@ -12,8 +12,12 @@
 //!    has no local grid, e.g. route-following robots);
 //! 2. the inter-robot check of a [`PeerAvoidance`] policy against peers' odometry and
 //!    plans (priority-based, §8.2.3);
+//! 3. when a geofence is set (`[robot.collision] geofence`, a hardware robot's
+//!    `[mavlink.geofence]`), the box check, made before the other two: the candidate
+//!    from now to its end stays inside ([`within_geofence`]);
 //!
-//! publishes it on [`PLAN`], or the round's stopping trajectory when none passes, and
+//! publishes it on [`PLAN`], or the round's stopping trajectory when none passes or
+//! while the operator holds the robot ([`OPERATOR_HOLD`], sent from the base), and
 //! answers with a [`PlanDecision`]. Every rejection is counted by reason and logged;
 //! the counters go out on [`COLLISION_STATUS`] after each round.
 
@@ -25,6 +29,8 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use super::body::{BodyConfig, BodyError};
+use super::geofence::{Geofence, GeofenceConfig};
+use super::operator::{OPERATOR_HOLD, OperatorHold};
 use super::peers::{PeerAvoidance, PeerTable};
 use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
@@ -46,6 +52,9 @@ pub struct CollisionActorConfig {
     pub margin_m: f64,
     /// Spacing of the samples checked against the distance field, seconds.
     pub check_step_s: f64,
+    /// The box no committed plan may leave (world frame, metres); absent: none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub geofence: Option<GeofenceConfig>,
 }
 
 impl Default for CollisionActorConfig {
@@ -54,6 +63,7 @@ impl Default for CollisionActorConfig {
             body: BodyConfig::default(),
             margin_m: 0.0,
             check_step_s: 0.1,
+            geofence: None,
         }
     }
 }
@@ -63,6 +73,9 @@ impl CollisionActorConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         ConfigError::non_negative("margin_m", self.margin_m)?;
         ConfigError::positive("check_step_s", self.check_step_s)?;
+        if let Some(fence) = &self.geofence {
+            fence.fence().map_err(|e| e.within("geofence"))?;
+        }
         self.body
             .ellipsoid()
             .map(|_| ())
@@ -71,7 +84,7 @@ impl CollisionActorConfig {
 }
 
 /// The collision actor's counters (published after every round).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct CollisionStatus {
     /// Rounds decided.
     pub rounds: u64,
@@ -85,6 +98,11 @@ pub struct CollisionStatus {
     pub rejected_peer_plan: u64,
     /// Candidates rejected against a peer's stopping envelope.
     pub rejected_peer_envelope: u64,
+    /// Candidates rejected for leaving the geofence.
+    pub rejected_geofence: u64,
+    /// Rounds that committed the stopping trajectory because the operator held the
+    /// robot (counted in `stopped` too; their candidates are not judged).
+    pub held: u64,
     /// This robot's priority in the last round.
     pub priority: u16,
 }
@@ -117,20 +135,40 @@ pub fn clear_of_unsafe_space(
     clear_path(positions, snapshot, clearance_m)
 }
 
+/// Whether `trajectory` from `from` to its end stays inside `fence` (exactly: linear
+/// between knots, so the state at `from` and the later knots decide; the span is the
+/// one [`clear_of_unsafe_space`] samples). Logs where it leaves at debug level.
+#[must_use]
+pub fn within_geofence(trajectory: &Trajectory, from: Time, fence: &Geofence) -> bool {
+    match fence.check_from(trajectory, from) {
+        Ok(()) => true,
+        Err(violation) => {
+            tracing::debug!(time = %from, "candidate rejected: {violation}");
+            false
+        }
+    }
+}
+
 /// Commits the first candidate of each planning round that passes the checks (see `actors::collision`).
 pub struct CollisionActor<P> {
     config: CollisionActorConfig,
     body_radius_m: f64,
+    /// `Err`: the configured fence is invalid.
+    geofence: Result<Option<Geofence>, ConfigError>,
     avoidance: P,
     snapshot: Option<Arc<GridSnapshot>>,
     odometry: Option<Arc<Odometry>>,
     peers: PeerTable,
+    /// Whether it listens to [`OPERATOR_HOLD`] ([`CollisionActor::obeying_operator`]).
+    operator: bool,
+    held: bool,
     status: CollisionStatus,
 }
 
 impl<P: PeerAvoidance> CollisionActor<P> {
     /// A collision actor; `config` must be valid ([`CollisionActorConfig::validate`]),
-    /// else the body falls back to the default one.
+    /// else the body falls back to the default one and an invalid geofence rejects
+    /// every candidate (the robot stops rather than fly unfenced).
     #[must_use]
     pub fn new(config: CollisionActorConfig, avoidance: P) -> Self {
         let body = config
@@ -138,13 +176,17 @@ impl<P: PeerAvoidance> CollisionActor<P> {
             .ellipsoid()
             .or_else(|_| BodyConfig::default().ellipsoid());
         let body_radius_m = body.map_or(0.3, |b| b.center().norm() + b.bounding_radius());
+        let geofence = config.geofence.map(|f| f.fence()).transpose();
         CollisionActor {
             config,
             body_radius_m,
+            geofence,
             avoidance,
             snapshot: None,
             odometry: None,
             peers: PeerTable::default(),
+            operator: false,
+            held: false,
             status: CollisionStatus::default(),
         }
     }
@@ -192,12 +234,38 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         }
     }
 
+    /// The same actor, holding the robot while the operator says so
+    /// ([`OPERATOR_HOLD`], from the operator actor).
+    #[must_use]
+    pub fn obeying_operator(mut self) -> Self {
+        self.operator = true;
+        self
+    }
+
+    /// The geofence check, apart from the others (an invalid fence rejects all).
+    fn fence_check(&self, now: Time, trajectory: &Trajectory) -> Result<(), Rejection> {
+        match &self.geofence {
+            Ok(None) => Ok(()),
+            Ok(Some(fence)) if within_geofence(trajectory, now, fence) => Ok(()),
+            _ => Err(Rejection::Geofence),
+        }
+    }
+
     fn decide(&mut self, round: &PlanCandidates, ctx: &mut Context<'_>) {
         let now = ctx.now();
         let mut rejected = Vec::new();
         let mut chosen = None;
-        for (i, candidate) in round.candidates.iter().enumerate() {
-            match self.judge(now, ctx, &candidate.trajectory) {
+        let candidates = if self.held {
+            self.status.held += 1;
+            &[][..]
+        } else {
+            &round.candidates[..]
+        };
+        for (i, candidate) in candidates.iter().enumerate() {
+            let verdict = self
+                .fence_check(now, &candidate.trajectory)
+                .and_then(|()| self.judge(now, ctx, &candidate.trajectory));
+            match verdict {
                 Ok(()) => {
                     chosen = Some(i);
                     break;
@@ -207,6 +275,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                         Rejection::Clearance => self.status.rejected_clearance += 1,
                         Rejection::PeerPlan => self.status.rejected_peer_plan += 1,
                         Rejection::PeerEnvelope => self.status.rejected_peer_envelope += 1,
+                        Rejection::Geofence => self.status.rejected_geofence += 1,
                     }
                     tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, candidate = i, reason = reason.as_str(), "candidate rejected");
                     rejected.push((i, reason));
@@ -229,7 +298,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
             }
             None => {
                 self.status.stopped += 1;
-                if !round.candidates.is_empty() {
+                if !candidates.is_empty() {
                     tracing::info!(robot = ctx.robot_name(), time = %now, round = round.round, rejected = rejected.len(), "every candidate rejected: stopping");
                 }
                 Plan {
@@ -260,6 +329,9 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         ctx.subscribe(&PEER_ODOMETRY, QueuePolicy::Fifo { capacity: 64 });
         ctx.subscribe(&PEER_PLAN, QueuePolicy::Fifo { capacity: 16 });
+        if self.operator {
+            ctx.subscribe(&OPERATOR_HOLD, QueuePolicy::LATEST);
+        }
         Ok(())
     }
 
@@ -275,6 +347,11 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
                 self.peers.update_odometry(&peer);
             } else if let Some(plan) = m.get_arc(&PEER_PLAN) {
                 self.peers.update_plan(&plan);
+            } else if let Some(&OperatorHold { held }) = m.get(&OPERATOR_HOLD) {
+                if held != self.held {
+                    tracing::info!(robot = ctx.robot_name(), held, "operator hold");
+                }
+                self.held = held;
             }
         }
         Ok(())
@@ -369,12 +446,23 @@ mod tests {
         }
     }
 
-    fn run(x_max: f64) -> (Vec<PlanDecision>, Vec<Plan>, Option<CollisionStatus>) {
-        let robot = RobotSpec::new("r0")
+    type Log = (Vec<PlanDecision>, Vec<Plan>, Option<CollisionStatus>);
+
+    fn run(x_max: f64) -> Log {
+        run_with(CollisionActorConfig::default(), x_max, None)
+    }
+
+    /// Runs the rounds through a collision actor with `config` and a [`Wall`] at
+    /// `x_max`, with `extra` beside them, for 3.5 s.
+    fn run_with(config: CollisionActorConfig, x_max: f64, extra: Option<ActorSpec>) -> Log {
+        let mut robot = RobotSpec::new("r0")
             .with(ActorSpec::new("rounds", || Rounds(0)))
             .with(ActorSpec::new("collision", move || {
-                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max })
+                CollisionActor::new(config.clone(), Wall { x_max }).obeying_operator()
             }));
+        if let Some(extra) = extra {
+            robot.add(extra);
+        }
         let log = Arc::new(Mutex::new((Vec::new(), Vec::new(), None)));
         let tap = log.clone();
         let mut exec = SimExecutor::new(vec![robot], 1);
@@ -394,6 +482,88 @@ mod tests {
         let _ = exec.finish();
         let log = log.lock().unwrap();
         (log.0.clone(), log.1.clone(), log.2.clone())
+    }
+
+    #[test]
+    fn rejects_candidates_leaving_the_geofence() {
+        use crate::collision::geofence::GeofenceConfig;
+        let config = CollisionActorConfig {
+            geofence: Some(GeofenceConfig {
+                min_m: [-1.0, -1.0, 0.0],
+                max_m: [2.5, 1.0, 2.0],
+            }),
+            ..CollisionActorConfig::default()
+        };
+        assert_eq!(config.validate(), Ok(()));
+        // No peer in the way: only the fence (x ≤ 2.5) rejects the candidate to x = 3.
+        let (decisions, plans, status) = run_with(config.clone(), 100.0, None);
+        assert_eq!(decisions.len(), 3);
+        for d in &decisions {
+            assert_eq!(d.chosen, Some(1));
+            assert_eq!(d.rejected, vec![(0, Rejection::Geofence)]);
+        }
+        assert!(
+            plans
+                .iter()
+                .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 2.0)
+        );
+        let status = status.unwrap();
+        assert_eq!((status.rejected_geofence, status.committed), (3, 3));
+        // A fence that the start is outside of rejects everything: the robot stops.
+        let outside = CollisionActorConfig {
+            geofence: Some(GeofenceConfig {
+                min_m: [0.5, -1.0, 0.0],
+                max_m: [4.0, 1.0, 2.0],
+            }),
+            ..config.clone()
+        };
+        let (decisions, _, status) = run_with(outside, 100.0, None);
+        assert!(decisions.iter().all(|d| d.chosen.is_none()));
+        assert_eq!(status.unwrap().rejected_geofence, 9);
+        // An invalid fence fails safe (validation names it first).
+        let invalid = CollisionActorConfig {
+            geofence: Some(GeofenceConfig {
+                min_m: [0.0, 0.0, 0.0],
+                max_m: [f64::NAN, 1.0, 1.0],
+            }),
+            ..config
+        };
+        assert_eq!(invalid.validate().unwrap_err().key, "geofence");
+        let (_, _, status) = run_with(invalid, 100.0, None);
+        assert_eq!(status.unwrap().stopped, 3);
+    }
+
+    /// Holds the robot from 1.5 s to 2.5 s, as the operator actor does.
+    struct Operator(u32);
+
+    impl Actor for Operator {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(0), Duration::from_millis(500));
+            Ok(())
+        }
+        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            self.0 += 1;
+            match self.0 {
+                3 => ctx.publish(&OPERATOR_HOLD, OperatorHold { held: true }),
+                5 => ctx.publish(&OPERATOR_HOLD, OperatorHold { held: false }),
+                _ => {}
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn commits_the_stop_while_the_operator_holds() {
+        let operator = ActorSpec::new("operator", || Operator(0));
+        let (decisions, plans, status) =
+            run_with(CollisionActorConfig::default(), 1.5, Some(operator));
+        let chosen: Vec<_> = decisions.iter().map(|d| d.chosen).collect();
+        assert_eq!(chosen, vec![Some(2), None, Some(2)]);
+        assert!(decisions[1].rejected.is_empty(), "held: nothing judged");
+        let stopping: Vec<_> = plans.iter().map(|p| p.stopping).collect();
+        assert_eq!(stopping, vec![false, true, false]);
+        let status = status.unwrap();
+        assert_eq!((status.held, status.stopped, status.committed), (1, 1, 2));
     }
 
     #[test]

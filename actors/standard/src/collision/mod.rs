@@ -2,11 +2,20 @@
 //! [`troupe_algorithms::collision`], re-exported here.
 //!
 //! - [`CollisionActor`]: commits the first of a planning round's candidates that is
-//!   clear of the local grid's unsafe space and of higher-priority peers, or the stop.
+//!   clear of the local grid's unsafe space, of higher-priority peers and inside the
+//!   geofence, or the stop.
+//! - [`OperatorActor`]: the base station's hold / resume / velocity commands for this
+//!   robot (issue 17).
 
 mod actor;
+mod operator;
 
 pub use actor::{
     COLLISION_STATUS, CollisionActor, CollisionActorConfig, CollisionStatus, clear_of_unsafe_space,
+    within_geofence,
+};
+pub use operator::{
+    BASE_COMMAND, BaseCommand, CommandParseError, OPERATOR_HOLD, OperatorActor, OperatorCommand,
+    OperatorHold,
 };
 pub use troupe_algorithms::collision::*;

@@ -146,6 +146,8 @@ pub struct LinkActor {
     shared: BTreeMap<String, SharedEntry>,
     /// Lanes added so far, in order (what the journal keeps).
     lanes: Vec<JournaledLane>,
+    /// Topics to share from `start` on ([`LinkActor::sharing`]).
+    sharing_from_start: Vec<ShareRequest>,
     /// Whether `lanes` changed since the journal was written.
     lanes_changed: bool,
     /// The shaper's store generation last written to the journal.
@@ -186,6 +188,7 @@ impl LinkActor {
             lanes: Vec::new(),
             lanes_changed: false,
             replay: Vec::new(),
+            sharing_from_start: Vec::new(),
         })
     }
 
@@ -277,6 +280,16 @@ impl LinkActor {
             disk.sync(state, entry.sequence)?;
         }
         Ok(())
+    }
+
+    /// Shares a topic from the start, as if an actor had asked in its `start`
+    /// ([`SharedTopic::request`](super::SharedTopic::request)). The real-time executor
+    /// takes subscriptions only in `start`, so a link that must *send* a shared topic
+    /// there (the base station's commands) is built with it.
+    #[must_use]
+    pub fn sharing(mut self, request: ShareRequest) -> Self {
+        self.sharing_from_start.push(request);
+        self
     }
 
     /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
@@ -930,6 +943,9 @@ impl Actor for LinkActor {
             if let Some(codec) = &entry.codec {
                 codec.subscribe(ctx);
             }
+        }
+        for request in std::mem::take(&mut self.sharing_from_start) {
+            self.register(&request, ctx)?;
         }
         let me = ctx.robot().0;
         for &peer in self.config.peers.iter().filter(|p| **p != me) {

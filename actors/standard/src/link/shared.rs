@@ -169,10 +169,17 @@ impl<T: Message + Serialize + DeserializeOwned> SharedTopic<T> {
         Topic::named(format!("peer/{}", self.name))
     }
 
+    /// The registration [`share`](Self::share) sends, for a link that shares the
+    /// topic from its start ([`LinkActor::sharing`](super::LinkActor::sharing)).
+    #[must_use]
+    pub fn request(&self) -> ShareRequest {
+        ShareRequest(Arc::new(*self))
+    }
+
     /// Asks this robot's link to share the topic (call it from the actor's
     /// `start`; calling it again, e.g. after a restart, changes nothing).
     pub fn share(&self, ctx: &mut Context<'_>) {
-        ctx.publish(&SHARE_REQUESTS, ShareRequest(Arc::new(*self)));
+        ctx.publish(&SHARE_REQUESTS, self.request());
     }
 }
 

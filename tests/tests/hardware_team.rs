@@ -1,0 +1,313 @@
+//! The closed loop of issue 17 with a team: the hardware robot (robot 0, the
+//! `troupe-robot` assembly: ROS 2 depth and odometry in over zenoh, MAVLink setpoints
+//! out), a simulated peer (robot 1, the `troupe robot` process assembly in its own
+//! simulated cave) and the base station (`troupe base`), each with its own zenoh
+//! session on loopback, run side by side in this test's process through the same
+//! library entry points the binaries call.
+//!
+//! The other ends are real: `scripts/ros2/box_room_camera.py` (rclpy + the zenoh
+//! binding) renders 640×480 depth of a box room at 15 Hz from the pose of
+//! `scripts/mavlink/px4_like_autopilot.py` (pymavlink), a point mass flying the
+//! robot's setpoints — the Python side of `robot/tests/hardware_loop.rs`.
+//!
+//! Checks: the hardware robot streams setpoints for ≥ 20 s, none outside its geofence,
+//! and no committed plan left the fence (the collision actor's plan check and the
+//! vehicle's clamp share the robot file's `[mavlink.geofence]`); the two robots share
+//! keyframes both ways; the base's merged map holds keyframes of both. Skips, saying
+//! why, without the Python venvs (`.ci/run` installs them).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+use serde_json::Value;
+use troupe_robot::hardware::HardwareRobot;
+use troupe_runtime::TopicStats;
+use troupe_sims::base::BaseStation;
+use troupe_sims::process::RobotProcess;
+
+const FLY_S: f64 = 22.0;
+const FENCE_MIN: [f64; 3] = [-2.5, -2.5, 0.5];
+const FENCE_MAX: [f64; 3] = [4.5, 2.5, 2.5];
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ has a parent")
+        .to_path_buf()
+}
+
+/// The venv's Python if it imports `modules`, or why not.
+fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
+    let python = root().join(venv).join("bin/python");
+    let ok = Command::new(&python)
+        .args(["-c", &format!("import {modules}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        Ok(python)
+    } else {
+        Err(format!(
+            "{} cannot import {modules} (run .ci/run)",
+            python.display()
+        ))
+    }
+}
+
+fn free_port(udp: bool) -> u16 {
+    if udp {
+        std::net::UdpSocket::bind("127.0.0.1:0").and_then(|s| s.local_addr())
+    } else {
+        std::net::TcpListener::bind("127.0.0.1:0").and_then(|s| s.local_addr())
+    }
+    .expect("a free loopback port")
+    .port()
+}
+
+fn finish(child: Child, name: &str) -> Output {
+    let output = child.wait_with_output().expect("wait");
+    assert!(
+        output.status.success(),
+        "{name} failed: {}\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("json file")).expect("json")
+}
+
+/// A zenoh table listening on `me` and connecting to the `others`.
+fn zenoh(me: &str, others: &[&str]) -> String {
+    format!("listen = [\"{me}\"]\nconnect = {others:?}\n")
+}
+
+#[test]
+fn hardware_robot_a_simulated_peer_and_the_base_share_one_map() {
+    let (ros_python, mav_python) = match (
+        python(
+            ".venv-ros2",
+            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
+        ),
+        python(".venv-pymavlink", "pymavlink"),
+    ) {
+        (Ok(r), Ok(m)) => (r, m),
+        (r, m) => {
+            eprintln!(
+                "SKIPPED hardware team test: {}",
+                [r.err(), m.err()]
+                    .into_iter()
+                    .flatten()
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dir = dir.path();
+    let ros_port = free_port(false);
+    let team: Vec<String> = (0..3)
+        .map(|_| format!("tcp/127.0.0.1:{}", free_port(false)))
+        .collect();
+    let (hw, sim, base) = (team[0].as_str(), team[1].as_str(), team[2].as_str());
+    let (mavlink_port, state_port) = (free_port(true), free_port(true));
+
+    // The team: robot 0 on hardware, robot 1 simulated, the base as id 2.
+    std::fs::write(
+        dir.join("team.toml"),
+        "name = \"hwteam\"\nrobots = 2\n\n[robot.link]\nteam = 3\npeers = [0, 1]\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("robot0.toml"),
+        format!(
+            r#"id = 0
+team_size = 2
+out = "hw0"
+record = false
+[robot]
+sensor_rate_hz = 15.0
+[robot.link]
+team = 3
+peers = [1]
+[ros2]
+format = "rmw_zenoh"
+startup_timeout_s = 20.0
+zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
+[ros2.topics]
+depth = "/camera/depth/image_rect_raw"
+camera_info = "/camera/depth/camera_info"
+odometry = "/odom"
+plan = "/troupe/plan"
+[mavlink]
+connection = "udpin:127.0.0.1:{mavlink_port}"
+odometry_source = "external"
+[mavlink.geofence]
+min_m = {FENCE_MIN:?}
+max_m = {FENCE_MAX:?}
+[zenoh]
+{}"#,
+            zenoh(hw, &[sim, base])
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("robot1.toml"),
+        format!(
+            "robot = 1\nscenario = \"team.toml\"\nout = \"sim1\"\nrecord = false\n\n[zenoh]\n{}",
+            zenoh(sim, &[hw, base])
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("base.toml"),
+        format!(
+            "scenario = \"team.toml\"\nout = \"station\"\nply_points = 2000\nrecord = false\n\n\
+             [zenoh]\n{}",
+            zenoh(base, &[hw, sim])
+        ),
+    )
+    .unwrap();
+    let hardware = HardwareRobot::load(&dir.join("robot0.toml")).expect("robot0.toml");
+    let peer = RobotProcess::load(&dir.join("robot1.toml")).expect("robot1.toml");
+    let station = BaseStation::load(&dir.join("base.toml")).expect("base.toml");
+
+    // The Python ends run past the robot's flight (it starts once their topics appear).
+    let peers_s = (FLY_S + 15.0).to_string();
+    let report = dir.join("autopilot.json");
+    let autopilot = Command::new(mav_python)
+        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
+        .args([
+            "--report",
+            report.to_str().unwrap(),
+            "--duration-s",
+            &peers_s,
+        ])
+        .args(["--start-ned", "0,0,-1.2"])
+        .args(["--state-to", &format!("127.0.0.1:{state_port}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the autopilot");
+    let camera = Command::new(ros_python)
+        .arg(root().join("scripts/ros2/box_room_camera.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
+        .args(["--state-port", &state_port.to_string()])
+        .args(["--duration-s", &peers_s])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the camera");
+
+    // The base and the simulated peer run until the hardware robot is done.
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let stopped = |mut rx: tokio::sync::watch::Receiver<bool>| async move {
+        let _ = rx.wait_for(|s| *s).await;
+    };
+    let (base_rx, peer_rx) = (stop_rx.clone(), stop_rx);
+    let base_thread = std::thread::spawn(move || {
+        let runtime = tokio::runtime::Runtime::new().expect("runtime");
+        let (_commands, from_operator) = std::sync::mpsc::channel();
+        runtime.block_on(troupe_sims::base::run(
+            &station,
+            stopped(base_rx),
+            from_operator,
+        ))
+    });
+    let peer_thread = std::thread::spawn(move || {
+        let runtime = tokio::runtime::Runtime::new().expect("runtime");
+        runtime.block_on(troupe_sims::process::run(&peer, stopped(peer_rx)))
+    });
+    let flown = troupe_robot::hardware::run(&hardware, async {
+        tokio::time::sleep(Duration::from_secs_f64(FLY_S)).await;
+    });
+    // The base hears the last keyframes before it stops.
+    std::thread::sleep(Duration::from_secs(3));
+    stop_tx.send(true).unwrap();
+    let peer_summary = peer_thread.join().unwrap().expect("the simulated peer");
+    let base_summary = base_thread.join().unwrap().expect("the base");
+    let hw_summary = flown.expect("the hardware robot");
+    finish(camera, "the camera");
+    finish(autopilot, "the autopilot");
+
+    // The hardware robot mapped and planned, and no committed plan left the fence.
+    println!(
+        "hardware: frames {} keyframes {} plans {} vehicle {:?} collision {:?}",
+        hw_summary.frames,
+        hw_summary.keyframes,
+        hw_summary.plans,
+        hw_summary.vehicle,
+        hw_summary.collision
+    );
+    assert!(hw_summary.keyframes > 0 && hw_summary.plans > 0);
+    let vehicle = hw_summary.vehicle.as_ref().expect("vehicle status");
+    assert_eq!(vehicle.plans_leaving_fence, 0, "{vehicle:?}");
+    assert_eq!(vehicle.fence_holds, 0, "{vehicle:?}");
+    assert!(hw_summary.collision.is_some(), "no collision actor status");
+
+    // It flew ≥ 20 s: setpoints over that span, none outside the fence.
+    let autopilot = read_json(&report);
+    let setpoints = autopilot["setpoints"].as_array().unwrap();
+    let times: Vec<f64> = setpoints.iter().map(|s| s["t"].as_f64().unwrap()).collect();
+    let span_s = times.last().unwrap_or(&0.0) - times.first().unwrap_or(&0.0);
+    println!("{} setpoints over {span_s:.1} s", times.len());
+    assert!(span_s >= 20.0, "setpoints over only {span_s:.1} s");
+    for s in setpoints {
+        let f = |k: &str| s[k].as_f64().unwrap();
+        let enu = [f("y"), f("x"), -f("z")];
+        for k in 0..3 {
+            assert!(
+                (FENCE_MIN[k] - 1e-3..=FENCE_MAX[k] + 1e-3).contains(&enu[k]),
+                "setpoint {enu:?} outside the geofence"
+            );
+        }
+    }
+
+    // The robots shared keyframes both ways.
+    let received = |topics: &BTreeMap<String, TopicStats>| {
+        topics.get("peer/keyframe").map_or(0, |t| t.messages)
+    };
+    let (hw_got, sim_got) = (received(&hw_summary.topics), received(&peer_summary.topics));
+    println!("keyframes received: hardware robot {hw_got}, simulated peer {sim_got}");
+    assert!(
+        hw_got > 0,
+        "the hardware robot got no keyframe from its peer"
+    );
+    assert!(
+        sim_got > 0,
+        "the simulated peer got no keyframe from the hardware robot"
+    );
+
+    // The base's merged map holds both robots' keyframes.
+    let robots = &base_summary.robots;
+    println!(
+        "base: {:?}",
+        robots
+            .iter()
+            .map(|(id, r)| (id, r.keyframes))
+            .collect::<Vec<_>>()
+    );
+    for id in [0, 1] {
+        assert!(
+            robots.get(&id).is_some_and(|r| r.keyframes > 0),
+            "the base has no keyframe of robot {id}"
+        );
+    }
+    let merged = troupe_actors::mapper::mapfile::GmmMap::load(
+        &dir.join("station").join("merged_map.troupe"),
+    )
+    .expect("merged map");
+    assert_eq!(
+        merged.keyframes.len(),
+        robots.values().map(|r| r.keyframes).sum::<usize>()
+    );
+}
