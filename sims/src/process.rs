@@ -457,7 +457,8 @@ fn write_outputs(
 /// (e.g. `tcp/127.0.0.1:7447`) and connects to every other robot's endpoint (zenoh
 /// peers do not forward); `scenario` is written as given (use an absolute path, or
 /// one relative to `dir`). The same files work across hosts with the hosts'
-/// addresses. Returns the files.
+/// addresses, once they authenticate (`troupe keys`, docs/security.md) or say
+/// `insecure = true`: an open listener off loopback is refused. Returns the files.
 pub fn write_team(
     dir: &Path,
     scenario: &Path,

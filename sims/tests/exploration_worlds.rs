@@ -87,7 +87,12 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
             .unwrap();
         for name in ["discovered_m3", "unproductive_s", "longest_unproductive_s"] {
             let cell: f64 = last[column(name)].parse().unwrap();
-            assert_eq!(cell, r[name].as_f64().unwrap(), "robot {i} {name}");
+            // The same sums, added in a different order: equal to rounding.
+            let summary = r[name].as_f64().unwrap();
+            assert!(
+                (cell - summary).abs() <= 1e-9,
+                "robot {i} {name}: {cell} vs {summary}"
+            );
         }
     }
 }
