@@ -228,9 +228,9 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("team.toml"), "name = \"rec\"\nrobots = 3\n").unwrap();
     let ports = free_ports(4);
-    let robots: Vec<String> = ports[..3]
-        .iter()
-        .map(|p| format!("\"tcp/127.0.0.1:{p}\""))
+    // `troupe launch` puts robot i on BASE_PORT + i.
+    let robots: Vec<String> = (0..3)
+        .map(|i| format!("\"tcp/127.0.0.1:{}\"", ports[0] + i))
         .collect();
     std::fs::write(
         dir.path().join("base.toml"),
@@ -307,8 +307,7 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
     }
     let station = dir.path().join("station/run.mcap");
     let channels = checked_channels(&station).expect("the venv was checked above");
-    // The base (robot 3) records each robot it hears; with three robots it has
-    // been seen to hear only robot 0 (a link matter, not the recording's).
+    // The base (robot 3) connects to every robot and records each one it hears.
     let heard = (0..3)
         .filter(|j| {
             channels
@@ -317,9 +316,9 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
                 > Some(10)
         })
         .count();
-    assert!(
-        heard >= 1,
-        "the base recorded no robot's pose: {channels:?}"
+    assert_eq!(
+        heard, 3,
+        "the base recorded the poses of {heard} robots: {channels:?}"
     );
     for channel in ["peer_keyframes", "peer_keyframe_points", "link"] {
         let topic = format!("/robot3/{channel}");
