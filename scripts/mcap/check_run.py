@@ -38,6 +38,7 @@ from pathlib import Path
 
 import jsonschema
 from mcap.reader import make_reader
+from quaternion import rotation
 
 POSE_TOLERANCE_M = 1e-6
 SIGMAS = 2.0
@@ -92,15 +93,6 @@ def read_map(path):
         offset += f * 8 * 13
         keyframes.append((stamp_s, components))
     return keyframes
-
-
-def rotation(q):
-    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
-    return [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
 
 
 def ellipsoid_covariance(sphere):

@@ -22,15 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 from mcap.reader import make_reader  # noqa: E402
-
-
-def rotation(q):
-    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
-    return [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
+from quaternion import rotation  # noqa: E402
 
 
 def projected_ellipse(sphere):
