@@ -3,6 +3,8 @@
 use serde::{Deserialize, Serialize};
 use troupe_core::ConfigError;
 
+use super::guidance::Coordination;
+
 /// Settings of the frontier memory ([`FrontierMemory`](super::FrontierMemory)), the
 /// global guidance field ([`GuidanceField`](super::GuidanceField)) and implicit
 /// coordination. On by default.
@@ -28,8 +30,11 @@ pub struct GuidanceConfig {
     /// Points sampled from each peer keyframe's GMM (§6.1.5); the rays from the peer's
     /// sensor to them retire the remembered frontiers they cross.
     pub peer_keyframe_samples: usize,
-    /// A frontier within this distance of where a peer is heading (the end of its
-    /// committed plan), and closer to it than to this robot, is the peer's claim.
+    /// How the peers' claims on remembered frontiers are decided.
+    pub coordination: Coordination,
+    /// A frontier within this distance of where a peer is heading (the frontier
+    /// assigned to it, or the end of its committed plan — then only when closer to that
+    /// end than to this robot) is the peer's claim, metres.
     pub claim_radius_m: f64,
     /// Route length added to a frontier a peer claims, metres.
     pub claim_penalty_m: f64,
@@ -56,6 +61,7 @@ impl Default for GuidanceConfig {
             min_frontier_cells: 4,
             window_reward_above_nats: None,
             peer_keyframe_samples: 1000,
+            coordination: Coordination::default(),
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
             look_ahead_m: 1.0,

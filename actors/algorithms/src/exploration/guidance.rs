@@ -4,10 +4,12 @@
 //! with frontiers that peers are heading to made longer (implicit coordination).
 
 use std::cmp::Ordering;
-use std::collections::{BTreeSet, BinaryHeap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::hash::BuildHasherDefault;
 
 use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+use troupe_core::RobotId;
 
 use super::memory::{CellKey, FrontierMemory};
 
@@ -20,11 +22,32 @@ pub struct PeerIntent {
     pub goal_m: Point3<f64>,
 }
 
+/// How a robot decides which remembered frontiers its peers have claimed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Coordination {
+    /// A frontier within the claim radius of where a peer's committed plan ends, and
+    /// closer to that end than to this robot, is the peer's.
+    PlanEnd,
+    /// Every robot this robot knows of (itself and its peers, at their latest positions)
+    /// is given a frontier greedily, cheapest route first (ties by robot id, so every
+    /// robot computes the same assignment from the same memory); the frontiers within
+    /// the claim radius of a peer's are the peer's. Greedy assignment of targets by
+    /// travel cost with the utility of targets near an assigned one reduced is the
+    /// coordination of Burgard et al. (IEEE T-RO 2005); the thesis' teams coordinate
+    /// only implicitly (§8.2), which leaves robots side by side at a fork entering the
+    /// same branch.
+    #[default]
+    Assignment,
+}
+
 /// How frontiers are weighed when the field is built.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FieldParams {
-    /// A frontier within this distance of a peer's goal, and closer to that goal than to
-    /// this robot, is the peer's claim, metres.
+    /// How the peers' claims are decided.
+    pub coordination: Coordination,
+    /// A frontier within this distance of a peer's goal (or the frontier assigned to
+    /// it), and closer to it than to this robot, is the peer's claim, metres.
     pub claim_radius_m: f64,
     /// Route length added to a claimed frontier, metres.
     pub claim_penalty_m: f64,
@@ -48,6 +71,99 @@ pub struct GuidanceField {
     look_ahead_m: f64,
     distance_m: HashMap<CellKey, (f64, CellKey), Fixed>,
     frontiers: usize,
+}
+
+/// Route distance (metres) from `from` to every passable memory cell it reaches:
+/// single-source Dijkstra over the 26-connected passable cells, from the cell holding
+/// `from` (or its passable neighbours when that cell is not passable).
+fn routes_from(memory: &FrontierMemory, from: &Point3<f64>) -> HashMap<CellKey, f64, Fixed> {
+    let mut reached: HashMap<CellKey, f64, Fixed> = HashMap::default();
+    let Some(start) = memory.key_of(from) else {
+        return reached;
+    };
+    let mut heap = BinaryHeap::new();
+    for (n, _) in std::iter::once((start, 0.0)).chain(neighbours(start)) {
+        if memory.record(n).passable {
+            heap.push(Entry {
+                cost_m: (memory.centre(n) - from).norm(),
+                key: n,
+                target: n,
+            });
+        }
+    }
+    let cell_m = memory.cell_m();
+    while let Some(Entry { cost_m, key, .. }) = heap.pop() {
+        if reached.contains_key(&key) {
+            continue;
+        }
+        reached.insert(key, cost_m);
+        for (n, step) in neighbours(key) {
+            if !reached.contains_key(&n) && memory.record(n).passable {
+                heap.push(Entry {
+                    cost_m: cost_m + step * cell_m,
+                    key: n,
+                    target: n,
+                });
+            }
+        }
+    }
+    reached
+}
+
+/// The frontiers of `open` that the greedy assignment ([`Coordination::Assignment`])
+/// gives to a peer of `own`: each robot's route cost to each frontier (through a
+/// passable neighbour, as the field seeds it); repeatedly the cheapest (robot, frontier)
+/// pair whose robot has no frontier yet and whose frontier is unclaimed is assigned, and
+/// the unclaimed frontiers within `claim_radius_m` of it become that robot's.
+///
+/// Time: one Dijkstra per robot, `O(r · c log c)` for `r` robots and `c` passable
+/// cells, plus sorting the `r · f` pairs.
+fn claimed_by_assignment(
+    memory: &FrontierMemory,
+    open: &[CellKey],
+    (own, own_m): (RobotId, &Point3<f64>),
+    peers: &BTreeMap<RobotId, PeerIntent>,
+    claim_radius_m: f64,
+) -> BTreeSet<CellKey> {
+    let cell_m = memory.cell_m();
+    let robots = std::iter::once((own, *own_m)).chain(
+        peers
+            .iter()
+            .filter(|(id, _)| **id != own)
+            .map(|(id, peer)| (*id, peer.position_m)),
+    );
+    let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
+    for (id, position_m) in robots {
+        let routes = routes_from(memory, &position_m);
+        for &f in open {
+            let cost_m = std::iter::once((f, 0.0))
+                .chain(neighbours(f))
+                .filter_map(|(n, step)| routes.get(&n).map(|d| d + step * cell_m))
+                .fold(f64::INFINITY, f64::min);
+            if cost_m.is_finite() {
+                pairs.push((cost_m, id, f));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let mut owner: BTreeMap<CellKey, RobotId> = BTreeMap::new();
+    let mut assigned: BTreeSet<RobotId> = BTreeSet::new();
+    for (_, id, f) in pairs {
+        if assigned.contains(&id) || owner.contains_key(&f) {
+            continue;
+        }
+        assigned.insert(id);
+        let centre = memory.centre(f);
+        for &g in open {
+            if (memory.centre(g) - centre).norm() <= claim_radius_m {
+                owner.entry(g).or_insert(id);
+            }
+        }
+    }
+    owner
+        .into_iter()
+        .filter_map(|(f, id)| (id != own).then_some(f))
+        .collect()
 }
 
 /// A heap entry ordered by cost, then key (deterministic ties), smallest first.
@@ -90,27 +206,46 @@ fn neighbours(key: CellKey) -> impl Iterator<Item = (CellKey, f64)> {
 }
 
 impl GuidanceField {
-    /// The field over `memory` for a robot at `robot_m`, with the `peers`' claims;
+    /// The field over `memory` for robot `own` at `robot_m`, with the `peers`' claims;
     /// the frontiers in `given_up` do not seed it.
     #[must_use]
     pub fn build(
         memory: &FrontierMemory,
-        robot_m: &Point3<f64>,
-        peers: &[PeerIntent],
+        (own, robot_m): (RobotId, &Point3<f64>),
+        peers: &BTreeMap<RobotId, PeerIntent>,
         given_up: &BTreeSet<CellKey>,
         params: &FieldParams,
     ) -> Self {
         let cell_m = memory.cell_m();
+        let open: Vec<CellKey> = memory
+            .frontiers()
+            .filter(|f| !given_up.contains(f))
+            .collect();
+        let claimed = match params.coordination {
+            Coordination::PlanEnd => open
+                .iter()
+                .copied()
+                .filter(|&f| {
+                    let centre = memory.centre(f);
+                    let mine_m = (centre - robot_m).norm();
+                    peers.values().any(|peer| {
+                        let theirs_m = (centre - peer.goal_m).norm();
+                        theirs_m <= params.claim_radius_m && theirs_m < mine_m
+                    })
+                })
+                .collect(),
+            Coordination::Assignment => {
+                claimed_by_assignment(memory, &open, (own, robot_m), peers, params.claim_radius_m)
+            }
+        };
         let mut heap = BinaryHeap::new();
         let mut frontiers = 0;
-        for f in memory.frontiers().filter(|f| !given_up.contains(f)) {
-            let centre = memory.centre(f);
-            let mine_m = (centre - robot_m).norm();
-            let claimed = peers.iter().any(|peer| {
-                let theirs_m = (centre - peer.goal_m).norm();
-                theirs_m <= params.claim_radius_m && theirs_m < mine_m
-            });
-            let penalty_m = if claimed { params.claim_penalty_m } else { 0.0 };
+        for &f in &open {
+            let penalty_m = if claimed.contains(&f) {
+                params.claim_penalty_m
+            } else {
+                0.0
+            };
             let mut seeded = false;
             for (n, step) in std::iter::once((f, 0.0)).chain(neighbours(f)) {
                 if memory.record(n).passable {

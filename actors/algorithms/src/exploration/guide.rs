@@ -108,17 +108,17 @@ impl Guide {
 
     /// Marks the robot's own cell passable, counts the time since the last call
     /// towards the frontiers near `robot_m` (giving up those watched too long) and
-    /// builds the field for a robot there at `now`, with the peers' claims.
-    pub fn field(&mut self, robot_m: &Point3<f64>, now: Time) -> GuidanceField {
+    /// builds the field for robot `own` there at `now`, with the peers' claims.
+    pub fn field(&mut self, (own, robot_m): (RobotId, &Point3<f64>), now: Time) -> GuidanceField {
         self.memory.mark_body(robot_m);
         self.watch(robot_m, now);
-        let peers: Vec<PeerIntent> = self.peers.values().copied().collect();
         GuidanceField::build(
             &self.memory,
-            robot_m,
-            &peers,
+            (own, robot_m),
+            &self.peers,
             &self.given_up,
             &FieldParams {
+                coordination: self.config.coordination,
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,

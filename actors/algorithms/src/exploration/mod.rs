@@ -28,7 +28,7 @@ mod guide;
 mod memory;
 
 pub use config::GuidanceConfig;
-pub use guidance::{FieldParams, GuidanceField, PeerIntent};
+pub use guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
 pub use guide::Guide;
 pub use memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
 

@@ -185,7 +185,7 @@ fn fly(
         let margin_m = config.margin_m(snapshot.resolution_m());
         let field = guide.as_mut().map(|g| {
             g.observe_snapshot(&snapshot, margin_m);
-            g.field(&here, now)
+            g.field((RobotId(0), &here), now)
         });
         let mut problem = PlanningProblem::new(&config, &snapshot, &camera);
         let mut candidates = problem.children(&state);
@@ -230,7 +230,7 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
         for x in [4.0, 14.0, 24.0, 34.0] {
             let here = Point3::new(x, 0.0, 0.0);
             g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
-            g.field(&here, Time::ZERO);
+            g.field((RobotId(0), &here), Time::ZERO);
         }
         assert!(g.memory().frontiers().all(|k| k[0] == -1 || k[0] == 0));
         assert!(g.memory().frontiers().count() > 0);
@@ -279,11 +279,14 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     assert!(guides[0].memory().frontiers().any(right));
     // Robot 0 leads, robot 1 follows; alone, both would take the left branch.
     let (lead, follow) = (Point3::new(8.5, 0.5, 0.0), Point3::new(4.0, 0.0, 0.0));
-    let target =
-        |g: &mut Guide, at: &Point3<f64>| g.field(at, Time::ZERO).target_of(at).expect("a route");
-    let lead_target = target(&mut guides[0], &lead);
+    let target = |g: &mut Guide, id: u32, at: &Point3<f64>| {
+        g.field((RobotId(id), at), Time::ZERO)
+            .target_of(at)
+            .expect("a route")
+    };
+    let lead_target = target(&mut guides[0], 0, &lead);
     assert!(left(lead_target), "{lead_target:?}");
-    assert!(left(target(&mut guides[1], &follow)));
+    assert!(left(target(&mut guides[1], 1, &follow)));
     // Robot 0 commits towards the left branch; robot 1 hears its plan and takes the
     // right one, while robot 0, hearing robot 1 head right, keeps left.
     let plan = |robot: u32, from: Point3<f64>, to: Point3<f64>| crate::team::PeerPlan {
@@ -308,13 +311,42 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
         received_at: Time::ZERO,
     };
     guides[1].observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));
-    let follow_target = target(&mut guides[1], &follow);
+    let follow_target = target(&mut guides[1], 1, &follow);
     assert!(right(follow_target), "{follow_target:?}");
     guides[0].observe_peer_plan(&plan(1, follow, Point3::new(7.0, 0.0, 0.0)));
-    assert!(left(target(&mut guides[0], &lead)));
+    assert!(left(target(&mut guides[0], 0, &lead)));
     // Deterministic: the same inputs give the same field.
-    let again = target(&mut guides[1], &follow);
+    let again = target(&mut guides[1], 1, &follow);
     assert_eq!(again, follow_target);
+
+    // Side by side at the fork, both heading the same way: the assignment splits them,
+    // each robot computing the same split from its own memory.
+    let beside = Point3::new(8.5, -0.5, 0.0);
+    let towards = Point3::new(9.0, 0.0, 0.0);
+    let split = |coordination: Coordination| {
+        let config = GuidanceConfig {
+            coordination,
+            ..GuidanceConfig::default()
+        };
+        let mut pair = [Guide::new(config), Guide::new(config)];
+        for g in &mut pair {
+            g.observe_snapshot(
+                &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
+                0.67,
+            );
+        }
+        pair[0].observe_peer_plan(&plan(1, beside, towards));
+        pair[1].observe_peer_plan(&plan(0, lead, towards));
+        [
+            target(&mut pair[0], 0, &lead),
+            target(&mut pair[1], 1, &beside),
+        ]
+    };
+    let [a, b] = split(Coordination::Assignment);
+    assert!(
+        left(a) != left(b) && (left(a) || right(a)) && (left(b) || right(b)),
+        "{a:?} {b:?}"
+    );
 }
 
 #[test]
@@ -334,7 +366,7 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     for s in 0..30 {
         assert!(
             guide
-                .field(&far, second(f64::from(s)))
+                .field((RobotId(0), &far), second(f64::from(s)))
                 .distance_m(&far)
                 .is_finite()
         );
@@ -344,7 +376,7 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     // lasts `give_up_after_s`, then the frontiers within reach stop pulling.
     let mut when = None;
     for s in 30..60 {
-        let field = guide.field(&near, second(f64::from(s)));
+        let field = guide.field((RobotId(0), &near), second(f64::from(s)));
         if when.is_none() && field.frontier_count() < frontiers {
             when = Some(f64::from(s) - 30.0);
         }
@@ -361,9 +393,9 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     let given_up = guide.given_up().clone();
     let seen_all = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |_| true);
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67);
-    guide.field(&near, second(61.0));
+    guide.field((RobotId(0), &near), second(61.0));
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
-    let field = guide.field(&near, second(62.0));
+    let field = guide.field((RobotId(0), &near), second(62.0));
     assert_eq!(guide.given_up(), &given_up);
     assert!(field.frontier_count() < frontiers);
 }

@@ -276,7 +276,8 @@ impl<S: ActionSelection> PlannerActor<S> {
         let root = replanning_root(self.committed.as_ref(), now, &odometry.pose);
         let round = &self.config.round;
         let here = nalgebra::Point3::from(root.position_m());
-        let field = self.guide.as_mut().map(|g| g.field(&here, now));
+        let own = ctx.robot();
+        let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
         if let Some(guide) = &self.guide {
             let memory = guide.memory();
             ctx.publish(
