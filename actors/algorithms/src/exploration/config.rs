@@ -21,6 +21,11 @@ pub struct GuidanceConfig {
     /// Fine frontier cells (of the grid window) a memory cell must hold to be a
     /// remembered frontier.
     pub min_frontier_cells: usize,
+    /// Remembered frontiers pull a robot only as part of a region of at least this many
+    /// 26-connected frontier cells: single cells left along a flown tunnel (a niche, a
+    /// pocket under the floor) are not worth the trip back (Yamauchi 1997 discards
+    /// frontier regions smaller than the robot for the same reason). 1 keeps every one.
+    pub min_region_cells: usize,
     /// The frontier reward of a round is measured over the memory (route distance to
     /// the remembered frontiers) whenever the memory's field reaches the robot. With a
     /// value here, a round whose best candidate's information (CSQMI, nats) reaches it
@@ -59,13 +64,14 @@ impl Default for GuidanceConfig {
             cell_m: 1.0,
             max_cells: 262_144,
             min_frontier_cells: 4,
+            min_region_cells: 3,
             window_reward_above_nats: None,
             peer_keyframe_samples: 1000,
             coordination: Coordination::default(),
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
             look_ahead_m: 1.0,
-            give_up_after_s: Some(10.0),
+            give_up_after_s: Some(4.0),
             give_up_radius_m: 3.0,
         }
     }
@@ -90,6 +96,9 @@ impl GuidanceConfig {
         }
         if self.min_frontier_cells == 0 {
             return Err(ConfigError::new("min_frontier_cells", "must be ≥ 1", 0));
+        }
+        if self.min_region_cells == 0 {
+            return Err(ConfigError::new("min_region_cells", "must be ≥ 1", 0));
         }
         if self.peer_keyframe_samples > 100_000 {
             return Err(ConfigError::new(

@@ -46,6 +46,8 @@ pub enum Coordination {
 pub struct FieldParams {
     /// How the peers' claims are decided.
     pub coordination: Coordination,
+    /// Smallest region of 26-connected frontier cells that seeds the field.
+    pub min_region_cells: usize,
     /// A frontier within this distance of a peer's goal (or the frontier assigned to
     /// it), and closer to it than to this robot, is the peer's claim, metres.
     pub claim_radius_m: f64,
@@ -71,6 +73,35 @@ pub struct GuidanceField {
     look_ahead_m: f64,
     distance_m: HashMap<CellKey, (f64, CellKey), Fixed>,
     frontiers: usize,
+}
+
+/// The cells of `frontiers` (in key order) that lie in a region of at least
+/// `min_cells` 26-connected frontier cells, in key order.
+fn regions_of_at_least(frontiers: BTreeSet<CellKey>, min_cells: usize) -> Vec<CellKey> {
+    if min_cells <= 1 {
+        return frontiers.into_iter().collect();
+    }
+    let mut kept = BTreeSet::new();
+    let mut visited = BTreeSet::new();
+    for &start in &frontiers {
+        if !visited.insert(start) {
+            continue;
+        }
+        let mut region = vec![start];
+        let mut next = 0;
+        while let Some(&key) = region.get(next) {
+            next += 1;
+            for (n, _) in neighbours(key) {
+                if frontiers.contains(&n) && visited.insert(n) {
+                    region.push(n);
+                }
+            }
+        }
+        if region.len() >= min_cells {
+            kept.extend(region);
+        }
+    }
+    kept.into_iter().collect()
 }
 
 /// Route distance (metres) from `from` to every passable memory cell it reaches:
@@ -217,10 +248,13 @@ impl GuidanceField {
         params: &FieldParams,
     ) -> Self {
         let cell_m = memory.cell_m();
-        let open: Vec<CellKey> = memory
-            .frontiers()
-            .filter(|f| !given_up.contains(f))
-            .collect();
+        let open = regions_of_at_least(
+            memory
+                .frontiers()
+                .filter(|f| !given_up.contains(f))
+                .collect(),
+            params.min_region_cells,
+        );
         let claimed = match params.coordination {
             Coordination::PlanEnd => open
                 .iter()
@@ -351,5 +385,30 @@ impl GuidanceField {
     #[must_use]
     pub fn target_of(&self, p: &Point3<f64>) -> Option<CellKey> {
         self.distance_at(p).1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::regions_of_at_least;
+
+    #[test]
+    fn frontier_regions_smaller_than_the_minimum_are_dropped() {
+        // A region of three cells touching only diagonally, a pair, and a lone cell.
+        let frontiers: std::collections::BTreeSet<_> = [
+            [0, 0, 0],
+            [1, 1, 1],
+            [2, 2, 1],
+            [10, 0, 0],
+            [10, 0, 1],
+            [20, 5, 5],
+        ]
+        .into_iter()
+        .collect();
+        let kept = |min| regions_of_at_least(frontiers.clone(), min);
+        assert_eq!(kept(1).len(), 6);
+        assert_eq!(kept(2).len(), 5);
+        assert_eq!(kept(3), vec![[0, 0, 0], [1, 1, 1], [2, 2, 1]]);
+        assert!(kept(4).is_empty());
     }
 }

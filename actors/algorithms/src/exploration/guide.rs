@@ -119,6 +119,7 @@ impl Guide {
             &self.given_up,
             &FieldParams {
                 coordination: self.config.coordination,
+                min_region_cells: self.config.min_region_cells,
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,

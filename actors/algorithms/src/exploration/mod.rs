@@ -11,9 +11,11 @@
 //!   keyframe GMMs sampled at the memory's resolution (thesis §6.1.4–6.1.5: a GMM can
 //!   be resampled at any resolution), which retire the frontiers anyone has looked into.
 //! - [`GuidanceField`]: route distance through known passable cells to the nearest
-//!   remembered frontier (multi-source Dijkstra), the global `d` of V. Frontiers a peer
-//!   is heading to ([`PeerIntent`]: the end of its committed plan) are made longer by a
-//!   penalty, so teammates spread over different openings.
+//!   remembered frontier (multi-source Dijkstra), the global `d` of V, seeded by the
+//!   frontier regions of at least a few cells. Frontiers assigned to peers
+//!   ([`Coordination`]: greedy assignment by route cost over every known robot's
+//!   [`PeerIntent`]) are made longer by a penalty, so teammates spread over different
+//!   openings.
 //! - [`Guide`]: one robot's memory, its peers' intents and the rule for when a round
 //!   follows the field.
 //! - [`GuidanceConfig`]: the settings, table `robot.planner.guidance`.
