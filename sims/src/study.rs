@@ -216,7 +216,9 @@ impl Study {
                 .axes
                 .into_iter()
                 .enumerate()
-                .map(|(i, a)| axis_from_file(a).map_err(|e| invalid(e.within(&format!("axes[{i}]")))))
+                .map(|(i, a)| {
+                    axis_from_file(a).map_err(|e| invalid(e.within(&format!("axes[{i}]"))))
+                })
                 .collect::<Result<_, _>>()?,
         };
         study.check().map_err(invalid)?;
@@ -226,7 +228,8 @@ impl Study {
     }
 
     fn check(&self) -> Result<(), ConfigError> {
-        const NAME_RULE: &str = "must be non-empty, use only letters, digits, `-`, `_`, `.` and not start with `.`";
+        const NAME_RULE: &str =
+            "must be non-empty, use only letters, digits, `-`, `_`, `.` and not start with `.`";
         let name_ok = |s: &str| {
             !s.is_empty()
                 && !s.starts_with('.')
@@ -234,10 +237,18 @@ impl Study {
                     .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
         };
         if !name_ok(&self.name) {
-            return Err(ConfigError::new("name", NAME_RULE, format!("{:?}", self.name)));
+            return Err(ConfigError::new(
+                "name",
+                NAME_RULE,
+                format!("{:?}", self.name),
+            ));
         }
         if self.seeds.is_empty() {
-            return Err(ConfigError::new("seeds", "must list at least one seed", "[]"));
+            return Err(ConfigError::new(
+                "seeds",
+                "must list at least one seed",
+                "[]",
+            ));
         }
         if let Some(l) = self
             .coverage_levels
@@ -327,7 +338,11 @@ fn axis_from_file(a: AxisFile) -> Result<Axis, ConfigError> {
     match (a.key, a.values, a.levels) {
         (Some(key), Some(values), None) => {
             if values.is_empty() {
-                return Err(ConfigError::new("values", "must list at least one value", "[]"));
+                return Err(ConfigError::new(
+                    "values",
+                    "must list at least one value",
+                    "[]",
+                ));
             }
             let labels = match a.labels {
                 Some(l) if l.len() == values.len() => l,
@@ -362,7 +377,11 @@ fn axis_from_file(a: AxisFile) -> Result<Axis, ConfigError> {
                 ConfigError::new("name", "must be given for an axis with `levels`", "nothing")
             })?;
             if levels.is_empty() {
-                return Err(ConfigError::new("levels", "must list at least one level", "[]"));
+                return Err(ConfigError::new(
+                    "levels",
+                    "must list at least one level",
+                    "[]",
+                ));
             }
             Ok(Axis { name, levels })
         }

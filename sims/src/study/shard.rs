@@ -401,7 +401,10 @@ mod tests {
             "{message}"
         );
         let run_dir = record.parent().expect("run dir");
-        assert_eq!(super::super::finished_run(run_dir, &variants[0], &[0.5]), None);
+        assert_eq!(
+            super::super::finished_run(run_dir, &variants[0], &[0.5]),
+            None
+        );
         // A record that is not JSON is an error, not a missing run.
         std::fs::write(
             dir.path()
