@@ -7,8 +7,9 @@
 //! shares do not depend on `--jobs`, on the machine, or on which shards already ran.
 //! Each finished run leaves its row and the scenario it flew in
 //! `runs/<run>/study_row.json` ([`super::FINISHED_RUN_FILE`]); merging reads those,
-//! checks that each was flown with the scenario the study gives now, and lists the
-//! runs that no directory holds.
+//! checks that each was flown with the scenario the study gives now and by this
+//! troupe version ([`super::TROUPE_VERSION`]), and lists the runs that no directory
+//! holds.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
