@@ -33,6 +33,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 use troupe_comms::wire::Class;
+use troupe_core::ConfigError;
+use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use crate::plot::{Chart, Series, write_chart};
 use crate::scenario::{Scenario, ScenarioError};
@@ -128,21 +130,36 @@ pub struct Variant {
 /// Why a study could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
-    /// The file could not be read.
-    #[error("study file `{path}`")]
-    Read {
-        /// File.
+    /// The study file cannot be read, is not TOML, or has an unknown key or a value
+    /// of the wrong type.
+    #[error("reading the study")]
+    File(#[source] TomlFileError),
+    /// The base scenario the study names cannot be read or is not TOML.
+    #[error("study file `{path}`: its base scenario")]
+    BaseScenario {
+        /// Study file.
         path: PathBuf,
         /// Cause.
-        source: std::io::Error,
+        source: TomlFileError,
     },
-    /// The file is not a valid study.
-    #[error("study file `{path}`: {message}")]
+    /// A key of the study breaks a rule (no seeds, an empty axis, a bad label…).
+    #[error("study file `{path}`")]
     Invalid {
-        /// File.
+        /// Study file.
         path: PathBuf,
-        /// What is wrong.
-        message: String,
+        /// The key, the rule and the value.
+        source: ConfigError,
+    },
+    /// A variant of the base scenario could not be written out as TOML to be read
+    /// as a scenario.
+    #[error("study file `{path}`, run {run}: the scenario cannot be written as TOML")]
+    Encode {
+        /// Study file.
+        path: PathBuf,
+        /// The variant.
+        run: String,
+        /// Cause.
+        source: toml::ser::Error,
     },
     /// The base scenario or a variant of it is invalid.
     #[error("study file `{path}`, run {run}")]
@@ -159,30 +176,19 @@ pub enum StudyError {
 impl Study {
     /// Reads a study file and its base scenario, and checks every variant.
     pub fn load(path: &Path) -> Result<Study, StudyError> {
-        let read = |p: &Path| {
-            std::fs::read_to_string(p).map_err(|source| StudyError::Read {
-                path: p.to_owned(),
-                source,
-            })
-        };
-        let invalid = |message: String| StudyError::Invalid {
+        let invalid = |source: ConfigError| StudyError::Invalid {
             path: path.to_owned(),
-            message,
+            source,
         };
-        let text = read(path)?;
-        let deserializer = toml::Deserializer::parse(&text).map_err(|e| invalid(e.to_string()))?;
-        let file: StudyFile = serde_path_to_error::deserialize(deserializer)
-            .map_err(|e| invalid(format!("key `{}`: {}", e.path(), e.inner())))?;
-        let base = match &file.scenario {
+        let file: StudyFile = read_toml(path).map_err(StudyError::File)?;
+        let mut base = match &file.scenario {
             Some(relative) => {
                 let scenario_path = path.parent().unwrap_or(Path::new(".")).join(relative);
-                let base_text = read(&scenario_path)?;
-                let mut table = base_text.parse::<Table>().map_err(|e| {
-                    invalid(format!(
-                        "scenario `{}` is not valid TOML: {e}",
-                        scenario_path.display()
-                    ))
-                })?;
+                let mut table: Table =
+                    read_toml(&scenario_path).map_err(|source| StudyError::BaseScenario {
+                        path: path.to_owned(),
+                        source,
+                    })?;
                 // A mesh file is named relative to the scenario file.
                 if let Some(Value::String(mesh)) = table
                     .get_mut("world")
@@ -197,7 +203,6 @@ impl Study {
             }
             None => Table::new(),
         };
-        let mut base = base;
         if let Some(d) = file.duration_s {
             base.insert("duration_s".into(), Value::Float(d));
         }
@@ -211,7 +216,9 @@ impl Study {
                 .axes
                 .into_iter()
                 .enumerate()
-                .map(|(i, a)| axis_from_file(a).map_err(|m| invalid(format!("axes[{i}]: {m}"))))
+                .map(|(i, a)| {
+                    axis_from_file(a).map_err(|e| invalid(e.within(&format!("axes[{i}]"))))
+                })
                 .collect::<Result<_, _>>()?,
         };
         study.check().map_err(invalid)?;
@@ -220,7 +227,9 @@ impl Study {
         Ok(study)
     }
 
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), ConfigError> {
+        const NAME_RULE: &str =
+            "must be non-empty, use only letters, digits, `-`, `_`, `.` and not start with `.`";
         let name_ok = |s: &str| {
             !s.is_empty()
                 && !s.starts_with('.')
@@ -228,29 +237,37 @@ impl Study {
                     .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
         };
         if !name_ok(&self.name) {
-            return Err(format!(
-                "key `name` must use only letters, digits, `-`, `_`, `.`; got {:?}",
-                self.name
+            return Err(ConfigError::new(
+                "name",
+                NAME_RULE,
+                format!("{:?}", self.name),
             ));
         }
         if self.seeds.is_empty() {
-            return Err("key `seeds` must list at least one seed".into());
+            return Err(ConfigError::new(
+                "seeds",
+                "must list at least one seed",
+                "[]",
+            ));
         }
         if let Some(l) = self
             .coverage_levels
             .iter()
             .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 1.0))
         {
-            return Err(format!(
-                "key `coverage_levels` must hold fractions in (0, 1], got {l}"
+            return Err(ConfigError::new(
+                "coverage_levels",
+                "must hold fractions in (0, 1]",
+                l,
             ));
         }
-        for axis in &self.axes {
-            for level in &axis.levels {
+        for (i, axis) in self.axes.iter().enumerate() {
+            for (j, level) in axis.levels.iter().enumerate() {
                 if !name_ok(&level.label) {
-                    return Err(format!(
-                        "axis `{}`: level label {:?} must use only letters, digits, `-`, `_`, `.`",
-                        axis.name, level.label
+                    return Err(ConfigError::new(
+                        format!("axes[{i}].levels[{j}].label"),
+                        NAME_RULE,
+                        format!("{:?}", level.label),
                     ));
                 }
             }
@@ -292,9 +309,10 @@ impl Study {
                 }
                 table.insert("seed".into(), Value::Integer(seed as i64));
                 table.insert("name".into(), Value::String(name.clone()));
-                let text = toml::to_string(&table).map_err(|e| StudyError::Invalid {
+                let text = toml::to_string(&table).map_err(|source| StudyError::Encode {
                     path: self.path.clone(),
-                    message: format!("run {name}: {}", troupe_actors::runtime::ErrorChain(&e)),
+                    run: name.clone(),
+                    source,
                 })?;
                 let scenario =
                     Scenario::from_toml(&text, &PathBuf::from(format!("<study run {name}>")))
@@ -315,16 +333,25 @@ impl Study {
     }
 }
 
-fn axis_from_file(a: AxisFile) -> Result<Axis, String> {
+/// An axis as the study uses it; errors name keys relative to the axis.
+fn axis_from_file(a: AxisFile) -> Result<Axis, ConfigError> {
     match (a.key, a.values, a.levels) {
         (Some(key), Some(values), None) => {
             if values.is_empty() {
-                return Err("`values` is empty".into());
+                return Err(ConfigError::new(
+                    "values",
+                    "must list at least one value",
+                    "[]",
+                ));
             }
             let labels = match a.labels {
                 Some(l) if l.len() == values.len() => l,
                 Some(l) => {
-                    return Err(format!("{} labels for {} values", l.len(), values.len()));
+                    return Err(ConfigError::new(
+                        "labels",
+                        format!("must give one label per value ({})", values.len()),
+                        format!("{} labels", l.len()),
+                    ));
                 }
                 None => values.iter().map(value_label).collect(),
             };
@@ -346,15 +373,37 @@ fn axis_from_file(a: AxisFile) -> Result<Axis, String> {
             })
         }
         (None, None, Some(levels)) => {
-            let name = a
-                .name
-                .ok_or("an axis with `levels` needs a `name`".to_string())?;
+            let name = a.name.ok_or_else(|| {
+                ConfigError::new("name", "must be given for an axis with `levels`", "nothing")
+            })?;
             if levels.is_empty() {
-                return Err("`levels` is empty".into());
+                return Err(ConfigError::new(
+                    "levels",
+                    "must list at least one level",
+                    "[]",
+                ));
             }
             Ok(Axis { name, levels })
         }
-        _ => Err("give either `key` and `values`, or `name` and `levels`".into()),
+        (key, values, levels) => {
+            let given: Vec<&str> = [
+                ("key", key.is_some()),
+                ("values", values.is_some()),
+                ("levels", levels.is_some()),
+            ]
+            .into_iter()
+            .filter_map(|(k, given)| given.then_some(k))
+            .collect();
+            Err(ConfigError::new(
+                "",
+                "must give either `key` and `values`, or `name` and `levels`",
+                if given.is_empty() {
+                    "none of them".to_owned()
+                } else {
+                    given.join(" and ")
+                },
+            ))
+        }
     }
 }
 
@@ -534,15 +583,30 @@ fn scenario_json(scenario: &Scenario) -> serde_json::Result<serde_json::Value> {
     serde_json::from_str(&serde_json::to_string(scenario)?)
 }
 
+/// The troupe version that flies runs now, kept in every finished-run record:
+/// `--resume` reuses and `--merge` accepts only runs flown by the same version.
+pub const TROUPE_VERSION: &str = env!("CARGO_PKG_VERSION");
+
 /// A finished run as [`save_finished_run`] records it.
 #[derive(Deserialize)]
 struct Record {
     /// The study's name (absent in records written before it was kept).
     #[serde(default)]
     study: Option<String>,
+    /// The troupe version that flew the run (absent in records written before it
+    /// was kept, all by troupe 0.1.0).
+    #[serde(default)]
+    troupe: Option<String>,
     /// The scenario the run flew, as [`scenario_json`] writes it.
     scenario: serde_json::Value,
     row: RunRow,
+}
+
+impl Record {
+    /// Whether the run was flown by this troupe version.
+    fn same_version(&self) -> bool {
+        self.troupe.as_deref().is_none_or(|v| v == TROUPE_VERSION)
+    }
 }
 
 /// Records a finished run of study `study` in `run_dir` (its report directory) for
@@ -559,6 +623,7 @@ pub fn save_finished_run(
 ) -> std::io::Result<()> {
     let record = serde_json::json!({
         "study": study,
+        "troupe": TROUPE_VERSION,
         "scenario": scenario_json(&variant.scenario)?,
         "row": row,
     });
@@ -576,6 +641,7 @@ pub fn finished_run(run_dir: &Path, variant: &Variant, levels: &[f64]) -> Option
     let bytes = std::fs::read(run_dir.join(FINISHED_RUN_FILE)).ok()?;
     let record: Record = serde_json::from_slice(&bytes).ok()?;
     let same = scenario_json(&variant.scenario).ok()? == record.scenario
+        && record.same_version()
         && record.row.run == variant.name
         && record.row.seed == variant.seed;
     same.then(|| RunRow {
@@ -971,6 +1037,15 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
                 "name = \"s\"\nseeds = [1]\nscenario = \"missing.toml\"\n",
                 "missing.toml",
             ),
+            (
+                "name = \"s\"\nseeds = [1]\n[[axes]]\nkey = \"robots\"\nvalues = [1, 2]\nlabels = [\"a\"]\n",
+                "`axes[0].labels` must give one label per value (2), got 1 labels",
+            ),
+            (
+                "name = \"s\"\nseeds = [1]\n[[axes]]\nname = \"n\"\n[[axes.levels]]\nlabel = \"a/b\"\n",
+                "`axes[0].levels[0].label` must be non-empty",
+            ),
+            ("name = \"../x\"\nseeds = [1]\n", "`name` must be non-empty"),
         ];
         for (text, needle) in cases {
             let path = write(dir.path(), "bad.toml", text);

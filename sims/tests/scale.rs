@@ -224,15 +224,19 @@ fn is_root() -> bool {
     })
 }
 
-/// The first of `names` not found on PATH (or in /usr/sbin, where Debian puts daemons).
-fn missing_program(names: &[&'static str]) -> Option<&'static str> {
+/// Where `name` is: on PATH, or in /usr/sbin, where Debian puts daemons (a PATH
+/// need not name it).
+fn find_program(name: &str) -> Option<PathBuf> {
     let path = std::env::var("PATH").unwrap_or_default();
-    names.iter().copied().find(|name| {
-        !path
-            .split(':')
-            .chain(["/usr/sbin", "/sbin"])
-            .any(|dir| Path::new(dir).join(name).is_file())
-    })
+    path.split(':')
+        .chain(["/usr/sbin", "/sbin"])
+        .map(|dir| Path::new(dir).join(name))
+        .find(|p| p.is_file())
+}
+
+/// `name` found by [`find_program`], or the bare name (then spawning it says why).
+fn program(name: &str) -> PathBuf {
+    find_program(name).unwrap_or_else(|| name.into())
 }
 
 /// A free TCP port on loopback.
@@ -266,20 +270,20 @@ fn tail(path: &Path) -> String {
 /// their configuration, state, sockets and logs in `dir`. `Err` says why it could
 /// not start.
 fn start_slurm(dir: &Path) -> Result<(Daemons, PathBuf), String> {
-    let spawn = |program: &str, args: &[&str], log: &str| -> Result<Child, String> {
+    let spawn = |name: &str, args: &[&str], log: &str| -> Result<Child, String> {
         let log = std::fs::File::create(dir.join(log)).map_err(|e| e.to_string())?;
-        Command::new(program)
+        Command::new(program(name))
             .args(args)
             .stdout(log.try_clone().map_err(|e| e.to_string())?)
             .stderr(log)
             .spawn()
-            .map_err(|e| format!("starting {program}: {e}"))
+            .map_err(|e| format!("starting {name}: {e}"))
     };
     let path = |name: &str| dir.join(name).display().to_string();
     for sub in ["state", "spool"] {
         std::fs::create_dir(dir.join(sub)).map_err(|e| e.to_string())?;
     }
-    let key = Command::new("mungekey")
+    let key = Command::new(program("mungekey"))
         .args(["--create", "--keyfile", &path("munge.key")])
         .output()
         .map_err(|e| format!("mungekey: {e}"))?;
@@ -367,7 +371,7 @@ PartitionName=test Nodes=ALL Default=YES MaxTime=INFINITE State=UP
         "slurmd.out",
     )?);
     let idle = wait_for(Duration::from_secs(30), || {
-        Command::new("sinfo")
+        Command::new(program("sinfo"))
             .args(["-h", "-o", "%T"])
             .env("SLURM_CONF", &conf)
             .output()
@@ -392,7 +396,7 @@ fn a_slurm_job_array_flies_the_shards_and_its_merge_equals_the_study_run_whole()
         eprintln!("skipped: needs root to start munged, slurmctld and slurmd");
         return;
     }
-    if let Some(program) = missing_program(&[
+    if let Some(program) = [
         "mungekey",
         "munged",
         "slurmctld",
@@ -400,7 +404,10 @@ fn a_slurm_job_array_flies_the_shards_and_its_merge_equals_the_study_run_whole()
         "sbatch",
         "squeue",
         "sinfo",
-    ]) {
+    ]
+    .into_iter()
+    .find(|p| find_program(p).is_none())
+    {
         eprintln!(
             "skipped: {program} not found (Debian: apt-get install slurm-wlm munge; .ci/run installs them)"
         );
@@ -424,7 +431,7 @@ fn a_slurm_job_array_flies_the_shards_and_its_merge_equals_the_study_run_whole()
         out_dir.display()
     );
     let sbatch = |args: &[&str]| -> String {
-        let out = Command::new("sbatch")
+        let out = Command::new(program("sbatch"))
             .args(["--parsable", "--chdir"])
             .arg(d)
             .args(["--export", &export, "--cpus-per-task", "1"])
@@ -458,7 +465,7 @@ fn a_slurm_job_array_flies_the_shards_and_its_merge_equals_the_study_run_whole()
         d,
     ));
     let finished = wait_for(Duration::from_secs(120), || {
-        Command::new("squeue")
+        Command::new(program("squeue"))
             .args(["-h", "-j", &format!("{array},{merge}")])
             .env("SLURM_CONF", &conf)
             .output()

@@ -7,14 +7,18 @@
 //! shares do not depend on `--jobs`, on the machine, or on which shards already ran.
 //! Each finished run leaves its row and the scenario it flew in
 //! `runs/<run>/study_row.json` ([`super::FINISHED_RUN_FILE`]); merging reads those,
-//! checks that each was flown with the scenario the study gives now, and lists the
-//! runs that no directory holds.
+//! checks that each was flown with the scenario the study gives now and by this
+//! troupe version ([`super::TROUPE_VERSION`]), and lists the runs that no directory
+//! holds.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use super::{FINISHED_RUN_FILE, Record, RunRow, Study, Variant, scenario_json, times_to_coverage};
+use super::{
+    FINISHED_RUN_FILE, Record, RunRow, Study, TROUPE_VERSION, Variant, scenario_json,
+    times_to_coverage,
+};
 
 /// One of `count` shares of a study's runs: the runs at positions `index`,
 /// `index + count`, `index + 2·count`, … of [`Study::variants`].
@@ -124,7 +128,7 @@ pub enum MergeError {
         source: serde_json::Error,
     },
     /// A run was flown by another version of the study (its scenario, axes or seeds
-    /// changed since).
+    /// changed since) or by another troupe version.
     #[error(
         "`{path}`: run `{run}` {why}; refusing to merge runs of different versions of study `{study}`"
     )]
@@ -136,7 +140,7 @@ pub enum MergeError {
         /// The study.
         study: String,
         /// How it differs.
-        why: &'static str,
+        why: String,
     },
 }
 
@@ -188,7 +192,7 @@ pub fn merge_finished_runs(
                 other_studies += 1;
                 continue;
             }
-            let mixed = |why| MergeError::MixedVersions {
+            let mixed = |why: String| MergeError::MixedVersions {
                 path: path.clone(),
                 run: record.row.run.clone(),
                 study: study.name.clone(),
@@ -196,13 +200,19 @@ pub fn merge_finished_runs(
             };
             let Some((i, scenario)) = expected.get(record.row.run.as_str()) else {
                 return Err(mixed(
-                    "is not a run of the study as it stands (its axes or seeds changed)",
+                    "is not a run of the study as it stands (its axes or seeds changed)".into(),
                 ));
             };
             if *scenario != record.scenario || record.row.seed != variants[*i].seed {
                 return Err(mixed(
-                    "flew another scenario than the study gives now (the study or its base scenario changed)",
+                    "flew another scenario than the study gives now (the study or its base scenario changed)".into(),
                 ));
+            }
+            if !record.same_version() {
+                return Err(mixed(format!(
+                    "was flown by troupe {}, not by this troupe {TROUPE_VERSION}",
+                    record.troupe.as_deref().unwrap_or("?")
+                )));
             }
             rows[*i].get_or_insert_with(|| RunRow {
                 time_to_coverage_s: times_to_coverage(
@@ -370,6 +380,32 @@ mod tests {
             .expect_err("dropped seed")
             .to_string();
         assert!(message.contains("not a run of the study"), "{message}");
+        // The same run flown by another troupe version: not merged, not resumed.
+        let (study_now, variants) = study(dir.path(), 5.0, "[1, 2, 3]");
+        let record = dir
+            .path()
+            .join("runs")
+            .join(&old[0].name)
+            .join(FINISHED_RUN_FILE);
+        merge_finished_runs(&study_now, &variants, &[dir.path().to_owned()])
+            .expect("the same study and troupe merge");
+        let mut json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&record).expect("record")).expect("json");
+        json["troupe"] = "0.0.1-elsewhere".into();
+        std::fs::write(&record, serde_json::to_vec(&json).expect("json")).expect("record");
+        let message = merge_finished_runs(&study_now, &variants, &[dir.path().to_owned()])
+            .expect_err("another troupe")
+            .to_string();
+        assert!(
+            message.contains("flown by troupe 0.0.1-elsewhere")
+                && message.contains(&format!("this troupe {TROUPE_VERSION}")),
+            "{message}"
+        );
+        let run_dir = record.parent().expect("run dir");
+        assert_eq!(
+            super::super::finished_run(run_dir, &variants[0], &[0.5]),
+            None
+        );
         // A record that is not JSON is an error, not a missing run.
         std::fs::write(
             dir.path()
