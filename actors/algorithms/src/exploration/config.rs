@@ -24,7 +24,9 @@ pub struct GuidanceConfig {
     /// Remembered frontiers pull a robot only as part of a region of at least this many
     /// 26-connected frontier cells: single cells left along a flown tunnel (a niche, a
     /// pocket under the floor) are not worth the trip back (Yamauchi 1997 discards
-    /// frontier regions smaller than the robot for the same reason). 1 keeps every one.
+    /// frontier regions smaller than the robot for the same reason). 1 (the default)
+    /// keeps every one: in the default cave a branch first seen as one or two cells
+    /// was hidden too (docs/exploration.md).
     pub min_region_cells: usize,
     /// The frontier reward of a round is measured over the memory (route distance to
     /// the remembered frontiers) whenever the memory's field reaches the robot. With a
@@ -64,7 +66,7 @@ impl Default for GuidanceConfig {
             cell_m: 1.0,
             max_cells: 262_144,
             min_frontier_cells: 4,
-            min_region_cells: 3,
+            min_region_cells: 1,
             window_reward_above_nats: None,
             peer_keyframe_samples: 1000,
             coordination: Coordination::default(),

@@ -11,8 +11,8 @@
 //!   keyframe GMMs sampled at the memory's resolution (thesis §6.1.4–6.1.5: a GMM can
 //!   be resampled at any resolution), which retire the frontiers anyone has looked into.
 //! - [`GuidanceField`]: route distance through known passable cells to the nearest
-//!   remembered frontier (multi-source Dijkstra), the global `d` of V, seeded by the
-//!   frontier regions of at least a few cells. Frontiers assigned to peers
+//!   remembered frontier (multi-source Dijkstra), the global `d` of V (optionally seeded only by
+//!   frontier regions of a few cells). Frontiers assigned to peers
 //!   ([`Coordination`]: greedy assignment by route cost over every known robot's
 //!   [`PeerIntent`]) are made longer by a penalty, so teammates spread over different
 //!   openings.
