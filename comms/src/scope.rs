@@ -1,18 +1,19 @@
 //! What each robot receives of its peers' broadcasts (issue 22): per-robot network
 //! load that need not grow with the team.
 //!
-//! A robot's broadcast keyframes and plans are published under a key naming a
-//! coarse square cell of the sender's own position (`cell_m` on a side, in x and
-//! y of the team's shared frame; [`cell_segment`]). A robot with scope
+//! A robot's broadcast odometry, plans and keyframes are published under a key
+//! naming a coarse square cell of the sender's own position (`cell_m` on a side,
+//! in x and y of the team's shared frame; [`cell_segment`]). A robot with scope
 //! [`Scope::Neighbourhood`] subscribes only to the cells near its own cell, and
 //! re-subscribes when it enters another cell; with [`Scope::Base`] it subscribes
-//! to none. Everything else stays team-wide whatever the scope: odometry and
-//! acknowledgements (so every robot still knows where every peer is), bulk
-//! messages, frames addressed to one robot (store-and-forward, catch-up), and
-//! frames whose sender does not know its position yet (a base station that never
-//! moves, a robot before its first odometry). The selection happens in the
-//! network's routing (zenoh key expressions and subscriptions; the simulated
-//! network's [`SubscriptionConfig::receives`]), never by dropping what arrived.
+//! to none. Everything else stays team-wide whatever the scope: bulk messages,
+//! frames addressed to one robot (acknowledgements, store-and-forward, catch-up),
+//! and frames whose sender does not know its position yet (a base station that
+//! never moves, a robot before its first odometry). Odometry is scoped too: at
+//! 10 Hz from every peer it would otherwise be most of what a robot receives in a
+//! large team, and grow with it. The selection happens in the network's routing
+//! (zenoh key expressions and subscriptions; the simulated network's
+//! [`SubscriptionConfig::receives`]), never by dropping what arrived.
 //!
 //! The cell set is chosen so that every sender within `radius_m` of the receiver
 //! is in it: the cells whose square comes within `radius_m` of the receiver's
@@ -28,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::wire::Class;
 use troupe_core::ConfigError;
 
-/// Which peers' broadcast keyframes and plans a robot receives.
+/// Which peers' broadcast odometry, plans and keyframes a robot receives.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Scope {
@@ -38,8 +39,8 @@ pub enum Scope {
     /// Peers within `radius_m` of this robot's own odometry (and some beyond,
     /// see the [module docs](self)).
     Neighbourhood,
-    /// None: only what is team-wide (odometry, bulk, addressed frames, and the
-    /// base station's frames).
+    /// None: only what is team-wide (bulk, addressed frames, and the base
+    /// station's frames).
     Base,
 }
 
@@ -65,7 +66,8 @@ pub struct SubscriptionConfig {
     pub scope: Scope,
     /// Neighbourhood radius around the robot's own position, metres.
     pub radius_m: f64,
-    /// Edge of the square cells keyframes and plans are published under, metres.
+    /// Edge of the square cells odometry, plans and keyframes are published
+    /// under, metres.
     /// Every robot of a team must use the same value (senders pick the cell).
     pub cell_m: f64,
 }
@@ -160,9 +162,10 @@ impl SubscriptionConfig {
         }
     }
 
-    /// The cell a frame is published under: broadcast keyframes and plans of a
-    /// sender that knows its position, when the scope is not [`Scope::All`] (a
-    /// team shares one scope: the scenario's); `None`: the team-wide key.
+    /// The cell a frame is published under: broadcast odometry, plans and
+    /// keyframes of a sender that knows its position, when the scope is not
+    /// [`Scope::All`] (a team shares one scope: the scenario's); `None`: the
+    /// team-wide key.
     #[must_use]
     pub fn publish_cell(
         &self,
@@ -170,8 +173,7 @@ impl SubscriptionConfig {
         addressed: bool,
         sender_m: Option<[f64; 3]>,
     ) -> Option<Cell> {
-        if self.scope == Scope::All || addressed || !matches!(class, Class::Keyframe | Class::Plan)
-        {
+        if self.scope == Scope::All || addressed || class == Class::Bulk {
             return None;
         }
         sender_m.and_then(|p| self.cell_of(p))
@@ -259,9 +261,10 @@ mod tests {
                 scope,
                 ..SubscriptionConfig::default()
             };
-            assert!(config.receives(Class::Odometry, false, far, here));
+            assert!(!config.receives(Class::Odometry, false, far, here));
             assert!(config.receives(Class::Bulk, false, far, here));
             assert!(config.receives(Class::Keyframe, true, far, here));
+            assert!(config.receives(Class::Odometry, true, far, here));
             assert!(config.receives(Class::Keyframe, false, None, here));
             let own_cell = config.receives(Class::Keyframe, false, here, here);
             assert_eq!(own_cell, scope == Scope::Neighbourhood);

@@ -3,9 +3,10 @@
 //!
 //! - **Key expressions** `troupe/<team>/<robot>/<class>` with the *sending* robot's
 //!   index and the frame's class (`odometry`, `plan`, `keyframe`, `bulk`; ack
-//!   frames travel as `odometry`, like the shaper schedules them); broadcast
-//!   keyframes and plans of a robot that knows where it is add the cell of its
-//!   position, `troupe/<team>/<robot>/<class>/c<x>_<y>` ([`crate::scope`]).
+//!   frames travel as `odometry`, like the shaper schedules them); under a
+//!   subscription scope other than `all`, broadcast odometry, plans and keyframes
+//!   of a robot that knows where it is add the cell of its position,
+//!   `troupe/<team>/<robot>/<class>/c<x>_<y>` ([`crate::scope`]).
 //! - **Subscriptions** ([`ZenohTransport::with_subscription`]): scope `all` (the
 //!   default) subscribes to `troupe/<team>/**`; `neighbourhood` and `base`
 //!   subscribe to the team-wide keys `troupe/<team>/*/*` and, for
@@ -424,8 +425,8 @@ pub enum KeyError {
     OtherTeam,
 }
 
-/// Parses `troupe/<team>/<robot>/<class>` (or, for keyframes and plans, with a
-/// cell segment `/c<x>_<y>` after the class) for `team`: the sender and the class.
+/// Parses `troupe/<team>/<robot>/<class>` (or, but for bulk, with a cell segment
+/// `/c<x>_<y>` after the class) for `team`: the sender and the class.
 pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
     let mut parts = key.split('/');
     let (Some("troupe"), Some(t), Some(r), Some(c), cell, None) = (
@@ -445,7 +446,7 @@ pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
         .find(|k| class_segment(*k) == c)
         .ok_or(KeyError::Malformed)?;
     if let Some(cell) = cell
-        && (!matches!(class, Class::Keyframe | Class::Plan) || parse_cell_segment(cell).is_none())
+        && (class == Class::Bulk || parse_cell_segment(cell).is_none())
     {
         return Err(KeyError::Malformed);
     }

@@ -315,10 +315,9 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
         .flatten()
         .map(|u| u.peak_rss_mib)
         .fold(0.0, f64::max);
-    if let (Some(max_cpu), Some(launcher)) = (
-        cpu.iter().copied().reduce(f64::max),
-        report.launcher_usage,
-    ) {
+    if let (Some(max_cpu), Some(launcher)) =
+        (cpu.iter().copied().reduce(f64::max), report.launcher_usage)
+    {
         println!(
             "robots: CPU {:.0} % of a core on average (at most {max_cpu:.0} %), peak memory at most {rss:.0} MiB; {}: CPU {:.0} %, peak memory {:.0} MiB (launch.json)",
             cpu.iter().sum::<f64>() / cpu.len() as f64,

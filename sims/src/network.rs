@@ -88,12 +88,9 @@ impl SimNetwork for ScenarioNetwork {
         let addressed = matches!(to, Destination::Robot(_));
         for target in to.recipients(from, team_size) {
             if let Some(class) = class
-                && !self.subscription.receives(
-                    class,
-                    addressed,
-                    position(from),
-                    position(target),
-                )
+                && !self
+                    .subscription
+                    .receives(class, addressed, position(from), position(target))
             {
                 continue;
             }

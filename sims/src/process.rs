@@ -458,7 +458,11 @@ pub async fn run(
         zenoh,
         transport_errors,
         trajectory_samples: trajectory.len(),
-        peers: std::mem::take(&mut *peers.lock().unwrap_or_else(std::sync::PoisonError::into_inner)),
+        peers: std::mem::take(
+            &mut *peers
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        ),
         recording,
     };
     write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {

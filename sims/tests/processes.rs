@@ -13,9 +13,14 @@ use troupe_sims::process::{
     loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
 };
 
-/// `n` consecutive free TCP ports on loopback, in this binary's range.
+/// `n` consecutive free TCP ports on loopback, in this binary's range; each call
+/// starts 100 ports further, so tests picking ports at the same time (before their
+/// processes bind them) get different ones.
 fn free_ports(n: usize) -> Vec<u16> {
-    common::free_ports_from(10_000, n)
+    use std::sync::atomic::{AtomicU16, Ordering};
+    static CALLS: AtomicU16 = AtomicU16::new(0);
+    let k = CALLS.fetch_add(1, Ordering::Relaxed) % 10;
+    common::free_ports_from(10_000 + 100 * k, n)
 }
 
 /// Robot files for every robot of the scenario `dir/team.toml` (`robots` of them), each
@@ -393,7 +398,10 @@ fn two_client_robots_and_a_router_in_three_network_namespaces() {
         let peer = (1 - i).to_string();
         let heard = &summary["peers"][&peer];
         assert!(heard["odometry"].as_u64() > Some(50), "robot{i}: {summary}");
-        assert!(heard["keyframes"].as_u64() >= Some(1), "robot{i}: {summary}");
+        assert!(
+            heard["keyframes"].as_u64() >= Some(1),
+            "robot{i}: {summary}"
+        );
         assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
     }
@@ -579,12 +587,20 @@ fn launch_with_a_router_runs_the_team_as_its_clients() {
         for peer in (0..4).filter(|p| *p != i) {
             let heard = &summary["peers"][&peer.to_string()];
             assert!(heard["odometry"].as_u64() > Some(40), "robot{i}: {summary}");
-            assert!(heard["keyframes"].as_u64() >= Some(1), "robot{i}: {summary}");
+            assert!(
+                heard["keyframes"].as_u64() >= Some(1),
+                "robot{i}: {summary}"
+            );
             assert!(heard["plans"].as_u64() >= Some(1), "robot{i}: {summary}");
         }
         assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
         let z = &summary["zenoh"];
-        for key in ["rejected_key", "rejected_frame", "rejected_class", "rejected_sender"] {
+        for key in [
+            "rejected_key",
+            "rejected_frame",
+            "rejected_class",
+            "rejected_sender",
+        ] {
             assert_eq!(z[key].as_u64(), Some(0), "robot{i}: {z}");
         }
     }

@@ -33,9 +33,15 @@ fn settings_read_from_toml_and_bad_ones_name_the_key() {
             gossip_scouting: on,
             ..ZenohConfig::default()
         };
-        c.to_zenoh().unwrap().get_json("scouting/gossip/enabled").unwrap()
+        c.to_zenoh()
+            .unwrap()
+            .get_json("scouting/gossip/enabled")
+            .unwrap()
     };
-    assert_eq!((gossip(false), gossip(true)), ("false".into(), "true".into()));
+    assert_eq!(
+        (gossip(false), gossip(true)),
+        ("false".into(), "true".into())
+    );
     assert!(toml::from_str::<ZenohConfig>("listn = []").is_err());
     let bad = |text: &str| match toml::from_str::<ZenohConfig>(text).unwrap().validate() {
         Err(TransportError::Config { key, .. }) => key,
@@ -69,7 +75,7 @@ fn key_expressions_name_team_sender_and_class() {
         "troupe/1/2/plans",
         "other/1/2/plan",
         "troupe/-1/2/plan",
-        "troupe/1/2/odometry/c1_2",
+        "troupe/1/2/bulk/c1_2",
         "troupe/1/2/keyframe/c1",
         "troupe/1/2/keyframe/c1_2/x",
     ] {
@@ -79,7 +85,10 @@ fn key_expressions_name_team_sender_and_class() {
         parse_key_expr("troupe/1/2/keyframe/c-1_20", 1),
         Ok((2, Class::Keyframe))
     );
-    assert_eq!(parse_key_expr("troupe/1/2/plan/c0_0", 1), Ok((2, Class::Plan)));
+    assert_eq!(
+        parse_key_expr("troupe/1/2/plan/c0_0", 1),
+        Ok((2, Class::Plan))
+    );
 }
 
 /// A port for this test run (distinct per test and per process).
@@ -335,99 +344,4 @@ fn access_control_and_size_limit_reach_zenohs_configuration() {
         MAX_MESSAGE_BYTES.to_string()
     );
     let _ = std::fs::remove_file(users);
-}
-
-/// One frame of `class` from its own shaper.
-fn frame_of(class: Class) -> Vec<u8> {
-    let mut shaper = LinkShaper::new(ShaperConfig::default()).unwrap();
-    shaper.offer(0, class, vec![7; 100]).unwrap();
-    shaper.poll(0).unwrap().bytes
-}
-
-/// Issue 22: a robot with a neighbourhood scope, a client of a zenoh router, gets
-/// the keyframes of a robot nearby and not those of a robot 200 m away — zenoh
-/// never hands them over (nothing is counted as rejected) — while it still gets the
-/// far robot's odometry; a robot with scope `all` gets both. When the robot moves
-/// next to the far one, its subscriptions follow.
-#[test]
-fn a_neighbourhood_scope_subscribes_to_nearby_cells_through_a_router() {
-    use crate::scope::{Scope, SubscriptionConfig};
-
-    let p = port(1);
-    let mut router_config = ZenohConfig {
-        listen: vec![format!("tcp/127.0.0.1:{p}")],
-        ..ZenohConfig::default()
-    }
-    .to_zenoh()
-    .unwrap();
-    router_config.insert_json5("mode", "\"router\"").unwrap();
-    let router = ::zenoh::open(router_config).wait().unwrap();
-    let client = ZenohConfig {
-        mode: ZenohMode::Client,
-        connect: vec![format!("tcp/127.0.0.1:{p}")],
-        ..ZenohConfig::default()
-    };
-    let scope = |scope| SubscriptionConfig {
-        scope,
-        radius_m: 20.0,
-        cell_m: 10.0,
-    };
-    let open = |robot: u32, s: Scope, at: [f64; 3]| {
-        let t = ZenohTransport::open(&client, 1, vec![robot])
-            .unwrap()
-            .with_subscription(scope(s));
-        t.set_position(robot, at);
-        let seen: Seen = Arc::default();
-        t.start(sink(&seen)).unwrap();
-        (t, seen)
-    };
-    let (me, seen_me) = open(0, Scope::Neighbourhood, [0.0, 0.0, 1.0]);
-    let (near, _) = open(1, Scope::Neighbourhood, [12.0, -3.0, 1.0]);
-    let (far, _) = open(2, Scope::Neighbourhood, [200.0, 0.0, 1.0]);
-    let (all, seen_all) = open(3, Scope::All, [0.0, 0.0, 1.0]);
-    assert!(me.stats().subscribed_cells > 0);
-    assert_eq!(all.stats().subscribed_cells, 0);
-    let (keyframe, odometry) = (frame_of(Class::Keyframe), frame_of(Class::Odometry));
-    let heard = |seen: &Seen, from: u32, frame: &[u8]| {
-        seen.lock()
-            .unwrap()
-            .iter()
-            .any(|(f, _, b)| *f == from && b == frame)
-    };
-    wait_for("every frame at the robot with scope all", || {
-        for (t, id) in [(&near, 1), (&far, 2)] {
-            t.send(id, None, &keyframe).unwrap();
-            t.send(id, None, &odometry).unwrap();
-        }
-        std::thread::sleep(Duration::from_millis(50));
-        heard(&seen_all, 1, &keyframe)
-            && heard(&seen_all, 2, &keyframe)
-            && heard(&seen_me, 1, &keyframe)
-            && heard(&seen_me, 2, &odometry)
-    });
-    assert!(!heard(&seen_me, 2, &keyframe), "a keyframe from 200 m away");
-    let s = me.stats();
-    assert_eq!(
-        s.received_frames,
-        seen_me.lock().unwrap().len() as u64,
-        "{s:?}"
-    );
-    assert_eq!(s.rejected_key + s.rejected_class + s.rejected_frame, 0);
-    // The robot moves next to the far one: it now hears it, and not the near one.
-    me.set_position(0, [195.0, 4.0, 1.0]);
-    assert!(me.stats().resubscriptions >= 2);
-    seen_me.lock().unwrap().clear();
-    wait_for("the far robot's keyframe after the move", || {
-        far.send(2, None, &keyframe).unwrap();
-        near.send(1, None, &keyframe).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        heard(&seen_me, 2, &keyframe)
-    });
-    near.send(1, None, &keyframe).unwrap();
-    std::thread::sleep(Duration::from_millis(200));
-    assert!(!heard(&seen_me, 1, &keyframe), "the old neighbour's keyframe");
-    for t in [me, near, far, all] {
-        t.close().unwrap();
-    }
-    router.close().wait().unwrap();
 }
