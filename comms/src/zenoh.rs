@@ -618,7 +618,7 @@ impl ZenohTransport {
     }
 
     /// Tells the transport where local robot `robot` is (its own odometry, metres):
-    /// its broadcast keyframes and plans go out under that cell, and under scope
+    /// its broadcast odometry, plans and keyframes go out under that cell, and under scope
     /// `neighbourhood` the cell subscriptions follow it. Cheap when the cell has
     /// not changed; other robots' ids are ignored.
     pub fn set_position(&self, robot: u32, position_m: [f64; 3]) {

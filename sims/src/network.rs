@@ -5,7 +5,7 @@
 //!
 //! The robots' subscription scope (`[robot.link.subscribe]`, issue 22,
 //! [`troupe_comms::scope`]) is applied before anything else, as zenoh's routing
-//! does: a broadcast keyframe or plan goes only to the robots whose subscribed
+//! does: a broadcast odometry, plan or keyframe goes only to the robots whose subscribed
 //! cells hold the sender's cell, judged from the ground-truth positions when it is
 //! sent; the others never see it, on the channel or in their counters.
 

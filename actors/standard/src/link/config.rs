@@ -61,7 +61,7 @@ pub struct LinkConfig {
     /// Per shared topic (by name), what overrides the policy its
     /// [`SharedTopic`](super::SharedTopic) declares.
     pub shared: BTreeMap<String, SharedConfig>,
-    /// Which peers' broadcast keyframes and plans reach this robot: all, those
+    /// Which peers' broadcast odometry, plans and keyframes reach this robot: all, those
     /// near its own odometry, or none but the base station's (issue 22,
     /// [`troupe_comms::scope`]). The network applies it, not the link: the zenoh
     /// transport of a robot process through its subscriptions, the simulated
