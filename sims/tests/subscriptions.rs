@@ -1,5 +1,6 @@
 //! Issue 22: subscription scopes over a real zenoh router (`troupe_comms::scope`,
 //! `troupe_comms::zenoh`).
+#![allow(clippy::unwrap_used)]
 
 mod common;
 
