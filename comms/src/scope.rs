@@ -181,9 +181,9 @@ impl SubscriptionConfig {
 
     /// Whether a robot at `receiver_m` with these settings gets a frame of
     /// `class` sent from `sender_m` by a robot with the same settings: the
-    /// same decision zenoh's routing makes for the keys of [`publish_cell`]
-    /// (`Self::publish_cell`) and the subscriptions of [`subscribed_cells`]
-    /// (`Self::subscribed_cells`). The simulated network calls it.
+    /// same decision zenoh's routing makes for the keys of
+    /// [`publish_cell`](Self::publish_cell) and the subscriptions of
+    /// [`subscribed_cells`](Self::subscribed_cells). The simulated network calls it.
     #[must_use]
     pub fn receives(
         &self,
