@@ -12,6 +12,9 @@
 //! - [`journal`]: a link's durable state on disk for robot processes (an fsync'd
 //!   append-only log with CRC-32 per record): stored messages, acknowledgements,
 //!   the next message id, messages received.
+//! - [`scope`]: what each robot receives of its peers' broadcasts (all peers,
+//!   peers near its own position, the base station only), as key-expression cells
+//!   for zenoh and as a routing rule for the simulated network.
 //! - [`simnet`]: a deterministic simulated network (latency, jitter, random and
 //!   bursty loss, reordering, duplication, range, partitions) for sim-time teams.
 //! - [`transport`]: the runtime-free [`transport::PacketTransport`] trait an
@@ -31,6 +34,7 @@
 #![deny(missing_docs)]
 
 pub mod journal;
+pub mod scope;
 pub mod shaping;
 pub mod simnet;
 pub mod transport;

@@ -3,8 +3,17 @@
 //!
 //! - **Key expressions** `troupe/<team>/<robot>/<class>` with the *sending* robot's
 //!   index and the frame's class (`odometry`, `plan`, `keyframe`, `bulk`; ack
-//!   frames travel as `odometry`, like the shaper schedules them). Each process
-//!   subscribes to `troupe/<team>/*/*`.
+//!   frames travel as `odometry`, like the shaper schedules them); under a
+//!   subscription scope other than `all`, broadcast odometry, plans and keyframes
+//!   of a robot that knows where it is add the cell of its position,
+//!   `troupe/<team>/<robot>/<class>/c<x>_<y>` ([`crate::scope`]).
+//! - **Subscriptions** ([`ZenohTransport::with_subscription`]): scope `all` (the
+//!   default) subscribes to `troupe/<team>/**`; `neighbourhood` and `base`
+//!   subscribe to the team-wide keys `troupe/<team>/*/*` and, for
+//!   `neighbourhood`, one subscriber `troupe/<team>/*/*/<cell>` per cell near the
+//!   robot, re-declared as [`ZenohTransport::set_position`] moves it into other
+//!   cells. zenoh's routing (a router, or the publishing peer) then never sends
+//!   a robot the cells it did not ask for.
 //! - **Addressing**: a frame for one robot (acks, store-and-forward catch-up)
 //!   carries the addressee as a 4-byte attachment; other robots drop it.
 //! - **Checks on receipt** (each counted in [`ZenohStats`]): the key expression
@@ -40,7 +49,8 @@ use ::zenoh::pubsub::Subscriber;
 use ::zenoh::sample::{Locality, Sample};
 use serde::{Deserialize, Serialize};
 
-use crate::shaping::frame::{self, ParsedFrame};
+use crate::scope::{Cell, Scope, SubscriptionConfig, cell_segment, parse_cell_segment};
+use crate::shaping::frame;
 use crate::transport::{
     PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
 };
@@ -142,6 +152,11 @@ pub struct ZenohConfig {
     pub connect: Vec<String>,
     /// Discover peers by UDP multicast (and gossip). Off by default.
     pub multicast_scouting: bool,
+    /// Peer mode: learn of the other peers from the sessions in `connect` (a
+    /// router, or another peer) and connect to them directly — zenoh's gossip
+    /// scouting, for networks without multicast (`docs/scale.md`). Off by
+    /// default; on with `multicast_scouting` too.
+    pub gossip_scouting: bool,
     /// TLS files; required when an endpoint uses `tls/`.
     pub tls: Option<ZenohTls>,
     /// User/password authentication.
@@ -288,7 +303,10 @@ impl ZenohConfig {
         set("listen/endpoints", json(&self.listen))?;
         set("connect/endpoints", json(&self.connect))?;
         set("scouting/multicast/enabled", json(&self.multicast_scouting))?;
-        set("scouting/gossip/enabled", json(&self.multicast_scouting))?;
+        set(
+            "scouting/gossip/enabled",
+            json(&(self.multicast_scouting || self.gossip_scouting)),
+        )?;
         set(
             "transport/link/rx/max_message_size",
             self.max_message_bytes().to_string(),
@@ -407,10 +425,12 @@ pub enum KeyError {
     OtherTeam,
 }
 
-/// Parses `troupe/<team>/<robot>/<class>` for `team`: the sender and the class.
+/// Parses `troupe/<team>/<robot>/<class>` (or, but for bulk, with a cell segment
+/// `/c<x>_<y>` after the class) for `team`: the sender and the class.
 pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
     let mut parts = key.split('/');
-    let (Some("troupe"), Some(t), Some(r), Some(c), None) = (
+    let (Some("troupe"), Some(t), Some(r), Some(c), cell, None) = (
+        parts.next(),
         parts.next(),
         parts.next(),
         parts.next(),
@@ -425,6 +445,11 @@ pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
         .into_iter()
         .find(|k| class_segment(*k) == c)
         .ok_or(KeyError::Malformed)?;
+    if let Some(cell) = cell
+        && (class == Class::Bulk || parse_cell_segment(cell).is_none())
+    {
+        return Err(KeyError::Malformed);
+    }
     if t != team {
         return Err(KeyError::OtherTeam);
     }
@@ -433,10 +458,7 @@ pub fn parse_key_expr(key: &str, team: u32) -> Result<(u32, Class), KeyError> {
 
 /// The class a frame travels in (acks: odometry, the shaper's first class).
 pub fn frame_class(bytes: &[u8]) -> Result<Class, TransportError> {
-    Ok(match frame::parse(bytes)? {
-        ParsedFrame::Data(header, _) => header.class,
-        ParsedFrame::Ack(_) => Class::Odometry,
-    })
+    Ok(frame::class_of(bytes)?)
 }
 
 /// Counters of a [`ZenohTransport`].
@@ -465,6 +487,10 @@ pub struct ZenohStats {
     /// Rejected: a key expression naming one of this process's own robots as
     /// the sender (someone else is using its key).
     pub rejected_sender: u64,
+    /// Cells subscribed to now (scope `neighbourhood`; [`crate::scope`]).
+    pub subscribed_cells: u64,
+    /// Times the cell subscriptions changed because a local robot moved.
+    pub resubscriptions: u64,
 }
 
 #[derive(Default)]
@@ -480,6 +506,8 @@ struct Counters {
     rejected_frame: AtomicU64,
     rejected_class: AtomicU64,
     rejected_sender: AtomicU64,
+    subscribed_cells: AtomicU64,
+    resubscriptions: AtomicU64,
 }
 
 fn bump(c: &AtomicU64) {
@@ -501,6 +529,8 @@ impl Counters {
             rejected_frame: l(&self.rejected_frame),
             rejected_class: l(&self.rejected_class),
             rejected_sender: l(&self.rejected_sender),
+            subscribed_cells: l(&self.subscribed_cells),
+            resubscriptions: l(&self.resubscriptions),
         }
     }
 }
@@ -512,6 +542,20 @@ struct Outgoing {
     bytes: Vec<u8>,
 }
 
+/// What received samples go to.
+type SampleHandler = Arc<dyn Fn(&Sample) + Send + Sync>;
+
+/// The session's subscribers: the team-wide one and one per subscribed cell.
+#[derive(Default)]
+struct Subscriptions {
+    /// Set by [`PacketTransport::start`].
+    handler: Option<SampleHandler>,
+    team_wide: Option<Subscriber<()>>,
+    cells: std::collections::BTreeMap<Cell, Subscriber<()>>,
+    /// The last known position of each local robot.
+    positions: std::collections::BTreeMap<u32, [f64; 3]>,
+}
+
 /// One zenoh session carrying the frames of the robots `local` of team `team`.
 /// See the [module docs](self).
 pub struct ZenohTransport {
@@ -520,7 +564,8 @@ pub struct ZenohTransport {
     session: ::zenoh::Session,
     queue: Mutex<Option<SyncSender<Outgoing>>>,
     sender: Mutex<Option<JoinHandle<()>>>,
-    subscriber: Mutex<Option<Subscriber<()>>>,
+    subscription: SubscriptionConfig,
+    subscriptions: Mutex<Subscriptions>,
     counters: Arc<Counters>,
 }
 
@@ -556,9 +601,82 @@ impl ZenohTransport {
             session,
             queue: Mutex::new(Some(tx)),
             sender: Mutex::new(Some(sender)),
-            subscriber: Mutex::new(None),
+            subscription: SubscriptionConfig::default(),
+            subscriptions: Mutex::new(Subscriptions::default()),
             counters,
         })
+    }
+
+    /// Receives what `subscription` selects instead of every peer's frames (call
+    /// before [`PacketTransport::start`]; [`crate::scope`]). Frames are then
+    /// published under the cell of the sender's position too, so every robot of a
+    /// team must use the same `cell_m`.
+    #[must_use]
+    pub fn with_subscription(mut self, subscription: SubscriptionConfig) -> Self {
+        self.subscription = subscription;
+        self
+    }
+
+    /// Tells the transport where local robot `robot` is (its own odometry, metres):
+    /// its broadcast odometry, plans and keyframes go out under that cell, and under scope
+    /// `neighbourhood` the cell subscriptions follow it. Cheap when the cell has
+    /// not changed; other robots' ids are ignored.
+    pub fn set_position(&self, robot: u32, position_m: [f64; 3]) {
+        if !self.local.contains(&robot) {
+            return;
+        }
+        let Ok(mut subs) = self.subscriptions.lock() else {
+            return;
+        };
+        let before = subs.positions.insert(robot, position_m);
+        let cell = |p: Option<[f64; 3]>| p.and_then(|p| self.subscription.cell_of(p));
+        if before.is_none() || cell(before) != cell(Some(position_m)) {
+            self.resubscribe(&mut subs);
+        }
+    }
+
+    /// The cells the local robots' positions call for.
+    fn wanted_cells(&self, subs: &Subscriptions) -> std::collections::BTreeSet<Cell> {
+        subs.positions
+            .values()
+            .flat_map(|p| self.subscription.subscribed_cells(Some(*p)))
+            .collect()
+    }
+
+    /// Declares the cell subscribers now wanted and undeclares the others (once
+    /// started).
+    fn resubscribe(&self, subs: &mut Subscriptions) {
+        let Some(handler) = subs.handler.clone() else {
+            return;
+        };
+        let wanted = self.wanted_cells(subs);
+        let before = subs.cells.len();
+        subs.cells.retain(|cell, _| wanted.contains(cell));
+        let mut changed = before != subs.cells.len();
+        for cell in wanted {
+            if subs.cells.contains_key(&cell) {
+                continue;
+            }
+            let handler = handler.clone();
+            let declared = self
+                .session
+                .declare_subscriber(format!("troupe/{}/*/*/{}", self.team, cell_segment(cell)))
+                .callback(move |sample| handler(&sample))
+                .wait();
+            match declared {
+                Ok(subscriber) => {
+                    subs.cells.insert(cell, subscriber);
+                    changed = true;
+                }
+                Err(e) => tracing::warn!(?cell, "zenoh: cannot subscribe to a cell: {e}"),
+            }
+        }
+        if changed {
+            bump(&self.counters.resubscriptions);
+        }
+        self.counters
+            .subscribed_cells
+            .store(subs.cells.len() as u64, Ordering::Relaxed);
     }
 
     /// Counters so far.
@@ -577,8 +695,10 @@ impl ZenohTransport {
         {
             let _ = handle.join();
         }
-        if let Ok(mut s) = self.subscriber.lock() {
-            s.take();
+        if let Ok(mut s) = self.subscriptions.lock() {
+            s.team_wide.take();
+            s.cells.clear();
+            s.handler.take();
         }
         self.session
             .close()
@@ -682,19 +802,29 @@ fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink:
 impl PacketTransport for ZenohTransport {
     fn start(&self, sink: PacketSink) -> Result<(), TransportError> {
         let (team, local, counters) = (self.team, self.local.clone(), self.counters.clone());
+        let handler: SampleHandler =
+            Arc::new(move |sample: &Sample| receive(sample, team, &local, &counters, &sink));
+        let key = match self.subscription.scope {
+            Scope::All => format!("troupe/{team}/**"),
+            Scope::Neighbourhood | Scope::Base => format!("troupe/{team}/*/*"),
+        };
+        let team_handler = handler.clone();
         let subscriber = self
             .session
-            .declare_subscriber(format!("troupe/{team}/*/*"))
-            .callback(move |sample| receive(&sample, team, &local, &counters, &sink))
+            .declare_subscriber(key)
+            .callback(move |sample| team_handler(&sample))
             .wait()
             .map_err(|e| TransportError::Network {
                 context: "declaring the zenoh subscriber".into(),
                 source: e,
             })?;
-        match self.subscriber.lock() {
-            Ok(mut s) => *s = Some(subscriber),
-            Err(_) => return Err(TransportError::Closed),
-        }
+        let mut subs = self
+            .subscriptions
+            .lock()
+            .map_err(|_| TransportError::Closed)?;
+        subs.team_wide = Some(subscriber);
+        subs.handler = Some(handler);
+        self.resubscribe(&mut subs);
         Ok(())
     }
 
@@ -715,8 +845,20 @@ impl PacketTransport for ZenohTransport {
 
     fn send(&self, from: u32, to: Option<u32>, frame: &[u8]) -> Result<(), TransportError> {
         let class = frame_class(frame)?;
+        let position = self
+            .subscriptions
+            .lock()
+            .ok()
+            .and_then(|s| s.positions.get(&from).copied());
+        let mut key = key_expr(self.team, from, class);
+        if let Some(cell) = self
+            .subscription
+            .publish_cell(class, to.is_some(), position)
+        {
+            key = format!("{key}/{}", cell_segment(cell));
+        }
         let out = Outgoing {
-            key: key_expr(self.team, from, class),
+            key,
             to,
             bytes: frame.to_vec(),
         };

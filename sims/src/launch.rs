@@ -2,9 +2,14 @@
 //! processes on this machine, talking over zenoh on loopback, peer to peer or (with
 //! `--router`) through one zenoh router ([`crate::router`]) that this process runs;
 //! the same robot files work across hosts with other addresses ([`crate::process`]).
+//!
+//! While the robots run, the launcher samples each process's CPU time and peak
+//! resident memory from `/proc` (Linux; elsewhere the usage is absent), and its own,
+//! which with `--router` is the router's (the launcher itself only waits).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
@@ -38,6 +43,57 @@ pub struct LaunchReport {
     /// Smallest distance between two robots, from their trajectories aligned in
     /// wall time, metres.
     pub min_inter_robot_distance_m: Option<f64>,
+    /// Wall seconds from the first robot's start to the last one's exit.
+    pub wall_s: f64,
+    /// CPU and memory of each robot process (index = robot), sampled every half
+    /// second until it exits; `None` where `/proc` could not tell.
+    pub robot_usage: Vec<Option<ProcessUsage>>,
+    /// The same for the launching process: the router, with `--router`.
+    pub launcher_usage: Option<ProcessUsage>,
+}
+
+/// What one process used, from `/proc/<pid>/stat` and `/proc/<pid>/status`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ProcessUsage {
+    /// User plus system CPU time, seconds (at the last sample before exit).
+    pub cpu_s: f64,
+    /// `cpu_s` over the wall seconds it ran, percent of one core.
+    pub cpu_percent: f64,
+    /// Peak resident memory (`VmHWM`), MiB.
+    pub peak_rss_mib: f64,
+}
+
+/// Reads the CPU seconds and peak resident MiB of process `pid` (`self` for
+/// this one) from `/proc`; `None` where it is not there.
+fn read_usage(pid: &str) -> Option<(f64, f64)> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which may hold spaces): state is field 3,
+    // utime and stime fields 14 and 15, in clock ticks (USER_HZ, 100 on Linux).
+    let after = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    let ticks = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let kib: f64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some((ticks / 100.0, kib / 1024.0))
+}
+
+fn usage(sample: Option<(f64, f64)>, wall_s: f64) -> Option<ProcessUsage> {
+    sample.map(|(cpu_s, peak_rss_mib)| ProcessUsage {
+        cpu_s,
+        cpu_percent: if wall_s > 0.0 {
+            100.0 * cpu_s / wall_s
+        } else {
+            0.0
+        },
+        peak_rss_mib,
+    })
 }
 
 /// Why a launch failed.
@@ -116,12 +172,32 @@ pub fn launch(
         }
     }
     // Ctrl-C in the terminal reaches the whole process group: each robot writes its
-    // outputs and exits, and this waits for them.
-    let exit_codes = children
-        .iter_mut()
-        .map(|c| c.wait().map(|s| s.code()))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| io("waiting for troupe robot", e))?;
+    // outputs and exits, and this waits for them, sampling what they use.
+    let started = Instant::now();
+    let mut exit_codes = vec![None; children.len()];
+    let mut running: Vec<bool> = vec![true; children.len()];
+    let mut samples: Vec<Option<(f64, f64)>> = vec![None; children.len()];
+    let mut walls = vec![0.0; children.len()];
+    while running.iter().any(|r| *r) {
+        for (i, child) in children.iter_mut().enumerate() {
+            if !running[i] {
+                continue;
+            }
+            if let Some(status) = child
+                .try_wait()
+                .map_err(|e| io("waiting for troupe robot", e))?
+            {
+                exit_codes[i] = status.code();
+                running[i] = false;
+                walls[i] = started.elapsed().as_secs_f64();
+            } else if let Some(s) = read_usage(&child.id().to_string()) {
+                samples[i] = Some(s);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    let launcher_usage = usage(read_usage("self"), wall_s);
     let router = router.map(|(router, endpoint)| {
         if let Err(e) = router.close() {
             tracing::warn!("{e}");
@@ -136,6 +212,13 @@ pub fn launch(
         router,
         exit_codes,
         min_inter_robot_distance_m: min_distance_between(&trajectories),
+        wall_s,
+        robot_usage: samples
+            .iter()
+            .zip(&walls)
+            .map(|(s, w)| usage(*s, *w))
+            .collect(),
+        launcher_usage,
     };
     let mut json = serde_json::to_string_pretty(&report)
         .map_err(|e| LaunchError::Io(format!("launch.json: {e}")))?;

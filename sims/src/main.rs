@@ -303,6 +303,29 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
             .min_inter_robot_distance_m
             .map_or("n/a".into(), |d| format!("{d:.2} m"))
     );
+    let cpu: Vec<f64> = report
+        .robot_usage
+        .iter()
+        .flatten()
+        .map(|u| u.cpu_percent)
+        .collect();
+    let rss = report
+        .robot_usage
+        .iter()
+        .flatten()
+        .map(|u| u.peak_rss_mib)
+        .fold(0.0, f64::max);
+    if let (Some(max_cpu), Some(launcher)) =
+        (cpu.iter().copied().reduce(f64::max), report.launcher_usage)
+    {
+        println!(
+            "robots: CPU {:.0} % of a core on average (at most {max_cpu:.0} %), peak memory at most {rss:.0} MiB; {}: CPU {:.0} %, peak memory {:.0} MiB (launch.json)",
+            cpu.iter().sum::<f64>() / cpu.len() as f64,
+            if args.router { "router" } else { "launcher" },
+            launcher.cpu_percent,
+            launcher.peak_rss_mib
+        );
+    }
     if failed > 0 {
         anyhow::bail!("{failed} robot processes failed");
     }

@@ -2,10 +2,18 @@
 //! random and bursty loss, reordering, duplication, range-dependent rate and radius,
 //! scheduled partitions) behind the sim-time executor's network interface. Robot
 //! positions come from the ground-truth monitor.
+//!
+//! The robots' subscription scope (`[robot.link.subscribe]`, issue 22,
+//! [`troupe_comms::scope`]) is applied before anything else, as zenoh's routing
+//! does: a broadcast odometry, plan or keyframe goes only to the robots whose subscribed
+//! cells hold the sender's cell, judged from the ground-truth positions when it is
+//! sent; the others never see it, on the channel or in their counters.
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use troupe_actors::runtime::{ConfigError, Destination, RobotId, SimNetwork, Time};
+use troupe_comms::scope::SubscriptionConfig;
+use troupe_comms::shaping::frame;
 use troupe_comms::simnet::{NetStats, SimNet, SimNetConfig};
 
 use crate::faults::LossBurst;
@@ -24,6 +32,7 @@ pub struct ScenarioNetwork {
     positions: Positions,
     stats: Arc<Mutex<NetStats>>,
     bursts: Vec<LossBurst>,
+    subscription: SubscriptionConfig,
 }
 
 impl ScenarioNetwork {
@@ -35,7 +44,16 @@ impl ScenarioNetwork {
             positions,
             stats: Arc::default(),
             bursts: Vec::new(),
+            subscription: SubscriptionConfig::default(),
         })
+    }
+
+    /// Applies the team's subscription scope (default: every robot gets every
+    /// frame).
+    #[must_use]
+    pub fn with_subscription(mut self, subscription: SubscriptionConfig) -> Self {
+        self.subscription = subscription;
+        self
     }
 
     /// Adds scheduled loss bursts (applied before the network's own model).
@@ -58,12 +76,24 @@ impl SimNetwork for ScenarioNetwork {
         now: Time,
         from: RobotId,
         to: Destination,
-        bytes: usize,
+        bytes: &[u8],
         team_size: usize,
         deliveries: &mut Vec<(RobotId, Time)>,
     ) {
         let positions = lock(&self.positions).clone();
+        let position = |r: RobotId| positions.get(r.0 as usize).copied();
+        // A frame that does not parse has no class: every subscriber gets it (and
+        // the link rejects it).
+        let class = frame::class_of(bytes).ok();
+        let addressed = matches!(to, Destination::Robot(_));
         for target in to.recipients(from, team_size) {
+            if let Some(class) = class
+                && !self
+                    .subscription
+                    .receives(class, addressed, position(from), position(target))
+            {
+                continue;
+            }
             // Every burst draws for every packet it covers, so one burst's losses do
             // not depend on another's.
             let mut lost = false;
@@ -75,7 +105,7 @@ impl SimNetwork for ScenarioNetwork {
             }
             let routing = self
                 .net
-                .route(now.as_nanos(), from.0, target.0, bytes, &positions);
+                .route(now.as_nanos(), from.0, target.0, bytes.len(), &positions);
             deliveries.extend(
                 routing
                     .deliveries

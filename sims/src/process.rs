@@ -48,7 +48,7 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
-use troupe_actors::msgs::ODOMETRY;
+use troupe_actors::msgs::{ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
 use troupe_actors::runtime::{
     ConfigError, ErrorChain, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
 };
@@ -274,9 +274,22 @@ pub struct ProcessSummary {
     pub transport_errors: u64,
     /// Odometry samples in `trajectory.csv`.
     pub trajectory_samples: usize,
+    /// What arrived from each peer (by robot id): who this robot heard.
+    pub peers: BTreeMap<u32, PeerCounts>,
     /// The recording `run.mcap`, when one was written.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub recording: Option<RecordingStats>,
+}
+
+/// Messages received from one peer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct PeerCounts {
+    /// Odometry messages.
+    pub odometry: u64,
+    /// Plans.
+    pub plans: u64,
+    /// Keyframes.
+    pub keyframes: u64,
 }
 
 /// One actor's health.
@@ -334,9 +347,19 @@ pub async fn run(
         }
     }
     .map_err(|source| ProcessError::Assemble { id, source })?;
+    let transport = Arc::new(
+        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
+            .map_err(|source| ProcessError::Transport {
+                context: "opening the zenoh session",
+                source,
+            })?
+            .with_subscription(scenario.robot.link.subscribe),
+    );
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());
+    let peers: Arc<Mutex<BTreeMap<u32, PeerCounts>>> = Arc::default();
+    let (trajectory_tap, link_tap, peers_tap) = (trajectory.clone(), link.clone(), peers.clone());
+    let position_tap = transport.clone();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
         .map_err(ProcessError::RobotId)?;
@@ -346,6 +369,9 @@ pub async fn run(
                 .duration_since(UNIX_EPOCH)
                 .map_or(0.0, |d| d.as_secs_f64());
             let v = o.pose.translation.vector;
+            // Where the robot is picks its keyframes' cell and, under a
+            // neighbourhood scope, the cells it hears (troupe_comms::scope).
+            position_tap.set_position(id, [v.x, v.y, v.z]);
             if let Ok(mut samples) = trajectory_tap.lock() {
                 samples.push([t, v.x, v.y, v.z]);
             }
@@ -353,6 +379,19 @@ pub async fn run(
             && let Ok(mut last) = link_tap.lock()
         {
             *last = Some(status.clone());
+        } else {
+            let count = |robot: RobotId, field: fn(&mut PeerCounts) -> &mut u64| {
+                if let Ok(mut peers) = peers_tap.lock() {
+                    *field(peers.entry(robot.0).or_default()) += 1;
+                }
+            };
+            if let Some(o) = p.get(&PEER_ODOMETRY) {
+                count(o.robot, |c| &mut c.odometry);
+            } else if let Some(k) = p.get(&PEER_KEYFRAME) {
+                count(k.robot, |c| &mut c.keyframes);
+            } else if let Some(plan) = p.get(&PEER_PLAN) {
+                count(plan.robot, |c| &mut c.plans);
+            }
         }
     });
     let recorder = if process.config.record {
@@ -369,14 +408,6 @@ pub async fn run(
     } else {
         None
     };
-    let transport = Arc::new(
-        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id]).map_err(
-            |source| ProcessError::Transport {
-                context: "opening the zenoh session",
-                source,
-            },
-        )?,
-    );
     let started = Instant::now();
     let handle = executor
         .spawn_with_transport(transport.clone())
@@ -427,6 +458,11 @@ pub async fn run(
         zenoh,
         transport_errors,
         trajectory_samples: trajectory.len(),
+        peers: std::mem::take(
+            &mut *peers
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        ),
         recording,
     };
     write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {

@@ -349,7 +349,9 @@ impl Team {
         )
         .map_err(|e| AssembleError::Config(e.within("network")))?;
         let network_stats = network.stats();
-        let network = network.with_loss_bursts(bursts);
+        let network = network
+            .with_loss_bursts(bursts)
+            .with_subscription(scenario.robot.link.subscribe);
         let mut executor = SimExecutor::new(team, scenario.seed).with_network(network);
         executor.add_tap(monitor);
         let map_collector = MapCollector::new(count);

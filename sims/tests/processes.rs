@@ -1,7 +1,7 @@
 //! Three `troupe robot` processes, one robot each, talking over zenoh on loopback
 //! (issue 3 item 4, issue 8 item 7): every robot hears the others' odometry and
-//! keyframes, and the robots keep apart; the same through a `troupe router`
-//! (issue 22).
+//! keyframes, and the robots keep apart; the same through a `troupe router`,
+//! with a neighbourhood subscription, and in network namespaces (issue 22).
 
 mod common;
 
@@ -13,9 +13,14 @@ use troupe_sims::process::{
     loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
 };
 
-/// `n` consecutive free TCP ports on loopback, in this binary's range.
+/// `n` consecutive free TCP ports on loopback, in this binary's range; each call
+/// starts 100 ports further, so tests picking ports at the same time (before their
+/// processes bind them) get different ones.
 fn free_ports(n: usize) -> Vec<u16> {
-    common::free_ports_from(10_000, n)
+    use std::sync::atomic::{AtomicU16, Ordering};
+    static CALLS: AtomicU16 = AtomicU16::new(0);
+    let k = CALLS.fetch_add(1, Ordering::Relaxed) % 10;
+    common::free_ports_from(10_000 + 100 * k, n)
 }
 
 /// Robot files for every robot of the scenario `dir/team.toml` (`robots` of them), each
@@ -233,8 +238,10 @@ impl Drop for Namespaces {
 /// token buckets at 250 kbit/s (`tc tbf`, as the thesis shaped its §8.2.7 links);
 /// delay and loss come from troupe's own shaping. Needs root and `ip`/`tc`; without
 /// them it says why and returns.
-#[test]
-fn three_robots_in_network_namespaces_over_shaped_links() {
+/// Three namespaces shaped at 250 kbit/s for this test (`tag` tells the tests
+/// apart): the prefix, the `10.77.<net>.0/24` network, and the namespaces; `None`
+/// (and a line saying why) without root, iproute2, or kernel support.
+fn shaped_namespaces(tag: u32) -> Option<(String, u8, Namespaces)> {
     let root = std::fs::read_to_string("/proc/self/status").is_ok_and(|s| {
         s.lines()
             .find(|l| l.starts_with("Uid:"))
@@ -242,18 +249,34 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     });
     if !root || sh(&["ip", "-V"]).is_err() || sh(&["tc", "-V"]).is_err() {
         eprintln!("skipped: needs root and iproute2 (ip, tc) to create network namespaces");
-        return;
+        return None;
     }
     let pid = std::process::id();
-    let prefix = format!("tr{}", pid % 100_000);
-    let net = (pid % 200 + 20) as u8;
-    let namespaces = match Namespaces::create(&prefix, 3, net, "250kbit") {
-        Ok(n) => n,
+    let prefix = format!("tr{}{tag}", pid % 100_000);
+    let net = ((pid + 97 * tag) % 200 + 20) as u8;
+    match Namespaces::create(&prefix, 3, net, "250kbit") {
+        Ok(n) => Some((prefix, net, n)),
         Err(e) => {
             // A kernel without bridges or veth pairs (some containers): say so.
             eprintln!("skipped: cannot create the network namespaces here: {e}");
-            return;
+            None
         }
+    }
+}
+
+/// Checks that no namespace of `prefix` is left.
+fn assert_no_namespaces_left(prefix: &str) {
+    let leftover = Command::new("ip")
+        .args(["netns", "list"])
+        .output()
+        .expect("ip netns list");
+    assert!(!String::from_utf8_lossy(&leftover.stdout).contains(prefix));
+}
+
+#[test]
+fn three_robots_in_network_namespaces_over_shaped_links() {
+    let Some((prefix, net, namespaces)) = shaped_namespaces(0) else {
+        return;
     };
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::write(
@@ -294,11 +317,97 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
     assert!(closest > 0.6, "robots came within {closest} m");
     drop(namespaces);
-    let leftover = Command::new("ip")
-        .args(["netns", "list"])
-        .output()
-        .expect("ip netns list");
-    assert!(!String::from_utf8_lossy(&leftover.stdout).contains(&prefix));
+    assert_no_namespaces_left(&prefix);
+}
+
+/// Starts `troupe router --listen endpoint` (in network namespace `netns` if given,
+/// `--insecure` off loopback) and waits for the line saying it listens: clients
+/// that find no router give up.
+fn spawn_router(endpoint: &str, netns: Option<&str>) -> Child {
+    use std::io::{BufRead as _, BufReader};
+
+    let exe = env!("CARGO_BIN_EXE_troupe");
+    let mut command = match netns {
+        Some(ns) => {
+            let mut c = Command::new("ip");
+            c.args(["netns", "exec", ns]).arg(exe);
+            c.args(["router", "--listen", endpoint, "--insecure"]);
+            c
+        }
+        None => {
+            let mut c = Command::new(exe);
+            c.args(["router", "--listen", endpoint]);
+            c
+        }
+    };
+    let mut router = command
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("spawn troupe router");
+    let mut line = String::new();
+    BufReader::new(router.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("router output");
+    assert!(line.contains("listening on"), "router said {line:?}");
+    router
+}
+
+/// SIGTERM stops a router cleanly.
+fn stop_router(mut router: Child) {
+    let stopped = Command::new("kill")
+        .args(["-TERM", &router.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(stopped.success());
+    let status = router.wait().expect("router exit");
+    assert!(status.success(), "router exited with {status}");
+}
+
+/// Issue 22: the namespaces of the test above, now one holding a `troupe router`
+/// and two holding robots in client mode that name only the router; every link
+/// is shaped at 250 kbit/s. Each robot hears the other through the router.
+#[test]
+fn two_client_robots_and_a_router_in_three_network_namespaces() {
+    let Some((prefix, net, namespaces)) = shaped_namespaces(1) else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"netns_router\"\nrobots = 2\n",
+    )
+    .expect("scenario");
+    let endpoint = format!("tcp/10.77.{net}.1:7447");
+    let router = spawn_router(&endpoint, Some(&namespaces.ns(0)));
+    let duration_s = 20.0;
+    let files = write_client_team(
+        dir.path(),
+        Path::new("team.toml"),
+        2,
+        std::slice::from_ref(&endpoint),
+        Some(duration_s),
+    )
+    .expect("robot files");
+    let mut children: Vec<_> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| spawn_robot(f, Some(&namespaces.ns(i + 1))))
+        .collect();
+    wait_all(&mut children, duration_s);
+    for (i, (summary, _)) in outputs(dir.path(), 2).into_iter().enumerate() {
+        let peer = (1 - i).to_string();
+        let heard = &summary["peers"][&peer];
+        assert!(heard["odometry"].as_u64() > Some(50), "robot{i}: {summary}");
+        assert!(
+            heard["keyframes"].as_u64() >= Some(1),
+            "robot{i}: {summary}"
+        );
+        assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
+        assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
+    }
+    stop_router(router);
+    drop(namespaces);
+    assert_no_namespaces_left(&prefix);
 }
 
 /// A robot process can replay a recorded sequence as its sensor (issue 8 item 7):
@@ -390,8 +499,6 @@ fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
 /// hears the others' odometry, keyframes and plans.
 #[test]
 fn three_robot_clients_talk_through_a_troupe_router() {
-    use std::io::{BufRead as _, BufReader};
-
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::write(
         dir.path().join("team.toml"),
@@ -399,17 +506,7 @@ fn three_robot_clients_talk_through_a_troupe_router() {
     )
     .expect("scenario");
     let endpoint = loopback_endpoints(&free_ports(1));
-    let mut router = Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(["router", "--listen", &endpoint[0]])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("spawn troupe router");
-    // It prints one line once it listens; clients that find no router give up.
-    let mut line = String::new();
-    BufReader::new(router.stdout.take().expect("stdout"))
-        .read_line(&mut line)
-        .expect("router output");
-    assert!(line.contains("listening on"), "router said {line:?}");
+    let router = spawn_router(&endpoint[0], None);
     let duration_s = 20.0;
     let files = write_client_team(
         dir.path(),
@@ -428,29 +525,27 @@ fn three_robot_clients_talk_through_a_troupe_router() {
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
         assert_eq!(summary["zenoh"]["rejected_frame"].as_u64(), Some(0));
     }
-    // SIGTERM stops the router cleanly.
-    let stopped = Command::new("kill")
-        .args(["-TERM", &router.id().to_string()])
-        .status()
-        .expect("kill");
-    assert!(stopped.success());
-    let status = router.wait().expect("router exit");
-    assert!(status.success(), "router exited with {status}");
+    stop_router(router);
 }
 
-/// `troupe launch --router`: the launcher starts the router itself and writes client
-/// robot files that name only it.
+/// `troupe launch --router` (issue 22): the launcher starts the router itself and
+/// writes client robot files that name only it. Four robots with a neighbourhood
+/// subscription (the cave's entrance keeps them neighbours): each hears every
+/// other's keyframes and plans through its cell subscriptions, nothing is
+/// rejected, and `launch.json` tells what each process and the router used.
 #[test]
 fn launch_with_a_router_runs_the_team_as_its_clients() {
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::write(
         dir.path().join("team.toml"),
-        "name = \"launched\"\nrobots = 2\n",
+        "name = \"launched\"\nrobots = 4\n\
+         [camera]\nwidth = 80\nheight = 60\n\
+         [robot.link.subscribe]\nscope = \"neighbourhood\"\nradius_m = 30.0\ncell_m = 10.0\n",
     )
     .expect("scenario");
     let port = free_ports(1)[0].to_string();
     let out = Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(["launch", "team.toml", "--router", "--duration-s", "12"])
+        .args(["launch", "team.toml", "--router", "--duration-s", "25"])
         .args(["--base-port", &port, "--out", "out"])
         .current_dir(dir.path())
         .output()
@@ -467,7 +562,13 @@ fn launch_with_a_router_runs_the_team_as_its_clients() {
     .expect("json");
     let router = format!("tcp/127.0.0.1:{port}");
     assert_eq!(report["router"].as_str(), Some(router.as_str()));
-    for i in 0..2 {
+    let usage = report["robot_usage"].as_array().expect("robot_usage");
+    assert_eq!(usage.len(), 4, "{report}");
+    for u in usage.iter().chain([&report["launcher_usage"]]) {
+        assert!(u["cpu_s"].as_f64() > Some(0.0), "{report}");
+        assert!(u["peak_rss_mib"].as_f64() > Some(1.0), "{report}");
+    }
+    for i in 0..4 {
         let file =
             std::fs::read_to_string(launched.join(format!("robot{i}.toml"))).expect("robot file");
         let robot: toml::Table = file.parse().expect("toml");
@@ -478,14 +579,29 @@ fn launch_with_a_router_runs_the_team_as_its_clients() {
             "{file}"
         );
     }
-    for (i, (summary, _)) in outputs(&launched, 2).into_iter().enumerate() {
+    for (i, (summary, _)) in outputs(&launched, 4).into_iter().enumerate() {
         assert!(
-            messages(&summary, "peer/odometry") > 40,
+            summary["zenoh"]["subscribed_cells"].as_u64() > Some(0),
             "robot{i}: {summary}"
         );
-        assert!(
-            messages(&summary, "peer/keyframe") >= 1,
-            "robot{i}: {summary}"
-        );
+        for peer in (0..4).filter(|p| *p != i) {
+            let heard = &summary["peers"][&peer.to_string()];
+            assert!(heard["odometry"].as_u64() > Some(40), "robot{i}: {summary}");
+            assert!(
+                heard["keyframes"].as_u64() >= Some(1),
+                "robot{i}: {summary}"
+            );
+            assert!(heard["plans"].as_u64() >= Some(1), "robot{i}: {summary}");
+        }
+        assert_eq!(summary["link"]["rejected_messages"].as_u64(), Some(0));
+        let z = &summary["zenoh"];
+        for key in [
+            "rejected_key",
+            "rejected_frame",
+            "rejected_class",
+            "rejected_sender",
+        ] {
+            assert_eq!(z[key].as_u64(), Some(0), "robot{i}: {z}");
+        }
     }
 }

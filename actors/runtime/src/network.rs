@@ -82,14 +82,15 @@ pub const LINK_TRANSPORT: Topic<TransportStats> = Topic::new("link/transport");
 /// A deterministic network model for the sim-time executor: decides when (if ever)
 /// each packet reaches each recipient.
 pub trait SimNetwork: Send {
-    /// Called for every packet a robot publishes on [`LINK_TX`]; pushes one
+    /// Called for every packet a robot publishes on [`LINK_TX`] (`bytes`: the
+    /// frame, whose length and header a model may look at); pushes one
     /// `(recipient, arrival time)` per copy that will be delivered.
     fn route(
         &mut self,
         now: Time,
         from: RobotId,
         to: Destination,
-        bytes: usize,
+        bytes: &[u8],
         team_size: usize,
         deliveries: &mut Vec<(RobotId, Time)>,
     );
@@ -108,7 +109,7 @@ impl SimNetwork for IdealNetwork {
         now: Time,
         from: RobotId,
         to: Destination,
-        _bytes: usize,
+        _bytes: &[u8],
         team_size: usize,
         deliveries: &mut Vec<(RobotId, Time)>,
     ) {

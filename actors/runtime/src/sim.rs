@@ -210,7 +210,7 @@ impl World {
                     clock.now,
                     robot.id,
                     packet.to,
-                    packet.bytes.len(),
+                    &packet.bytes,
                     self.team_size,
                     &mut self.deliveries,
                 );

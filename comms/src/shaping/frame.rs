@@ -185,6 +185,15 @@ pub fn parse(bytes: &[u8]) -> Result<ParsedFrame<'_>, FrameError> {
     }
 }
 
+/// The class a frame travels in: its header's, and odometry for acks (the
+/// shaper's first class, which schedules them).
+pub fn class_of(bytes: &[u8]) -> Result<Class, FrameError> {
+    Ok(match parse(bytes)? {
+        ParsedFrame::Data(header, _) => header.class,
+        ParsedFrame::Ack(_) => Class::Odometry,
+    })
+}
+
 /// The ids of an ack frame's body (from [`ParsedFrame::Ack`]).
 pub fn ack_ids(body: &[u8]) -> impl Iterator<Item = u32> + '_ {
     body.chunks_exact(4)

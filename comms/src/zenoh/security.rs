@@ -10,7 +10,8 @@
 //! - **Identity bound by zenoh** (with `[zenoh.access]`, in [`ZenohConfig::to_zenoh`]): zenoh's access control
 //!   with `default_permission = "deny"`. The session named `robot<id>`
 //!   ([`identity_name`]: its certificate's common name under mutual TLS, its user
-//!   under `auth`) may put only under `troupe/*/<id>/*`; the routers named in
+//!   under `auth`) may put only under `troupe/*/<id>/*` (and `troupe/*/<id>/*/*`,
+//!   the cells of [`crate::scope`]); the routers named in
 //!   `access.routers` may put any team key (they forward); every named session may
 //!   declare subscribers on `troupe/**`. Everything else (an unnamed session, another
 //!   id's key, queries, deletes, liveliness) is dropped by zenoh before it reaches
@@ -213,7 +214,7 @@ pub(super) fn access_control_json5(config: &ZenohConfig) -> Option<String> {
         subjects.push(subject(&sid, &identity_name(*id)));
         rules.push(format!(
             "{{\"id\":\"put{id}\",\"messages\":[\"put\"],\"flows\":[\"ingress\"],\
-             \"permission\":\"allow\",\"key_exprs\":[\"troupe/*/{id}/*\"]}}"
+             \"permission\":\"allow\",\"key_exprs\":[\"troupe/*/{id}/*\",\"troupe/*/{id}/*/*\"]}}"
         ));
         policies.push(format!(
             "{{\"rules\":[\"put{id}\"],\"subjects\":[{}]}}",

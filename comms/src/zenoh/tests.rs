@@ -27,6 +27,21 @@ fn settings_read_from_toml_and_bad_ones_name_the_key() {
     );
     let z = c.to_zenoh().unwrap();
     assert!(format!("{z}").contains("10.0.0.1:7447"));
+    let gossip = |on: bool| {
+        let c = ZenohConfig {
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            gossip_scouting: on,
+            ..ZenohConfig::default()
+        };
+        c.to_zenoh()
+            .unwrap()
+            .get_json("scouting/gossip/enabled")
+            .unwrap()
+    };
+    assert_eq!(
+        (gossip(false), gossip(true)),
+        ("false".into(), "true".into())
+    );
     assert!(toml::from_str::<ZenohConfig>("listn = []").is_err());
     let bad = |text: &str| match toml::from_str::<ZenohConfig>(text).unwrap().validate() {
         Err(TransportError::Config { key, .. }) => key,
@@ -60,9 +75,20 @@ fn key_expressions_name_team_sender_and_class() {
         "troupe/1/2/plans",
         "other/1/2/plan",
         "troupe/-1/2/plan",
+        "troupe/1/2/bulk/c1_2",
+        "troupe/1/2/keyframe/c1",
+        "troupe/1/2/keyframe/c1_2/x",
     ] {
         assert_eq!(parse_key_expr(bad, 1), Err(KeyError::Malformed), "{bad}");
     }
+    assert_eq!(
+        parse_key_expr("troupe/1/2/keyframe/c-1_20", 1),
+        Ok((2, Class::Keyframe))
+    );
+    assert_eq!(
+        parse_key_expr("troupe/1/2/plan/c0_0", 1),
+        Ok((2, Class::Plan))
+    );
 }
 
 /// A port for this test run (distinct per test and per process).

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use serde::Serialize;
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
-use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN, PinholeIntrinsics};
+use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, ODOMETRY, PLAN, PinholeIntrinsics};
 use troupe_actors::runtime::{
     ActorSpec, Publication, RealtimeExecutor, RobotId, RobotSpec, Time, TopicStats,
 };
@@ -215,7 +215,8 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
         .map_err(|source| HardwareError::Zenoh {
             context: "opening the team link's zenoh session".into(),
             source,
-        })?;
+        })?
+        .with_subscription(file.robot.link.subscribe);
     Ok(Started {
         spec,
         transport: Arc::new(transport),
@@ -258,7 +259,15 @@ async fn fly(
     let tap = collected.clone();
     let mut executor = RealtimeExecutor::new(vec![started.spec], u64::from(id))
         .with_robot_ids(vec![RobotId(id)])?;
+    let transport = started.transport.clone();
     executor.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&ODOMETRY) {
+            // Where the robot is picks its keyframes' cell and, under a
+            // neighbourhood scope, the cells it hears (troupe_comms::scope).
+            let v = o.pose.translation.vector;
+            transport.set_position(id, [v.x, v.y, v.z]);
+            return;
+        }
         let mut c = tap.lock().unwrap_or_else(PoisonError::into_inner);
         if p.get(&DEPTH_FRAME).is_some() {
             c.events.push((unix_now_s(), "frame"));

@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
+use troupe_comms::scope::SubscriptionConfig;
 use troupe_comms::shaping::{ClassConfig, QueuePolicy, ReassemblyConfig, ShaperConfig};
 use troupe_comms::wire::valid_user_name;
 use troupe_runtime::ConfigError;
@@ -60,6 +61,12 @@ pub struct LinkConfig {
     /// Per shared topic (by name), what overrides the policy its
     /// [`SharedTopic`](super::SharedTopic) declares.
     pub shared: BTreeMap<String, SharedConfig>,
+    /// Which peers' broadcast odometry, plans and keyframes reach this robot: all, those
+    /// near its own odometry, or none but the base station's (issue 22,
+    /// [`troupe_comms::scope`]). The network applies it, not the link: the zenoh
+    /// transport of a robot process through its subscriptions, the simulated
+    /// network of a sim-time team through its routing. A team shares one value.
+    pub subscribe: SubscriptionConfig,
 }
 
 /// Overrides for one shared topic (`[link.shared."artifacts/report"]`); what is
@@ -141,6 +148,7 @@ impl Default for LinkConfig {
             peer_frames: Vec::new(),
             keyframe_encoding: KeyframeEncoding::default(),
             shared: BTreeMap::new(),
+            subscribe: SubscriptionConfig::default(),
         }
     }
 }
@@ -182,6 +190,9 @@ impl LinkConfig {
         ConfigError::non_negative("plan_rate_hz", self.plan_rate_hz)?;
         ConfigError::non_negative("peer_timeout_s", self.peer_timeout_s)?;
         self.shaper.validate().map_err(|e| e.within("shaper"))?;
+        self.subscribe
+            .validate()
+            .map_err(|e| e.within("subscribe"))?;
         for (name, shared) in &self.shared {
             let key = format!("shared.\"{name}\"");
             if !valid_user_name(name) {

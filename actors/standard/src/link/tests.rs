@@ -224,7 +224,7 @@ impl troupe_runtime::SimNetwork for OnePairPartition {
         now: Time,
         from: RobotId,
         to: Destination,
-        _bytes: usize,
+        _bytes: &[u8],
         team_size: usize,
         deliveries: &mut Vec<(RobotId, Time)>,
     ) {
