@@ -66,8 +66,7 @@ fn run() -> Result<(), Box<dyn Error>> {
         .enumerate()
         .map(|(i, p)| (0.1 * i as f64, p))
         .collect();
-    let out = record_camera(&dir, &world, &CameraParams::default(), &path, seed)
-        ?;
+    let out = record_camera(&dir, &world, &CameraParams::default(), &path, seed)?;
     println!("{} frames in {}", path.len(), out.display());
     Ok(())
 }

@@ -15,8 +15,8 @@
 //!     [--sequence DIR [--every 40]]
 //! ```
 
-use std::io::Write;
 use std::error::Error;
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -47,13 +47,14 @@ fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, Bo
     ];
     let scene = synthetic::Scene::room_corner();
     let mut out = Vec::new();
-    let mut synth = |name: String, w: u32, h: u32, pose: &Isometry3<f64>| -> Result<(), Box<dyn Error>> {
-        let intr = synthetic::intrinsics(w, h);
-        let (d, g) = scene.render(&intr, pose);
-        let fp = frame_points(&d, &g, &intr, pose)?;
-        out.push((name, fp.depth_intensity));
-        Ok(())
-    };
+    let mut synth =
+        |name: String, w: u32, h: u32, pose: &Isometry3<f64>| -> Result<(), Box<dyn Error>> {
+            let intr = synthetic::intrinsics(w, h);
+            let (d, g) = scene.render(&intr, pose);
+            let fp = frame_points(&d, &g, &intr, pose)?;
+            out.push((name, fp.depth_intensity));
+            Ok(())
+        };
     synth("room40x30_0".into(), 40, 30, &views[0])?;
     for (k, pose) in views.iter().enumerate() {
         synth(format!("room160x120_{k}"), 160, 120, pose)?;
@@ -67,8 +68,7 @@ fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, Bo
                 &frame.intensity,
                 &frame.intrinsics,
                 &frame.pose,
-            )
-            ?;
+            )?;
             if !fp.is_empty() {
                 out.push((format!("cave_{i}"), fp.depth_intensity));
             }

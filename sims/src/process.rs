@@ -55,8 +55,8 @@ use troupe_actors::runtime::{
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
 use troupe_robot::AssembleError;
-use troupe_robot::hardware::{finish_recording, run_for};
 pub use troupe_robot::hardware::shutdown_signal;
+use troupe_robot::hardware::{finish_recording, run_for};
 use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
 use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};

@@ -294,17 +294,24 @@ mod tests {
         assert!(e.contains("`name`"), "{e}");
         let e = parse("duration_s = nan").unwrap_err().to_string();
         assert!(e.contains("`duration_s`"), "{e}");
-        let e = parse("[world.cave]\ntunnel_count = 0").unwrap_err().to_string();
+        let e = parse("[world.cave]\ntunnel_count = 0")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.ends_with("key `world.cave.tunnel_count` must be at least 1, got 0"),
             "{e}"
         );
-        let e = parse("[world.artifacts]\ncount = 2000").unwrap_err().to_string();
+        let e = parse("[world.artifacts]\ncount = 2000")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.ends_with("key `world.artifacts.count` must be at most 1000, got 2000"),
             "{e}"
         );
         let e = parse("[camera]\nwidth = 0").unwrap_err().to_string();
-        assert!(e.contains("`camera.width` must be at least 1, got 0"), "{e}");
+        assert!(
+            e.contains("`camera.width` must be at least 1, got 0"),
+            "{e}"
+        );
     }
 }

@@ -40,10 +40,9 @@ impl FrameSource for SimCameraSource {
         let Some(odometry) = odometry else {
             return Ok(None);
         };
-        let renderer = self
-            .renderer
-            .as_mut()
-            .map_err(|reason| ActorError::with_source("camera.backend = \"gpu\"", reason.clone()))?;
+        let renderer = self.renderer.as_mut().map_err(|reason| {
+            ActorError::with_source("camera.backend = \"gpu\"", reason.clone())
+        })?;
         let seed = self.noise_seed ^ self.frames.wrapping_mul(0x9e37_79b9_7f4a_7c15);
         self.frames += 1;
         renderer

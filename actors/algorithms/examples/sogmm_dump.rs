@@ -12,8 +12,8 @@
 //!
 //! `cargo run --release -p troupe-algorithms --example sogmm_dump -- OUT SIGMA...`
 
-use std::io::Write;
 use std::error::Error;
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -67,8 +67,7 @@ fn run() -> Result<(), Box<dyn Error>> {
                 &seeding.assignment,
                 seeding.centres.len(),
                 em.reg_covar,
-            )
-            ?;
+            )?;
             let start = Instant::now();
             let (gmm, report) = fit_em(&fp.points, &init, &em)?;
             let em_s = start.elapsed().as_secs_f64();

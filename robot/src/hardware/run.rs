@@ -20,8 +20,8 @@ use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 
 use super::file::{HardwareError, HardwareRobot};
 use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
-use crate::toml_file::SettingsFileError;
 use crate::ros2::{InputStats, OutputStats, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
+use crate::toml_file::SettingsFileError;
 use crate::{RobotParts, assemble};
 
 /// How often the camera's first frame is looked for at start.
@@ -357,7 +357,10 @@ pub fn finish_recording(recorder: Option<&SharedRecorder>, who: &str) -> Option<
     match recorder?.finish()? {
         Ok(stats) => Some(stats),
         Err(e) => {
-            tracing::warn!("{who}: recording: {}", troupe_actors::runtime::ErrorChain(&e));
+            tracing::warn!(
+                "{who}: recording: {}",
+                troupe_actors::runtime::ErrorChain(&e)
+            );
             None
         }
     }

@@ -10,8 +10,8 @@ use std::path::PathBuf;
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
-use troupe_core::ConfigError;
 use troupe_actors::grid::distance::distance_to;
+use troupe_core::ConfigError;
 
 pub use super::mesh_io::{MeshError, MeshFormatError};
 use super::noise::ValueNoise;

@@ -81,10 +81,7 @@ impl OpenFieldParams {
         if self.route_height_m + 1.0 > self.height_m {
             return Err(ConfigError::new(
                 "route_height_m",
-                format!(
-                    "must leave 1 m below the top (height_m {})",
-                    self.height_m
-                ),
+                format!("must leave 1 m below the top (height_m {})", self.height_m),
                 self.route_height_m,
             ));
         }

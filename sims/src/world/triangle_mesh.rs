@@ -48,7 +48,9 @@ impl TriangleMesh {
             .iter()
             .find(|v| !v.coords.iter().all(|c| c.is_finite()))
         {
-            return Err(InvalidMesh::NonFiniteVertex { vertex: v.coords.into() });
+            return Err(InvalidMesh::NonFiniteVertex {
+                vertex: v.coords.into(),
+            });
         }
         let n = self.vertices.len() as u32;
         if let Some(t) = self.triangles.iter().find(|t| t.iter().any(|&i| i >= n)) {
