@@ -1,10 +1,15 @@
 //! Reading the TOML files a user writes (robot, scenario, base, study files) with
-//! errors that name the file, the key, the line and the column.
+//! errors that name the file, the key, the line and the column, and the one error of a
+//! settings file (a robot process's, a hardware robot's or a base station's):
+//! [`SettingsFileError`].
 
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
+use troupe_comms::transport::TransportError;
+
+use crate::ConfigError;
 
 /// Where in a TOML file something went wrong.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -50,6 +55,54 @@ pub enum TomlFileError {
         /// TOML's or serde's description of the problem.
         message: String,
     },
+}
+
+/// A settings file (robot process, hardware robot or base station) that cannot be
+/// used: each of their errors wraps it.
+#[derive(Debug, thiserror::Error)]
+pub enum SettingsFileError {
+    /// The file cannot be read or does not have the expected shape.
+    #[error(transparent)]
+    Toml(#[from] TomlFileError),
+    /// A value breaks a rule.
+    #[error("{}: invalid setting", path.display())]
+    Config {
+        /// The file.
+        path: PathBuf,
+        /// The key, the rule and the value.
+        source: ConfigError,
+    },
+    /// A zenoh table is invalid.
+    #[error("{}: invalid `[{table}]` table", path.display())]
+    Zenoh {
+        /// The file.
+        path: PathBuf,
+        /// The table (`zenoh`, `ros2.zenoh`).
+        table: &'static str,
+        /// The transport's error.
+        source: TransportError,
+    },
+}
+
+impl SettingsFileError {
+    /// A value of the file at `path` breaks a rule.
+    #[must_use]
+    pub fn config(path: &Path, source: ConfigError) -> Self {
+        SettingsFileError::Config {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// The zenoh table `table` of the file at `path` is invalid.
+    #[must_use]
+    pub fn zenoh(path: &Path, table: &'static str, source: TransportError) -> Self {
+        SettingsFileError::Zenoh {
+            path: path.to_path_buf(),
+            table,
+            source,
+        }
+    }
 }
 
 /// Reads and deserializes the TOML file at `path`.

@@ -10,6 +10,7 @@
 //! The camera (160×120, D435-like field of view, 5 m range, no noise) flies at
 //! 0.5 m/s, 10 frames per second, looking along the route.
 
+use std::error::Error;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -43,7 +44,7 @@ fn poses_along(route: &[Point3<f64>], step_m: f64, count: usize) -> Vec<Isometry
     out
 }
 
-fn run() -> Result<(), String> {
+fn run() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
@@ -65,8 +66,7 @@ fn run() -> Result<(), String> {
         .enumerate()
         .map(|(i, p)| (0.1 * i as f64, p))
         .collect();
-    let out = record_camera(&dir, &world, &CameraParams::default(), &path, seed)
-        .map_err(|e| e.to_string())?;
+    let out = record_camera(&dir, &world, &CameraParams::default(), &path, seed)?;
     println!("{} frames in {}", path.len(), out.display());
     Ok(())
 }
@@ -75,7 +75,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", troupe_actors::runtime::ErrorChain(e.as_ref()));
             ExitCode::FAILURE
         }
     }

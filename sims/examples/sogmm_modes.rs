@@ -15,6 +15,7 @@
 //!     [--sequence DIR [--every 40]]
 //! ```
 
+use std::error::Error;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -31,7 +32,7 @@ use troupe_sims::sequence::Sequence;
 type NamedData = (String, Vec<[f64; 2]>);
 
 /// Every frame asked for.
-fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, String> {
+fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, Box<dyn Error>> {
     let base = synthetic::room_pose();
     let views = [
         base,
@@ -46,28 +47,28 @@ fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, St
     ];
     let scene = synthetic::Scene::room_corner();
     let mut out = Vec::new();
-    let mut synth = |name: String, w: u32, h: u32, pose: &Isometry3<f64>| -> Result<(), String> {
-        let intr = synthetic::intrinsics(w, h);
-        let (d, g) = scene.render(&intr, pose);
-        let fp = frame_points(&d, &g, &intr, pose).map_err(|e| e.to_string())?;
-        out.push((name, fp.depth_intensity));
-        Ok(())
-    };
+    let mut synth =
+        |name: String, w: u32, h: u32, pose: &Isometry3<f64>| -> Result<(), Box<dyn Error>> {
+            let intr = synthetic::intrinsics(w, h);
+            let (d, g) = scene.render(&intr, pose);
+            let fp = frame_points(&d, &g, &intr, pose)?;
+            out.push((name, fp.depth_intensity));
+            Ok(())
+        };
     synth("room40x30_0".into(), 40, 30, &views[0])?;
     for (k, pose) in views.iter().enumerate() {
         synth(format!("room160x120_{k}"), 160, 120, pose)?;
     }
     if let Some(dir) = sequence {
-        let seq = Sequence::open(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let seq = Sequence::open(dir)?;
         for i in (0..seq.len()).step_by(every.max(1)) {
-            let frame = decimate(&seq.frame(i).map_err(|e| e.to_string())?, 2);
+            let frame = decimate(&seq.frame(i)?, 2);
             let fp = frame_points(
                 &frame.depth_m,
                 &frame.intensity,
                 &frame.intrinsics,
                 &frame.pose,
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
             if !fp.is_empty() {
                 out.push((format!("cave_{i}"), fp.depth_intensity));
             }
@@ -76,7 +77,7 @@ fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, St
     Ok(out)
 }
 
-fn run() -> Result<(), String> {
+fn run() -> Result<(), Box<dyn Error>> {
     let usage = "usage: sogmm_modes OUT SIGMA... [--sequence DIR [--every N]]";
     let mut args = std::env::args().skip(1);
     let out = PathBuf::from(args.next().ok_or(usage)?);
@@ -116,7 +117,7 @@ fn run() -> Result<(), String> {
                 blurring.len(),
             );
             let mut stdout = std::io::stdout().lock();
-            writeln!(stdout, "{line}").map_err(|e| e.to_string())?;
+            writeln!(stdout, "{line}")?;
         }
     }
     Ok(())
@@ -126,7 +127,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", troupe_actors::runtime::ErrorChain(e.as_ref()));
             ExitCode::FAILURE
         }
     }

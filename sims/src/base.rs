@@ -65,9 +65,8 @@ use troupe_actors::runtime::{
     Actor, ActorResult, ActorSpec, ConfigError, Context, ErrorChain, Event, LINK_RX, Publication,
     RealtimeExecutor, RobotId, RobotSpec, TimerId,
 };
-use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
-use troupe_robot::toml_file::{TomlFileError, read_toml};
+use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
 use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 
@@ -129,25 +128,10 @@ pub struct BaseStation {
 /// Why the base station cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum BaseError {
-    /// The base file cannot be read or does not have the expected shape.
+    /// The base file cannot be read, does not have the expected shape, or a value
+    /// (in `[zenoh]` too) breaks a rule.
     #[error(transparent)]
-    File(#[from] TomlFileError),
-    /// A value of the base file breaks a rule.
-    #[error("{}: invalid setting", path.display())]
-    Config {
-        /// The base file.
-        path: PathBuf,
-        /// The key, the rule and the value.
-        source: ConfigError,
-    },
-    /// The `[zenoh]` table is invalid.
-    #[error("{}: invalid `[zenoh]` table", path.display())]
-    ZenohSettings {
-        /// The base file.
-        path: PathBuf,
-        /// The transport's error.
-        source: TransportError,
-    },
+    File(#[from] SettingsFileError),
     /// The base file's scenario cannot be used.
     #[error("the base file's scenario")]
     Scenario(#[source] ScenarioError),
@@ -186,11 +170,8 @@ pub enum BaseError {
 impl BaseStation {
     /// Reads and checks a base file and its scenario.
     pub fn load(path: &Path) -> Result<Self, BaseError> {
-        let mut config: BaseConfig = read_toml(path)?;
-        let invalid = |source: ConfigError| BaseError::Config {
-            path: path.to_path_buf(),
-            source,
-        };
+        let mut config: BaseConfig = read_toml(path).map_err(SettingsFileError::from)?;
+        let invalid = |e: ConfigError| BaseError::from(SettingsFileError::config(path, e));
         let dir = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&dir.join(&config.scenario)).map_err(BaseError::Scenario)?;
         let team_base_id = scenario.robot.link.base_id.unwrap_or(scenario.robots);
@@ -222,10 +203,7 @@ impl BaseStation {
         config
             .zenoh
             .validate()
-            .map_err(|source| BaseError::ZenohSettings {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            .map_err(|e| SettingsFileError::zenoh(path, "zenoh", e))?;
         let out = dir.join(config.out.clone().unwrap_or_else(|| PathBuf::from("base")));
         Ok(BaseStation {
             config,

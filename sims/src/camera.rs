@@ -17,7 +17,7 @@ mod backend;
 mod gpu;
 mod render;
 
-pub use backend::{CameraBackend, CameraRenderer, Choice, resolve_backend};
+pub use backend::{CameraBackend, CameraRenderer, Choice, GpuUnavailable, resolve_backend};
 pub use gpu::{GpuCamera, GpuContext, GpuError};
 pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
 
@@ -25,7 +25,7 @@ use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_algorithms::frame::DepthFrame;
-use troupe_core::Time;
+use troupe_core::{ConfigError, Time};
 
 use crate::world::World;
 
@@ -68,35 +68,29 @@ impl Default for CameraParams {
 }
 
 impl CameraParams {
-    /// Check every field; the error names the field, the rule and the value.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.width == 0 || self.height == 0 {
-            return Err(format!(
-                "camera.width and camera.height must be at least 1, got {}x{}",
-                self.width, self.height
-            ));
-        }
-        for (name, v) in [("hfov_deg", self.hfov_deg), ("vfov_deg", self.vfov_deg)] {
-            if !(v.is_finite() && v > 0.0 && v < 180.0) {
-                return Err(format!("camera.{name} must be in (0, 180), got {v}"));
+    /// Checks every field.
+    ///
+    /// # Errors
+    ///
+    /// The offending key (relative to `[camera]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [("width", self.width), ("height", self.height)] {
+            if v == 0 {
+                return Err(ConfigError::new(key, "must be at least 1", v));
             }
         }
-        if !(self.range_m.is_finite() && self.range_m > 0.0) {
-            return Err(format!(
-                "camera.range_m must be a finite number > 0, got {}",
-                self.range_m
-            ));
+        for (key, v) in [("hfov_deg", self.hfov_deg), ("vfov_deg", self.vfov_deg)] {
+            if !(v.is_finite() && v > 0.0 && v < 180.0) {
+                return Err(ConfigError::new(key, "must be in (0, 180)", v));
+            }
         }
-        if !(self.depth_noise_std_m.is_finite() && self.depth_noise_std_m >= 0.0) {
-            return Err(format!(
-                "camera.depth_noise_std_m must be a finite number >= 0, got {}",
-                self.depth_noise_std_m
-            ));
-        }
+        ConfigError::positive("range_m", self.range_m)?;
+        ConfigError::non_negative("depth_noise_std_m", self.depth_noise_std_m)?;
         if !(0.0..=1.0).contains(&self.dropout_prob) {
-            return Err(format!(
-                "camera.dropout_prob must be in [0, 1], got {}",
-                self.dropout_prob
+            return Err(ConfigError::new(
+                "dropout_prob",
+                "must be in [0, 1]",
+                self.dropout_prob,
             ));
         }
         Ok(())

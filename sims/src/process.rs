@@ -50,14 +50,14 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::{ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
 use troupe_actors::runtime::{
-    ConfigError, ErrorChain, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
+    ConfigError, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
 };
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
 use troupe_robot::AssembleError;
-use troupe_robot::hardware::run_for;
 pub use troupe_robot::hardware::shutdown_signal;
-use troupe_robot::toml_file::{TomlFileError, read_toml};
+use troupe_robot::hardware::{finish_recording, run_for};
+use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
 use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 
@@ -116,9 +116,10 @@ pub struct RobotProcess {
 /// Why a robot process could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
-    /// The robot file cannot be read or does not have the expected shape.
+    /// The robot file cannot be read, does not have the expected shape, or a value
+    /// (in `[zenoh]` too) breaks a rule.
     #[error(transparent)]
-    File(#[from] TomlFileError),
+    File(#[from] SettingsFileError),
     /// The scenario the robot file names cannot be used.
     #[error("{}: the scenario it names", path.display())]
     Scenario {
@@ -126,22 +127,6 @@ pub enum ProcessError {
         path: PathBuf,
         /// Why the scenario cannot be used.
         source: ScenarioError,
-    },
-    /// A value of the robot file breaks a rule.
-    #[error("{}: invalid setting", path.display())]
-    Config {
-        /// The robot file.
-        path: PathBuf,
-        /// The key, the rule and the value.
-        source: ConfigError,
-    },
-    /// The `[zenoh]` table is invalid.
-    #[error("{}: invalid `[zenoh]` table", path.display())]
-    ZenohSettings {
-        /// The robot file.
-        path: PathBuf,
-        /// The transport's error.
-        source: TransportError,
     },
     /// The recorded sequence the robot file names cannot be opened.
     #[error("{}: cannot open its `sequence`", path.display())]
@@ -201,11 +186,8 @@ pub enum ProcessError {
 impl RobotProcess {
     /// Reads and checks a robot file and its scenario.
     pub fn load(path: &Path) -> Result<Self, ProcessError> {
-        let mut config: ProcessConfig = read_toml(path)?;
-        let invalid = |source: ConfigError| ProcessError::Config {
-            path: path.to_path_buf(),
-            source,
-        };
+        let mut config: ProcessConfig = read_toml(path).map_err(SettingsFileError::from)?;
+        let invalid = |e: ConfigError| ProcessError::from(SettingsFileError::config(path, e));
         let base = path.parent().unwrap_or(Path::new("."));
         let scenario = Scenario::load(&base.join(&config.scenario)).map_err(|source| {
             ProcessError::Scenario {
@@ -227,10 +209,7 @@ impl RobotProcess {
         config
             .zenoh
             .validate()
-            .map_err(|source| ProcessError::ZenohSettings {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            .map_err(|e| SettingsFileError::zenoh(path, "zenoh", e))?;
         let out = base.join(
             config
                 .out
@@ -424,14 +403,7 @@ pub async fn run(
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
     let report = reports.into_iter().next().ok_or(ProcessError::NoReport)?;
-    let recording = match recorder.as_ref().and_then(SharedRecorder::finish) {
-        Some(Ok(stats)) => Some(stats),
-        Some(Err(e)) => {
-            tracing::warn!(robot = id, "recording: {}", ErrorChain(&e));
-            None
-        }
-        None => None,
-    };
+    let recording = finish_recording(recorder.as_ref(), &format!("robot{id}"));
     let trajectory = std::mem::take(
         &mut *trajectory
             .lock()

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use troupe_comms::simnet::SimNetConfig;
+use troupe_core::ConfigError;
 use troupe_robot::RobotConfig;
 use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
@@ -186,30 +187,15 @@ impl Scenario {
                 format!("must be between 1 and 64, got {}", self.robots),
             ));
         }
-        self.world
-            .validate()
-            .map_err(|(table, reason)| invalid(&format!("world.{table}"), reason))?;
-        self.camera
-            .validate()
-            .map_err(|reason| invalid("camera", reason))?;
-        self.robot.validate().map_err(|e| {
-            invalid(
-                &format!("robot.{}", e.key),
-                format!("{}, got {}", e.rule, e.value),
-            )
-        })?;
-        self.vehicle.validate().map_err(|e| {
-            invalid(
-                &format!("vehicle.{}", e.key),
-                format!("{}, got {}", e.rule, e.value),
-            )
-        })?;
-        self.network.validate().map_err(|e| {
-            invalid(
-                &format!("network.{}", e.key),
-                format!("{}, got {}", e.rule, e.value),
-            )
-        })?;
+        let config = |table: &str, e: ConfigError| {
+            let e = e.within(table);
+            invalid(&e.key, format!("{}, got {}", e.rule, e.value))
+        };
+        self.world.validate().map_err(|e| config("world", e))?;
+        self.camera.validate().map_err(|e| config("camera", e))?;
+        self.robot.validate().map_err(|e| config("robot", e))?;
+        self.vehicle.validate().map_err(|e| config("vehicle", e))?;
+        self.network.validate().map_err(|e| config("network", e))?;
         let m = &self.metrics;
         if !(m.coverage_cell_m.is_finite() && m.coverage_cell_m >= 0.05) {
             return Err(invalid(
@@ -297,8 +283,6 @@ mod tests {
         assert!(e.contains("`robots`"), "{e}");
         let e = parse("[robot]\nspeed_mps = -1.0").unwrap_err().to_string();
         assert!(e.contains("`robot.speed_mps`"), "{e}");
-        let e = parse("[camera]\nwidth = 0").unwrap_err().to_string();
-        assert!(e.contains("camera"), "{e}");
         let e = parse("robots = 0").unwrap_err().to_string();
         assert!(e.contains("`robots`"), "{e}");
         let e =
@@ -310,5 +294,24 @@ mod tests {
         assert!(e.contains("`name`"), "{e}");
         let e = parse("duration_s = nan").unwrap_err().to_string();
         assert!(e.contains("`duration_s`"), "{e}");
+        let e = parse("[world.cave]\ntunnel_count = 0")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.ends_with("key `world.cave.tunnel_count` must be at least 1, got 0"),
+            "{e}"
+        );
+        let e = parse("[world.artifacts]\ncount = 2000")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.ends_with("key `world.artifacts.count` must be at most 1000, got 2000"),
+            "{e}"
+        );
+        let e = parse("[camera]\nwidth = 0").unwrap_err().to_string();
+        assert!(
+            e.contains("`camera.width` must be at least 1, got 0"),
+            "{e}"
+        );
     }
 }

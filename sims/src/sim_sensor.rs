@@ -6,7 +6,7 @@ use troupe_actors::msgs::{DepthFrame, Odometry};
 use troupe_actors::runtime::{ActorError, Time};
 use troupe_actors::sensor::FrameSource;
 
-use crate::camera::{CameraParams, CameraRenderer};
+use crate::camera::{CameraParams, CameraRenderer, GpuUnavailable};
 use crate::world::World;
 
 /// Renders the world from the robot's latest odometry pose, on the backend named by
@@ -14,7 +14,7 @@ use crate::world::World;
 pub struct SimCameraSource {
     /// The renderer, or why backend `"gpu"` could not be had (reported by every
     /// capture, so the sensor actor fails loudly instead of seeing nothing).
-    renderer: Result<CameraRenderer, String>,
+    renderer: Result<CameraRenderer, GpuUnavailable>,
     noise_seed: u64,
     frames: u64,
 }
@@ -40,10 +40,9 @@ impl FrameSource for SimCameraSource {
         let Some(odometry) = odometry else {
             return Ok(None);
         };
-        let renderer = self
-            .renderer
-            .as_mut()
-            .map_err(|reason| ActorError::msg(reason.clone()))?;
+        let renderer = self.renderer.as_mut().map_err(|reason| {
+            ActorError::with_source("camera.backend = \"gpu\"", reason.clone())
+        })?;
         let seed = self.noise_seed ^ self.frames.wrapping_mul(0x9e37_79b9_7f4a_7c15);
         self.frames += 1;
         renderer

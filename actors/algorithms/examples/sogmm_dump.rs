@@ -12,6 +12,7 @@
 //!
 //! `cargo run --release -p troupe-algorithms --example sogmm_dump -- OUT SIGMA...`
 
+use std::error::Error;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,7 +42,7 @@ fn poses() -> Vec<Isometry3<f64>> {
     ]
 }
 
-fn run() -> Result<(), String> {
+fn run() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
     let out = PathBuf::from(args.next().ok_or("usage: sogmm_dump OUT SIGMA...")?);
     let sigmas: Vec<f64> = args
@@ -56,7 +57,7 @@ fn run() -> Result<(), String> {
     for sigma in sigmas {
         for (k, pose) in poses().iter().enumerate() {
             let (d, g) = scene.render(&intr, pose);
-            let fp = frame_points(&d, &g, &intr, pose).map_err(|e| e.to_string())?;
+            let fp = frame_points(&d, &g, &intr, pose)?;
             let modes = mean_shift_modes(&fp.depth_intensity, sigma, &MeanShiftConfig::default());
             let m = modes.len().clamp(1, fp.len());
             let seeding = kmeans_plusplus(&fp.points, m, &mut ChaCha8Rng::seed_from_u64(0));
@@ -66,10 +67,9 @@ fn run() -> Result<(), String> {
                 &seeding.assignment,
                 seeding.centres.len(),
                 em.reg_covar,
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
             let start = Instant::now();
-            let (gmm, report) = fit_em(&fp.points, &init, &em).map_err(|e| e.to_string())?;
+            let (gmm, report) = fit_em(&fp.points, &init, &em)?;
             let em_s = start.elapsed().as_secs_f64();
             let ll = gmm.mean_log_likelihood(&fp.points);
 
@@ -87,8 +87,8 @@ fn run() -> Result<(), String> {
                 .collect();
             let points_path = out.join(format!("{stem}.points.f64"));
             let assign_path = out.join(format!("{stem}.assign.u32"));
-            std::fs::write(&points_path, points).map_err(|e| e.to_string())?;
-            std::fs::write(&assign_path, assign).map_err(|e| e.to_string())?;
+            std::fs::write(&points_path, points)?;
+            std::fs::write(&assign_path, assign)?;
             println!(
                 "{{\"frame\":{k},\"sigma\":{sigma},\"n\":{},\"m\":{},\"ll\":{ll},\"em_s\":{em_s},\"iterations\":{},\"converged\":{},\"points\":\"{}\",\"assign\":\"{}\"}}",
                 fp.len(),
@@ -98,7 +98,7 @@ fn run() -> Result<(), String> {
                 points_path.display(),
                 assign_path.display()
             );
-            std::io::stdout().flush().map_err(|e| e.to_string())?;
+            std::io::stdout().flush()?;
         }
     }
     Ok(())
@@ -108,7 +108,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", troupe_core::ErrorChain(e.as_ref()));
             ExitCode::FAILURE
         }
     }

@@ -9,7 +9,7 @@ use troupe_comms::zenoh::ZenohConfig;
 
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
-use crate::toml_file::{TomlFileError, parse_toml};
+use crate::toml_file::{SettingsFileError, TomlFileError, parse_toml};
 use crate::{AssembleError, ConfigError, RobotConfig};
 
 /// A hardware robot file as written (see the [module docs](crate::hardware) and
@@ -66,26 +66,14 @@ pub struct HardwareRobot {
 /// Why a hardware robot could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum HardwareError {
-    /// The robot file cannot be read or does not have the expected shape.
+    /// The robot file cannot be read, does not have the expected shape, or a value
+    /// breaks a rule; a rule's source names the dotted key (`id`, `camera`,
+    /// `robot.speed_mps`, `mavlink.setpoint_rate_hz`, `ros2.topics.depth`).
     #[error(transparent)]
-    File(#[from] TomlFileError),
-    /// A value of the robot file breaks a rule; the source names the dotted key
-    /// (`id`, `camera`, `robot.speed_mps`, `mavlink.setpoint_rate_hz`, `ros2.topics.depth`).
-    #[error("{}: invalid setting", path.display())]
-    Config {
-        /// The file.
-        path: PathBuf,
-        /// The key, the rule and the value.
-        source: ConfigError,
-    },
-    /// A zenoh table is invalid, or the team link's session did not open.
-    #[error("{context}")]
-    Zenoh {
-        /// Which session, doing what.
-        context: String,
-        /// The transport's error.
-        source: TransportError,
-    },
+    File(#[from] SettingsFileError),
+    /// The team link's zenoh session did not open.
+    #[error("opening the team link's zenoh session")]
+    Session(#[source] TransportError),
     /// The ROS 2 drivers could not start (a silent topic names itself here).
     #[error("starting the ROS 2 drivers")]
     Ros2(#[from] Ros2Error),
@@ -136,9 +124,11 @@ pub enum HardwareError {
 impl HardwareRobot {
     /// Reads, checks and resolves a robot file.
     pub fn load(path: &Path) -> Result<Self, HardwareError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TomlFileError::Read {
-            path: path.to_path_buf(),
-            source,
+        let text = std::fs::read_to_string(path).map_err(|source| {
+            SettingsFileError::from(TomlFileError::Read {
+                path: path.to_path_buf(),
+                source,
+            })
         })?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::from_toml(&text, path, base)
@@ -147,11 +137,8 @@ impl HardwareRobot {
     /// Parses and checks a robot file's text; `path` names it in errors and relative
     /// paths are resolved against `base`.
     pub fn from_toml(text: &str, path: &Path, base: &Path) -> Result<Self, HardwareError> {
-        let mut file: HardwareFile = parse_toml(text, path)?;
-        share_geofence(&mut file).map_err(|source| HardwareError::Config {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let mut file: HardwareFile = parse_toml(text, path).map_err(SettingsFileError::from)?;
+        share_geofence(&mut file).map_err(|e| SettingsFileError::config(path, e))?;
         resolve_zenoh(&mut file.zenoh, base);
         resolve_zenoh(&mut file.ros2.zenoh, base);
         file.validate(path)?;
@@ -171,10 +158,7 @@ impl HardwareRobot {
 impl HardwareFile {
     /// Checks every table; errors name the file and the key.
     pub fn validate(&self, path: &Path) -> Result<(), HardwareError> {
-        let config = |source: ConfigError| HardwareError::Config {
-            path: path.to_path_buf(),
-            source,
-        };
+        let config = |e: ConfigError| HardwareError::from(SettingsFileError::config(path, e));
         if self.id >= self.team_size {
             return Err(config(ConfigError::new(
                 "id",
@@ -206,10 +190,9 @@ impl HardwareFile {
             .validate()
             .map_err(|e| config(e.within("mavlink")))?;
         for (table, zenoh) in [("zenoh", &self.zenoh), ("ros2.zenoh", &self.ros2.zenoh)] {
-            zenoh.validate().map_err(|source| HardwareError::Zenoh {
-                context: format!("{}: invalid `[{table}]` table", path.display()),
-                source,
-            })?;
+            zenoh
+                .validate()
+                .map_err(|e| SettingsFileError::zenoh(path, table, e))?;
         }
         Ok(())
     }

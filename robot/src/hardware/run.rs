@@ -21,6 +21,7 @@ use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 use super::file::{HardwareError, HardwareRobot};
 use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
 use crate::ros2::{InputStats, OutputStats, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
+use crate::toml_file::SettingsFileError;
 use crate::{RobotParts, assemble};
 
 /// How often the camera's first frame is looked for at start.
@@ -176,10 +177,8 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
     inputs.wait_for_topics()?;
     let camera = camera_intrinsics(robot, &inputs)?;
     let publisher = Ros2Publisher::open(&ros_session, &file.ros2)?;
-    let vehicle = mavlink_vehicle(&file.mavlink).map_err(|e| HardwareError::Config {
-        path: robot.path.clone(),
-        source: e.within("mavlink"),
-    })?;
+    let vehicle = mavlink_vehicle(&file.mavlink)
+        .map_err(|e| SettingsFileError::config(&robot.path, e.within("mavlink")))?;
     // The link's journal outlives the process (docs/link-durability.md); a new
     // one starts its message ids somewhere new, as a simulated robot process does,
     // so peers do not drop them as repeats.
@@ -212,10 +211,7 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
         Ros2Outputs::new(out_publisher.clone(), Some(out_inputs.clone()))
     }));
     let transport = ZenohTransport::open(&file.zenoh, file.robot.link.team, vec![file.id])
-        .map_err(|source| HardwareError::Zenoh {
-            context: "opening the team link's zenoh session".into(),
-            source,
-        })?
+        .map_err(HardwareError::Session)?
         .with_subscription(file.robot.link.subscribe);
     Ok(Started {
         spec,
@@ -308,18 +304,7 @@ async fn fly(
         tracing::warn!(robot = id, "closing zenoh: {e}");
     }
     let report = reports.into_iter().next().ok_or(HardwareError::NoReport)?;
-    let recording = match recorder.as_ref().and_then(SharedRecorder::finish) {
-        Some(Ok(stats)) => Some(stats),
-        Some(Err(e)) => {
-            tracing::warn!(
-                robot = id,
-                "recording: {}",
-                troupe_actors::runtime::ErrorChain(&e)
-            );
-            None
-        }
-        None => None,
-    };
+    let recording = finish_recording(recorder.as_ref(), &format!("robot{id}"));
     let collected = std::mem::take(&mut *collected.lock().unwrap_or_else(PoisonError::into_inner));
     let count = |name: &str| report.topics.get(name).map_or(0, |t| t.messages);
     let summary = HardwareSummary {
@@ -373,6 +358,21 @@ fn write_outputs(
     }
     let path = dir.join("events.csv");
     std::fs::write(&path, csv).map_err(err(&path))
+}
+
+/// Finishes a process's `run.mcap` (`None`: recording was off); a failed recording
+/// is logged as a warning naming `who` and gives `None`, since the run itself succeeded.
+pub fn finish_recording(recorder: Option<&SharedRecorder>, who: &str) -> Option<RecordingStats> {
+    match recorder?.finish()? {
+        Ok(stats) => Some(stats),
+        Err(e) => {
+            tracing::warn!(
+                "{who}: recording: {}",
+                troupe_actors::runtime::ErrorChain(&e)
+            );
+            None
+        }
+    }
 }
 
 /// Resolves after `duration_s` seconds (never, when `None`) or when `stop` resolves,

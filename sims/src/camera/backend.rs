@@ -62,18 +62,35 @@ fn log_once(message: &str) {
     }
 }
 
-const NO_GPU_SCENE: &str = "the world has no GPU description (mesh worlds render on the CPU)";
+/// Why the GPU camera cannot be had: backend `"gpu"` fails with it, `"auto"` falls
+/// back to the CPU and logs it.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum GpuUnavailable {
+    /// The world cannot be described to the GPU.
+    #[error("the world has no GPU description (mesh worlds render on the CPU)")]
+    NoGpuScene,
+    /// The only adapter renders in software (`"auto"` passes it over).
+    #[error(
+        "the only Vulkan adapter, {adapter}, is a software rasteriser, slower than the CPU \
+         path (camera.backend = \"gpu\" uses it anyway)"
+    )]
+    SoftwareAdapter {
+        /// The adapter's name.
+        adapter: String,
+    },
+    /// No adapter or device, or the camera's buffers could not be made.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
 
-/// Why this process's GPU adapter will not do (`Ok`: it will); a software adapter
-/// counts only if `allow_software`.
-fn check_adapter(allow_software: bool) -> Result<(), String> {
-    let ctx = GpuContext::shared().map_err(|e| e.to_string())?;
+/// Whether this process's GPU adapter will do; a software adapter counts only if
+/// `allow_software`.
+fn check_adapter(allow_software: bool) -> Result<(), GpuUnavailable> {
+    let ctx = GpuContext::shared()?;
     if ctx.is_software() && !allow_software {
-        return Err(format!(
-            "the only Vulkan adapter, {}, is a software rasteriser, slower than the CPU path \
-             (camera.backend = \"gpu\" uses it anyway)",
-            ctx.adapter_name()
-        ));
+        return Err(GpuUnavailable::SoftwareAdapter {
+            adapter: ctx.adapter_name(),
+        });
     }
     Ok(())
 }
@@ -90,7 +107,7 @@ pub fn resolve_backend(world: &dyn World, backend: CameraBackend) -> CameraBacke
     let usable = if world.gpu_scene().is_some() {
         check_adapter(false)
     } else {
-        Err(NO_GPU_SCENE.to_owned())
+        Err(GpuUnavailable::NoGpuScene)
     };
     match usable {
         Ok(()) => CameraBackend::Gpu,
@@ -106,10 +123,10 @@ fn open_gpu(
     world: &dyn World,
     params: &CameraParams,
     allow_software: bool,
-) -> Result<GpuCamera, String> {
-    let scene = world.gpu_scene().ok_or(NO_GPU_SCENE)?;
+) -> Result<GpuCamera, GpuUnavailable> {
+    let scene = world.gpu_scene().ok_or(GpuUnavailable::NoGpuScene)?;
     check_adapter(allow_software)?;
-    GpuCamera::new(params, &scene).map_err(|e| e.to_string())
+    Ok(GpuCamera::new(params, &scene)?)
 }
 
 impl CameraRenderer {
@@ -118,12 +135,14 @@ impl CameraRenderer {
     /// # Errors
     ///
     /// Only for [`CameraBackend::Gpu`]: why the GPU camera is unavailable.
-    pub fn new(world: Arc<dyn World>, params: CameraParams) -> Result<CameraRenderer, String> {
+    pub fn new(
+        world: Arc<dyn World>,
+        params: CameraParams,
+    ) -> Result<CameraRenderer, GpuUnavailable> {
         let (gpu, choice) = match params.backend {
             CameraBackend::Cpu => (None, Choice::Cpu("camera.backend = \"cpu\"".to_owned())),
             CameraBackend::Gpu => {
-                let gpu = open_gpu(world.as_ref(), &params, true)
-                    .map_err(|e| format!("camera.backend = \"gpu\": {e}"))?;
+                let gpu = open_gpu(world.as_ref(), &params, true)?;
                 let name = gpu.context().adapter_name();
                 (Some(gpu), Choice::Gpu(name))
             }
@@ -132,7 +151,7 @@ impl CameraRenderer {
                     let name = gpu.context().adapter_name();
                     (Some(gpu), Choice::Gpu(name))
                 }
-                Err(reason) => (None, Choice::Cpu(reason)),
+                Err(reason) => (None, Choice::Cpu(reason.to_string())),
             },
         };
         match &choice {

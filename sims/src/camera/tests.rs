@@ -64,12 +64,12 @@ fn defaults_validate_and_give_expected_intrinsics() {
         dropout_prob: 1.5,
         ..CameraParams::default()
     };
-    assert!(bad.validate().unwrap_err().contains("dropout_prob"));
+    assert_eq!(bad.validate().unwrap_err().key, "dropout_prob");
     let bad = CameraParams {
         range_m: f64::NAN,
         ..CameraParams::default()
     };
-    assert!(bad.validate().unwrap_err().contains("range_m"));
+    assert_eq!(bad.validate().unwrap_err().key, "range_m");
     let err = serde_json::from_str::<CameraParams>(r#"{"widht": 3}"#).unwrap_err();
     assert!(err.to_string().contains("widht"));
 }

@@ -52,7 +52,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::{DepthFrame, Odometry, PinholeIntrinsics};
-use troupe_actors::runtime::{ActorError, Time};
+use troupe_actors::runtime::{ActorError, ConfigError, Time};
 use troupe_actors::sensor::FrameSource;
 
 use png_io::Plane;
@@ -91,13 +91,21 @@ pub enum SequenceError {
         /// What is wrong.
         reason: String,
     },
-    /// The camera file is malformed or out of range.
+    /// The camera file is malformed.
     #[error("{path}: {reason}")]
     BadCamera {
         /// The file.
         path: PathBuf,
         /// What is wrong.
         reason: String,
+    },
+    /// A value of the camera file breaks a rule.
+    #[error("{path}: invalid setting")]
+    InvalidCamera {
+        /// The file.
+        path: PathBuf,
+        /// The key, the rule and the value.
+        source: ConfigError,
     },
     /// An image cannot be decoded or does not fit the camera.
     #[error("{path}: {reason}")]
@@ -174,28 +182,29 @@ impl CameraFile {
         }
     }
 
-    /// Check every field; the message names the key, the rule and the value.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks every field.
+    ///
+    /// # Errors
+    ///
+    /// The offending key of `camera.toml`, its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         for (key, v) in [
             ("fx", self.fx),
             ("fy", self.fy),
             ("depth_scale", self.depth_scale),
             ("max_depth_m", self.max_depth_m),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("`{key}` must be a finite number > 0, got {v}"));
-            }
+            ConfigError::positive(key, v)?;
         }
         for (key, v) in [("cx", self.cx), ("cy", self.cy)] {
             if !v.is_finite() {
-                return Err(format!("`{key}` must be finite, got {v}"));
+                return Err(ConfigError::new(key, "must be finite", v));
             }
         }
-        if self.width == 0 || self.height == 0 {
-            return Err(format!(
-                "`width` and `height` must be at least 1, got {}×{}",
-                self.width, self.height
-            ));
+        for (key, v) in [("width", self.width), ("height", self.height)] {
+            if v == 0 {
+                return Err(ConfigError::new(key, "must be at least 1", v));
+            }
         }
         Ok(())
     }
@@ -212,9 +221,9 @@ impl CameraFile {
         })?;
         camera
             .validate()
-            .map_err(|reason| SequenceError::BadCamera {
+            .map_err(|source| SequenceError::InvalidCamera {
                 path: path.to_path_buf(),
-                reason,
+                source,
             })?;
         Ok(camera)
     }
@@ -569,12 +578,12 @@ impl SequenceWriter {
     /// Create `dir` (and `depth/`, `rgb/` inside); depth is stored at `depth_scale`
     /// units per metre (1000: millimetres).
     pub fn create(dir: &Path, depth_scale: f64) -> Result<Self, SequenceError> {
-        if !(depth_scale.is_finite() && depth_scale > 0.0) {
-            return Err(SequenceError::BadCamera {
+        ConfigError::positive("depth_scale", depth_scale).map_err(|source| {
+            SequenceError::InvalidCamera {
                 path: dir.join("camera.toml"),
-                reason: format!("`depth_scale` must be a finite number > 0, got {depth_scale}"),
-            });
-        }
+                source,
+            }
+        })?;
         for sub in ["depth", "rgb"] {
             let p = dir.join(sub);
             std::fs::create_dir_all(&p).map_err(|source| SequenceError::Io { path: p, source })?;

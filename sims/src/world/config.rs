@@ -3,6 +3,7 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::artifacts::{ArtifactParams, WithArtifacts, place};
 use super::mesh::MeshError;
@@ -92,20 +93,25 @@ impl WorldConfig {
     ///
     /// # Errors
     ///
-    /// `(key, reason)`: the table of the selected world and what is wrong in it.
-    pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        self.artifacts.validate().map_err(|r| ("artifacts", r))?;
-        match self.kind {
-            WorldKind::Cave => self.cave.validate().map_err(|r| ("cave", r)),
-            WorldKind::Warehouse => self.warehouse.validate().map_err(|r| ("warehouse", r)),
-            WorldKind::Window => self.window.validate().map_err(|r| ("window", r)),
-            WorldKind::Door => self.door.validate().map_err(|r| ("door", r)),
-            WorldKind::Mesh => self.mesh.validate().map_err(|r| ("mesh", r)),
-            WorldKind::OpenField => self.open_field.validate().map_err(|r| ("open_field", r)),
-            WorldKind::TJunction | WorldKind::DeadEnd => {
-                self.tunnel.validate().map_err(|r| ("tunnel", r))
-            }
-        }
+    /// The offending key relative to `[world]` (`cave.tunnel_count`), its rule and its
+    /// value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        // artifacts.rs still says "KEY RULE, got VALUE"; it converts to ConfigError next.
+        self.artifacts.validate().map_err(|reason| {
+            let (key, rest) = reason.split_once(' ').unwrap_or(("", &reason));
+            let (rule, value) = rest.rsplit_once(", got ").unwrap_or((rest, "?"));
+            ConfigError::new(key, rule.to_owned(), value).within("artifacts")
+        })?;
+        let (table, checked) = match self.kind {
+            WorldKind::Cave => ("cave", self.cave.validate()),
+            WorldKind::Warehouse => ("warehouse", self.warehouse.validate()),
+            WorldKind::Window => ("window", self.window.validate()),
+            WorldKind::Door => ("door", self.door.validate()),
+            WorldKind::Mesh => ("mesh", self.mesh.validate()),
+            WorldKind::OpenField => ("open_field", self.open_field.validate()),
+            WorldKind::TJunction | WorldKind::DeadEnd => ("tunnel", self.tunnel.validate()),
+        };
+        checked.map_err(|e| e.within(table))
     }
 
     /// Builds the selected world (validate first).

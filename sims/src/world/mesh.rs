@@ -11,10 +11,11 @@ use std::path::PathBuf;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use troupe_actors::grid::distance::distance_to;
+use troupe_core::ConfigError;
 
-pub use super::mesh_io::MeshError;
+pub use super::mesh_io::{MeshError, MeshFormatError};
 use super::noise::ValueNoise;
-pub use super::triangle_mesh::TriangleMesh;
+pub use super::triangle_mesh::{InvalidMesh, TriangleMesh};
 use super::{Aabb, Site, World};
 
 /// Which side of the mesh robots fly in.
@@ -66,31 +67,44 @@ impl MeshParams {
     ///
     /// # Errors
     ///
-    /// A sentence naming the offending key.
-    pub fn validate(&self) -> Result<(), String> {
+    /// The offending key (relative to `[world.mesh]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if self.path.as_os_str().is_empty() {
-            return Err("path must name a .ply or .obj file".into());
-        }
-        if !(self.resolution_m.is_finite() && (0.02..=1.0).contains(&self.resolution_m)) {
-            return Err(format!(
-                "resolution_m must be in [0.02, 1] m, got {}",
-                self.resolution_m
+            return Err(ConfigError::new(
+                "path",
+                "must name a .ply or .obj file",
+                "\"\"",
             ));
         }
-        if !(self.margin_m.is_finite() && self.margin_m >= 0.0) {
-            return Err(format!("margin_m must be ≥ 0, got {}", self.margin_m));
+        if !(self.resolution_m.is_finite() && (0.02..=1.0).contains(&self.resolution_m)) {
+            return Err(ConfigError::new(
+                "resolution_m",
+                "must be in [0.02, 1] m",
+                self.resolution_m,
+            ));
         }
+        ConfigError::non_negative("margin_m", self.margin_m)?;
         if self.starts_m.is_empty() {
-            return Err("starts_m must give at least one start position".into());
+            return Err(ConfigError::new(
+                "starts_m",
+                "must give at least one start position",
+                "[]",
+            ));
         }
         let finite = |p: &[f64; 3]| p.iter().all(|v| v.is_finite());
-        if !self
-            .starts_m
-            .iter()
-            .chain(self.routes_m.iter().flatten())
-            .all(finite)
-        {
-            return Err("starts_m and routes_m must hold finite coordinates".into());
+        if let Some(p) = self.starts_m.iter().find(|p| !finite(p)) {
+            return Err(ConfigError::new(
+                "starts_m",
+                "must hold finite coordinates",
+                format!("{p:?}"),
+            ));
+        }
+        if let Some(p) = self.routes_m.iter().flatten().find(|p| !finite(p)) {
+            return Err(ConfigError::new(
+                "routes_m",
+                "must hold finite coordinates",
+                format!("{p:?}"),
+            ));
         }
         Ok(())
     }

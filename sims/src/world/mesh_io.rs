@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Point3;
 
-use super::triangle_mesh::TriangleMesh;
+use super::triangle_mesh::{InvalidMesh, TriangleMesh};
 
 /// Why a mesh could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -20,14 +20,105 @@ pub enum MeshError {
         /// Cause.
         source: std::io::Error,
     },
-    /// The file is not a mesh we can read.
-    #[error("mesh file `{path}`: {reason}")]
+    /// The file is not a mesh we can parse.
+    #[error("mesh file `{path}` cannot be parsed")]
     Format {
         /// File.
         path: PathBuf,
         /// What is wrong.
-        reason: String,
+        source: MeshFormatError,
     },
+    /// The file parses but its triangles cannot make a world.
+    #[error("mesh file `{path}` holds no usable mesh")]
+    Invalid {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        source: InvalidMesh,
+    },
+}
+
+/// What is wrong in the text or bytes of a PLY or OBJ file.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum MeshFormatError {
+    /// Neither `.ply` nor `.obj`.
+    #[error("the file name must end in .ply or .obj")]
+    Extension,
+    /// An OBJ file that is not UTF-8.
+    #[error("an OBJ file must be UTF-8 text")]
+    ObjNotText,
+    /// An OBJ `v` line without three numbers.
+    #[error("line {line}: a vertex needs three numbers")]
+    ObjVertex {
+        /// 1-based line.
+        line: usize,
+    },
+    /// An OBJ `f` line with an index that is not a number.
+    #[error("line {line}: a face index is not a number")]
+    ObjIndex {
+        /// 1-based line.
+        line: usize,
+    },
+    /// An OBJ `f` line with an index before the first vertex.
+    #[error("line {line}: a face index is out of range")]
+    ObjIndexRange {
+        /// 1-based line.
+        line: usize,
+    },
+    /// An OBJ `f` line with fewer than three corners.
+    #[error("line {line}: a face needs at least three vertices")]
+    ObjShortFace {
+        /// 1-based line.
+        line: usize,
+    },
+    /// No `end_header` line.
+    #[error("not a PLY file: no `end_header` line")]
+    PlyNoEndHeader,
+    /// The first line is not `ply`.
+    #[error("not a PLY file: it must start with `ply`")]
+    PlyNoMagic,
+    /// A PLY header that is not ASCII.
+    #[error("the PLY header must be ASCII text")]
+    PlyHeaderNotText,
+    /// A PLY format other than ASCII or binary little-endian.
+    #[error("PLY format `{0}` is not supported")]
+    PlyFormat(String),
+    /// No `format` line in the PLY header.
+    #[error("the PLY header has no `format` line")]
+    PlyNoFormat,
+    /// A PLY element count that is not a number.
+    #[error("bad count for PLY element `{0}`")]
+    PlyElementCount(String),
+    /// A PLY element with more than 10⁸ items (refused before allocating).
+    #[error("PLY element `{0}` is too large")]
+    PlyElementTooLarge(String),
+    /// A PLY property of an unknown type (the header line).
+    #[error("unknown PLY property type in `{0}`")]
+    PlyPropertyType(String),
+    /// A PLY property before any element.
+    #[error("a PLY property before any element")]
+    PlyOrphanProperty,
+    /// An ASCII PLY body that is not text.
+    #[error("an ASCII PLY body must be text")]
+    PlyBodyNotText,
+    /// A PLY body shorter than its header says.
+    #[error("the file ends before its elements do")]
+    PlyTruncated,
+    /// An ASCII PLY value that is not a number.
+    #[error("a PLY value is not a number")]
+    PlyNotANumber,
+    /// A PLY face list with a negative or absurd length.
+    #[error("a face has an impossible vertex count")]
+    PlyFaceCount,
+    /// A PLY face index that is negative or too large.
+    #[error("a face index is out of range")]
+    PlyIndexRange,
+    /// A PLY face with fewer than three corners.
+    #[error("a face needs at least three vertices")]
+    PlyShortFace,
+    /// A PLY vertex element without `x`, `y` and `z`.
+    #[error("vertices need x, y and z properties")]
+    PlyVertexXyz,
 }
 
 impl TriangleMesh {
@@ -35,9 +126,9 @@ impl TriangleMesh {
     ///
     /// # Errors
     ///
-    /// A read error, or a format error naming the problem (unknown extension,
-    /// malformed header or element, out-of-range index, non-finite coordinate, no
-    /// triangles).
+    /// A read error, a format error naming the problem (unknown extension, malformed
+    /// header or element, out-of-range index), or a mesh that cannot make a world
+    /// (non-finite coordinate, index beyond the vertices, no triangles).
     pub fn load(path: &Path) -> Result<TriangleMesh, MeshError> {
         let bytes = std::fs::read(path).map_err(|source| MeshError::Read {
             path: path.to_owned(),
@@ -50,33 +141,35 @@ impl TriangleMesh {
         let mesh = match extension.as_deref() {
             Some("ply") => parse_ply(&bytes),
             Some("obj") => parse_obj(&bytes),
-            _ => Err("the file name must end in .ply or .obj".to_string()),
+            _ => Err(MeshFormatError::Extension),
         }
-        .and_then(|m| m.checked())
-        .map_err(|reason| MeshError::Format {
+        .map_err(|source| MeshError::Format {
             path: path.to_owned(),
-            reason,
+            source,
         })?;
-        Ok(mesh)
+        mesh.checked().map_err(|source| MeshError::Invalid {
+            path: path.to_owned(),
+            source,
+        })
     }
 }
 
 /// Parses an OBJ file.
-fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
-    let text = std::str::from_utf8(bytes).map_err(|_| "an OBJ file must be UTF-8 text")?;
+fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, MeshFormatError> {
+    let text = std::str::from_utf8(bytes).map_err(|_| MeshFormatError::ObjNotText)?;
     let mut mesh = TriangleMesh::default();
-    for (n, line) in text.lines().enumerate() {
-        let at = |what: &str| format!("line {}: {what}", n + 1);
-        let mut words = line.split_whitespace();
+    for (n, row) in text.lines().enumerate() {
+        let line = n + 1;
+        let mut words = row.split_whitespace();
         match words.next() {
             Some("v") => {
                 let c: Vec<f64> = words
                     .take(3)
                     .map(str::parse)
                     .collect::<Result<_, _>>()
-                    .map_err(|_| at("a vertex needs three numbers"))?;
+                    .map_err(|_| MeshFormatError::ObjVertex { line })?;
                 let [x, y, z] = c[..] else {
-                    return Err(at("a vertex needs three numbers"));
+                    return Err(MeshFormatError::ObjVertex { line });
                 };
                 mesh.vertices.push(Point3::new(x, y, z));
             }
@@ -89,13 +182,13 @@ fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, String> {
                             .split('/')
                             .next()
                             .and_then(|s| s.parse().ok())
-                            .ok_or_else(|| at("a face index is not a number"))?;
+                            .ok_or(MeshFormatError::ObjIndex { line })?;
                         let i = if i < 0 { count + i } else { i - 1 };
-                        u32::try_from(i).map_err(|_| at("a face index is out of range"))
+                        u32::try_from(i).map_err(|_| MeshFormatError::ObjIndexRange { line })
                     })
                     .collect::<Result<_, _>>()?;
                 if corners.len() < 3 {
-                    return Err(at("a face needs at least three vertices"));
+                    return Err(MeshFormatError::ObjShortFace { line });
                 }
                 for k in 1..corners.len() - 1 {
                     mesh.triangles
@@ -178,17 +271,17 @@ enum Body<'a> {
 }
 
 impl Body<'_> {
-    fn next(&mut self, scalar: Scalar) -> Result<f64, String> {
+    fn next(&mut self, scalar: Scalar) -> Result<f64, MeshFormatError> {
         match self {
             Body::Ascii(words) => words
                 .next()
-                .ok_or("the file ends before its elements do")?
+                .ok_or(MeshFormatError::PlyTruncated)?
                 .parse()
-                .map_err(|_| "a value is not a number".to_string()),
+                .map_err(|_| MeshFormatError::PlyNotANumber),
             Body::Binary(bytes) => {
                 let n = scalar.size();
                 if bytes.len() < n {
-                    return Err("the file ends before its elements do".into());
+                    return Err(MeshFormatError::PlyTruncated);
                 }
                 let v = scalar.read_le(&bytes[..n]);
                 *bytes = &bytes[n..];
@@ -199,14 +292,14 @@ impl Body<'_> {
 }
 
 /// Parses a PLY file.
-fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
-    let end = find(bytes, b"end_header\n").ok_or("not a PLY file: no `end_header` line")?;
+fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshFormatError> {
+    let end = find(bytes, b"end_header\n").ok_or(MeshFormatError::PlyNoEndHeader)?;
     let header =
-        std::str::from_utf8(&bytes[..end]).map_err(|_| "the PLY header must be ASCII text")?;
+        std::str::from_utf8(&bytes[..end]).map_err(|_| MeshFormatError::PlyHeaderNotText)?;
     let body = &bytes[end + b"end_header\n".len()..];
     let mut lines = header.lines();
     if lines.next().map(str::trim) != Some("ply") {
-        return Err("not a PLY file: it must start with `ply`".into());
+        return Err(MeshFormatError::PlyNoMagic);
     }
     let mut binary = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -215,42 +308,43 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
         match words.as_slice() {
             ["format", "ascii", _] => binary = Some(false),
             ["format", "binary_little_endian", _] => binary = Some(true),
-            ["format", other, _] => return Err(format!("PLY format `{other}` is not supported")),
+            ["format", other, _] => return Err(MeshFormatError::PlyFormat((*other).to_owned())),
             ["element", name, count] => elements.push(Element {
                 name: (*name).to_string(),
                 count: count
                     .parse()
-                    .map_err(|_| format!("bad count for element {name}"))?,
+                    .map_err(|_| MeshFormatError::PlyElementCount((*name).to_owned()))?,
                 properties: Vec::new(),
             }),
             ["property", "list", count, item, name] => {
                 let (Some(c), Some(i)) = (Scalar::parse(count), Scalar::parse(item)) else {
-                    return Err(format!("unknown list types in `{line}`"));
+                    return Err(MeshFormatError::PlyPropertyType(line.to_owned()));
                 };
                 elements
                     .last_mut()
-                    .ok_or("a property before any element")?
+                    .ok_or(MeshFormatError::PlyOrphanProperty)?
                     .properties
                     .push(Property::List((*name).to_string(), c, i));
             }
             ["property", kind, name] => {
-                let s = Scalar::parse(kind).ok_or_else(|| format!("unknown type in `{line}`"))?;
+                let s = Scalar::parse(kind)
+                    .ok_or_else(|| MeshFormatError::PlyPropertyType(line.to_owned()))?;
                 elements
                     .last_mut()
-                    .ok_or("a property before any element")?
+                    .ok_or(MeshFormatError::PlyOrphanProperty)?
                     .properties
                     .push(Property::Scalar((*name).to_string(), s));
             }
             _ => {}
         }
     }
-    let binary = binary.ok_or("the PLY header has no `format` line")?;
+    let binary = binary.ok_or(MeshFormatError::PlyNoFormat)?;
     let mut body = if binary {
         Body::Binary(body)
     } else {
         Body::Ascii(
             std::str::from_utf8(body)
-                .map_err(|_| "an ASCII PLY body must be text")?
+                .map_err(|_| MeshFormatError::PlyBodyNotText)?
                 .split_ascii_whitespace(),
         )
     };
@@ -259,7 +353,7 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
     for element in &elements {
         // Guard against absurd counts before allocating.
         if element.count > 100_000_000 {
-            return Err(format!("element {} is too large", element.name));
+            return Err(MeshFormatError::PlyElementTooLarge(element.name.clone()));
         }
         for _ in 0..element.count {
             let mut xyz = [f64::NAN; 3];
@@ -281,13 +375,13 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
                     Property::List(name, count, item) => {
                         let n = body.next(*count)?;
                         if !(0.0..=1e6).contains(&n) {
-                            return Err("a face has an impossible vertex count".into());
+                            return Err(MeshFormatError::PlyFaceCount);
                         }
                         let mut ids = Vec::with_capacity(n as usize);
                         for _ in 0..n as usize {
                             let i = body.next(*item)?;
                             if !(i >= 0.0 && i <= f64::from(u32::MAX)) {
-                                return Err("a face index is out of range".into());
+                                return Err(MeshFormatError::PlyIndexRange);
                             }
                             ids.push(i as u32);
                         }
@@ -295,7 +389,7 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
                             && (name == "vertex_indices" || name == "vertex_index")
                         {
                             if ids.len() < 3 {
-                                return Err("a face needs at least three vertices".into());
+                                return Err(MeshFormatError::PlyShortFace);
                             }
                             for k in 1..ids.len() - 1 {
                                 mesh.triangles.push([ids[0], ids[k], ids[k + 1]]);
@@ -306,7 +400,7 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, String> {
             }
             if element.name == "vertex" {
                 if xyz.iter().any(|v| v.is_nan()) {
-                    return Err("vertices need x, y and z properties".into());
+                    return Err(MeshFormatError::PlyVertexXyz);
                 }
                 mesh.vertices.push(Point3::new(xyz[0], xyz[1], xyz[2]));
                 if rgb.iter().all(|v| !v.is_nan()) {
@@ -370,19 +464,53 @@ mod tests {
     }
 
     #[test]
+    fn load_names_the_file_and_gives_the_problem_as_its_source() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bad.obj");
+        std::fs::write(&path, "v 0 0\n").expect("write");
+        let error = TriangleMesh::load(&path).expect_err("malformed");
+        assert!(matches!(
+            &error,
+            MeshError::Format {
+                source: MeshFormatError::ObjVertex { line: 1 },
+                ..
+            }
+        ));
+        let chain = troupe_actors::runtime::ErrorChain(&error).to_string();
+        assert!(
+            chain.ends_with("bad.obj` cannot be parsed: line 1: a vertex needs three numbers"),
+            "{chain}"
+        );
+        std::fs::write(&path, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").expect("write");
+        let error = TriangleMesh::load(&path).expect_err("degenerate");
+        assert!(matches!(
+            error,
+            MeshError::Invalid {
+                source: InvalidMesh::NoTriangles,
+                ..
+            }
+        ));
+    }
+
+    #[test]
     fn malformed_meshes_are_errors_not_panics() {
         let mut truncated = tetra_ply_binary();
         truncated.truncate(truncated.len() - 3);
-        assert!(parse_ply(&truncated).unwrap_err().contains("ends"));
-        assert!(parse_ply(b"plx\n").is_err());
-        assert!(parse_obj(b"v 0 0\n").unwrap_err().contains("line 1"));
-        assert!(
-            parse_obj(b"v 0 0 0\nf 1 2\n")
-                .unwrap_err()
-                .contains("three")
+        assert_eq!(parse_ply(&truncated), Err(MeshFormatError::PlyTruncated));
+        assert_eq!(parse_ply(b"plx\n"), Err(MeshFormatError::PlyNoEndHeader));
+        assert_eq!(
+            parse_obj(b"v 0 0\n"),
+            Err(MeshFormatError::ObjVertex { line: 1 })
+        );
+        assert_eq!(
+            parse_obj(b"v 0 0 0\nf 1 2\n"),
+            Err(MeshFormatError::ObjShortFace { line: 2 })
         );
         let out_of_range = parse_obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").expect("parses");
-        assert!(out_of_range.checked().unwrap_err().contains("beyond"));
+        assert!(matches!(
+            out_of_range.checked(),
+            Err(InvalidMesh::VertexBeyond { vertices: 3, .. })
+        ));
         // Random bytes never panic.
         for k in 0..500u64 {
             let junk: Vec<u8> = (0..64)
@@ -390,7 +518,7 @@ mod tests {
                 .collect();
             let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
             ply.extend_from_slice(&junk);
-            let _ = parse_ply(&ply).and_then(TriangleMesh::checked);
+            let _ = parse_ply(&ply).map(TriangleMesh::checked);
             let _ = parse_obj(&junk);
         }
     }

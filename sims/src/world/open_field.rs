@@ -5,6 +5,7 @@
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::{ValueNoise, mix64, unit_f64};
@@ -57,52 +58,51 @@ impl OpenFieldParams {
     ///
     /// # Errors
     ///
-    /// A sentence naming the offending parameter.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = [
+    /// The offending key (relative to `[world.open_field]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [
             ("half_extent_m", self.half_extent_m),
             ("height_m", self.height_m),
             ("route_radius_m", self.route_radius_m),
             ("route_height_m", self.route_height_m),
             ("keep_clear_m", self.keep_clear_m),
-        ];
-        for (key, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{key} must be positive, got {v}"));
-            }
+        ] {
+            ConfigError::positive(key, v)?;
         }
-        if !(self.arrival_speed_mps.is_finite() && self.arrival_speed_mps >= 0.0) {
-            return Err(format!(
-                "arrival_speed_mps must be ≥ 0, got {}",
-                self.arrival_speed_mps
-            ));
-        }
+        ConfigError::non_negative("arrival_speed_mps", self.arrival_speed_mps)?;
         let [lo, hi] = self.obstacle_size_m;
         if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi >= lo) {
-            return Err(format!(
-                "obstacle_size_m must be [min, max] with 0 < min ≤ max, got {:?}",
-                self.obstacle_size_m
+            return Err(ConfigError::new(
+                "obstacle_size_m",
+                "must be [min, max] with 0 < min ≤ max",
+                format!("{:?}", self.obstacle_size_m),
             ));
         }
         if self.route_height_m + 1.0 > self.height_m {
-            return Err(format!(
-                "route_height_m must leave 1 m below the top (height_m {}), got {}",
-                self.height_m, self.route_height_m
+            return Err(ConfigError::new(
+                "route_height_m",
+                format!("must leave 1 m below the top (height_m {})", self.height_m),
+                self.route_height_m,
             ));
         }
         if self.route_radius_m + 1.0 > self.half_extent_m {
-            return Err(format!(
-                "route_radius_m must leave 1 m to the edge (half_extent_m {}), got {}",
-                self.half_extent_m, self.route_radius_m
+            return Err(ConfigError::new(
+                "route_radius_m",
+                format!(
+                    "must leave 1 m to the edge (half_extent_m {})",
+                    self.half_extent_m
+                ),
+                self.route_radius_m,
             ));
         }
         if self.obstacles > 0
             && self.route_radius_m + self.keep_clear_m + hi * std::f64::consts::SQRT_2
                 > self.half_extent_m
         {
-            return Err(format!(
-                "half_extent_m {} leaves no room for obstacles outside the routes",
-                self.half_extent_m
+            return Err(ConfigError::new(
+                "half_extent_m",
+                "must leave room for obstacles outside the routes",
+                self.half_extent_m,
             ));
         }
         Ok(())
@@ -264,11 +264,11 @@ mod tests {
             route_radius_m: 30.0,
             ..OpenFieldParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("route_radius_m"));
+        assert_eq!(p.validate().unwrap_err().key, "route_radius_m");
         let p = OpenFieldParams {
             obstacle_size_m: [2.0, 1.0],
             ..OpenFieldParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("obstacle_size_m"));
+        assert_eq!(p.validate().unwrap_err().key, "obstacle_size_m");
     }
 }

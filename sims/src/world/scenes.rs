@@ -4,6 +4,7 @@
 
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::ValueNoise;
@@ -64,34 +65,22 @@ impl Default for DoorParams {
     }
 }
 
-fn check_positive(pairs: &[(&str, f64)]) -> Result<(), String> {
-    for (key, v) in pairs {
-        if !(v.is_finite() && *v > 0.0) {
-            return Err(format!("{key} must be positive, got {v}"));
-        }
-    }
-    Ok(())
-}
-
 impl WindowParams {
     /// Checks the scene can be built and flown.
     ///
     /// # Errors
     ///
-    /// A sentence naming the offending parameter.
-    pub fn validate(&self) -> Result<(), String> {
-        check_positive(&[
-            ("wall_thickness_m", self.wall_thickness_m),
-            ("window_m[0]", self.window_m[0]),
-            ("window_m[1]", self.window_m[1]),
-        ])?;
-        if !(self.distance_m.is_finite() && self.distance_m >= 2.0) {
-            return Err(format!("distance_m must be ≥ 2 m, got {}", self.distance_m));
-        }
+    /// The offending key (relative to `[world.window]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::positive("wall_thickness_m", self.wall_thickness_m)?;
+        ConfigError::positive("window_m[0]", self.window_m[0])?;
+        ConfigError::positive("window_m[1]", self.window_m[1])?;
+        check_distance_m(self.distance_m)?;
         if !(self.height_m - self.window_m[1] / 2.0 > 0.2 && self.height_m <= 4.0) {
-            return Err(format!(
-                "height_m must put the window above the floor and be ≤ 4 m, got {}",
-                self.height_m
+            return Err(ConfigError::new(
+                "height_m",
+                "must put the window above the floor and be ≤ 4 m",
+                self.height_m,
             ));
         }
         Ok(())
@@ -103,30 +92,37 @@ impl DoorParams {
     ///
     /// # Errors
     ///
-    /// A sentence naming the offending parameter.
-    pub fn validate(&self) -> Result<(), String> {
-        check_positive(&[
-            ("wall_thickness_m", self.wall_thickness_m),
-            ("door_m[0]", self.door_m[0]),
-            ("door_m[1]", self.door_m[1]),
-        ])?;
+    /// The offending key (relative to `[world.door]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::positive("wall_thickness_m", self.wall_thickness_m)?;
+        ConfigError::positive("door_m[0]", self.door_m[0])?;
+        ConfigError::positive("door_m[1]", self.door_m[1])?;
         let [depth, width, height] = self.building_m;
         if !(depth >= 3.0 && width >= self.door_m[0] + 1.0 && height > self.door_m[1]) {
-            return Err(format!(
-                "building_m must be at least 3 m deep, wider than the door and taller than it, got {:?}",
-                self.building_m
+            return Err(ConfigError::new(
+                "building_m",
+                "must be at least 3 m deep, wider than the door and taller than it",
+                format!("{:?}", self.building_m),
             ));
         }
-        if !(self.distance_m.is_finite() && self.distance_m >= 2.0) {
-            return Err(format!("distance_m must be ≥ 2 m, got {}", self.distance_m));
-        }
+        check_distance_m(self.distance_m)?;
         if !(self.height_m > 0.3 && self.height_m < self.door_m[1] - 0.3) {
-            return Err(format!(
-                "height_m must be inside the door's height with 0.3 m to spare, got {}",
-                self.height_m
+            return Err(ConfigError::new(
+                "height_m",
+                "must be inside the door's height with 0.3 m to spare",
+                self.height_m,
             ));
         }
         Ok(())
+    }
+}
+
+/// The opening stands at least 2 m ahead of the start.
+fn check_distance_m(distance_m: f64) -> Result<(), ConfigError> {
+    if distance_m.is_finite() && distance_m >= 2.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::new("distance_m", "must be ≥ 2 m", distance_m))
     }
 }
 
@@ -330,6 +326,6 @@ mod tests {
             height_m: 2.0,
             ..params
         };
-        assert!(narrow.validate().unwrap_err().contains("height_m"));
+        assert_eq!(narrow.validate().unwrap_err().key, "height_m");
     }
 }

@@ -6,6 +6,28 @@ use nalgebra::Point3;
 
 use super::Aabb;
 
+/// Why a parsed mesh cannot make a world ([`TriangleMesh::load`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InvalidMesh {
+    /// A vertex with a NaN or infinite coordinate.
+    #[error("vertex {vertex:?} is not finite")]
+    NonFiniteVertex {
+        /// The vertex, metres.
+        vertex: [f64; 3],
+    },
+    /// A triangle that names a vertex the file does not have.
+    #[error("triangle {triangle:?} refers to a vertex beyond the {vertices} vertices")]
+    VertexBeyond {
+        /// The triangle's vertex indices.
+        triangle: [u32; 3],
+        /// How many vertices there are.
+        vertices: u32,
+    },
+    /// Every triangle is degenerate, or there are none.
+    #[error("the mesh has no (non-degenerate) triangles")]
+    NoTriangles,
+}
+
 /// A triangle mesh: vertices and triangles (indices into the vertices), with an
 /// optional grey level per vertex.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -20,19 +42,22 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     /// Checks indices and coordinates; drops degenerate triangles.
-    pub(super) fn checked(mut self) -> Result<TriangleMesh, String> {
+    pub(super) fn checked(mut self) -> Result<TriangleMesh, InvalidMesh> {
         if let Some(v) = self
             .vertices
             .iter()
             .find(|v| !v.coords.iter().all(|c| c.is_finite()))
         {
-            return Err(format!("vertex {v} is not finite"));
+            return Err(InvalidMesh::NonFiniteVertex {
+                vertex: v.coords.into(),
+            });
         }
         let n = self.vertices.len() as u32;
         if let Some(t) = self.triangles.iter().find(|t| t.iter().any(|&i| i >= n)) {
-            return Err(format!(
-                "triangle {t:?} refers to a vertex beyond the {n} vertices"
-            ));
+            return Err(InvalidMesh::VertexBeyond {
+                triangle: *t,
+                vertices: n,
+            });
         }
         let vertices = &self.vertices;
         self.triangles.retain(|t| {
@@ -40,7 +65,7 @@ impl TriangleMesh {
             (b - a).cross(&(c - a)).norm() > 1e-12
         });
         if self.triangles.is_empty() {
-            return Err("the mesh has no (non-degenerate) triangles".into());
+            return Err(InvalidMesh::NoTriangles);
         }
         Ok(self)
     }

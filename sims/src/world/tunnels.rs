@@ -18,6 +18,7 @@
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::cave::{CaveEdge, CaveGraph, CaveNode, CaveParams, CaveWorld, ROUTE_CLEARANCE_M};
 
@@ -66,33 +67,28 @@ impl TunnelParams {
     ///
     /// A length that is not finite and positive, a negative roughness, or a radius
     /// that leaves less than the route clearance inside the rough walls.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = [
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [
             ("radius_m", self.radius_m),
             ("junction_distance_m", self.junction_distance_m),
             ("branch_length_m", self.branch_length_m),
             ("dead_end_length_m", self.dead_end_length_m),
             ("side_length_m", self.side_length_m),
             ("wall_noise_wavelength_m", self.wall_noise_wavelength_m),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!(
-                    "tunnel.{name} must be a finite number > 0, got {v}"
-                ));
-            }
+        ] {
+            ConfigError::positive(key, v)?;
         }
         let a = self.wall_noise_amplitude_m;
-        if !(a.is_finite() && a >= 0.0) {
-            return Err(format!(
-                "tunnel.wall_noise_amplitude_m must be a finite number >= 0, got {a}"
-            ));
-        }
+        ConfigError::non_negative("wall_noise_amplitude_m", a)?;
         let clearance = self.radius_m - a;
         if clearance < ROUTE_CLEARANCE_M + 0.1 {
-            return Err(format!(
-                "tunnel.radius_m - tunnel.wall_noise_amplitude_m must be at least {} m, got {clearance}",
-                ROUTE_CLEARANCE_M + 0.1
+            return Err(ConfigError::new(
+                "radius_m",
+                format!(
+                    "minus `wall_noise_amplitude_m` must be at least {} m",
+                    ROUTE_CLEARANCE_M + 0.1
+                ),
+                clearance,
             ));
         }
         Ok(())
@@ -271,8 +267,7 @@ mod tests {
             ),
         ];
         for (bad, needle) in cases {
-            let error = bad.validate().expect_err(needle);
-            assert!(error.contains(needle), "{error}");
+            assert_eq!(bad.validate().expect_err(needle).key, needle);
         }
     }
 

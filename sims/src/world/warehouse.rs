@@ -2,6 +2,7 @@
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::gpu_scene::{GpuAlbedo, GpuNoise, GpuScene};
 use super::noise::{ValueNoise, mix64, unit_f64};
@@ -56,60 +57,68 @@ impl WarehouseParams {
     ///
     /// # Errors
     ///
-    /// A sentence naming the offending parameter.
-    pub fn validate(&self) -> Result<(), String> {
+    /// The offending key (relative to `[world.warehouse]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         let [x, y, z] = self.size_m;
         if !(x.is_finite() && y.is_finite() && z.is_finite() && x >= 10.0 && y >= 6.0 && z >= 3.0) {
-            return Err(format!(
-                "size_m must be at least [10, 6, 3] m, got {:?}",
-                self.size_m
+            return Err(ConfigError::new(
+                "size_m",
+                "must be at least [10, 6, 3] m",
+                format!("{:?}", self.size_m),
             ));
         }
-        let positive = [
+        for (key, v) in [
             ("shelf_depth_m", self.shelf_depth_m),
             ("shelf_unit_length_m", self.shelf_unit_length_m),
             ("cross_aisle_m", self.cross_aisle_m),
-        ];
-        for (key, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{key} must be positive, got {v}"));
-            }
+        ] {
+            ConfigError::positive(key, v)?;
         }
         if !(self.aisle_width_m.is_finite() && self.aisle_width_m >= 2.0) {
-            return Err(format!(
-                "aisle_width_m must be at least 2 m, got {}",
-                self.aisle_width_m
+            return Err(ConfigError::new(
+                "aisle_width_m",
+                "must be at least 2 m",
+                self.aisle_width_m,
             ));
         }
         let [lo, hi] = self.shelf_height_m;
         if !(lo.is_finite() && hi.is_finite() && 0.5 <= lo && lo <= hi && hi <= z) {
-            return Err(format!(
-                "shelf_height_m must be [low, high] with 0.5 ≤ low ≤ high ≤ size_m[2], got {:?}",
-                self.shelf_height_m
+            return Err(ConfigError::new(
+                "shelf_height_m",
+                "must be [low, high] with 0.5 ≤ low ≤ high ≤ size_m[2]",
+                format!("{:?}", self.shelf_height_m),
             ));
         }
         if self.shelf_rows == 0 || self.y_margin_m() < 1.5 {
-            return Err(format!(
-                "shelf_rows = {} rows of {} m with {} m aisles do not fit in {} m with 1.5 m to the walls",
-                self.shelf_rows, self.shelf_depth_m, self.aisle_width_m, y
+            return Err(ConfigError::new(
+                "shelf_rows",
+                format!(
+                    "must be ≥ 1 with its rows ({} m deep, {} m aisles) fitting in \
+                     size_m[1] = {y} m with 1.5 m to the walls",
+                    self.shelf_depth_m, self.aisle_width_m
+                ),
+                self.shelf_rows,
             ));
         }
         if self.units_per_row() == 0 || self.end_margin_m.is_nan() || self.end_margin_m < 2.0 {
-            return Err(format!(
-                "end_margin_m must be ≥ 2 m and leave room for one shelf unit, got {}",
-                self.end_margin_m
+            return Err(ConfigError::new(
+                "end_margin_m",
+                "must be ≥ 2 m and leave room for one shelf unit",
+                self.end_margin_m,
             ));
         }
         if !(0.0..1.0).contains(&self.missing_unit_prob) {
-            return Err(format!(
-                "missing_unit_prob must be in [0, 1), got {}",
-                self.missing_unit_prob
+            return Err(ConfigError::new(
+                "missing_unit_prob",
+                "must be in [0, 1)",
+                self.missing_unit_prob,
             ));
         }
         if !(self.route_height_m > 0.5 && self.route_height_m < z - 0.5) {
-            return Err(format!(
-                "route_height_m must be at least 0.5 m from floor and ceiling, got {}",
-                self.route_height_m
+            return Err(ConfigError::new(
+                "route_height_m",
+                "must be at least 0.5 m from floor and ceiling",
+                self.route_height_m,
             ));
         }
         Ok(())
@@ -316,6 +325,6 @@ mod tests {
             shelf_rows: 20,
             ..WarehouseParams::default()
         };
-        assert!(params.validate().unwrap_err().contains("shelf_rows"));
+        assert_eq!(params.validate().unwrap_err().key, "shelf_rows");
     }
 }

@@ -1,6 +1,7 @@
 //! Parameters of the procedural cave.
 
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 /// Shape parameters of [`super::CaveWorld`]; lengths in metres, angles in degrees.
 ///
@@ -69,9 +70,16 @@ impl Default for CaveParams {
 pub const ROUTE_CLEARANCE_M: f64 = 1.0;
 
 impl CaveParams {
-    /// Check every field; the error names the field, the rule and the value.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = [
+    /// Checks every field; the error names the field (relative to `[world.cave]`), the
+    /// rule and the value.
+    ///
+    /// # Errors
+    ///
+    /// A length that is not finite and positive, a negative angle or roughness, a
+    /// minimum above its maximum, no tunnels, or tunnels too narrow for the route's
+    /// clearance ([`ROUTE_CLEARANCE_M`]).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [
             ("entrance_tunnel_length_m", self.entrance_tunnel_length_m),
             ("tunnel_length_min_m", self.tunnel_length_min_m),
             ("tunnel_length_max_m", self.tunnel_length_max_m),
@@ -83,23 +91,17 @@ impl CaveParams {
             ("chamber_radius_min_m", self.chamber_radius_min_m),
             ("chamber_radius_max_m", self.chamber_radius_max_m),
             ("wall_noise_wavelength_m", self.wall_noise_wavelength_m),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("cave.{name} must be a finite number > 0, got {v}"));
-            }
+        ] {
+            ConfigError::positive(key, v)?;
         }
-        let non_negative = [
+        for (key, v) in [
             ("wiggle_deg", self.wiggle_deg),
             ("max_grade", self.max_grade),
             ("wall_noise_amplitude_m", self.wall_noise_amplitude_m),
-        ];
-        for (name, v) in non_negative {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("cave.{name} must be a finite number >= 0, got {v}"));
-            }
+        ] {
+            ConfigError::non_negative(key, v)?;
         }
-        let ordered = [
+        for (name, lo, hi) in [
             (
                 "tunnel_length",
                 self.tunnel_length_min_m,
@@ -115,35 +117,45 @@ impl CaveParams {
                 self.chamber_radius_min_m,
                 self.chamber_radius_max_m,
             ),
-        ];
-        for (name, lo, hi) in ordered {
+        ] {
             if lo > hi {
-                return Err(format!(
-                    "cave.{name}_min_m ({lo}) must not exceed cave.{name}_max_m ({hi})"
+                return Err(ConfigError::new(
+                    format!("{name}_min_m"),
+                    format!("must not exceed `{name}_max_m` ({hi})"),
+                    lo,
                 ));
             }
         }
         if self.tunnel_count == 0 {
-            return Err("cave.tunnel_count must be at least 1, got 0".to_string());
+            return Err(ConfigError::new("tunnel_count", "must be at least 1", 0));
         }
         if self.wiggle_deg >= 90.0 {
-            return Err(format!(
-                "cave.wiggle_deg must be < 90, got {}",
-                self.wiggle_deg
+            return Err(ConfigError::new(
+                "wiggle_deg",
+                "must be < 90",
+                self.wiggle_deg,
             ));
         }
         let clearance = self.tunnel_radius_min_m - self.wall_noise_amplitude_m;
         if clearance < ROUTE_CLEARANCE_M + 0.1 {
-            return Err(format!(
-                "cave.tunnel_radius_min_m - cave.wall_noise_amplitude_m must be at least {} m \
-                 (the route keeps {ROUTE_CLEARANCE_M} m from the walls), got {clearance}",
-                ROUTE_CLEARANCE_M + 0.1
+            return Err(ConfigError::new(
+                "tunnel_radius_min_m",
+                format!(
+                    "minus `wall_noise_amplitude_m` must be at least {} m (the route keeps \
+                     {ROUTE_CLEARANCE_M} m from the walls)",
+                    ROUTE_CLEARANCE_M + 0.1
+                ),
+                clearance,
             ));
         }
         if self.chamber_radius_min_m < self.tunnel_radius_max_m {
-            return Err(format!(
-                "cave.chamber_radius_min_m ({}) must be at least cave.tunnel_radius_max_m ({})",
-                self.chamber_radius_min_m, self.tunnel_radius_max_m
+            return Err(ConfigError::new(
+                "chamber_radius_min_m",
+                format!(
+                    "must be at least `tunnel_radius_max_m` ({})",
+                    self.tunnel_radius_max_m
+                ),
+                self.chamber_radius_min_m,
             ));
         }
         Ok(())
@@ -161,17 +173,17 @@ mod tests {
             segment_length_m: f64::NAN,
             ..CaveParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("segment_length_m"));
+        assert_eq!(p.validate().unwrap_err().key, "segment_length_m");
         let p = CaveParams {
             tunnel_radius_min_m: -1.0,
             ..CaveParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("tunnel_radius_min_m"));
+        assert_eq!(p.validate().unwrap_err().key, "tunnel_radius_min_m");
         let p = CaveParams {
             chamber_radius_min_m: 7.0,
             ..CaveParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("chamber_radius"));
+        assert_eq!(p.validate().unwrap_err().key, "chamber_radius_min_m");
     }
 
     #[test]
