@@ -11,7 +11,7 @@ use troupe_comms::simnet::SimNetConfig;
 use troupe_robot::RobotConfig;
 use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
-use crate::camera::CameraParams;
+use crate::camera::{CameraBackend, CameraParams};
 pub use crate::faults::Fault;
 use crate::vehicle::VehicleConfig;
 pub use crate::world::{WorldConfig, WorldKind};
@@ -192,6 +192,15 @@ impl Scenario {
         self.camera
             .validate()
             .map_err(|reason| invalid("camera", reason))?;
+        if self.world.artifacts.count > 0 && self.camera.backend == CameraBackend::Gpu {
+            return Err(invalid(
+                "camera.backend",
+                "must be \"cpu\" or \"auto\" in a world with [world.artifacts]: the GPU \
+                 camera has no artifacts (their reflectance, 4.0, is outside the [0, 1] \
+                 albedo the GPU shader renders), so such a world renders on the CPU; got \"gpu\""
+                    .to_owned(),
+            ));
+        }
         self.robot.validate().map_err(|e| {
             invalid(
                 &format!("robot.{}", e.key),
@@ -310,5 +319,13 @@ mod tests {
         assert!(e.contains("`name`"), "{e}");
         let e = parse("duration_s = nan").unwrap_err().to_string();
         assert!(e.contains("`duration_s`"), "{e}");
+        let e = parse("[camera]\nbackend = \"gpu\"\n[world.artifacts]\ncount = 2")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`camera.backend`") && e.contains("artifacts"),
+            "{e}"
+        );
+        parse("[camera]\nbackend = \"auto\"\n[world.artifacts]\ncount = 2").unwrap();
     }
 }

@@ -449,7 +449,9 @@ fn late_subscription_robot(seen: &Arc<Mutex<Vec<(u64, Time)>>>) -> RobotSpec {
     let seen = seen.clone();
     RobotSpec::new("r0")
         .with(ActorSpec::new("publisher", || LatePublisher))
-        .with(ActorSpec::new("late", move || LateSubscriber { seen: seen.clone() }))
+        .with(ActorSpec::new("late", move || LateSubscriber {
+            seen: seen.clone(),
+        }))
 }
 
 /// A subscription made in a handler (not in `start`) gets every later message,

@@ -62,7 +62,8 @@ fn log_once(message: &str) {
     }
 }
 
-const NO_GPU_SCENE: &str = "the world has no GPU description (mesh worlds render on the CPU)";
+const NO_GPU_SCENE: &str =
+    "the world has no GPU description (mesh worlds and worlds with artifacts render on the CPU)";
 
 /// Why this process's GPU adapter will not do (`Ok`: it will); a software adapter
 /// counts only if `allow_software`.
