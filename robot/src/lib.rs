@@ -36,7 +36,7 @@ pub mod safety;
 pub mod toml_file;
 
 use nalgebra::Point3;
-use troupe_actors::artifacts::{ARTIFACT_REPORTS, ArtifactActor};
+use troupe_actors::artifacts::ArtifactActor;
 use troupe_actors::collision::{CollisionActor, OperatorActor};
 use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
@@ -239,16 +239,9 @@ pub fn assemble(
         );
     }
     let journal = parts.link_journal;
-    let artifacts = config.artifacts.enabled;
     robot.add(
         ActorSpec::new("link", move || {
-            let mut actor = LinkActor::new(link.clone())?.journaled(journal.clone())?;
-            // The real-time executor takes subscriptions only in `start`: a link that
-            // must send the artifact reports in a robot process shares them from its
-            // own start (the artifact actor's request, arriving later, changes nothing).
-            if artifacts {
-                actor = actor.sharing(ARTIFACT_REPORTS.request());
-            }
+            let actor = LinkActor::new(link.clone())?.journaled(journal.clone())?;
             Ok(if sharing == MapSharing::Gmm {
                 actor
             } else {

@@ -482,8 +482,8 @@ impl Actor for CountRejections {
     }
 }
 
-/// Publishes the operator's commands on [`BASE_COMMAND`] (which the base's link shares
-/// from its start) as they arrive from the standard-input reader ([`read_commands`]).
+/// Shares [`BASE_COMMAND`] with the team and publishes the operator's commands on it
+/// as they arrive from the standard-input reader ([`read_commands`]).
 struct Commander {
     commands: Arc<Mutex<std::sync::mpsc::Receiver<BaseCommand>>>,
 }
@@ -492,6 +492,7 @@ const POLL_COMMANDS: TimerId = TimerId(0);
 
 impl Actor for Commander {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        BASE_COMMAND.share(ctx);
         ctx.set_timer(POLL_COMMANDS, Duration::from_millis(50));
         Ok(())
     }
@@ -550,7 +551,12 @@ pub async fn run(
 ) -> Result<BaseSummary, BaseError> {
     let scenario = &station.scenario;
     let id = station.base_id;
-    let link = scenario.robot.link.clone().with_team(scenario.robots);
+    let link = scenario
+        .robot
+        .link
+        .clone()
+        .with_team(scenario.robots)
+        .with_roster_as_peers();
     // As a robot process: message ids start somewhere new in every run.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -560,11 +566,7 @@ pub async fn run(
     let counter = rejected.clone();
     let mut robot = RobotSpec::new("base").with(
         ActorSpec::new("link", move || {
-            // The link sends the operator's commands: it subscribes to them from its
-            // start (the real-time executor takes subscriptions only in `start`).
-            Ok(LinkActor::new(link.clone())?
-                .journaled(journal.clone())?
-                .sharing(BASE_COMMAND.request()))
+            LinkActor::new(link.clone())?.journaled(journal.clone())
         })
         .wrap(move |inner| {
             Box::new(CountRejections {

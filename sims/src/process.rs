@@ -47,6 +47,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::{ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
 use troupe_actors::runtime::{
@@ -258,6 +259,10 @@ pub struct ProcessSummary {
     /// The recording `run.mcap`, when one was written.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub recording: Option<RecordingStats>,
+    /// The team's artifacts as this robot knew them last (with `[robot.artifacts]`;
+    /// absent without).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub artifacts: Vec<Artifact>,
 }
 
 /// Messages received from one peer.
@@ -290,7 +295,16 @@ pub async fn run(
     process: &RobotProcess,
     stop: impl std::future::Future<Output = ()>,
 ) -> Result<ProcessSummary, ProcessError> {
-    let scenario = &process.scenario;
+    // Every team member, the base station included, is a store-and-forward
+    // recipient from the start: one that starts late or restarts still gets what
+    // was sent before it was heard.
+    let mut scenario = process.scenario.clone();
+    scenario.robot.link = scenario
+        .robot
+        .link
+        .with_team(scenario.robots)
+        .with_roster_as_peers();
+    let scenario = &scenario;
     let id = process.config.robot;
     // The link's journal outlives the process (`kill -9` included): what it
     // accepted and what it acknowledged, and its message ids, which a new journal
@@ -337,7 +351,13 @@ pub async fn run(
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let peers: Arc<Mutex<BTreeMap<u32, PeerCounts>>> = Arc::default();
-    let (trajectory_tap, link_tap, peers_tap) = (trajectory.clone(), link.clone(), peers.clone());
+    let artifacts: Arc<Mutex<Vec<Artifact>>> = Arc::default();
+    let (trajectory_tap, link_tap, peers_tap, artifacts_tap) = (
+        trajectory.clone(),
+        link.clone(),
+        peers.clone(),
+        artifacts.clone(),
+    );
     let position_tap = transport.clone();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
@@ -358,6 +378,10 @@ pub async fn run(
             && let Ok(mut last) = link_tap.lock()
         {
             *last = Some(status.clone());
+        } else if let Some(list) = p.get(&ARTIFACT_LIST)
+            && let Ok(mut last) = artifacts_tap.lock()
+        {
+            last.clone_from(&list.artifacts);
         } else {
             let count = |robot: RobotId, field: fn(&mut PeerCounts) -> &mut u64| {
                 if let Ok(mut peers) = peers_tap.lock() {
@@ -436,6 +460,11 @@ pub async fn run(
                 .unwrap_or_else(std::sync::PoisonError::into_inner),
         ),
         recording,
+        artifacts: std::mem::take(
+            &mut *artifacts
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        ),
     };
     write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {
         path: process.out.clone(),

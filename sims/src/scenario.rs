@@ -12,7 +12,7 @@ use troupe_core::ConfigError;
 use troupe_robot::RobotConfig;
 use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
-use crate::camera::CameraParams;
+use crate::camera::{CameraBackend, CameraParams};
 pub use crate::faults::Fault;
 use crate::vehicle::VehicleConfig;
 pub use crate::world::{WorldConfig, WorldKind};
@@ -193,6 +193,15 @@ impl Scenario {
         };
         self.world.validate().map_err(|e| config("world", e))?;
         self.camera.validate().map_err(|e| config("camera", e))?;
+        if self.world.artifacts.count > 0 && self.camera.backend == CameraBackend::Gpu {
+            return Err(invalid(
+                "camera.backend",
+                "must be \"cpu\" or \"auto\" in a world with [world.artifacts]: the GPU \
+                 camera has no artifacts (their reflectance, 4.0, is outside the [0, 1] \
+                 albedo the GPU shader renders), so such a world renders on the CPU; got \"gpu\""
+                    .to_owned(),
+            ));
+        }
         self.robot.validate().map_err(|e| config("robot", e))?;
         self.vehicle.validate().map_err(|e| config("vehicle", e))?;
         self.network.validate().map_err(|e| config("network", e))?;
@@ -313,5 +322,13 @@ mod tests {
             e.contains("`camera.width` must be at least 1, got 0"),
             "{e}"
         );
+        let e = parse("[camera]\nbackend = \"gpu\"\n[world.artifacts]\ncount = 2")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`camera.backend`") && e.contains("artifacts"),
+            "{e}"
+        );
+        parse("[camera]\nbackend = \"auto\"\n[world.artifacts]\ncount = 2").unwrap();
     }
 }

@@ -112,9 +112,11 @@ impl Context<'_> {
         self.outbox.push(Outgoing::new(topic, message));
     }
 
-    /// Subscribes to a topic with the given queue policy. Call it from
-    /// [`Actor::start`](crate::Actor::start); subscribing twice to the same topic
-    /// updates the policy and keeps the queue.
+    /// Subscribes to a topic with the given queue policy, usually from
+    /// [`Actor::start`](crate::Actor::start); from any later hook it takes effect
+    /// when the hook returns, under both executors (messages published before
+    /// that are not delivered). Subscribing twice to the same topic updates the
+    /// policy and keeps the queue.
     pub fn subscribe<T: Message>(&mut self, topic: &Topic<T>, policy: QueuePolicy) {
         self.commands.push(Command::Subscribe {
             topic: Arc::from(topic.name()),

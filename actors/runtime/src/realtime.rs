@@ -1,11 +1,13 @@
 //! The real-time executor: one tokio task per actor, against the wall clock.
 //!
 //! Publishers push into the subscriber's bounded queues (behind a mutex) and wake its
-//! task; timers are tokio timers. Actors marked [`blocking`](crate::ActorOptions::blocking)
-//! run their handlers under `block_in_place`, so heavy compute does not stall the
-//! async workers (this needs the multi-threaded runtime; on a current-thread runtime
-//! they run inline and a warning says so). Packets on [`LINK_TX`] are delivered to
-//! the peers' [`LINK_RX`] at once, inside the process.
+//! task; each topic's subscriber list is a snapshot they read without locking, which
+//! a subscription (in `start` or any later hook) replaces. Timers are tokio timers.
+//! Actors marked [`blocking`](crate::ActorOptions::blocking) run their handlers
+//! under `block_in_place`, so heavy compute does not stall the async workers (this
+//! needs the multi-threaded runtime; on a current-thread runtime they run inline and
+//! a warning says so). Packets on [`LINK_TX`] are delivered to the peers'
+//! [`LINK_RX`] at once, inside the process.
 //!
 //! **Transport hook**: a process may run some robots of a larger team
 //! ([`RealtimeExecutor::with_robot_ids`]: the process for robot 2 of a 3-robot
@@ -23,6 +25,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, RwLock};
 
+use arc_swap::ArcSwap;
 use tokio::runtime::RuntimeFlavor;
 use tokio::sync::{Notify, watch};
 use tokio::task::JoinHandle;
@@ -32,7 +35,7 @@ use troupe_comms::transport::{PacketTransport, ReceivedPacket, TransportError};
 use crate::context::{Command, Outgoing};
 use crate::inputs::Inputs;
 use crate::network::{Destination, LINK_RX, LINK_TRANSPORT, LINK_TX, LinkRx, LinkTx};
-use crate::registry::{TopicRegistry, apply_command};
+use crate::registry::{SubscriberRef, TopicRegistry, TypeMismatch, apply_command};
 use crate::slot::{Hook, HookOutcome, Slot};
 use crate::spec::RobotSpec;
 use crate::stats::{RobotReport, TopicStats};
@@ -54,7 +57,9 @@ struct RtTopic {
     name: Arc<str>,
     type_id: TypeId,
     type_name: &'static str,
-    subscribers: Vec<(usize, usize)>,
+    /// Who receives its messages. Publishers read a snapshot without locking; a
+    /// subscription (in `start` or any later hook) swaps in a new list.
+    subscribers: ArcSwap<Vec<SubscriberRef>>,
     messages: AtomicU64,
     bytes: AtomicU64,
     type_mismatches: AtomicU64,
@@ -65,13 +70,13 @@ impl RtTopic {
         name: Arc<str>,
         type_id: TypeId,
         type_name: &'static str,
-        subscribers: Vec<(usize, usize)>,
+        subscribers: Vec<SubscriberRef>,
     ) -> Self {
         RtTopic {
             name,
             type_id,
             type_name,
-            subscribers,
+            subscribers: ArcSwap::from_pointee(subscribers),
             messages: AtomicU64::new(0),
             bytes: AtomicU64::new(0),
             type_mismatches: AtomicU64::new(0),
@@ -143,6 +148,36 @@ impl Shared {
             .clone()
     }
 
+    /// Adds a subscriber to a topic of robot `robot` (idempotent), as the sim-time
+    /// executor's registry does: a topic that carries another type refuses it
+    /// (counted and logged).
+    fn add_subscriber(
+        &self,
+        robot: usize,
+        name: &str,
+        type_id: TypeId,
+        type_name: &'static str,
+        who: SubscriberRef,
+    ) -> Result<(), TypeMismatch> {
+        let topic = self.topic(robot, name, type_id, type_name);
+        if topic.type_id != type_id {
+            topic.type_mismatches.fetch_add(1, Ordering::Relaxed);
+            return Err(TypeMismatch {
+                topic: topic.name.clone(),
+                declared: topic.type_name,
+                used: type_name,
+            });
+        }
+        topic.subscribers.rcu(|list| {
+            let mut list = Vec::clone(list);
+            if !list.contains(&who) {
+                list.push(who);
+            }
+            list
+        });
+        Ok(())
+    }
+
     fn route(&self, robot: usize, outputs: &mut Vec<Outgoing>) {
         for out in outputs.drain(..) {
             let topic = self.topic(robot, &out.topic, out.type_id, out.type_name);
@@ -166,7 +201,7 @@ impl Shared {
                     });
                 }
             }
-            for &(slot, sub) in &topic.subscribers {
+            for &(slot, sub) in topic.subscribers.load().iter() {
                 let inbox = &self.robots[robot].inboxes[slot];
                 let arrival = self.arrival.fetch_add(1, Ordering::Relaxed);
                 let message = Received {
@@ -339,8 +374,9 @@ impl RealtimeExecutor {
 
     /// Starts every actor and spawns one task per actor on the current tokio runtime.
     ///
-    /// All `start` hooks run before any task is spawned, so every subscription exists
-    /// before the first message flows.
+    /// All `start` hooks run before any task is spawned, so every subscription made
+    /// in `start` exists before the first message flows; one made later takes effect
+    /// when its hook returns.
     ///
     /// # Panics
     ///
@@ -550,18 +586,21 @@ impl ActorTask {
                 Command::Subscribe {
                     topic,
                     type_id,
+                    type_name,
                     policy,
-                    ..
                 } => {
-                    let known = inputs
-                        .subscriptions
-                        .iter()
-                        .any(|s| s.topic == topic && s.type_id == type_id);
-                    if known {
-                        inputs.subscribe(&topic, type_id, policy);
-                    } else {
-                        tracing::warn!(robot = %robot.name, actor = %self.slot.name, %topic,
-                            "ignoring a subscription made after the robot started (subscribe in `start`)");
+                    // The queue exists before any publisher can see the subscriber.
+                    let sub = inputs.subscribe(&topic, type_id, policy);
+                    let added = self.shared.add_subscriber(
+                        self.robot,
+                        &topic,
+                        type_id,
+                        type_name,
+                        (self.index, sub),
+                    );
+                    if let Err(e) = added {
+                        tracing::error!(robot = %robot.name, actor = %self.slot.name, topic = %e.topic,
+                            "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
                     }
                 }
                 Command::SetTimer { id, period } if !period.is_zero() => {

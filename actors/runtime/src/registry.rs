@@ -86,7 +86,7 @@ impl TopicRegistry {
         Ok(())
     }
 
-    /// The entries, consumed (the real-time executor freezes them after start).
+    /// The entries, consumed (the real-time executor takes them over after `start`).
     pub(crate) fn into_entries(self) -> impl Iterator<Item = TopicEntry> {
         self.topics.into_values()
     }

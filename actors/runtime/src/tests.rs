@@ -393,3 +393,100 @@ fn realtime_panics_are_contained() {
     assert_eq!(reports[0].actors[1].stats.restarts, 1);
     assert_eq!(seen.lock().unwrap().len(), 9);
 }
+
+const READY: Topic<Number> = Topic::new("ready");
+const LATE: Topic<Number> = Topic::new("late");
+
+/// Subscribes to [`LATE`] from a timer handler (after the robot started), then
+/// says so on [`READY`].
+struct LateSubscriber {
+    seen: Arc<Mutex<Vec<(u64, Time)>>>,
+}
+
+impl Actor for LateSubscriber {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(TICK, Duration::from_millis(20));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Timer(TICK) => {
+                ctx.cancel_timer(TICK);
+                ctx.subscribe(&LATE, QueuePolicy::fifo(1024));
+                ctx.publish(&READY, Number(0));
+            }
+            _ => {
+                if let Some(n) = event.message().and_then(|m| m.get(&LATE)) {
+                    self.seen.lock().unwrap().push((n.0, ctx.now()));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Publishes 0 on [`LATE`] at start (nobody listens yet), and 1..=20 once a
+/// subscriber is ready.
+struct LatePublisher;
+
+impl Actor for LatePublisher {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&READY, QueuePolicy::fifo(4));
+        ctx.publish(&LATE, Number(0));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if event.message().and_then(|m| m.get(&READY)).is_some() {
+            for n in 1..=20 {
+                ctx.publish(&LATE, Number(n));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn late_subscription_robot(seen: &Arc<Mutex<Vec<(u64, Time)>>>) -> RobotSpec {
+    let seen = seen.clone();
+    RobotSpec::new("r0")
+        .with(ActorSpec::new("publisher", || LatePublisher))
+        .with(ActorSpec::new("late", move || LateSubscriber {
+            seen: seen.clone(),
+        }))
+}
+
+/// A subscription made in a handler (not in `start`) gets every later message,
+/// under both executors alike; what was published before it is not replayed.
+#[test]
+fn late_subscriptions_receive_every_later_message_under_both_executors() {
+    let expected: Vec<u64> = (1..=20).collect();
+
+    let sim_seen = Arc::new(Mutex::new(Vec::new()));
+    let mut sim = SimExecutor::new(vec![late_subscription_robot(&sim_seen)], 1);
+    sim.run_until(Time::from_secs_f64(1.0));
+    let sim_reports = sim.finish();
+    let sim_values: Vec<u64> = sim_seen.lock().unwrap().iter().map(|(v, _)| *v).collect();
+    assert_eq!(sim_values, expected);
+    assert_eq!(sim_reports[0].topics["late"].messages, 21);
+
+    let rt_seen = Arc::new(Mutex::new(Vec::new()));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let rt_reports = runtime.block_on(async {
+        let handle = RealtimeExecutor::new(vec![late_subscription_robot(&rt_seen)], 1).spawn();
+        for _ in 0..400 {
+            if rt_seen.lock().unwrap().len() == 20 {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        // A little longer: nothing more (and nothing twice) may arrive.
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        handle.shutdown().await
+    });
+    let rt_values: Vec<u64> = rt_seen.lock().unwrap().iter().map(|(v, _)| *v).collect();
+    assert_eq!(rt_values, expected);
+    assert_eq!(rt_reports[0].topics["late"].messages, 21);
+}

@@ -34,7 +34,7 @@
 //!   class it names (after that class's own queue, lanes in the order they were
 //!   added), optionally addressed to one peer, with its own [`ClassStats`]
 //!   ([`LinkShaper::lane_stats`]; [`ShaperStats::classes`] counts the classes' own
-//!   queues only).
+//!   queues only, [`ShaperStats::lane_sent_bytes`] the extra lanes' bytes together).
 //!
 //! The receive side is a [`Reassembler`]: bounded memory, timeouts, duplicate
 //! suppression, counted incomplete and evicted messages.
@@ -841,7 +841,10 @@ impl LinkShaper {
             Next::Queued(lane, _) => {
                 let class = self.lane_classes[lane];
                 let stats = match lane.checked_sub(Class::ALL.len()) {
-                    Some(extra) => &mut self.lane_stats[extra],
+                    Some(extra) => {
+                        self.stats.lane_sent_bytes += len as u64;
+                        &mut self.lane_stats[extra]
+                    }
                     None => &mut self.stats.classes[lane],
                 };
                 match &mut self.lanes[lane] {
@@ -852,7 +855,10 @@ impl LinkShaper {
             Next::Stored(lane, _, next) => {
                 let class = self.lane_classes[lane];
                 let stats = match lane.checked_sub(Class::ALL.len()) {
-                    Some(extra) => &mut self.lane_stats[extra],
+                    Some(extra) => {
+                        self.stats.lane_sent_bytes += len as u64;
+                        &mut self.lane_stats[extra]
+                    }
                     None => &mut self.stats.classes[lane],
                 };
                 match &mut self.lanes[lane] {

@@ -205,6 +205,9 @@ pub struct ShaperStats {
     pub ack_frames: u64,
     /// Bytes of ack frames sent.
     pub ack_bytes: u64,
+    /// Bytes sent in frames by the extra lanes (shared topics), retransmissions
+    /// included; per lane in [`LinkShaper::lane_stats`](super::LinkShaper::lane_stats).
+    pub lane_sent_bytes: u64,
 }
 
 impl ShaperStats {
@@ -214,10 +217,13 @@ impl ShaperStats {
         &self.classes[class.index()]
     }
 
-    /// Every byte sent on the link (data and ack frames).
+    /// Every byte sent on the link (data frames of the classes and of the extra
+    /// lanes, and ack frames).
     #[must_use]
     pub fn total_sent_bytes(&self) -> u64 {
-        self.classes.iter().map(|c| c.sent_bytes).sum::<u64>() + self.ack_bytes
+        self.classes.iter().map(|c| c.sent_bytes).sum::<u64>()
+            + self.lane_sent_bytes
+            + self.ack_bytes
     }
 }
 

@@ -923,6 +923,14 @@ fn an_extra_lane_keeps_its_own_policy_priority_counters_and_addressee() {
     let stats = shaper.lane_stats(lane).unwrap();
     assert_eq!((stats.offered_messages, stats.sent_messages), (5, 5));
     assert_eq!(shaper.stats().class(Class::Plan).sent_messages, 1);
+    // The link's total counts the lane's frames too.
+    let lane_bytes: u64 = frames[1..6].iter().map(|f| f.bytes.len() as u64).sum();
+    assert_eq!(shaper.stats().lane_sent_bytes, lane_bytes);
+    assert_eq!(stats.sent_bytes, lane_bytes);
+    assert_eq!(
+        shaper.stats().total_sent_bytes(),
+        frames.iter().map(|f| f.bytes.len() as u64).sum::<u64>()
+    );
     // The last five reports wait for acks: the addressed one from robot 2 only.
     let state = shaper.durable_state();
     assert_eq!(state.stored.len(), 5);

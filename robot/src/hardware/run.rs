@@ -198,7 +198,7 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
         link_journal,
     };
     let mut config = file.robot.clone();
-    config.link = config.link.with_team(file.team_size);
+    config.link = config.link.with_team(file.team_size).with_roster_as_peers();
     let mut spec = assemble(&format!("robot{}", file.id), &config, parts)?;
     if file.mavlink.odometry_source == OdometrySource::External {
         let odometry = inputs.clone();

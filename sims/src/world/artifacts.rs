@@ -9,7 +9,10 @@
 //! [`ARTIFACT_REFLECTANCE`] — above the `[0, 1]` of diffuse surfaces, like a
 //! retroreflector: the camera clamps the intensity it returns to 1, so an artifact
 //! is the brightest thing in a frame at any distance a diffuse surface could match.
-//! A world with artifacts has no GPU description (the camera renders on the CPU).
+//! A world with artifacts has no GPU description: the GPU shader renders albedo in
+//! `[0, 1]` and knows no spheres, so the camera renders such a world on the CPU
+//! (`camera.backend = "auto"` chooses it, and a scenario that asks for `"gpu"` with
+//! `[world.artifacts]` is refused with a message that says why).
 
 use std::sync::Arc;
 

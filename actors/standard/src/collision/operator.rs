@@ -14,15 +14,17 @@
 //!   `behaviour = "teleop"` robot maps to its closest safe primitive.
 //!
 //! It republishes the hold state every second, so a restarted collision actor learns it
-//! again. Who may send commands is who may join the team's zenoh session: the link
-//! accepts frames of its own team only, and the session's TLS certificates and
-//! user/password (`[zenoh] tls`, `auth`) decide who joins.
+//! again. Only the base may send commands: the link accepts frames of its own team
+//! only, the session's TLS certificates and user/password (`[zenoh] tls`, `auth`)
+//! decide who joins, and a command whose sender is not the base's id (`[robot.link]
+//! base_id`, default the team size) is rejected and counted
+//! ([`Rejection::NotFromBase`](crate::link::Rejection::NotFromBase)).
 
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use crate::link::{Peer, ShareClass, SharePolicy, ShareTo, SharedTopic};
+use crate::link::{Peer, ShareClass, ShareFrom, SharePolicy, ShareTo, SharedTopic};
 use crate::planner::TELEOP_COMMAND;
 use crate::planner::teleop::TeleopCommand;
 use troupe_comms::shaping::QueuePolicy as ShaperPolicy;
@@ -117,7 +119,9 @@ impl BaseCommand {
 }
 
 /// The shared topic of base commands: store-and-forward at the highest priority, to
-/// every peer (each robot keeps the ones addressed to it).
+/// every peer (each robot keeps the ones addressed to it), accepted from the base
+/// station's id only (a command from any other id is rejected and counted as
+/// `not_from_base` in the link's rejections).
 pub const BASE_COMMAND: SharedTopic<BaseCommand> = SharedTopic::new(
     "base/command",
     1,
@@ -125,6 +129,7 @@ pub const BASE_COMMAND: SharedTopic<BaseCommand> = SharedTopic::new(
         class: ShareClass::Odometry,
         policy: ShaperPolicy::StoreAndForward,
         to: ShareTo::Peers,
+        from: ShareFrom::Base,
     },
 );
 

@@ -29,7 +29,7 @@ use super::convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_
 use super::frames::{PeerFrame, transform_keyframe, transform_plan};
 use super::journal::{JournaledLane, LinkJournal};
 use super::rejections::{RateLimitedLog, Rejection, RejectionCounts};
-use super::shared::{SHARE_REQUESTS, ShareRequest, ShareTo, SharedCodec};
+use super::shared::{SHARE_REQUESTS, ShareFrom, ShareRequest, ShareTo, SharedCodec};
 /// The link's counters, published every second.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LinkStatus {
@@ -146,8 +146,6 @@ pub struct LinkActor {
     shared: BTreeMap<String, SharedEntry>,
     /// Lanes added so far, in order (what the journal keeps).
     lanes: Vec<JournaledLane>,
-    /// Topics to share from `start` on ([`LinkActor::sharing`]).
-    sharing_from_start: Vec<ShareRequest>,
     /// Whether `lanes` changed since the journal was written.
     lanes_changed: bool,
     /// The shaper's store generation last written to the journal.
@@ -188,7 +186,6 @@ impl LinkActor {
             lanes: Vec::new(),
             lanes_changed: false,
             replay: Vec::new(),
-            sharing_from_start: Vec::new(),
         })
     }
 
@@ -271,7 +268,9 @@ impl LinkActor {
         };
         entry.sequence = self.sequence;
         if self.lanes_changed {
+            // Before the stored messages that name them.
             entry.lanes = self.lanes.clone();
+            entry.sync_lanes()?;
             self.lanes_changed = false;
         }
         if let (Some(disk), Some(state)) = (&mut entry.disk, &entry.shaper)
@@ -280,16 +279,6 @@ impl LinkActor {
             disk.sync(state, entry.sequence)?;
         }
         Ok(())
-    }
-
-    /// Shares a topic from the start, as if an actor had asked in its `start`
-    /// ([`SharedTopic::request`](super::SharedTopic::request)). The real-time executor
-    /// takes subscriptions only in `start`, so a link that must *send* a shared topic
-    /// there (the base station's commands) is built with it.
-    #[must_use]
-    pub fn sharing(mut self, request: ShareRequest) -> Self {
-        self.sharing_from_start.push(request);
-        self
     }
 
     /// Keeps this robot's keyframes local (when the team shares occupancy-grid change
@@ -746,6 +735,15 @@ impl LinkActor {
             stats.not_addressed += 1;
             return Ok(());
         }
+        if codec.policy().from == ShareFrom::Base && self.config.base_id != Some(from.0) {
+            self.reject(
+                Rejection::NotFromBase,
+                from,
+                format_args!("{} may come from the base station only", message.name),
+                ctx,
+            );
+            return Ok(());
+        }
         if message.version != codec.version() {
             if message.version < codec.version() {
                 stats.older_version += 1;
@@ -943,9 +941,6 @@ impl Actor for LinkActor {
             if let Some(codec) = &entry.codec {
                 codec.subscribe(ctx);
             }
-        }
-        for request in std::mem::take(&mut self.sharing_from_start) {
-            self.register(&request, ctx)?;
         }
         let me = ctx.robot().0;
         for &peer in self.config.peers.iter().filter(|p| **p != me) {

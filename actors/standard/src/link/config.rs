@@ -158,22 +158,45 @@ pub const DEFAULT_PEER_TIMEOUT_S: f64 = 10.0;
 
 impl LinkConfig {
     /// Fills an empty [`roster`](Self::roster) with the team of `team_size`
-    /// robots (ids `0..team_size`) and the base station ([`base_id`](Self::base_id),
-    /// default `team_size`); a roster given in the file is kept as written.
+    /// robots (ids `0..team_size`) and the base station, and an absent
+    /// [`base_id`](Self::base_id) with its default, `team_size`; a roster given in
+    /// the file is kept as written.
     ///
     /// ```
     /// use troupe_actors::link::LinkConfig;
     /// let config = LinkConfig::default().with_team(3);
     /// assert_eq!(config.roster, vec![0, 1, 2, 3]);
+    /// assert_eq!(config.base_id, Some(3));
     /// ```
     #[must_use]
     pub fn with_team(mut self, team_size: u32) -> Self {
+        let base_id = *self.base_id.get_or_insert(team_size);
         if self.roster.is_empty() {
-            self.roster = (0..team_size)
-                .chain([self.base_id.unwrap_or(team_size)])
-                .collect();
+            self.roster = (0..team_size).chain([base_id]).collect();
             self.roster.sort_unstable();
             self.roster.dedup();
+        }
+        self
+    }
+
+    /// Makes every member of the [`roster`](Self::roster) (the base station
+    /// included) a store-and-forward recipient from the start, when
+    /// [`peers`](Self::peers) is empty. Robot processes and the base station do
+    /// this: a member that starts late, or restarts, then still gets what the
+    /// others sent before it was first heard (a message every member heard so
+    /// far would otherwise be released); a member that never comes is suspended
+    /// after [`peer_timeout_s`](Self::peer_timeout_s) and holds at most its own
+    /// bound of stored messages.
+    ///
+    /// ```
+    /// use troupe_actors::link::LinkConfig;
+    /// let config = LinkConfig::default().with_team(2).with_roster_as_peers();
+    /// assert_eq!(config.peers, vec![0, 1, 2]);
+    /// ```
+    #[must_use]
+    pub fn with_roster_as_peers(mut self) -> Self {
+        if self.peers.is_empty() {
+            self.peers.clone_from(&self.roster);
         }
         self
     }

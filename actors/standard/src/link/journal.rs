@@ -1,7 +1,8 @@
 //! The link's non-volatile storage ([`LinkJournal`]): in memory for simulated teams,
 //! on disk ([`troupe_comms::journal`]) for robot processes.
 
-use std::path::Path;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use troupe_comms::journal::{DiskJournal, JournalError, ReceivedMessage};
@@ -34,8 +35,79 @@ pub(super) struct JournalEntry {
     pub lanes: Vec<JournaledLane>,
     /// The file, for a journal on disk.
     pub disk: Option<DiskJournal>,
+    /// Where the lanes are kept beside a journal on disk ([`LANES_FILE`]).
+    pub lanes_path: Option<PathBuf>,
     /// Messages received before a restart, not yet handed to a link.
     pub received: Vec<ReceivedMessage>,
+}
+
+/// The file beside `link.journal` that keeps the shared topics' lanes (name, class,
+/// queue settings, in the order they were added; postcard), rewritten atomically
+/// when a lane is added: stored messages of a lane go back to it after a restart,
+/// so they keep their store-and-forward lane rather than falling back to their
+/// class's own queue.
+pub const LANES_FILE: &str = "link.lanes";
+
+/// What [`LANES_FILE`] holds per lane.
+type DiskLane = (String, Class, ClassConfig);
+
+/// The lanes kept in `path` (none when there is no file yet).
+fn read_lanes(path: &Path) -> Result<Vec<JournaledLane>, JournalError> {
+    let io = |source| JournalError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(io(e)),
+    };
+    let lanes: Vec<DiskLane> = postcard::from_bytes(&bytes).map_err(|e| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not a list of link lanes: {e}"),
+        ))
+    })?;
+    Ok(lanes
+        .into_iter()
+        .map(|(name, class, config)| JournaledLane {
+            name,
+            class,
+            config,
+            request: None,
+        })
+        .collect())
+}
+
+impl JournalEntry {
+    /// On disk: writes the lanes to [`LANES_FILE`] (a new file, fsync'd, renamed
+    /// over the old one, so a crash leaves the old list or the new one).
+    pub(super) fn sync_lanes(&self) -> Result<(), JournalError> {
+        let Some(path) = &self.lanes_path else {
+            return Ok(());
+        };
+        let lanes: Vec<DiskLane> = self
+            .lanes
+            .iter()
+            .map(|l| (l.name.clone(), l.class, l.config))
+            .collect();
+        let bytes = postcard::to_allocvec(&lanes).map_err(JournalError::Encode)?;
+        let temporary = path.with_extension("lanes.new");
+        let write = || -> std::io::Result<()> {
+            let mut file = std::fs::File::create(&temporary)?;
+            file.write_all(&bytes)?;
+            file.sync_all()?;
+            std::fs::rename(&temporary, path)?;
+            if let Some(dir) = path.parent() {
+                std::fs::File::open(dir)?.sync_all()?;
+            }
+            Ok(())
+        };
+        write().map_err(|source| JournalError::Io {
+            path: path.clone(),
+            source,
+        })
+    }
 }
 
 /// A shared topic's lane as the journal keeps it: a new link adds the lanes again
@@ -67,12 +139,14 @@ impl LinkJournal {
 
     /// A journal kept on disk in `dir` (`dir/link.journal`, see
     /// [`troupe_comms::journal`]), for a robot process: it resumes what the file
-    /// holds — stored messages, recipients, the next message id, messages received
-    /// — and writes every change through, fsync'd, so that `kill -9` and a restart
-    /// lose nothing accepted or acknowledged and reuse no id. A new file's ids
-    /// start at `first_id`.
+    /// holds — stored messages, recipients, the next message id, messages received,
+    /// and the shared topics' lanes ([`LANES_FILE`]) — and writes every change
+    /// through, fsync'd, so that `kill -9` and a restart lose nothing accepted or
+    /// acknowledged and reuse no id. A new file's ids start at `first_id`.
     pub fn on_disk(dir: &Path, first_id: u32) -> Result<Self, JournalError> {
         let (disk, recovered) = DiskJournal::open(dir, first_id, MAX_RECEIVED_BYTES)?;
+        let lanes_path = dir.join(LANES_FILE);
+        let lanes = read_lanes(&lanes_path)?;
         if recovered.discarded_bytes > 0 {
             tracing::warn!(
                 journal = %disk.path().display(),
@@ -92,8 +166,9 @@ impl LinkJournal {
         Ok(LinkJournal(Arc::new(Mutex::new(JournalEntry {
             shaper: Some(recovered.state),
             sequence: recovered.sequence,
-            lanes: Vec::new(),
+            lanes,
             disk: Some(disk),
+            lanes_path: Some(lanes_path),
             received: recovered.received,
         }))))
     }
@@ -126,5 +201,57 @@ impl LinkJournal {
     #[must_use]
     pub fn stored_messages(&self) -> usize {
         self.entry().shaper.as_ref().map_or(0, |s| s.stored.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    /// The lanes survive a process restart (they used to be kept in memory only, so
+    /// a restarted robot's stored shared-topic messages fell back to their class's
+    /// own queue and lost store-and-forward).
+    #[test]
+    fn lanes_on_disk_come_back_after_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = LinkJournal::on_disk(dir.path(), 7).unwrap();
+        assert!(journal.entry().lanes.is_empty());
+        {
+            let mut entry = journal.entry();
+            for (name, class) in [
+                ("artifacts/report", Class::Plan),
+                ("base/command", Class::Odometry),
+            ] {
+                entry.lanes.push(JournaledLane {
+                    name: name.to_owned(),
+                    class,
+                    config: ClassConfig::store_and_forward(),
+                    request: None,
+                });
+            }
+            entry.sync_lanes().unwrap();
+        }
+        drop(journal);
+        let again = LinkJournal::on_disk(dir.path(), 9).unwrap();
+        let entry = again.entry();
+        let lanes: Vec<(&str, Class)> = entry
+            .lanes
+            .iter()
+            .map(|l| (l.name.as_str(), l.class))
+            .collect();
+        assert_eq!(
+            lanes,
+            [
+                ("artifacts/report", Class::Plan),
+                ("base/command", Class::Odometry)
+            ]
+        );
+        assert_eq!(entry.lanes[0].config, ClassConfig::store_and_forward());
+        drop(entry);
+        std::fs::write(dir.path().join(LANES_FILE), b"\xff\xff\xff").unwrap();
+        let e = LinkJournal::on_disk(dir.path(), 9).err().unwrap();
+        assert!(e.to_string().contains(LANES_FILE), "{e}");
     }
 }

@@ -32,8 +32,8 @@ pub use actor::{
 pub use config::{DEFAULT_PEER_TIMEOUT_S, KeyframeEncoding, LinkConfig, SharedConfig};
 pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
-pub use journal::{LinkJournal, MAX_RECEIVED_BYTES};
+pub use journal::{LANES_FILE, LinkJournal, MAX_RECEIVED_BYTES};
 pub use rejections::{RateLimitedLog, Rejection, RejectionCounts};
 pub use shared::{
-    Peer, SHARE_REQUESTS, ShareClass, SharePolicy, ShareRequest, ShareTo, SharedTopic,
+    Peer, SHARE_REQUESTS, ShareClass, ShareFrom, SharePolicy, ShareRequest, ShareTo, SharedTopic,
 };

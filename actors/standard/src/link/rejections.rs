@@ -30,6 +30,9 @@ pub enum Rejection {
     /// An acknowledgement of a message this robot does not hold for that peer, or
     /// has not sent it yet.
     UnheldAck,
+    /// A message on a topic only the base station may send (operator commands,
+    /// [`ShareFrom::Base`](super::ShareFrom::Base)) from another id.
+    NotFromBase,
 }
 
 impl Rejection {
@@ -45,6 +48,7 @@ impl Rejection {
             Rejection::WrongSender => "wrong_sender",
             Rejection::InvalidPayload => "invalid_payload",
             Rejection::UnheldAck => "unheld_ack",
+            Rejection::NotFromBase => "not_from_base",
         }
     }
 }
@@ -68,6 +72,8 @@ pub struct RejectionCounts {
     pub invalid_payload: u64,
     /// See [`Rejection::UnheldAck`].
     pub unheld_ack: u64,
+    /// See [`Rejection::NotFromBase`].
+    pub not_from_base: u64,
 }
 
 impl RejectionCounts {
@@ -93,6 +99,7 @@ impl RejectionCounts {
             Rejection::WrongSender => &mut self.wrong_sender,
             Rejection::InvalidPayload => &mut self.invalid_payload,
             Rejection::UnheldAck => &mut self.unheld_ack,
+            Rejection::NotFromBase => &mut self.not_from_base,
         }
     }
 
@@ -107,6 +114,7 @@ impl RejectionCounts {
             + self.wrong_sender
             + self.invalid_payload
             + self.unheld_ack
+            + self.not_from_base
     }
 }
 

@@ -55,6 +55,19 @@ pub enum ShareTo {
     Robot(u32),
 }
 
+/// Whom the receivers accept a shared topic's messages from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShareFrom {
+    /// Any member of the team roster.
+    Peers,
+    /// The base station only ([`LinkConfig::base_id`](super::LinkConfig::base_id)):
+    /// a message from any other id is dropped and counted
+    /// ([`Rejection::NotFromBase`](super::Rejection::NotFromBase)). Operator
+    /// commands travel so (issue 17).
+    Base,
+}
+
 /// Traffic class of a shared topic, by the names a robot file uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -80,8 +93,8 @@ impl From<ShareClass> for Class {
     }
 }
 
-/// How a shared topic travels: its priority class, its lane's queue policy, and
-/// its addressee.
+/// How a shared topic travels: its priority class, its lane's queue policy, its
+/// addressee, and whom receivers accept it from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SharePolicy {
     /// Priority class (the lane goes after the class's own queue).
@@ -91,6 +104,8 @@ pub struct SharePolicy {
     pub policy: ShaperPolicy,
     /// Every peer, or one.
     pub to: ShareTo,
+    /// Any team member, or the base station only.
+    pub from: ShareFrom,
 }
 
 impl SharePolicy {
@@ -102,6 +117,7 @@ impl SharePolicy {
             class: ShareClass::Plan,
             policy: ShaperPolicy::StoreAndForward,
             to: ShareTo::Peers,
+            from: ShareFrom::Peers,
         }
     }
 }
@@ -169,8 +185,7 @@ impl<T: Message + Serialize + DeserializeOwned> SharedTopic<T> {
         Topic::named(format!("peer/{}", self.name))
     }
 
-    /// The registration [`share`](Self::share) sends, for a link that shares the
-    /// topic from its start ([`LinkActor::sharing`](super::LinkActor::sharing)).
+    /// The registration [`share`](Self::share) sends.
     #[must_use]
     pub fn request(&self) -> ShareRequest {
         ShareRequest(Arc::new(*self))

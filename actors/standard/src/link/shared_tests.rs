@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::*;
-use crate::link::{Peer, ShareClass, SharePolicy, ShareTo, SharedConfig, SharedTopic};
+use crate::link::{Peer, ShareClass, ShareFrom, SharePolicy, ShareTo, SharedConfig, SharedTopic};
 use troupe_comms::shaping::QueuePolicy as ShaperPolicy;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -47,6 +47,7 @@ const DIRECT: SharedTopic<Report> = SharedTopic::new(
         class: ShareClass::Bulk,
         policy: ShaperPolicy::DropOldest,
         to: ShareTo::Robot(1),
+        from: ShareFrom::Peers,
     },
 );
 
@@ -424,4 +425,91 @@ fn reports_above_keyframes_keep_a_bounded_delay_on_a_saturated_link() {
         bulk.len() < 30 || pct(&bulk, 0.5) > 5.0 * pct(&plan, 0.5),
         "{bulk:?}"
     );
+}
+
+/// Publishes one operator command for robot 0 every second, ids from `first_id`.
+struct Commander {
+    first_id: u64,
+    command: crate::collision::OperatorCommand,
+    sent: u64,
+}
+
+impl Actor for Commander {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        crate::collision::BASE_COMMAND.share(ctx);
+        ctx.set_timer(TICK, Duration::from_secs(1));
+        Ok(())
+    }
+    fn handle(&mut self, _: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if self.sent < 5 {
+            ctx.publish(
+                &crate::collision::BASE_COMMAND.topic(),
+                crate::collision::BaseCommand {
+                    robot: Some(0),
+                    id: self.first_id + self.sent,
+                    command: self.command,
+                },
+            );
+            self.sent += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Issue 17: operator commands are obeyed from the base station's id only. Robot 1
+/// (a team member, in the roster) sends `hold` commands with higher ids than the
+/// base's `resume`s: robot 0 rejects and counts every one, applies the base's.
+#[test]
+fn operator_commands_from_another_robot_than_the_base_are_rejected_and_counted() {
+    use crate::collision::{BASE_COMMAND, OPERATOR_HOLD, OperatorActor, OperatorCommand};
+    // Two robots; the base station is id 2 (the team size).
+    let config = LinkConfig {
+        peers: vec![0, 1, 2],
+        ..LinkConfig::default()
+    }
+    .with_team(2);
+    let commander = |first_id, command| {
+        ActorSpec::new("commander", move || Commander {
+            first_id,
+            command,
+            sent: 0,
+        })
+    };
+    let team = vec![
+        RobotSpec::new("r0")
+            .with(link(&config))
+            .with(ActorSpec::new("operator", OperatorActor::new)),
+        RobotSpec::new("r1")
+            .with(link(&config))
+            .with(commander(1_000, OperatorCommand::Hold)),
+        RobotSpec::new("base")
+            .with(link(&config))
+            .with(commander(1, OperatorCommand::Resume)),
+    ];
+    let senders: Arc<Mutex<Vec<RobotId>>> = Arc::default();
+    let held: Arc<Mutex<Vec<bool>>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let (tap_senders, tap_held, tap_status) = (senders.clone(), held.clone(), status.clone());
+    let peer_commands = BASE_COMMAND.peer_topic();
+    let mut exec = SimExecutor::new(team, 1);
+    exec.add_tap(move |p: &Publication<'_>| {
+        if p.robot != RobotId(0) {
+            return;
+        }
+        if let Some(c) = p.get(&peer_commands) {
+            tap_senders.lock().unwrap().push(c.robot);
+        } else if let Some(h) = p.get(&OPERATOR_HOLD) {
+            tap_held.lock().unwrap().push(h.held);
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            *tap_status.lock().unwrap() = Some(s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(8.0));
+    let reports = exec.finish();
+    assert_eq!(*senders.lock().unwrap(), vec![RobotId(2); 5]);
+    assert_eq!(*held.lock().unwrap(), vec![false; 5], "no hold obeyed");
+    let status = status.lock().unwrap().clone().unwrap();
+    assert_eq!(status.rejections.not_from_base, 5);
+    assert_eq!(status.shared["base/command"].received, 5);
+    assert!(reports[0].actors.iter().all(|a| a.stats.errors == 0));
 }

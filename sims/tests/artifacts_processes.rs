@@ -1,0 +1,239 @@
+//! Issue 24 between processes: two `troupe robot` processes running the artifact
+//! reporter and a `troupe base` on loopback over zenoh. Robot 1 (the first to leave
+//! the start) is killed with SIGKILL right after its first reports and started
+//! again on its journal; the base starts late, after that crash. No report is lost:
+//! the reports robot 1 made before the crash reach the base, which was not running
+//! then (they wait in robot 1's journal, `<out>/state/link.journal` and
+//! `link.lanes`), and the base's list and robot 0's equal the union of the robots'
+//! lists.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use troupe_comms::zenoh::ZenohConfig;
+use troupe_sims::process::{ProcessConfig, loopback_endpoints};
+
+/// Reports within this distance are one artifact (the artifact actor's default
+/// merge radius).
+const SAME_ARTIFACT_M: f64 = 1.0;
+
+fn troupe() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_troupe"))
+}
+
+/// Writes `robot<i>.toml` for robot `i` of the scenario `team.toml`, listening on
+/// `endpoints[i]` and connecting to the other endpoints.
+fn robot_file(dir: &Path, i: usize, endpoints: &[String], duration_s: Option<f64>) -> PathBuf {
+    let config = ProcessConfig {
+        robot: i as u32,
+        scenario: PathBuf::from("team.toml"),
+        duration_s,
+        out: Some(PathBuf::from(format!("robot{i}"))),
+        sequence: None,
+        zenoh: ZenohConfig {
+            listen: vec![endpoints[i].clone()],
+            connect: endpoints
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, e)| e.clone())
+                .collect(),
+            ..ZenohConfig::default()
+        },
+        record: false,
+    };
+    let file = dir.join(format!("robot{i}.toml"));
+    std::fs::write(&file, toml::to_string(&config).expect("toml")).expect("robot file");
+    file
+}
+
+/// Starts `troupe robot`; its "artifact found" log lines are counted in `found`.
+fn spawn_robot(file: &Path, found: &Arc<AtomicUsize>) -> Child {
+    let mut child = troupe()
+        .args(["robot", "--config"])
+        .arg(file)
+        .env("RUST_LOG", "warn,troupe_actors::artifacts=info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn troupe robot");
+    let stderr = child.stderr.take().expect("stderr");
+    let found = found.clone();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if line.contains("artifact found") {
+                found.fetch_add(1, Ordering::SeqCst);
+            }
+        }
+    });
+    child
+}
+
+fn wait(child: &mut Child, within: Duration, what: &str) {
+    let started = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            assert!(status.success(), "{what} exited with {status}");
+            return;
+        }
+        if started.elapsed() > within {
+            let _ = child.kill();
+            panic!("{what} did not stop");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn terminate(child: &mut Child, what: &str) {
+    let pid = child.id().to_string();
+    let sent = Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .expect("kill");
+    assert!(sent.success());
+    wait(child, Duration::from_secs(60), what);
+}
+
+fn summary(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("summary.json")).expect("json")
+}
+
+/// The artifacts of a summary: (position, first reporter).
+fn artifacts(summary: &serde_json::Value) -> Vec<([f64; 3], u64)> {
+    summary["artifacts"]
+        .as_array()
+        .map(|list| {
+            list.iter()
+                .map(|a| {
+                    let p = &a["position_m"];
+                    let c = |k: usize| p[k].as_f64().expect("coordinate");
+                    (
+                        [c(0), c(1), c(2)],
+                        a["first_reporter"].as_u64().expect("reporter"),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn near(a: &[f64; 3], b: &[f64; 3]) -> bool {
+    let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+    d2.sqrt() <= SAME_ARTIFACT_M
+}
+
+/// Whether two lists name the same artifacts (one to one, within the merge radius).
+fn same_artifacts(a: &[([f64; 3], u64)], b: &[([f64; 3], u64)]) -> bool {
+    a.len() == b.len()
+        && a.iter().all(|(p, _)| b.iter().any(|(q, _)| near(p, q)))
+        && b.iter().all(|(q, _)| a.iter().any(|(p, _)| near(p, q)))
+}
+
+#[test]
+fn reports_reach_the_peer_and_a_late_base_through_a_robot_crash() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Many artifacts, so that robot 0 finds one soon after it starts.
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"artifacts\"\nrobots = 2\n\n[world.artifacts]\ncount = 40\nmin_spacing_m = 2.0\n\n\
+         [robot.artifacts]\nenabled = true\n\n[robot.link.shared.\"artifacts/report\"]\n\
+         class = \"plan\"\npolicy = \"store_and_forward\"\n",
+    )
+    .expect("scenario");
+    let endpoints = loopback_endpoints(&common::free_ports_from(23_000, 3));
+    // The robots dial each other; the base, when it comes, dials them.
+    let robots = &endpoints[..2];
+    let found0 = Arc::new(AtomicUsize::new(0));
+    let found1 = Arc::new(AtomicUsize::new(0));
+    let mut robot0 = spawn_robot(&robot_file(dir.path(), 0, robots, None), &found0);
+    let mut robot1 = spawn_robot(&robot_file(dir.path(), 1, robots, None), &found1);
+
+    // Robot 1 reports; robot 0 acknowledges within a second or so.
+    let started = Instant::now();
+    while found1.load(Ordering::SeqCst) == 0 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "robot 1 found no artifact in 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_secs(3));
+    robot1.kill().expect("SIGKILL robot 1");
+    let _ = robot1.wait();
+    let before_crash = found1.load(Ordering::SeqCst);
+
+    // Robot 1 again on its journal (20 s), and the base, which missed everything so far.
+    let restarted = Arc::new(AtomicUsize::new(0));
+    let mut robot1 = spawn_robot(&robot_file(dir.path(), 1, robots, Some(20.0)), &restarted);
+    std::fs::write(
+        dir.path().join("base.toml"),
+        format!(
+            "scenario = \"team.toml\"\nout = \"station\"\nply_points = 1000\n\n[zenoh]\n\
+             listen = [\"{}\"]\nconnect = [\"{}\", \"{}\"]\n",
+            endpoints[2], endpoints[0], endpoints[1]
+        ),
+    )
+    .expect("base file");
+    let mut base = troupe()
+        .args(["base", "--config"])
+        .arg(dir.path().join("base.toml"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn troupe base");
+    wait(&mut robot1, Duration::from_secs(80), "restarted robot 1");
+    // Robot 0 and the base get robot 1's last reports, then stop.
+    std::thread::sleep(Duration::from_secs(2));
+    terminate(&mut robot0, "robot 0");
+    terminate(&mut base, "base");
+
+    let r0 = summary(&dir.path().join("robot0/summary.json"));
+    let r1 = summary(&dir.path().join("robot1/summary.json"));
+    let station = summary(&dir.path().join("station/summary.json"));
+    let (list0, list1, at_base) = (artifacts(&r0), artifacts(&r1), artifacts(&station));
+    let mut union: Vec<([f64; 3], u64)> = Vec::new();
+    for a in list0.iter().chain(&list1) {
+        if !union.iter().any(|(p, _)| near(p, &a.0)) {
+            union.push(*a);
+        }
+    }
+    let context = format!(
+        "robot 1 found {before_crash} before the crash, {} after; robot 0 found {}\n\
+         robot0 {list0:?}\nrobot1 {list1:?}\nbase {at_base:?}",
+        restarted.load(Ordering::SeqCst),
+        found0.load(Ordering::SeqCst),
+    );
+    // What robot 1 reported before the crash reached robot 0 ...
+    let early: Vec<_> = list0.iter().filter(|(_, by)| *by == 1).collect();
+    assert!(!early.is_empty(), "{context}");
+    // ... and the base, which started after the crash: from robot 1's journal.
+    for (p, _) in &early {
+        assert!(at_base.iter().any(|(q, _)| near(p, q)), "{context}");
+    }
+    assert!(same_artifacts(&at_base, &union), "base: {context}");
+    assert!(same_artifacts(&list0, &union), "robot 0: {context}");
+    // The restarted robot 1 knows what robot 0 reported (its journal replays
+    // what it had received) and what it finds again; its own reports from before
+    // the crash it knows only if it sees them again, so its list is a part of
+    // the union.
+    assert!(
+        list1
+            .iter()
+            .all(|(p, _)| union.iter().any(|(q, _)| near(p, q))),
+        "robot 1: {context}"
+    );
+    for s in [&r0, &r1] {
+        for actor in s["actors"].as_array().expect("actors") {
+            assert_eq!(actor["panics"].as_u64(), Some(0), "{actor}");
+        }
+        let shared = &s["link"]["shared"]["artifacts/report"];
+        assert_eq!(shared["undecodable"].as_u64(), Some(0), "{shared}");
+        assert_eq!(shared["unknown_name"].as_u64(), Some(0), "{shared}");
+    }
+}
