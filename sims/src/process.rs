@@ -47,6 +47,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
+use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::runtime::{
@@ -268,6 +269,9 @@ pub struct ProcessSummary {
     pub actors: Vec<ProcessActor>,
     /// The link's last counters.
     pub link: Option<LinkStatus>,
+    /// The collision actor's last counters (`stopped`: rounds that committed the
+    /// stopping trajectory).
+    pub collision: Option<CollisionStatus>,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
     /// Packets the executor could not hand to the transport.
@@ -336,7 +340,9 @@ pub async fn run(
     .map_err(|source| ProcessError::Assemble { id, source })?;
     let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let (trajectory_tap, link_tap) = (trajectory.clone(), link.clone());
+    let collision: Arc<Mutex<Option<CollisionStatus>>> = Arc::default();
+    let (trajectory_tap, link_tap, collision_tap) =
+        (trajectory.clone(), link.clone(), collision.clone());
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
         .with_robot_ids(vec![RobotId(id)])
         .map_err(ProcessError::RobotId)?;
@@ -351,6 +357,10 @@ pub async fn run(
             }
         } else if let Some(status) = p.get(&LINK_STATUS)
             && let Ok(mut last) = link_tap.lock()
+        {
+            *last = Some(status.clone());
+        } else if let Some(status) = p.get(&COLLISION_STATUS)
+            && let Ok(mut last) = collision_tap.lock()
         {
             *last = Some(status.clone());
         }
@@ -421,6 +431,10 @@ pub async fn run(
             })
             .collect(),
         link: link
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone(),
+        collision: collision
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clone(),
