@@ -9,9 +9,9 @@
 //!   carries the addressee as a 4-byte attachment; other robots drop it.
 //! - **Checks on receipt** (each counted in [`ZenohStats`]): the key expression
 //!   must parse, name our team and a known class, and agree with the frame's
-//!   class; the frame must parse and be at most the largest MTU long. The link actor then checks that the envelope's
-//!   sender is the robot of the key expression ([`ReceivedPacket::from`]) and
-//!   rejects and counts a mismatch.
+//!   class; the frame must parse and be at most the largest MTU long. The link
+//!   actor then checks that the envelope's sender is the robot of the key
+//!   expression ([`ReceivedPacket::from`]) and rejects and counts a mismatch.
 //! - **Sessions**: peer mode with explicit listen/connect endpoints, or client
 //!   mode towards a router; multicast scouting off by default (a session with no
 //!   endpoints and no scouting opens no socket); optional TLS (root CA,
@@ -166,11 +166,10 @@ const DEFAULT_SEND_QUEUE_FRAMES: usize = 4096;
 /// The smallest `max_message_bytes`: one frame of the largest MTU with headroom.
 const MIN_MAX_MESSAGE_BYTES: usize = 64 * 1024;
 
-/// The default `max_message_bytes`: twice the largest frame. Larger than needed
-/// costs memory that stays: glibc's malloc serves a dropped message's buffer by
-/// `mmap` and then raises its thresholds to that size, after which every thread
-/// arena keeps up to twice as much freed memory resident (measured: a 200 MB
-/// message and a flood left ~30 MB more resident with a 4 MiB limit).
+/// The default `max_message_bytes`: twice the largest frame a link sends (zenoh
+/// carries nothing larger for troupe). It bounds what zenoh buffers for one
+/// incomplete message of one connection, so many hostile connections at once cost
+/// little (each could hold 4 MiB with troupe's message limit as the bound).
 pub const DEFAULT_MAX_MESSAGE_BYTES: usize = 128 * 1024;
 
 fn config_error(key: &str, reason: impl Into<String>) -> TransportError {

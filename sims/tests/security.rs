@@ -1,7 +1,9 @@
-//! Issue 23, the transport side: identity bound by zenoh's access control, messages
-//! refused before they are buffered, secure defaults. The hostile peer is a real
-//! zenoh client (`eclipse-zenoh` from PyPI, `.venv-ros2`, `sims/tests/zenoh_hostile.py`);
-//! without it the tests that need it skip (saying why).
+//! Issue 23, the transport side: identity bound by zenoh's access control with the
+//! secure forms of `docs/security.md` as written, and secure defaults. The hostile
+//! peer is a real zenoh client (`eclipse-zenoh` from PyPI, `.venv-ros2`,
+//! `sims/tests/zenoh_hostile.py`); without it the tests that need it skip (saying
+//! why). The same against `troupe robot` processes, memory under a flood and a
+//! 200 MB message, and `kill -9`: `security_processes.rs`.
 
 mod common;
 
