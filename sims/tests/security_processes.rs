@@ -577,8 +577,7 @@ fn a_flood_and_a_200_mb_message_leave_a_robot_process_as_it_was() {
             ])
         })
         .collect();
-    for flood in floods {
-        let mut flood = flood;
+    for mut flood in floods {
         loop {
             peaks(&robots, &mut peak);
             if flood.try_wait().expect("wait").is_some() {
