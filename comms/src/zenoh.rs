@@ -18,9 +18,9 @@
 //!   carries the addressee as a 4-byte attachment; other robots drop it.
 //! - **Checks on receipt** (each counted in [`ZenohStats`]): the key expression
 //!   must parse, name our team and a known class, and agree with the frame's
-//!   class; the frame must parse. The link actor then checks that the envelope's
-//!   sender is the robot of the key expression ([`ReceivedPacket::from`]) and
-//!   rejects and counts a mismatch.
+//!   class; the frame must parse and be at most the largest MTU long. The link
+//!   actor then checks that the envelope's sender is the robot of the key
+//!   expression ([`ReceivedPacket::from`]) and rejects and counts a mismatch.
 //! - **Sessions**: peer mode with explicit listen/connect endpoints, or client
 //!   mode towards a router; multicast scouting off by default (a session with no
 //!   endpoints and no scouting opens no socket); optional TLS (root CA,
@@ -31,8 +31,8 @@
 //!   (certificate common name or user) publish only under its own id; a session
 //!   listening off loopback without authentication refuses to open unless it says
 //!   `insecure = true`; zenoh drops any message larger than `max_message_bytes`
-//!   (troupe's message limit by default) while receiving it, before it is buffered
-//!   whole.
+//!   (twice the largest frame by default) while receiving it, before it is
+//!   buffered whole.
 //! - **Never blocking the robot**: [`PacketTransport::send`] puts the frame in a
 //!   bounded queue drained by a sender thread (full queue: dropped and counted).
 //!   Shaping happens above, in the link actor, so the same study runs over zenoh
@@ -50,11 +50,12 @@ use ::zenoh::sample::{Locality, Sample};
 use serde::{Deserialize, Serialize};
 
 use crate::scope::{Cell, Scope, SubscriptionConfig, cell_segment, parse_cell_segment};
-use crate::shaping::frame;
+use crate::shaping::MAX_MTU_BYTES;
+use crate::shaping::frame::{self, ParsedFrame};
 use crate::transport::{
     PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
 };
-use crate::wire::{Class, MAX_MESSAGE_BYTES};
+use crate::wire::Class;
 
 pub mod security;
 
@@ -168,8 +169,8 @@ pub struct ZenohConfig {
     pub insecure: bool,
     /// Largest message zenoh receives, bytes; larger ones are dropped while they
     /// arrive, before they are buffered whole (zenoh's
-    /// `transport/link/rx/max_message_size`). 0: troupe's message limit
-    /// ([`MAX_MESSAGE_BYTES`]; the link's frames are far smaller).
+    /// `transport/link/rx/max_message_size`). 0: [`DEFAULT_MAX_MESSAGE_BYTES`]
+    /// (twice the largest frame a link sends: zenoh carries nothing else).
     pub max_message_bytes: usize,
     /// Frames waiting for the sender thread before new ones are dropped.
     pub send_queue_frames: usize,
@@ -179,6 +180,12 @@ const DEFAULT_SEND_QUEUE_FRAMES: usize = 4096;
 
 /// The smallest `max_message_bytes`: one frame of the largest MTU with headroom.
 const MIN_MAX_MESSAGE_BYTES: usize = 64 * 1024;
+
+/// The default `max_message_bytes`: twice the largest frame a link sends (zenoh
+/// carries nothing larger for troupe). It bounds what zenoh buffers for one
+/// incomplete message of one connection, so many hostile connections at once cost
+/// little (each could hold 4 MiB with troupe's message limit as the bound).
+pub const DEFAULT_MAX_MESSAGE_BYTES: usize = 128 * 1024;
 
 fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
     TransportError::Config {
@@ -201,11 +208,11 @@ impl ZenohConfig {
         }
     }
 
-    /// `max_message_bytes`, with 0 meaning troupe's message limit.
+    /// `max_message_bytes`, with 0 meaning [`DEFAULT_MAX_MESSAGE_BYTES`].
     #[must_use]
     pub fn max_message_bytes(&self) -> usize {
         if self.max_message_bytes == 0 {
-            MAX_MESSAGE_BYTES
+            DEFAULT_MAX_MESSAGE_BYTES
         } else {
             self.max_message_bytes
         }
@@ -480,7 +487,8 @@ pub struct ZenohStats {
     pub rejected_key: u64,
     /// Rejected: another team's key expression.
     pub rejected_team: u64,
-    /// Rejected: bytes that are not a frame, or a bad addressee attachment.
+    /// Rejected: bytes that are not a frame (or longer than the largest MTU, a
+    /// frame no link sends), or a bad addressee attachment.
     pub rejected_frame: u64,
     /// Rejected: the frame's class differs from the key expression's.
     pub rejected_class: u64,
@@ -784,6 +792,10 @@ fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink:
     };
     if to.is_some_and(|to| !local.contains(&to)) {
         return bump(&counters.not_for_us);
+    }
+    if sample.payload().len() > MAX_MTU_BYTES {
+        // No link sends a frame this long: junk, refused before it is copied.
+        return bump(&counters.rejected_frame);
     }
     let bytes = sample.payload().to_bytes();
     match frame_class(&bytes) {

@@ -32,6 +32,13 @@
 //! plans and keyframes as received into `out/run.mcap` in wall time (`record = false`
 //! turns it off; `docs/recordings.md`).
 //!
+//! Like a robot process, the base keeps its link journal on disk
+//! (`out/state/link.journal`, `docs/link-durability.md`): a robot releases a keyframe
+//! once the base acknowledged it, so the base journals it first; after `kill -9`
+//! and a restart the journaled keyframes fill the maps again (up to
+//! [`BASE_JOURNAL_RECEIVED_BYTES`]), unacknowledged operator commands are resent and
+//! no message id is used twice.
+//!
 //! An operator types commands on the base's standard input, one per line —
 //! `robot1 hold`, `all hold`, `robot1 resume`, `robot1 velocity 0.5 0 0.1` — which
 //! go to the robots as [`BaseCommand`]s on the shared topic [`BASE_COMMAND`]
@@ -73,6 +80,11 @@ use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
 use crate::maps::merged_points;
 use crate::recording::RUN_RECORDING;
 use crate::scenario::{Scenario, ScenarioError};
+
+/// Most bytes of received keyframes the base's link journal keeps for a restart
+/// (oldest dropped first): the team's map of a long mission (a keyframe is a few
+/// tens of kB).
+pub const BASE_JOURNAL_RECEIVED_BYTES: usize = 512 * 1024 * 1024;
 
 /// Default points in `merged_map.ply`.
 pub const DEFAULT_PLY_POINTS: usize = 200_000;
@@ -557,11 +569,22 @@ pub async fn run(
         .clone()
         .with_team(scenario.robots)
         .with_roster_as_peers();
-    // As a robot process: message ids start somewhere new in every run.
+    // As a robot process, the link's journal is on disk (`out/state/link.journal`):
+    // the keyframes it acknowledged (the robots released them) come back into the
+    // maps after a crash, the operator's commands not yet acknowledged are resent,
+    // and no message id is used twice; a new journal's ids start from the clock.
     let first_id = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u32);
-    let journal = LinkJournal::starting_at(first_id);
+    let journal = LinkJournal::on_disk_keeping(
+        &link.journal_dir_in(&station.out),
+        first_id,
+        BASE_JOURNAL_RECEIVED_BYTES,
+    )
+    .map_err(|e| BaseError::Start {
+        context: "opening the link journal",
+        source: Box::new(e),
+    })?;
     let rejected = Arc::new(AtomicU64::new(0));
     let counter = rejected.clone();
     let mut robot = RobotSpec::new("base").with(

@@ -6,6 +6,13 @@
 //! While the robots run, the launcher samples each process's CPU time and peak
 //! resident memory from `/proc` (Linux; elsewhere the usage is absent), and its own,
 //! which with `--router` is the router's (the launcher itself only waits).
+//!
+//! With `--tls` the team is the secure one of `docs/security.md` in one command: the
+//! launcher writes a CA and a certificate per member with `troupe keys`
+//! ([`crate::keys`], into `keys/` of the launch directory) and robot files whose
+//! `tls/` endpoints use them under mutual TLS, with zenoh's access control
+//! (`[zenoh.access]`: robot `i` may publish only as `i`); the router, if any, runs on
+//! the router's certificate.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -13,8 +20,13 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
+use troupe_comms::zenoh::security::identity_name;
+use troupe_comms::zenoh::{ZenohAccess, ZenohConfig, ZenohTls};
+
+use crate::keys::{ROUTER_NAME, write_team_keys};
 use crate::process::{
-    loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
+    ProcessConfig, loopback_endpoints, min_distance_between, read_trajectory, write_client_team,
+    write_team,
 };
 use crate::router::{Router, RouterError, settings};
 use crate::scenario::Scenario;
@@ -29,6 +41,9 @@ pub struct LaunchOptions {
     pub duration_s: Option<f64>,
     /// Start one zenoh router and make the robots its clients.
     pub router: bool,
+    /// Mutual TLS and access control with credentials written by `troupe keys`
+    /// into `dir/keys` (see the module docs).
+    pub tls: bool,
 }
 
 /// What a launch did (`launch.json`).
@@ -108,6 +123,56 @@ pub enum LaunchError {
     /// The router did not start.
     #[error("starting the router")]
     Router(#[source] RouterError),
+    /// The team's credentials could not be written.
+    #[error("writing the team's keys")]
+    Keys(#[source] crate::keys::KeysError),
+}
+
+/// The directory, in the launch directory, that `--tls` writes the keys into.
+pub const KEYS_DIR: &str = "keys";
+
+/// The secure form of `zenoh` for the member `name` (`robot<i>`, `router`) of a
+/// team of `robots` whose keys `troupe keys` wrote into `keys` (relative to the
+/// file the table is written in): `tls/` endpoints, mutual TLS with the member's
+/// certificate, and access control naming every id (the robots' and the base's)
+/// and the router.
+fn with_team_keys(mut zenoh: ZenohConfig, keys: &Path, name: &str, robots: u32) -> ZenohConfig {
+    let tls = |endpoints: &mut Vec<String>| {
+        for e in endpoints {
+            if let Some(rest) = e.strip_prefix("tcp/") {
+                *e = format!("tls/{rest}");
+            }
+        }
+    };
+    tls(&mut zenoh.listen);
+    tls(&mut zenoh.connect);
+    zenoh.tls = Some(ZenohTls {
+        root_ca_path: keys.join("ca.pem"),
+        cert_path: keys.join(format!("{name}.pem")),
+        key_path: keys.join(format!("{name}.key")),
+        mutual: true,
+    });
+    zenoh.access = Some(ZenohAccess {
+        ids: (0..=robots).collect(),
+        routers: vec![ROUTER_NAME.to_owned()],
+    });
+    zenoh
+}
+
+/// Rewrites each robot file's `[zenoh]` table in its secure form
+/// ([`with_team_keys`], keys in `KEYS_DIR` next to the files).
+fn secure_robot_files(files: &[PathBuf], robots: u32) -> Result<(), LaunchError> {
+    let io = |file: &Path, e: String| LaunchError::Io(format!("{}: {e}", file.display()));
+    for file in files {
+        let text = std::fs::read_to_string(file).map_err(|e| io(file, e.to_string()))?;
+        let mut config: ProcessConfig =
+            toml::from_str(&text).map_err(|e| io(file, e.to_string()))?;
+        let name = identity_name(config.robot);
+        config.zenoh = with_team_keys(config.zenoh, Path::new(KEYS_DIR), &name, robots);
+        let text = toml::to_string(&config).map_err(|e| io(file, e.to_string()))?;
+        std::fs::write(file, text).map_err(|e| io(file, e.to_string()))?;
+    }
+    Ok(())
 }
 
 /// Writes robot files for `scenario_path`'s team into `dir` (see [`LaunchOptions`]),
@@ -123,10 +188,21 @@ pub fn launch(
     let scenario = Scenario::load(scenario_path)?;
     let scenario_abs = std::fs::canonicalize(scenario_path)
         .map_err(|e| io(&scenario_path.display().to_string(), e))?;
+    if options.tls {
+        write_team_keys(&dir.join(KEYS_DIR), scenario.robots).map_err(LaunchError::Keys)?;
+    }
     let (files, router) = if options.router {
-        let endpoint = loopback_endpoints(&[options.base_port]);
-        let router =
-            Router::open(&settings(endpoint.clone(), Vec::new())).map_err(LaunchError::Router)?;
+        let mut router_settings = settings(loopback_endpoints(&[options.base_port]), Vec::new());
+        if options.tls {
+            router_settings = with_team_keys(
+                router_settings,
+                &dir.join(KEYS_DIR),
+                ROUTER_NAME,
+                scenario.robots,
+            );
+        }
+        let endpoint = router_settings.listen.clone();
+        let router = Router::open(&router_settings).map_err(LaunchError::Router)?;
         let files = write_client_team(
             dir,
             &scenario_abs,
@@ -154,6 +230,9 @@ pub fn launch(
         .map_err(|e| io(&dir.display().to_string(), e))?;
         (files, None)
     };
+    if options.tls {
+        secure_robot_files(&files, scenario.robots)?;
+    }
     let mut children: Vec<Child> = Vec::new();
     for file in &files {
         match Command::new(troupe_exe)

@@ -161,6 +161,10 @@ struct LaunchArgs {
     /// Start one zenoh router on BASE_PORT and run the robots as its clients.
     #[arg(long)]
     router: bool,
+    /// Mutual TLS with zenoh's access control: write the team's keys with `troupe
+    /// keys` into the launch directory's `keys/` and robot files that use them.
+    #[arg(long)]
+    tls: bool,
     /// Directory that receives the launch directory.
     #[arg(long, default_value = "runs/launch")]
     out: PathBuf,
@@ -292,6 +296,7 @@ fn launch(args: LaunchArgs) -> anyhow::Result<()> {
         base_port: args.base_port,
         duration_s: args.duration_s,
         router: args.router,
+        tls: args.tls,
     };
     let report = troupe_sims::launch::launch(&args.scenario, &dir, &options, &troupe)?;
     let failed = report.exit_codes.iter().filter(|c| **c != Some(0)).count();
@@ -887,7 +892,7 @@ mod tests {
             .expect("launch")
             .command
         {
-            Command::Launch(a) => assert!(a.router),
+            Command::Launch(a) => assert!(a.router && !a.tls),
             other => panic!("{other:?}"),
         }
     }

@@ -48,6 +48,7 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact};
+use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
 use troupe_actors::msgs::{ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
 use troupe_actors::runtime::{
@@ -248,6 +249,9 @@ pub struct ProcessSummary {
     pub actors: Vec<ProcessActor>,
     /// The link's last counters.
     pub link: Option<LinkStatus>,
+    /// The collision actor's last counters (`stopped`: rounds that committed the
+    /// stopping trajectory).
+    pub collision: Option<CollisionStatus>,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
     /// Packets the executor could not hand to the transport.
@@ -352,11 +356,13 @@ pub async fn run(
     let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
     let peers: Arc<Mutex<BTreeMap<u32, PeerCounts>>> = Arc::default();
     let artifacts: Arc<Mutex<Vec<Artifact>>> = Arc::default();
-    let (trajectory_tap, link_tap, peers_tap, artifacts_tap) = (
+    let collision: Arc<Mutex<Option<CollisionStatus>>> = Arc::default();
+    let (trajectory_tap, link_tap, peers_tap, artifacts_tap, collision_tap) = (
         trajectory.clone(),
         link.clone(),
         peers.clone(),
         artifacts.clone(),
+        collision.clone(),
     );
     let position_tap = transport.clone();
     let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
@@ -376,6 +382,10 @@ pub async fn run(
             }
         } else if let Some(status) = p.get(&LINK_STATUS)
             && let Ok(mut last) = link_tap.lock()
+        {
+            *last = Some(status.clone());
+        } else if let Some(status) = p.get(&COLLISION_STATUS)
+            && let Ok(mut last) = collision_tap.lock()
         {
             *last = Some(status.clone());
         } else if let Some(list) = p.get(&ARTIFACT_LIST)
@@ -448,6 +458,10 @@ pub async fn run(
             })
             .collect(),
         link: link
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone(),
+        collision: collision
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clone(),

@@ -1,9 +1,11 @@
 """A hostile zenoh client (eclipse-zenoh from PyPI) for sims/tests/security.rs.
 
 Connects in client mode to ENDPOINT with the credentials given (none, TLS files,
-user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY, 20 ms
-apart, or (with --size-mb) one payload of that many megabytes. Prints one JSON
-line: whether the session opened, and how many puts zenoh accepted locally.
+user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY (and each
+--put-file KEY=FILE's bytes on its key), 20 ms apart; or (with --size-mb) one
+payload of that many megabytes; or (with --flood N) N copies of PAYLOAD_FILE on
+the first KEY as fast as zenoh takes them. Prints one JSON line: whether the
+session opened, and how many puts zenoh accepted locally.
 """
 
 import argparse
@@ -26,6 +28,8 @@ def main():
     ap.add_argument("--payload-file")
     ap.add_argument("--count", type=int, default=50)
     ap.add_argument("--size-mb", type=int)
+    ap.add_argument("--put-file", action="append", default=[], metavar="KEY=FILE")
+    ap.add_argument("--flood", type=int)
     a = ap.parse_args()
 
     conf = zenoh.Config()
@@ -56,11 +60,21 @@ def main():
         session.put(key, bytes(a.size_mb * 1_000_000), congestion_control=block)
         puts += 1
         time.sleep(2.0)
-    else:
+    elif a.flood:
         payload = open(a.payload_file, "rb").read()
+        for _ in range(a.flood):
+            session.put(a.put[0], payload, congestion_control=block)
+            puts += 1
+        time.sleep(0.5)
+    else:
+        payload = open(a.payload_file, "rb").read() if a.payload_file else b""
+        frames = [(key, payload) for key in a.put]
+        for pair in a.put_file:
+            key, path = pair.split("=", 1)
+            frames.append((key, open(path, "rb").read()))
         for _ in range(a.count):
-            for key in a.put:
-                session.put(key, payload, congestion_control=block)
+            for key, body in frames:
+                session.put(key, body, congestion_control=block)
                 puts += 1
             time.sleep(0.02)
         time.sleep(0.5)

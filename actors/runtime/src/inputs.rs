@@ -46,7 +46,10 @@ impl Inputs {
             self.dropped_while_stopped += 1;
             return false;
         }
-        self.subscriptions[sub].queue.push(arrival, message)
+        let bytes = message.bytes;
+        self.subscriptions[sub]
+            .queue
+            .push_sized(arrival, message, bytes)
     }
 
     /// Marks a timer tick as pending; returns false if it was coalesced.

@@ -23,6 +23,17 @@ pub enum QueuePolicy {
         /// Capacity (at least 1).
         capacity: usize,
     },
+    /// Like [`Fifo`](QueuePolicy::Fifo), and also at most `max_bytes` of queued
+    /// payload ([`Message::payload_bytes`](crate::Message::payload_bytes)): an
+    /// arrival that would pass either bound is rejected (one arrival into an empty
+    /// queue is always taken). Right for input a stranger controls (received
+    /// network frames), whose items may be large.
+    FifoBytes {
+        /// Capacity in messages (at least 1).
+        capacity: usize,
+        /// Capacity in payload bytes.
+        max_bytes: usize,
+    },
 }
 
 impl QueuePolicy {
@@ -35,10 +46,28 @@ impl QueuePolicy {
         QueuePolicy::Fifo { capacity }
     }
 
+    /// A FIFO queue bounded in messages and in payload bytes.
+    #[must_use]
+    pub const fn fifo_bytes(capacity: usize, max_bytes: usize) -> Self {
+        QueuePolicy::FifoBytes {
+            capacity,
+            max_bytes,
+        }
+    }
+
     fn capacity(self) -> usize {
         match self {
             QueuePolicy::KeepLatest { depth } => depth.max(1),
-            QueuePolicy::Fifo { capacity } => capacity.max(1),
+            QueuePolicy::Fifo { capacity } | QueuePolicy::FifoBytes { capacity, .. } => {
+                capacity.max(1)
+            }
+        }
+    }
+
+    fn max_bytes(self) -> usize {
+        match self {
+            QueuePolicy::FifoBytes { max_bytes, .. } => max_bytes,
+            _ => usize::MAX,
         }
     }
 }
@@ -50,7 +79,10 @@ impl QueuePolicy {
 #[derive(Debug)]
 pub(crate) struct BoundedQueue<T> {
     policy: QueuePolicy,
-    items: VecDeque<(u64, T)>,
+    /// Arrival, item, its payload bytes.
+    items: VecDeque<(u64, T, usize)>,
+    /// Payload bytes queued.
+    bytes: usize,
     dropped: u64,
 }
 
@@ -59,33 +91,46 @@ impl<T> BoundedQueue<T> {
         BoundedQueue {
             policy,
             items: VecDeque::with_capacity(policy.capacity().min(64)),
+            bytes: 0,
             dropped: 0,
         }
     }
 
-    /// Offers an item; returns `true` if it was accepted.
+    /// Offers an item of no counted size; returns `true` if it was accepted.
+    #[cfg(test)]
     pub(crate) fn push(&mut self, arrival: u64, item: T) -> bool {
-        if self.items.len() < self.policy.capacity() {
-            self.items.push_back((arrival, item));
+        self.push_sized(arrival, item, 0)
+    }
+
+    /// Offers an item of `bytes` payload bytes; returns `true` if it was accepted.
+    pub(crate) fn push_sized(&mut self, arrival: u64, item: T, bytes: usize) -> bool {
+        let fits_bytes =
+            self.items.is_empty() || self.bytes.saturating_add(bytes) <= self.policy.max_bytes();
+        if self.items.len() < self.policy.capacity() && fits_bytes {
+            self.bytes += bytes;
+            self.items.push_back((arrival, item, bytes));
             return true;
         }
         self.dropped += 1;
         match self.policy {
             QueuePolicy::KeepLatest { .. } => {
-                self.items.pop_front();
-                self.items.push_back((arrival, item));
+                self.pop();
+                self.bytes += bytes;
+                self.items.push_back((arrival, item, bytes));
                 true
             }
-            QueuePolicy::Fifo { .. } => false,
+            QueuePolicy::Fifo { .. } | QueuePolicy::FifoBytes { .. } => false,
         }
     }
 
     pub(crate) fn front_arrival(&self) -> Option<u64> {
-        self.items.front().map(|(seq, _)| *seq)
+        self.items.front().map(|(seq, _, _)| *seq)
     }
 
     pub(crate) fn pop(&mut self) -> Option<T> {
-        self.items.pop_front().map(|(_, item)| item)
+        let (_, item, bytes) = self.items.pop_front()?;
+        self.bytes -= bytes;
+        Some(item)
     }
 
     pub(crate) fn len(&self) -> usize {
@@ -98,8 +143,10 @@ impl<T> BoundedQueue<T> {
 
     pub(crate) fn set_policy(&mut self, policy: QueuePolicy) {
         self.policy = policy;
-        while self.items.len() > policy.capacity() {
-            self.items.pop_front();
+        while self.items.len() > policy.capacity()
+            || (self.items.len() > 1 && self.bytes > policy.max_bytes())
+        {
+            self.pop();
             self.dropped += 1;
         }
     }
@@ -131,6 +178,24 @@ mod tests {
         assert_eq!(q.front_arrival(), Some(0));
         assert_eq!(q.pop(), Some('a'));
         assert_eq!(q.pop(), Some('b'));
+    }
+
+    #[test]
+    fn fifo_bytes_rejects_what_passes_either_bound() {
+        let mut q = BoundedQueue::new(QueuePolicy::fifo_bytes(3, 100));
+        // One item larger than the byte bound is taken into an empty queue.
+        assert!(q.push_sized(0, 'a', 150));
+        assert!(!q.push_sized(1, 'b', 1));
+        assert_eq!(q.pop(), Some('a'));
+        assert!(q.push_sized(2, 'c', 60));
+        assert!(q.push_sized(3, 'd', 40));
+        assert!(!q.push_sized(4, 'e', 1), "100 bytes queued: full");
+        assert_eq!(q.pop(), Some('c'));
+        assert!(q.push_sized(5, 'f', 10));
+        assert!(q.push_sized(6, 'g', 0));
+        assert!(!q.push_sized(7, 'h', 0), "three messages: full");
+        assert_eq!(q.dropped(), 3);
+        assert_eq!(q.len(), 3);
     }
 
     #[test]

@@ -208,6 +208,7 @@ impl Shared {
                     topic: topic.name.clone(),
                     payload: out.payload.clone(),
                     published_at: now,
+                    bytes: out.bytes,
                 };
                 if lock(&inbox.inputs).offer(sub, arrival, message) {
                     inbox.notify.notify_one();

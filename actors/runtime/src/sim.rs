@@ -185,6 +185,7 @@ impl World {
                     topic: entry.name.clone(),
                     payload: out.payload.clone(),
                     published_at: clock.now,
+                    bytes: out.bytes,
                 };
                 if robot.inputs[slot].offer(sub, arrival, message) {
                     let state = &mut robot.schedule[slot];

@@ -82,6 +82,8 @@ pub struct Received {
     pub(crate) topic: Arc<str>,
     pub(crate) payload: Payload,
     pub(crate) published_at: Time,
+    /// Its payload bytes ([`Message::payload_bytes`]), charged to byte-bounded queues.
+    pub(crate) bytes: usize,
 }
 
 impl Received {

@@ -341,7 +341,7 @@ fn access_control_and_size_limit_reach_zenohs_configuration() {
     assert!(!acl.contains("\"cert_common_names\":["), "{acl}");
     assert_eq!(
         z.get_json("transport/link/rx/max_message_size").unwrap(),
-        MAX_MESSAGE_BYTES.to_string()
+        DEFAULT_MAX_MESSAGE_BYTES.to_string()
     );
     let _ = std::fs::remove_file(users);
 }

@@ -26,3 +26,31 @@ pub fn free_ports_from(first: u16, n: usize) -> Vec<u16> {
             )
         })
 }
+
+/// The workspace root.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace")
+        .to_path_buf()
+}
+
+/// The venv's Python that imports `zenoh` (the hostile peer of the security tests,
+/// `sims/tests/zenoh_hostile.py`), or why there is none.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn zenoh_python() -> Result<std::path::PathBuf, String> {
+    let python = root().join(".venv-ros2/bin/python");
+    let ok = std::process::Command::new(&python)
+        .args(["-c", "import zenoh"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        Ok(python)
+    } else {
+        Err(format!(
+            "{} cannot import zenoh (.ci/run installs eclipse-zenoh)",
+            python.display()
+        ))
+    }
+}

@@ -104,6 +104,14 @@ struct SharedEntry {
     stats: SharedStats,
 }
 
+/// Most received frames waiting for the link ([`LINK_RX`]); more are dropped and
+/// counted by the runtime (the sender's store-and-forward resends what mattered).
+pub const LINK_RX_MAX_FRAMES: usize = 4096;
+/// Most bytes of received frames waiting for the link: a flood of large junk
+/// frames cannot hold more memory than this (4096 frames of the largest MTU would
+/// be 256 MiB).
+pub const LINK_RX_MAX_BYTES: usize = 8 * 1024 * 1024;
+
 /// Link counters.
 pub const LINK_STATUS: Topic<LinkStatus> = Topic::new("link/status");
 
@@ -929,7 +937,10 @@ impl LinkActor {
 impl Actor for LinkActor {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
-        ctx.subscribe(&LINK_RX, QueuePolicy::fifo(4096));
+        ctx.subscribe(
+            &LINK_RX,
+            QueuePolicy::fifo_bytes(LINK_RX_MAX_FRAMES, LINK_RX_MAX_BYTES),
+        );
         ctx.subscribe(&LINK_TRANSPORT, QueuePolicy::LATEST);
         if self.share_keyframes {
             ctx.subscribe(&KEYFRAME, QueuePolicy::fifo(64));

@@ -144,7 +144,18 @@ impl LinkJournal {
     /// through, fsync'd, so that `kill -9` and a restart lose nothing accepted or
     /// acknowledged and reuse no id. A new file's ids start at `first_id`.
     pub fn on_disk(dir: &Path, first_id: u32) -> Result<Self, JournalError> {
-        let (disk, recovered) = DiskJournal::open(dir, first_id, MAX_RECEIVED_BYTES)?;
+        Self::on_disk_keeping(dir, first_id, MAX_RECEIVED_BYTES)
+    }
+
+    /// Like [`on_disk`](Self::on_disk), keeping up to `max_received_bytes` of
+    /// received messages (oldest dropped first) instead of [`MAX_RECEIVED_BYTES`]:
+    /// a base station keeps the team's whole map this way.
+    pub fn on_disk_keeping(
+        dir: &Path,
+        first_id: u32,
+        max_received_bytes: usize,
+    ) -> Result<Self, JournalError> {
+        let (disk, recovered) = DiskJournal::open(dir, first_id, max_received_bytes)?;
         let lanes_path = dir.join(LANES_FILE);
         let lanes = read_lanes(&lanes_path)?;
         if recovered.discarded_bytes > 0 {

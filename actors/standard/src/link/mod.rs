@@ -27,7 +27,8 @@ mod rejections;
 mod shared;
 
 pub use actor::{
-    LINK_STATUS, LinkActor, LinkStatus, MAX_UNKNOWN_NAMES, OTHER_UNKNOWN_NAMES, SharedStats,
+    LINK_RX_MAX_BYTES, LINK_RX_MAX_FRAMES, LINK_STATUS, LinkActor, LinkStatus, MAX_UNKNOWN_NAMES,
+    OTHER_UNKNOWN_NAMES, SharedStats,
 };
 pub use config::{DEFAULT_PEER_TIMEOUT_S, KeyframeEncoding, LinkConfig, SharedConfig};
 pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
