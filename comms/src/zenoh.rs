@@ -51,7 +51,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::scope::{Cell, Scope, SubscriptionConfig, cell_segment, parse_cell_segment};
 use crate::shaping::MAX_MTU_BYTES;
-use crate::shaping::frame::{self, ParsedFrame};
+use crate::shaping::frame;
 use crate::transport::{
     PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
 };
