@@ -76,10 +76,19 @@ pub enum Ros2Error {
     Thread(#[source] std::io::Error),
 }
 
+/// The largest ROS 2 message the session accepts when `[ros2.zenoh]` does not set
+/// `max_message_bytes`: a 1280 × 720 32FC1 depth image is 3.7 MB and a point cloud can
+/// be larger, far above the team link's default (sized for link frames).
+pub const ROS2_DEFAULT_MAX_MESSAGE_BYTES: usize = 64 * 1024 * 1024;
+
 /// Opens the zenoh session of the `[ros2]` table (its `zenoh` endpoints).
 pub fn open_session(config: &Ros2Config) -> Result<zenoh::Session, Ros2Error> {
     config.validate()?;
-    let zenoh_config = config.zenoh.to_zenoh().map_err(Ros2Error::ZenohSettings)?;
+    let mut zenoh = config.zenoh.clone();
+    if zenoh.max_message_bytes == 0 {
+        zenoh.max_message_bytes = ROS2_DEFAULT_MAX_MESSAGE_BYTES;
+    }
+    let zenoh_config = zenoh.to_zenoh().map_err(Ros2Error::ZenohSettings)?;
     zenoh::Wait::wait(zenoh::open(zenoh_config)).map_err(|source| Ros2Error::Zenoh {
         context: "opening the session".into(),
         source,

@@ -67,7 +67,9 @@ fn log_once(message: &str) {
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum GpuUnavailable {
     /// The world cannot be described to the GPU.
-    #[error("the world has no GPU description (mesh worlds and worlds with artifacts render on the CPU)")]
+    #[error(
+        "the world has no GPU description (mesh worlds and worlds with artifacts render on the CPU)"
+    )]
     NoGpuScene,
     /// The only adapter renders in software (`"auto"` passes it over).
     #[error(

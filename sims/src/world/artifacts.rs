@@ -20,6 +20,7 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use troupe_core::ConfigError;
 
 use super::{Aabb, Site, World, surface_distance_m};
 
@@ -57,24 +58,23 @@ impl ArtifactParams {
     ///
     /// # Errors
     ///
-    /// What is wrong, naming the key.
-    pub fn validate(&self) -> Result<(), String> {
+    /// The offending key (relative to `[world.artifacts]`), its rule and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if self.count > 1000 {
-            return Err(format!("count must be at most 1000, got {}", self.count));
+            return Err(ConfigError::new(
+                "count",
+                "must be at most 1000",
+                self.count,
+            ));
         }
-        for (key, v) in [
-            ("radius_m", self.radius_m),
-            ("clearance_m", self.clearance_m),
-            ("min_spacing_m", self.min_spacing_m),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{key} must be a finite number > 0, got {v}"));
-            }
-        }
+        ConfigError::positive("radius_m", self.radius_m)?;
+        ConfigError::positive("clearance_m", self.clearance_m)?;
+        ConfigError::positive("min_spacing_m", self.min_spacing_m)?;
         if self.clearance_m <= self.radius_m {
-            return Err(format!(
-                "clearance_m must exceed radius_m, got {}",
-                self.clearance_m
+            return Err(ConfigError::new(
+                "clearance_m",
+                "must exceed radius_m",
+                self.clearance_m,
             ));
         }
         Ok(())
@@ -245,11 +245,11 @@ mod tests {
             radius_m: f64::NAN,
             ..ArtifactParams::default()
         };
-        assert!(bad.validate().unwrap_err().starts_with("radius_m"));
+        assert_eq!(bad.validate().unwrap_err().key, "radius_m");
         let bad = ArtifactParams {
             clearance_m: 0.1,
             ..ArtifactParams::default()
         };
-        assert!(bad.validate().unwrap_err().starts_with("clearance_m"));
+        assert_eq!(bad.validate().unwrap_err().key, "clearance_m");
     }
 }

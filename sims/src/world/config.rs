@@ -96,12 +96,9 @@ impl WorldConfig {
     /// The offending key relative to `[world]` (`cave.tunnel_count`), its rule and its
     /// value.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        // artifacts.rs still says "KEY RULE, got VALUE"; it converts to ConfigError next.
-        self.artifacts.validate().map_err(|reason| {
-            let (key, rest) = reason.split_once(' ').unwrap_or(("", &reason));
-            let (rule, value) = rest.rsplit_once(", got ").unwrap_or((rest, "?"));
-            ConfigError::new(key, rule.to_owned(), value).within("artifacts")
-        })?;
+        self.artifacts
+            .validate()
+            .map_err(|e| e.within("artifacts"))?;
         let (table, checked) = match self.kind {
             WorldKind::Cave => ("cave", self.cave.validate()),
             WorldKind::Warehouse => ("warehouse", self.warehouse.validate()),
