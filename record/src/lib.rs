@@ -5,6 +5,25 @@
 //! executor: `troupe run` (sim time), the robot processes and the base station (wall
 //! time) add one. The channels are listed in [`recorder`]; `docs/recordings.md` is
 //! the user's guide.
+//!
+//! A recording written by hand (an executor's tap does the same for every
+//! publication):
+//!
+//! ```
+//! use troupe_core::Time;
+//! use troupe_record::{Clock, Recorder, schemas};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let dir = tempfile::tempdir()?;
+//! let mut recorder = Recorder::create(&dir.path().join("run.mcap"), Clock::Sim)?;
+//! let sample = serde_json::json!({ "time_s": 1.0, "fraction": 0.25, "explored_m3": 918.0 });
+//! recorder.write("/coverage", &schemas::COVERAGE, Time::from_nanos(1_000_000_000), &sample);
+//! let stats = recorder.finish()?;
+//! assert_eq!(stats.messages["/coverage"], 1);
+//! assert_eq!(stats.failed, 0);
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod foxglove;
 pub mod recorder;
