@@ -1,7 +1,7 @@
 //! Global guidance: the route distance from anywhere in known passable space to the
 //! nearest remembered frontier (paper Alg. 1, V-B: the frontier-distance reward
 //! V = d(ξ₀) − d(ξτ), here over the team's frontier memory instead of the window),
-//! with frontiers that peers are heading to made longer (implicit coordination).
+//! with the frontiers claimed by peers made longer ([`Coordination`]).
 
 use std::cmp::Ordering;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
@@ -48,8 +48,9 @@ pub struct FieldParams {
     pub coordination: Coordination,
     /// Smallest region of 26-connected frontier cells that seeds the field.
     pub min_region_cells: usize,
-    /// A frontier within this distance of a peer's goal (or the frontier assigned to
-    /// it), and closer to it than to this robot, is the peer's claim, metres.
+    /// A frontier within this distance of the frontier assigned to a peer (or, for
+    /// [`Coordination::PlanEnd`], of its plan's end and closer to it than to this robot)
+    /// is the peer's claim, metres.
     pub claim_radius_m: f64,
     /// Route length added to a claimed frontier, metres.
     pub claim_penalty_m: f64,
@@ -104,36 +105,49 @@ fn regions_of_at_least(frontiers: BTreeSet<CellKey>, min_cells: usize) -> Vec<Ce
     kept.into_iter().collect()
 }
 
-/// Route distance (metres) from `from` to every passable memory cell it reaches:
-/// single-source Dijkstra over the 26-connected passable cells, from the cell holding
-/// `from` (or its passable neighbours when that cell is not passable).
-fn routes_from(memory: &FrontierMemory, from: &Point3<f64>) -> HashMap<CellKey, f64, Fixed> {
-    let mut reached: HashMap<CellKey, f64, Fixed> = HashMap::default();
+/// Route distance (metres) from `from` to every passable memory cell it reaches, from
+/// the cell holding `from` (or its passable neighbours when that cell is not passable).
+fn routes_from(memory: &FrontierMemory, from: &Point3<f64>) -> Reached {
     let Some(start) = memory.key_of(from) else {
-        return reached;
+        return Reached::default();
     };
-    let mut heap = BinaryHeap::new();
-    for (n, _) in std::iter::once((start, 0.0)).chain(neighbours(start)) {
-        if memory.record(n).passable {
-            heap.push(Entry {
-                cost_m: (memory.centre(n) - from).norm(),
-                key: n,
-                target: n,
-            });
-        }
-    }
+    let seeds = std::iter::once(start)
+        .chain(neighbours(start).map(|(n, _)| n))
+        .filter(|n| memory.record(*n).passable)
+        .map(|n| Entry {
+            cost_m: (memory.centre(n) - from).norm(),
+            key: n,
+            target: start,
+        })
+        .collect();
+    spread(memory, seeds)
+}
+
+/// Each reached cell's least route cost, metres, and the target of the seed it came from.
+type Reached = HashMap<CellKey, (f64, CellKey), Fixed>;
+
+/// Dijkstra over the 26-connected passable cells of `memory` from the `seeds`.
+///
+/// Time: `O(c log c)` for `c` passable cells; memory: one entry per reached cell.
+fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
     let cell_m = memory.cell_m();
-    while let Some(Entry { cost_m, key, .. }) = heap.pop() {
+    let mut reached = Reached::default();
+    while let Some(Entry {
+        cost_m,
+        key,
+        target,
+    }) = heap.pop()
+    {
         if reached.contains_key(&key) {
             continue;
         }
-        reached.insert(key, cost_m);
+        reached.insert(key, (cost_m, target));
         for (n, step) in neighbours(key) {
             if !reached.contains_key(&n) && memory.record(n).passable {
                 heap.push(Entry {
                     cost_m: cost_m + step * cell_m,
                     key: n,
-                    target: n,
+                    target,
                 });
             }
         }
@@ -169,7 +183,7 @@ fn claimed_by_assignment(
         for &f in open {
             let cost_m = std::iter::once((f, 0.0))
                 .chain(neighbours(f))
-                .filter_map(|(n, step)| routes.get(&n).map(|d| d + step * cell_m))
+                .filter_map(|(n, step)| routes.get(&n).map(|(d, _)| d + step * cell_m))
                 .fold(f64::INFINITY, f64::min);
             if cost_m.is_finite() {
                 pairs.push((cost_m, id, f));
@@ -293,27 +307,7 @@ impl GuidanceField {
             }
             frontiers += usize::from(seeded);
         }
-        let mut distance_m: HashMap<CellKey, (f64, CellKey), Fixed> = HashMap::default();
-        while let Some(Entry {
-            cost_m,
-            key,
-            target,
-        }) = heap.pop()
-        {
-            if distance_m.contains_key(&key) {
-                continue;
-            }
-            distance_m.insert(key, (cost_m, target));
-            for (n, step) in neighbours(key) {
-                if !distance_m.contains_key(&n) && memory.record(n).passable {
-                    heap.push(Entry {
-                        cost_m: cost_m + step * cell_m,
-                        key: n,
-                        target,
-                    });
-                }
-            }
-        }
+        let distance_m = spread(memory, heap);
         GuidanceField {
             cell_m,
             key_scale: 1.0 / cell_m,
