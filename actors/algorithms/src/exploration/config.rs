@@ -28,6 +28,11 @@ pub struct GuidanceConfig {
     /// keeps every one: in the default cave a branch first seen as one or two cells
     /// was hidden too (docs/exploration.md).
     pub min_region_cells: usize,
+    /// With `min_region_cells` above 1: the route length added to the frontiers of a
+    /// smaller region instead of leaving them out, metres — a leftover cell pulls a
+    /// robot only when no real opening lies within this much further. `None` (the
+    /// default) leaves them out.
+    pub small_region_penalty_m: Option<f64>,
     /// The frontier reward of a round is measured over the memory (route distance to
     /// the remembered frontiers) whenever the memory's field reaches the robot. With a
     /// value here, a round whose best candidate's information (CSQMI, nats) reaches it
@@ -45,6 +50,11 @@ pub struct GuidanceConfig {
     pub claim_radius_m: f64,
     /// Route length added to a frontier a peer claims, metres.
     pub claim_penalty_m: f64,
+    /// Commitment: route length added to every frontier farther than
+    /// [`Self::claim_radius_m`] from the one this robot's route led to last round, while
+    /// that one is open, metres — a robot changes its goal only for one this much
+    /// nearer (0: it follows the nearest every round).
+    pub switch_penalty_m: f64,
     /// The guided frontier reward measures the route distance this far ahead of a
     /// pose, so that turning to face the route pays, metres.
     pub look_ahead_m: f64,
@@ -67,11 +77,13 @@ impl Default for GuidanceConfig {
             max_cells: 262_144,
             min_frontier_cells: 4,
             min_region_cells: 1,
+            small_region_penalty_m: None,
             window_reward_above_nats: None,
             peer_keyframe_samples: 1000,
             coordination: Coordination::default(),
             claim_radius_m: 6.0,
             claim_penalty_m: 30.0,
+            switch_penalty_m: 0.0,
             look_ahead_m: 1.0,
             give_up_after_s: Some(4.0),
             give_up_radius_m: 3.0,
@@ -109,11 +121,15 @@ impl GuidanceConfig {
                 self.peer_keyframe_samples,
             ));
         }
+        if let Some(m) = self.small_region_penalty_m {
+            ConfigError::non_negative("small_region_penalty_m", m)?;
+        }
         if let Some(nats) = self.window_reward_above_nats {
             ConfigError::non_negative("window_reward_above_nats", nats)?;
         }
         ConfigError::non_negative("claim_radius_m", self.claim_radius_m)?;
         ConfigError::non_negative("claim_penalty_m", self.claim_penalty_m)?;
+        ConfigError::non_negative("switch_penalty_m", self.switch_penalty_m)?;
         if let Some(s) = self.give_up_after_s {
             ConfigError::positive("give_up_after_s", s)?;
         }

@@ -46,14 +46,20 @@ pub enum Coordination {
 pub struct FieldParams {
     /// How the peers' claims are decided.
     pub coordination: Coordination,
-    /// Smallest region of 26-connected frontier cells that seeds the field.
+    /// Smallest region of 26-connected frontier cells that seeds the field as it is.
     pub min_region_cells: usize,
+    /// Route length added to the frontiers of a smaller region, metres; `None` leaves
+    /// them out.
+    pub small_region_penalty_m: Option<f64>,
     /// A frontier within this distance of the frontier assigned to a peer (or, for
     /// [`Coordination::PlanEnd`], of its plan's end and closer to it than to this robot)
     /// is the peer's claim, metres.
     pub claim_radius_m: f64,
     /// Route length added to a claimed frontier, metres.
     pub claim_penalty_m: f64,
+    /// Route length added, for this robot only, to the frontiers farther than the claim
+    /// radius from the frontier its route led to last round, metres (0: none).
+    pub switch_penalty_m: f64,
     /// How far ahead of a pose [`GuidanceField::pose_distance_m`] measures, metres.
     pub look_ahead_m: f64,
 }
@@ -76,13 +82,18 @@ pub struct GuidanceField {
     frontiers: usize,
 }
 
-/// The cells of `frontiers` (in key order) that lie in a region of at least
-/// `min_cells` 26-connected frontier cells, in key order.
-fn regions_of_at_least(frontiers: BTreeSet<CellKey>, min_cells: usize) -> Vec<CellKey> {
+/// The cells of `frontiers` with the route length each one's region adds, in key
+/// order: nothing for a region of at least `min_cells` 26-connected frontier cells,
+/// `small_penalty_m` for a smaller one, whose cells are left out when that is `None`.
+fn weigh_regions(
+    frontiers: BTreeSet<CellKey>,
+    min_cells: usize,
+    small_penalty_m: Option<f64>,
+) -> Vec<(CellKey, f64)> {
     if min_cells <= 1 {
-        return frontiers.into_iter().collect();
+        return frontiers.into_iter().map(|f| (f, 0.0)).collect();
     }
-    let mut kept = BTreeSet::new();
+    let mut weighed = BTreeMap::new();
     let mut visited = BTreeSet::new();
     for &start in &frontiers {
         if !visited.insert(start) {
@@ -98,11 +109,16 @@ fn regions_of_at_least(frontiers: BTreeSet<CellKey>, min_cells: usize) -> Vec<Ce
                 }
             }
         }
-        if region.len() >= min_cells {
-            kept.extend(region);
+        let extra_m = if region.len() >= min_cells {
+            Some(0.0)
+        } else {
+            small_penalty_m
+        };
+        if let Some(extra_m) = extra_m {
+            weighed.extend(region.into_iter().map(|f| (f, extra_m)));
         }
     }
-    kept.into_iter().collect()
+    weighed.into_iter().collect()
 }
 
 /// Route distance (metres) from `from` to every passable memory cell it reaches, from
@@ -157,7 +173,8 @@ fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
 
 /// The frontiers of `open` that the greedy assignment ([`Coordination::Assignment`])
 /// gives to a peer of `own`: each robot's route cost to each frontier (through a
-/// passable neighbour, as the field seeds it); repeatedly the cheapest (robot, frontier)
+/// passable neighbour, as the field seeds it; plus the frontier's region weight and, for
+/// `own`, its cost of switching); repeatedly the cheapest (robot, frontier)
 /// pair whose robot has no frontier yet and whose frontier is unclaimed is assigned, and
 /// the unclaimed frontiers within `claim_radius_m` of it become that robot's.
 ///
@@ -165,8 +182,8 @@ fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
 /// cells, plus sorting the `r · f` pairs.
 fn claimed_by_assignment(
     memory: &FrontierMemory,
-    open: &[CellKey],
-    (own, own_m): (RobotId, &Point3<f64>),
+    open: &[(CellKey, f64)],
+    (own, own_m, own_extra_m): (RobotId, &Point3<f64>, &dyn Fn(&CellKey) -> f64),
     peers: &BTreeMap<RobotId, PeerIntent>,
     claim_radius_m: f64,
 ) -> BTreeSet<CellKey> {
@@ -180,11 +197,14 @@ fn claimed_by_assignment(
     let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
     for (id, position_m) in robots {
         let routes = routes_from(memory, &position_m);
-        for &f in open {
-            let cost_m = std::iter::once((f, 0.0))
-                .chain(neighbours(f))
-                .filter_map(|(n, step)| routes.get(&n).map(|(d, _)| d + step * cell_m))
-                .fold(f64::INFINITY, f64::min);
+        for &(f, extra_m) in open {
+            let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
+            let cost_m = extra_m
+                + mine_m
+                + std::iter::once((f, 0.0))
+                    .chain(neighbours(f))
+                    .filter_map(|(n, step)| routes.get(&n).map(|(d, _)| d + step * cell_m))
+                    .fold(f64::INFINITY, f64::min);
             if cost_m.is_finite() {
                 pairs.push((cost_m, id, f));
             }
@@ -199,7 +219,7 @@ fn claimed_by_assignment(
         }
         assigned.insert(id);
         let centre = memory.centre(f);
-        for &g in open {
+        for &(g, _) in open {
             if (memory.centre(g) - centre).norm() <= claim_radius_m {
                 owner.entry(g).or_insert(id);
             }
@@ -252,27 +272,51 @@ fn neighbours(key: CellKey) -> impl Iterator<Item = (CellKey, f64)> {
 
 impl GuidanceField {
     /// The field over `memory` for robot `own` at `robot_m`, with the `peers`' claims;
-    /// the frontiers in `given_up` do not seed it.
+    /// the frontiers in `given_up` do not seed it; those far from `last_target` (the
+    /// frontier this robot's route led to last round, while it is still open) cost
+    /// [`FieldParams::switch_penalty_m`] more.
     #[must_use]
     pub fn build(
         memory: &FrontierMemory,
         (own, robot_m): (RobotId, &Point3<f64>),
         peers: &BTreeMap<RobotId, PeerIntent>,
         given_up: &BTreeSet<CellKey>,
+        last_target: Option<CellKey>,
         params: &FieldParams,
     ) -> Self {
         let cell_m = memory.cell_m();
-        let open = regions_of_at_least(
+        let open = weigh_regions(
             memory
                 .frontiers()
                 .filter(|f| !given_up.contains(f))
                 .collect(),
             params.min_region_cells,
+            params.small_region_penalty_m,
         );
+        // This robot's own cost of leaving the frontier it was heading to.
+        let switching: BTreeSet<CellKey> = match last_target.filter(|t| {
+            params.switch_penalty_m > 0.0 && open.binary_search_by_key(t, |(f, _)| *f).is_ok()
+        }) {
+            Some(last) => {
+                let kept = memory.centre(last);
+                open.iter()
+                    .map(|(f, _)| *f)
+                    .filter(|f| (memory.centre(*f) - kept).norm() > params.claim_radius_m)
+                    .collect()
+            }
+            None => BTreeSet::new(),
+        };
+        let own_extra_m = |f: &CellKey| {
+            if switching.contains(f) {
+                params.switch_penalty_m
+            } else {
+                0.0
+            }
+        };
         let claimed = match params.coordination {
             Coordination::PlanEnd => open
                 .iter()
-                .copied()
+                .map(|(f, _)| *f)
                 .filter(|&f| {
                     let centre = memory.centre(f);
                     let mine_m = (centre - robot_m).norm();
@@ -282,18 +326,24 @@ impl GuidanceField {
                     })
                 })
                 .collect(),
-            Coordination::Assignment => {
-                claimed_by_assignment(memory, &open, (own, robot_m), peers, params.claim_radius_m)
-            }
+            Coordination::Assignment => claimed_by_assignment(
+                memory,
+                &open,
+                (own, robot_m, &own_extra_m),
+                peers,
+                params.claim_radius_m,
+            ),
         };
         let mut heap = BinaryHeap::new();
         let mut frontiers = 0;
-        for &f in &open {
-            let penalty_m = if claimed.contains(&f) {
-                params.claim_penalty_m
-            } else {
-                0.0
-            };
+        for &(f, extra_m) in &open {
+            let penalty_m = extra_m
+                + own_extra_m(&f)
+                + if claimed.contains(&f) {
+                    params.claim_penalty_m
+                } else {
+                    0.0
+                };
             let mut seeded = false;
             for (n, step) in std::iter::once((f, 0.0)).chain(neighbours(f)) {
                 if memory.record(n).passable {
@@ -384,10 +434,10 @@ impl GuidanceField {
 
 #[cfg(test)]
 mod tests {
-    use super::regions_of_at_least;
+    use super::weigh_regions;
 
     #[test]
-    fn frontier_regions_smaller_than_the_minimum_are_dropped() {
+    fn frontier_regions_smaller_than_the_minimum_are_dropped_or_made_longer() {
         // A region of three cells touching only diagonally, a pair, and a lone cell.
         let frontiers: std::collections::BTreeSet<_> = [
             [0, 0, 0],
@@ -399,10 +449,25 @@ mod tests {
         ]
         .into_iter()
         .collect();
-        let kept = |min| regions_of_at_least(frontiers.clone(), min);
+        let kept = |min| -> Vec<_> {
+            weigh_regions(frontiers.clone(), min, None)
+                .into_iter()
+                .map(|(f, extra_m)| {
+                    assert_eq!(extra_m, 0.0);
+                    f
+                })
+                .collect()
+        };
         assert_eq!(kept(1).len(), 6);
         assert_eq!(kept(2).len(), 5);
         assert_eq!(kept(3), vec![[0, 0, 0], [1, 1, 1], [2, 2, 1]]);
         assert!(kept(4).is_empty());
+        // With a penalty the small regions stay, made longer.
+        let weighed = weigh_regions(frontiers.clone(), 3, Some(15.0));
+        assert_eq!(weighed.len(), 6);
+        for (f, extra_m) in weighed {
+            let small = f[0] >= 10;
+            assert_eq!(extra_m, if small { 15.0 } else { 0.0 }, "{f:?}");
+        }
     }
 }

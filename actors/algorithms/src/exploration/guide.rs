@@ -26,6 +26,8 @@ pub struct Guide {
     /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired.
     given_up: BTreeSet<CellKey>,
     last_field: Option<Time>,
+    /// The frontier this robot's route led to in the last field.
+    last_target: Option<CellKey>,
 }
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
@@ -45,6 +47,7 @@ impl Guide {
             watched_s: BTreeMap::new(),
             given_up: BTreeSet::new(),
             last_field: None,
+            last_target: None,
         }
     }
 
@@ -112,19 +115,24 @@ impl Guide {
     pub fn field(&mut self, (own, robot_m): (RobotId, &Point3<f64>), now: Time) -> GuidanceField {
         self.memory.mark_body(robot_m);
         self.watch(robot_m, now);
-        GuidanceField::build(
+        let field = GuidanceField::build(
             &self.memory,
             (own, robot_m),
             &self.peers,
             &self.given_up,
+            self.last_target,
             &FieldParams {
                 coordination: self.config.coordination,
                 min_region_cells: self.config.min_region_cells,
+                small_region_penalty_m: self.config.small_region_penalty_m,
                 claim_radius_m: self.config.claim_radius_m,
                 claim_penalty_m: self.config.claim_penalty_m,
+                switch_penalty_m: self.config.switch_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
             },
-        )
+        );
+        self.last_target = field.target_of(robot_m);
+        field
     }
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to

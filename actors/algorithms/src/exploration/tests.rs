@@ -399,3 +399,43 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     assert_eq!(guide.given_up(), &given_up);
     assert!(field.frontier_count() < frontiers);
 }
+
+#[test]
+fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_nearer() {
+    // A tunnel seen for |x| ≤ 5: frontiers at both ends.
+    let world = tunnels(vec![([-15.0, -2.0, -1.0], [15.0, 2.0, 1.0])], |p| {
+        p.x.abs() <= 5.0
+    });
+    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let goal_x = |config: GuidanceConfig, path: &[f64]| -> Vec<f64> {
+        let mut guide = Guide::new(config);
+        guide.observe_snapshot(&snapshot, 0.67);
+        path.iter()
+            .enumerate()
+            .map(|(s, x)| {
+                let here = Point3::new(*x, 0.0, 0.0);
+                let field = guide.field((RobotId(0), &here), Time::from_nanos(s as u64));
+                let target = field.target_of(&here).expect("a goal");
+                guide.memory().centre(target).x
+            })
+            .collect()
+    };
+    // Drifting from x = 0.5 to x = −0.5, then −2.5.
+    let path = [0.5, -0.5, -2.5];
+    let config = GuidanceConfig {
+        give_up_after_s: None,
+        ..GuidanceConfig::default()
+    };
+    let nearest = goal_x(config, &path);
+    assert!(nearest[0] > 0.0 && nearest[1] < 0.0, "{nearest:?}");
+    let committed = goal_x(
+        GuidanceConfig {
+            switch_penalty_m: 3.0,
+            ..config
+        },
+        &path,
+    );
+    // Kept while the other end is only 1 m nearer; given up once it is 5 m nearer.
+    assert!(committed[0] > 0.0 && committed[1] > 0.0, "{committed:?}");
+    assert!(committed[2] < 0.0, "{committed:?}");
+}
