@@ -17,7 +17,9 @@ mod backend;
 mod gpu;
 mod render;
 
-pub use backend::{CameraBackend, CameraRenderer, Choice, GpuUnavailable, resolve_backend};
+pub use backend::{
+    CameraBackend, CameraRenderer, Choice, GpuUnavailable, gpu_camera_available, resolve_backend,
+};
 pub use gpu::{GpuCamera, GpuContext, GpuError};
 pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
 

@@ -17,7 +17,7 @@ use troupe_comms::wire::Class;
 use troupe_robot::{AssembleError, RobotParts, assemble};
 
 use crate::artifact_score::{ArtifactCollector, ArtifactScore, ScoredArtifact};
-use crate::camera::{CameraBackend, resolve_backend};
+use crate::camera::{CameraBackend, gpu_camera_available, resolve_backend};
 use crate::faults::{FaultCounters, FaultEffect, LossBurst, PanicOnce, crashing_factory};
 use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
@@ -548,6 +548,15 @@ pub fn simulated_robot(
     );
     let body = new_body(pose);
     let camera_world: Arc<dyn World> = world.clone();
+    if scenario.camera.backend == CameraBackend::Gpu {
+        gpu_camera_available(camera_world.as_ref()).map_err(|e| {
+            AssembleError::Config(troupe_robot::ConfigError::new(
+                "camera.backend",
+                "= \"gpu\" needs a Vulkan adapter the camera can use (\"auto\" falls back to the CPU)",
+                e,
+            ))
+        })?;
+    }
     let camera = scenario.camera.clone();
     let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
     let vehicle_config = scenario.vehicle.clone();

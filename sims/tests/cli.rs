@@ -172,3 +172,34 @@ values = [0.5, 1.0]
     assert!(String::from_utf8_lossy(&out.stderr).contains("seeds"));
     assert!(!dir.path().join("bad_runs").exists());
 }
+
+/// Backend `"gpu"` on a machine without a usable Vulkan driver (the loader pointed at
+/// none): the run stops at once with one error naming the key, instead of flying
+/// robots whose cameras fail every frame.
+#[test]
+fn a_gpu_camera_without_a_gpu_stops_the_run_with_one_error() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("gpu.toml"),
+        "duration_s = 5.0\n[camera]\nbackend = \"gpu\"\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["run", "gpu.toml", "--out", "runs", "--no-progress"])
+        .current_dir(dir.path())
+        .env("RUST_LOG", "off")
+        .env("VK_DRIVER_FILES", dir.path().join("none.json"))
+        .env("VK_ICD_FILENAMES", dir.path().join("none.json"))
+        .output()
+        .expect("run troupe");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("camera.backend"), "{stderr}");
+    assert!(stderr.contains("Vulkan adapter"), "{stderr}");
+    let written = std::fs::read_dir(dir.path().join("runs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|run| run.path().join("summary.json").exists());
+    assert!(!written, "a run was reported");
+}

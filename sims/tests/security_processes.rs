@@ -251,6 +251,20 @@ fn finish_hostile(h: &Hostile, child: Child) -> String {
 /// path was open and the others were shut by zenoh's access control).
 #[test]
 fn a_tls_team_launched_in_one_command_accepts_nothing_from_hostile_clients() {
+    tls_team_under_attack(false);
+}
+
+/// The same through `troupe launch --tls --router`: the robots are clients of the
+/// launcher's router, which runs on the router's certificate and enforces the
+/// access control; every hostile client connects to it.
+#[test]
+fn a_tls_team_through_a_router_accepts_nothing_from_hostile_clients() {
+    tls_team_under_attack(true);
+}
+
+/// Launches the two-robot TLS team (peer to peer, or through a router) and attacks
+/// it as the tests above say.
+fn tls_team_under_attack(router: bool) {
     let python = match zenoh_python() {
         Ok(p) => p,
         Err(why) => return eprintln!("skipped: {why}"),
@@ -262,11 +276,18 @@ fn a_tls_team_launched_in_one_command_accepts_nothing_from_hostile_clients() {
     let world = scenario.world.build().expect("world");
     let start =
         |i: usize| -> [f32; 3] { world.start_position(i, 2).coords.map(|c| c as f32).into() };
-    let ports = free_ports(2);
+    // Peer to peer robot `i` listens on `ports[i]`; through a router only the
+    // router listens, on `ports[0]`.
+    let ports = free_ports(if router { 1 } else { 2 });
     let duration_s = 22.0;
     let log = std::fs::File::create(dir.path().join("launch.log")).expect("log");
-    let mut launch = Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(["launch", "team.toml", "--tls", "--duration-s"])
+    let mut launch = Command::new(env!("CARGO_BIN_EXE_troupe"));
+    launch.args(["launch", "team.toml", "--tls"]);
+    if router {
+        launch.arg("--router");
+    }
+    let mut launch = launch
+        .arg("--duration-s")
         .arg(duration_s.to_string())
         .args(["--base-port", &ports[0].to_string(), "--out", "out"])
         .current_dir(dir.path())
@@ -325,7 +346,11 @@ fn a_tls_team_launched_in_one_command_accepts_nothing_from_hostile_clients() {
     let mut attacks: Vec<(u16, Hostile)> = Vec::new();
     for (victim, claimed) in [(0u32, 1u32), (1, 0)] {
         let puts = forged(victim, claimed);
-        let port = ports[victim as usize];
+        let port = if router {
+            ports[0]
+        } else {
+            ports[victim as usize]
+        };
         attacks.push((
             port,
             Hostile {
@@ -402,11 +427,11 @@ fn a_tls_team_launched_in_one_command_accepts_nothing_from_hostile_clients() {
     let context = format!("{reports:#?}\n{}\n{}", summaries[0], summaries[1]);
     for (i, s) in summaries.iter().enumerate() {
         let peer = &summaries[1 - i];
-        // Nothing hostile reached a link: the only rejections are the control's,
-        // at robot 0.
-        let control = if i == 0 {
+        // Nothing hostile reached a link: the only rejections are the control's, at
+        // robot 0 (through a router, which forwards it to every robot, at both).
+        let control = if i == 0 || router {
             let n = s["link"]["rejections"]["wrong_team"].as_u64().unwrap_or(0);
-            assert!(n > 0, "the control never reached robot 0: {context}");
+            assert!(n > 0, "the control never reached robot {i}: {context}");
             n
         } else {
             0

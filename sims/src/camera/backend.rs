@@ -19,8 +19,8 @@ use crate::world::World;
 pub enum CameraBackend {
     /// Sphere tracing on the CPU threads (`render.rs`).
     Cpu,
-    /// The wgpu compute shader; the camera fails if there is no Vulkan adapter or the
-    /// world has no GPU description.
+    /// The wgpu compute shader; a team does not start if there is no Vulkan adapter or
+    /// the world has no GPU description.
     Gpu,
     /// The GPU when a hardware adapter is found and the world has a GPU description,
     /// else the CPU; the choice and its reason are logged once. A software adapter
@@ -118,6 +118,18 @@ pub fn resolve_backend(world: &dyn World, backend: CameraBackend) -> CameraBacke
             CameraBackend::Cpu
         }
     }
+}
+
+/// Whether backend `"gpu"` can render `world` in this process (a software adapter
+/// counts): a team checks it before its robots start, so that a missing GPU stops the
+/// run with one error instead of leaving every robot without a camera.
+///
+/// # Errors
+///
+/// Why the GPU camera is unavailable.
+pub fn gpu_camera_available(world: &dyn World) -> Result<(), GpuUnavailable> {
+    world.gpu_scene().ok_or(GpuUnavailable::NoGpuScene)?;
+    check_adapter(true)
 }
 
 /// The GPU camera for `world`, or why not; a software adapter only if `allow_software`.

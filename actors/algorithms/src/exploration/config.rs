@@ -64,6 +64,10 @@ pub struct GuidanceConfig {
     /// pockets under the floor, crevices behind boulders — would otherwise hold the
     /// robot for the rest of the run. `None` never gives up.
     pub give_up_after_s: Option<f64>,
+    /// A goal (the remembered frontier the robot's route leads to) whose route has not
+    /// got 0.5 m shorter for this long is given up, seconds (a progress timeout, as in
+    /// ROS' explore_lite); `None` never.
+    pub give_up_without_progress_s: Option<f64>,
     /// How close the robot must be for time to count towards giving a frontier up,
     /// metres (about the camera's useful range).
     pub give_up_radius_m: f64,
@@ -86,6 +90,7 @@ impl Default for GuidanceConfig {
             switch_penalty_m: 0.0,
             look_ahead_m: 1.0,
             give_up_after_s: Some(4.0),
+            give_up_without_progress_s: None,
             give_up_radius_m: 3.0,
         }
     }
@@ -132,6 +137,9 @@ impl GuidanceConfig {
         ConfigError::non_negative("switch_penalty_m", self.switch_penalty_m)?;
         if let Some(s) = self.give_up_after_s {
             ConfigError::positive("give_up_after_s", s)?;
+        }
+        if let Some(s) = self.give_up_without_progress_s {
+            ConfigError::positive("give_up_without_progress_s", s)?;
         }
         ConfigError::non_negative("give_up_radius_m", self.give_up_radius_m)?;
         ConfigError::non_negative("look_ahead_m", self.look_ahead_m)

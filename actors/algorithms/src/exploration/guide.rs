@@ -28,7 +28,13 @@ pub struct Guide {
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
+    /// Progress towards `last_target`: the least route distance to it so far, metres,
+    /// and when the route last got [`PROGRESS_M`] shorter.
+    progress: Option<(f64, Time)>,
 }
+
+/// How much shorter the route to a goal must get to count as progress, metres.
+pub const PROGRESS_M: f64 = 0.5;
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
 fn keyframe_seed(robot: RobotId, id: u32) -> u64 {
@@ -48,6 +54,7 @@ impl Guide {
             given_up: BTreeSet::new(),
             last_field: None,
             last_target: None,
+            progress: None,
         }
     }
 
@@ -131,8 +138,42 @@ impl Guide {
                 look_ahead_m: self.config.look_ahead_m,
             },
         );
-        self.last_target = field.target_of(robot_m);
+        let (route_m, target) = field.distance_at(robot_m);
+        if let Some(limit_s) = self.config.give_up_without_progress_s {
+            self.check_progress(target, route_m, now, limit_s);
+        }
+        self.last_target = target;
         field
+    }
+
+    /// The rule of goals that cannot be reached (explore_lite's progress timeout): a
+    /// goal whose route has not got [`PROGRESS_M`] shorter for `limit_s` — a pocket
+    /// under the floor the robot hovers beside, out of the camera's view — is given up
+    /// with the frontiers within [`PROGRESS_M`] · 4 of it. A new goal starts afresh.
+    fn check_progress(&mut self, target: Option<CellKey>, route_m: f64, now: Time, limit_s: f64) {
+        let Some(goal) = target.filter(|_| route_m.is_finite()) else {
+            self.progress = None;
+            return;
+        };
+        let (best_m, since) = match self.progress {
+            Some((best_m, since)) if self.last_target == Some(goal) => (best_m, since),
+            _ => (route_m, now),
+        };
+        if route_m <= best_m - PROGRESS_M {
+            self.progress = Some((route_m, now));
+        } else if now.saturating_since(since).as_secs_f64() >= limit_s {
+            let centre = self.memory.centre(goal);
+            let memory = &self.memory;
+            let near: Vec<CellKey> = memory
+                .frontiers()
+                .filter(|f| (memory.centre(*f) - centre).norm() <= 4.0 * PROGRESS_M)
+                .collect();
+            self.given_up.extend(near);
+            self.given_up.insert(goal);
+            self.progress = None;
+        } else {
+            self.progress = Some((best_m, since));
+        }
     }
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to

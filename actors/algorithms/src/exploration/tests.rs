@@ -439,3 +439,41 @@ fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_neare
     assert!(committed[0] > 0.0 && committed[1] > 0.0, "{committed:?}");
     assert!(committed[2] < 0.0, "{committed:?}");
 }
+
+#[test]
+fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
+    // The dead-end tunnel seen from x = 0 on: the frontier at x ≈ 0.
+    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let config = GuidanceConfig {
+        give_up_after_s: None,
+        give_up_without_progress_s: Some(6.0),
+        ..GuidanceConfig::default()
+    };
+    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
+    let fresh = || {
+        let mut guide = Guide::new(config);
+        guide.observe_snapshot(
+            &window(Point3::new(5.0, 0.0, 0.0), [20.0, 20.0, 4.0], &world),
+            0.67,
+        );
+        guide
+    };
+    // Flying towards it at 1 m/s: progress all along, nothing given up.
+    let mut guide = fresh();
+    for s in 0..8 {
+        let here = Point3::new(12.0 - f64::from(s), 0.0, 0.0);
+        guide.field((RobotId(0), &here), second(f64::from(s)));
+    }
+    assert!(guide.given_up().is_empty());
+    // Held 10 m away (a wall, a peer, a pocket out of view): given up after 6 s.
+    let mut guide = fresh();
+    let here = Point3::new(10.0, 0.0, 0.0);
+    let mut when = None;
+    for s in 0..12 {
+        guide.field((RobotId(0), &here), second(f64::from(s)));
+        if when.is_none() && !guide.given_up().is_empty() {
+            when = Some(s);
+        }
+    }
+    assert_eq!(when, Some(6));
+}

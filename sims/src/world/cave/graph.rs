@@ -122,6 +122,24 @@ impl CaveGraph {
         out
     }
 
+    /// The edges off the main chain, breadth first from the entrance (creation order
+    /// among siblings).
+    fn side_edges(&self) -> Vec<usize> {
+        let chain: std::collections::BTreeSet<usize> =
+            self.main_chain().into_iter().map(|(e, _)| e).collect();
+        let mut queue = std::collections::VecDeque::from([self.entrance]);
+        let mut out = Vec::new();
+        while let Some(node) = queue.pop_front() {
+            for &e in &self.nodes[node].child_edges {
+                if !chain.contains(&e) {
+                    out.push(e);
+                }
+                queue.push_back(self.edges[e].to);
+            }
+        }
+        out
+    }
+
     /// Start location of `robot_index`: see [`CaveGraph::start_position`].
     fn start_location(&self, robot_index: usize) -> Location {
         let entrance = self.nodes[self.entrance].position;
@@ -134,8 +152,7 @@ impl CaveGraph {
             };
         };
         let step_m = 0.01;
-        let mut placed = 0usize;
-        let mut last: Option<Point3<f64>> = None;
+        let mut placed: Vec<Point3<f64>> = Vec::new();
         let mut travelled = 0.0;
         let mut fallback = Location {
             point: entrance,
@@ -155,19 +172,40 @@ impl CaveGraph {
                     segment: j,
                 };
                 fallback = here;
-                let ok = match last {
+                let ok = match placed.last() {
                     None => s >= FIRST_START_OFFSET_M,
                     Some(q) => (p - q).norm() >= START_SPACING_M,
                 };
                 if ok {
-                    if placed == robot_index {
+                    if placed.len() == robot_index {
                         return here;
                     }
-                    placed += 1;
-                    last = Some(p);
+                    placed.push(p);
                 }
             }
             travelled += len;
+        }
+        // A team larger than the chain holds: the other tunnels, nearest the entrance
+        // first, each start that far from every earlier one.
+        for e in self.side_edges() {
+            let points = &self.edges[e].points;
+            for j in 0..points.len() - 1 {
+                let (a, b) = (points[j], points[j + 1]);
+                let n = ((b - a).norm() / step_m).ceil().max(1.0) as usize;
+                for i in 0..n {
+                    let p = a + (b - a) * (i as f64 / n as f64);
+                    if placed.iter().all(|q| (p - q).norm() >= START_SPACING_M) {
+                        if placed.len() == robot_index {
+                            return Location {
+                                point: p,
+                                edge: e,
+                                segment: j,
+                            };
+                        }
+                        placed.push(p);
+                    }
+                }
+            }
         }
         fallback
     }
@@ -175,9 +213,11 @@ impl CaveGraph {
     /// Start position of robot `robot_index`: on the centre line of the entrance tunnel
     /// (continuing along the first-child chain if it is too short), the first robot
     /// [`FIRST_START_OFFSET_M`] from the entrance and each next one at least
-    /// [`START_SPACING_M`] further in a straight line. Positions do not depend on the team
-    /// size, so adding a robot moves no other; robots beyond the end of the chain all get
-    /// its last point.
+    /// [`START_SPACING_M`] further in a straight line; robots beyond what that chain holds
+    /// start along the other tunnels, nearest the entrance first, at least
+    /// [`START_SPACING_M`] from every earlier start (the last point of the chain only if
+    /// the whole cave is full). Positions do not depend on the team size, so adding a
+    /// robot moves no other.
     #[must_use]
     pub fn start_position(&self, robot_index: usize) -> Point3<f64> {
         self.start_location(robot_index).point

@@ -275,6 +275,30 @@ fn start_positions_are_spaced_and_clear() {
 }
 
 #[test]
+fn a_team_larger_than_the_entrance_tunnel_holds_starts_spaced_in_the_other_tunnels() {
+    for seed in [1, 2] {
+        let w = cave(seed);
+        let n = 64;
+        let starts: Vec<_> = (0..n).map(|i| w.start_position(i, n)).collect();
+        // The first robots are where they always were.
+        assert_eq!(
+            starts[..8],
+            (0..8).map(|i| w.start_position(i, 8)).collect::<Vec<_>>()[..]
+        );
+        for (i, p) in starts.iter().enumerate() {
+            assert!(w.sdf_m(p) >= ROUTE_CLEARANCE_M, "seed {seed}: robot {i}");
+            for (k, q) in starts[..i].iter().enumerate() {
+                assert!(
+                    (p - q).norm() >= START_SPACING_M - 1e-9,
+                    "seed {seed}: robots {k} and {i} {} m apart",
+                    (p - q).norm()
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn tetrahedral_normal_matches_central_differences() {
     let w = cave(1);
     let mut rng = ChaCha8Rng::seed_from_u64(6);
@@ -311,7 +335,7 @@ fn minimal_parameters_still_give_a_usable_cave() {
     let route = w.centreline_route(2, 3);
     assert_eq!(route[0], w.start_position(2, 3));
     assert!(route.iter().all(|p| w.sdf_m(p) >= ROUTE_CLEARANCE_M));
-    // Robots beyond the end of the chain share its last point rather than panicking.
+    // Robots beyond what the cave holds share the chain's last point rather than panicking.
     let last = w.start_position(1000, 1001);
     assert!(w.sdf_m(&last) >= ROUTE_CLEARANCE_M);
 }
