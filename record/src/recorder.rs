@@ -117,7 +117,7 @@ const UNCHECKED: Color = Color {
 };
 
 /// What a recorder writes of the bulky topics, how often, and how it compresses the
-/// file. With the defaults the default scenario's recording is about 4 MB per
+/// file. With the defaults the default scenario's recording is about 4.5 MB per
 /// robot-minute, under the 20 MB budget (`docs/recordings.md`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RecordOptions {

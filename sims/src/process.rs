@@ -252,9 +252,7 @@ impl RobotProcess {
             sequence,
         })
     }
-}
 
-impl RobotProcess {
     /// What the recording writes: the scenario's `[metrics]` recording keys, the
     /// robot file's `record_depth_hz` and `record_compression` where it sets them.
     #[must_use]
