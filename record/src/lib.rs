@@ -31,5 +31,8 @@ pub mod scene;
 pub mod schemas;
 pub mod writer;
 
-pub use recorder::{Clock, RecordOptions, Recorder, RecordingStats, SharedRecorder};
-pub use writer::{RecordError, Recording};
+pub use recorder::{
+    Clock, MAX_RECORD_HZ, RecordOptions, Recorder, RecordingStats, SharedRecorder, check_rate_hz,
+    period_of_hz,
+};
+pub use writer::{Compression, RecordError, Recording};

@@ -33,6 +33,7 @@ use troupe_actors::msgs::{
 };
 use troupe_actors::planner::REMEMBERED_FRONTIERS;
 use troupe_actors::runtime::{Publication, Tap, Time};
+use troupe_core::ConfigError;
 
 use crate::foxglove::{
     Color, FrameTransform, KeyValuePair, PointCloud, PoseInFrame, RawImage, SceneEntity,
@@ -43,7 +44,7 @@ use crate::scene::{
     trajectory_line,
 };
 use crate::schemas::{self, Schema};
-use crate::writer::{RecordError, Recording};
+use crate::writer::{Compression, RecordError, Recording};
 
 /// What the recording's times count from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -115,9 +116,9 @@ const UNCHECKED: Color = Color {
     a: 0.4,
 };
 
-/// What a recorder writes of the bulky topics, and how often. With the defaults the
-/// default scenario's recording is 16 MB per robot-minute, under the 20 MB budget
-/// (`docs/recordings.md`).
+/// What a recorder writes of the bulky topics, how often, and how it compresses the
+/// file. With the defaults the default scenario's recording is about 4.5 MB per
+/// robot-minute, under the 20 MB budget (`docs/recordings.md`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RecordOptions {
     /// Least time between two recorded grids (occupied cells and frontiers) of a
@@ -129,6 +130,8 @@ pub struct RecordOptions {
     /// Least time between two recorded depth frames of a robot, seconds; `None`
     /// records none (a 160 × 120 frame is about 100 kB in the file).
     pub depth_period_s: Option<f64>,
+    /// How the file's chunks are compressed.
+    pub compression: Compression,
 }
 
 impl Default for RecordOptions {
@@ -137,7 +140,31 @@ impl Default for RecordOptions {
             grid_period_s: Some(1.0),
             keyframe_points: 500,
             depth_period_s: None,
+            compression: Compression::default(),
         }
+    }
+}
+
+/// Most messages per second a `record_*_hz` key may ask for.
+pub const MAX_RECORD_HZ: f64 = 30.0;
+
+/// The least time between two recorded messages of a rate in hertz (0: `None`,
+/// nothing recorded).
+#[must_use]
+pub fn period_of_hz(hz: f64) -> Option<f64> {
+    (hz > 0.0).then(|| 1.0 / hz)
+}
+
+/// Checks a `record_*_hz` key: between 0 and [`MAX_RECORD_HZ`].
+pub fn check_rate_hz(key: &str, hz: f64) -> Result<(), ConfigError> {
+    if hz.is_finite() && (0.0..=MAX_RECORD_HZ).contains(&hz) {
+        Ok(())
+    } else {
+        Err(ConfigError::new(
+            key,
+            format!("must be between 0 and {MAX_RECORD_HZ} Hz"),
+            hz,
+        ))
     }
 }
 
@@ -192,25 +219,28 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Creates the recording at `path`.
+    /// Creates the recording at `path` with the default options.
     pub fn create(path: &Path, clock: Clock) -> Result<Self, RecordError> {
+        Self::create_with(path, clock, RecordOptions::default())
+    }
+
+    /// Creates the recording at `path`, writing the bulky topics and compressing as
+    /// `options` say.
+    pub fn create_with(
+        path: &Path,
+        clock: Clock,
+        options: RecordOptions,
+    ) -> Result<Self, RecordError> {
         Ok(Recorder {
-            recording: Recording::create(path)?,
+            recording: Recording::create(path, options.compression)?,
             clock,
             robots: BTreeMap::new(),
             messages: BTreeMap::new(),
             failed: 0,
             error: None,
             peer_poses: false,
-            options: RecordOptions::default(),
+            options,
         })
-    }
-
-    /// Records the bulky topics as `options` say (default: [`RecordOptions::default`]).
-    #[must_use]
-    pub fn with_options(mut self, options: RecordOptions) -> Self {
-        self.options = options;
-        self
     }
 
     /// Writes the world's surface (`vertices`, three indices per triangle) on `/world`
@@ -588,5 +618,72 @@ mod tests {
         let mut never = None;
         assert!(!due(&mut never, at(5.0), None));
         assert_eq!(never, None);
+    }
+
+    #[test]
+    fn rates_become_periods_and_out_of_range_rates_name_their_key() {
+        assert_eq!(period_of_hz(0.0), None);
+        assert_eq!(period_of_hz(4.0), Some(0.25));
+        assert!(check_rate_hz("record_depth_hz", 0.0).is_ok());
+        assert!(check_rate_hz("record_depth_hz", MAX_RECORD_HZ).is_ok());
+        for bad in [-1.0, 31.0, f64::NAN, f64::INFINITY] {
+            let e = check_rate_hz("record_depth_hz", bad).unwrap_err();
+            assert_eq!(e.key, "record_depth_hz");
+        }
+    }
+
+    /// Every compression writes chunks that name it, and the messages read back.
+    #[test]
+    fn each_compression_names_its_chunks_and_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        for (compression, name) in [
+            (Compression::Zstd, "zstd"),
+            (Compression::Lz4, "lz4"),
+            (Compression::None, ""),
+        ] {
+            let path = dir.path().join(format!("{compression:?}.mcap"));
+            let options = RecordOptions {
+                compression,
+                ..RecordOptions::default()
+            };
+            let mut recorder = Recorder::create_with(&path, Clock::Sim, options).unwrap();
+            for k in 0..200_u32 {
+                let sample =
+                    serde_json::json!({ "time_s": k, "fraction": 0.5, "explored_m3": 1.0 });
+                recorder.write(
+                    "/c",
+                    &schemas::COVERAGE,
+                    Time::from_secs_f64(f64::from(k)),
+                    &sample,
+                );
+            }
+            let stats = recorder.finish().unwrap();
+            assert_eq!(stats.messages["/c"], 200);
+            let bytes = std::fs::read(&path).unwrap();
+            let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+            assert!(!summary.chunk_indexes.is_empty());
+            for chunk in &summary.chunk_indexes {
+                assert_eq!(chunk.compression, name, "{compression:?}");
+            }
+            let read: Vec<serde_json::Value> = mcap::MessageStream::new(&bytes)
+                .unwrap()
+                .map(|m| serde_json::from_slice(&m.unwrap().data).unwrap())
+                .collect();
+            assert_eq!(read.len(), 200);
+            assert_eq!(read[199]["time_s"], 199);
+        }
+    }
+
+    #[test]
+    fn compression_keys_parse_from_their_names() {
+        #[derive(serde::Deserialize)]
+        struct Key {
+            c: Compression,
+        }
+        let parse = |text: &str| serde_json::from_str::<Key>(text).map(|k| k.c);
+        assert_eq!(parse(r#"{"c":"zstd"}"#).unwrap(), Compression::Zstd);
+        assert_eq!(parse(r#"{"c":"lz4"}"#).unwrap(), Compression::Lz4);
+        assert_eq!(parse(r#"{"c":"none"}"#).unwrap(), Compression::None);
+        assert!(parse(r#"{"c":"gzip"}"#).is_err());
     }
 }

@@ -7,7 +7,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use mcap::records::MessageHeader;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::schemas::Schema;
 
@@ -16,6 +16,32 @@ pub const PROFILE: &str = "troupe";
 
 /// Target size of an MCAP chunk before it is closed, bytes.
 const CHUNK_BYTES: u64 = 1 << 20;
+
+/// How a recording's chunks are compressed (the `record_compression` key of a
+/// scenario's `[metrics]` and of robot and base files). Readers decompress by the
+/// name each chunk carries, so a file's compression needs no setting to read it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Compression {
+    /// Zstandard at its default level: the default run's file is about a quarter
+    /// of its uncompressed size (`docs/recordings.md`).
+    #[default]
+    Zstd,
+    /// LZ4 frames: faster to write, about half the uncompressed size.
+    Lz4,
+    /// Uncompressed chunks.
+    None,
+}
+
+impl Compression {
+    fn mcap(self) -> Option<mcap::Compression> {
+        match self {
+            Compression::Zstd => Some(mcap::Compression::Zstd),
+            Compression::Lz4 => Some(mcap::Compression::Lz4),
+            Compression::None => None,
+        }
+    }
+}
 
 /// Why a recording could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -58,8 +84,9 @@ pub struct Recording {
 }
 
 impl Recording {
-    /// Creates (or replaces) the MCAP file at `path`.
-    pub fn create(path: &Path) -> Result<Self, RecordError> {
+    /// Creates (or replaces) the MCAP file at `path`, its chunks compressed as
+    /// `compression` says.
+    pub fn create(path: &Path, compression: Compression) -> Result<Self, RecordError> {
         let file = File::create(path).map_err(|source| RecordError::Create {
             path: path.to_path_buf(),
             source,
@@ -67,7 +94,10 @@ impl Recording {
         let writer = mcap::WriteOptions::new()
             .profile(PROFILE)
             .library(concat!("troupe-record ", env!("CARGO_PKG_VERSION")))
-            .compression(None)
+            .compression(compression.mcap())
+            // Chunks are compressed on the writing thread: no worker threads
+            // competing with the run for the cores.
+            .compression_threads(0)
             .chunk_size(Some(CHUNK_BYTES))
             .create(BufWriter::new(file))
             .map_err(|source| RecordError::Write {

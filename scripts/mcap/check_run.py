@@ -20,10 +20,17 @@
   remembered frontiers on the memory's 1 m lattice; depth images only when
   `[metrics] record_depth_hz` asks, each `32FC1` of the camera's size;
 - the world surface (`/world`): one message at time 0, a triangle list whose
-  indices all name a vertex, and every robot pose inside its bounds.
+  indices all name a vertex, and every robot pose inside its bounds;
+- the chunks' compression (reported: `zstd` by default; the reader decompresses
+  them with the `zstandard` and `lz4` packages).
+
+A process or base-station recording (FILE.mcap) gets the schema checks, and the
+world and depth checks where it has those channels (`/world` once at its first
+message time; depth images `32FC1` of a consistent size).
 
 Usage: check_run.py RUN_DIR   (prints one JSON line of counts; exits 1 on a mismatch)
-       check_run.py FILE.mcap  (a process or base-station recording: schemas only)
+       check_run.py FILE.mcap  (prints the messages per channel and the chunks'
+                                compression; exits 1 on a mismatch)
 """
 
 import base64
@@ -215,19 +222,27 @@ def check_grids(messages, robots, scenario, duration_s):
             expect(0 < len(depth) <= math.floor(duration_s * depth_hz) + 1, f"robot{i}: {len(depth)} depth frames")
         else:
             expect(not depth, f"robot{i}: depth frames recorded with record_depth_hz = 0")
+        size = (camera.get("width", 160), camera.get("height", 120))
         for t, image in depth:
-            w, h = image["width"], image["height"]
-            expect((w, h) == (camera.get("width", w), camera.get("height", h)), f"robot{i}: depth image {w} x {h}")
-            expect(image["encoding"] == "32FC1" and image["step"] == 4 * w, f"robot{i}: depth encoding")
-            data = base64.b64decode(image["data"], validate=True)
-            expect(len(data) == 4 * w * h, f"robot{i}: depth image of {len(data)} bytes")
+            check_depth(image, f"robot{i} at {t}", size)
         counts[i] = {"grids": len(grids), "occupied_cells": occupied_total, "remembered_frontiers": remembered, "depth": len(depth)}
     return counts
 
 
-def check_world(messages):
+def check_depth(image, what, size=None):
+    w, h = image["width"], image["height"]
+    expect(size is None or (w, h) == size, f"{what}: depth image {w} x {h}, expected {size}")
+    expect(image["encoding"] == "32FC1" and image["step"] == 4 * w, f"{what}: depth encoding")
+    data = base64.b64decode(image["data"], validate=True)
+    expect(len(data) == 4 * w * h, f"{what}: depth image of {len(data)} bytes")
+    depths = struct.unpack(f"<{w * h}f", data)
+    expect(all(math.isfinite(d) and d >= 0 for d in depths), f"{what}: a depth not finite or negative")
+    return (w, h)
+
+
+def check_world(messages, start=0):
     worlds = messages.get("/world", [])
-    expect(len(worlds) == 1 and worlds[0][0] == 0, f"/world: {[t for t, _ in worlds]}")
+    expect(len(worlds) == 1 and worlds[0][0] == start, f"/world: {[t for t, _ in worlds]}, expected one at {start}")
     (entity,) = worlds[0][1]["entities"]
     (mesh,) = entity["triangles"]
     points, indices = mesh["points"], mesh["indices"]
@@ -244,7 +259,24 @@ def check_world(messages):
 
 
 def check_schemas(path):
-    return {topic: len(m) for topic, m in read_checked(path).items()}
+    messages = read_checked(path)
+    if "/world" in messages:
+        check_world(messages, min(t for m in messages.values() for t, _ in m))
+    for topic, images in messages.items():
+        if re.fullmatch(r"/robot\d+/depth", topic):
+            sizes = {check_depth(image, f"{topic} at {t}") for t, image in images}
+            expect(len(sizes) == 1, f"{topic}: images of sizes {sizes}")
+    return {
+        "channels": {topic: len(m) for topic, m in messages.items()},
+        "compression": chunk_compression(path),
+    }
+
+
+def chunk_compression(path):
+    """The compressions the file's chunks name ("" for uncompressed ones)."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    return sorted({c.compression for c in summary.chunk_indexes}) if summary else []
 
 
 def check(run_dir):
@@ -347,6 +379,7 @@ def check(run_dir):
         "grids": grids,
         "world_triangles": world_triangles,
         "bytes": (run_dir / "run.mcap").stat().st_size,
+        "compression": chunk_compression(run_dir / "run.mcap"),
     }
 
 

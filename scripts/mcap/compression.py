@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Measures what MCAP chunk compression would save on a troupe recording: rewrites it
-with zstd and with lz4 chunks of 1 MiB (troupe's chunk size; troupe writes them
-uncompressed) into /tmp and prints the sizes. Needs the Python `mcap`, `zstandard`
-and `lz4` packages (`.venv-mcap` has them).
+"""Compares MCAP chunk compressions on a troupe recording (one written with any
+`record_compression`): rewrites it with zstd and with lz4 chunks of 1 MiB (troupe's
+chunk size) into /tmp and prints the sizes. Needs the Python `mcap`, `zstandard` and
+`lz4` packages (`.venv-mcap` has them).
 
 Usage: compression.py RUN.mcap
 """

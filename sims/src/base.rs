@@ -75,7 +75,7 @@ use troupe_actors::runtime::{
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
 use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
-use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
+use troupe_record::{Clock, Compression, RecordOptions, Recorder, RecordingStats, SharedRecorder};
 
 use crate::maps::merged_points;
 use crate::recording::RUN_RECORDING;
@@ -114,6 +114,10 @@ pub struct BaseConfig {
     /// received them, in wall time (`docs/recordings.md`); `false` turns it off.
     #[serde(default = "record_by_default")]
     pub record: bool,
+    /// How `run.mcap`'s chunks are compressed: `"zstd"` (the default), `"lz4"` or
+    /// `"none"`.
+    #[serde(default)]
+    pub record_compression: Compression,
 }
 
 fn record_by_default() -> bool {
@@ -635,9 +639,15 @@ pub async fn run(
                 source,
             })
             .and_then(|()| {
-                Recorder::create(&path, Clock::wall_from_now()).map_err(|e| BaseError::Start {
-                    context: "creating the recording",
-                    source: Box::new(e),
+                let options = RecordOptions {
+                    compression: station.config.record_compression,
+                    ..RecordOptions::default()
+                };
+                Recorder::create_with(&path, Clock::wall_from_now(), options).map_err(|e| {
+                    BaseError::Start {
+                        context: "creating the recording",
+                        source: Box::new(e),
+                    }
                 })
             })?;
         let recorder = SharedRecorder::new(recorder.with_peer_poses());

@@ -554,7 +554,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             std::process::id()
         ));
         let mut recorder =
-            Recorder::create(&path, Clock::Sim)?.with_options(record_options(&scenario.metrics));
+            Recorder::create_with(&path, Clock::Sim, record_options(&scenario.metrics))?;
         record_world(&mut recorder, team.world());
         let recorder = SharedRecorder::new(recorder);
         team.add_tap(recorder.clone());

@@ -13,6 +13,9 @@
 //! out = "runs/processes/robot0"            # relative to this file; default: next to it
 //! # sequence = "recordings/tunnel"         # replay a recorded sequence (TUM RGB-D
 //! #                                        # layout) instead of the simulated camera
+//! # record = true                          # out/run.mcap (docs/recordings.md)
+//! # record_depth_hz = 0.0                  # depth frames recorded per second
+//! # record_compression = "zstd"            # or "lz4", "none"
 //!
 //! [zenoh]                                  # troupe_comms::zenoh::ZenohConfig
 //! mode = "peer"
@@ -61,9 +64,12 @@ pub use troupe_robot::hardware::shutdown_signal;
 use troupe_robot::hardware::{finish_recording, run_for};
 use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
-use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
+use troupe_record::{
+    Clock, Compression, RecordOptions, Recorder, RecordingStats, SharedRecorder, check_rate_hz,
+    period_of_hz,
+};
 
-use crate::recording::RUN_RECORDING;
+use crate::recording::{RUN_RECORDING, record_options, record_world};
 use crate::replay::replaying_robot;
 use crate::scenario::{Scenario, ScenarioError};
 use crate::sequence::{Sequence, SequenceError};
@@ -96,6 +102,15 @@ pub struct ProcessConfig {
     /// (`docs/recordings.md`); `false` turns it off.
     #[serde(default = "record_by_default")]
     pub record: bool,
+    /// Depth frames recorded per second (`/robot<i>/depth`, about 100 kB each at
+    /// 160 × 120 before compression); absent: the scenario's `[metrics]
+    /// record_depth_hz` (0, the default, records none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record_depth_hz: Option<f64>,
+    /// How `run.mcap`'s chunks are compressed: `"zstd"`, `"lz4"` or `"none"`;
+    /// absent: the scenario's `[metrics] record_compression` (`"zstd"` by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record_compression: Option<Compression>,
 }
 
 fn record_by_default() -> bool {
@@ -207,6 +222,9 @@ impl RobotProcess {
         if let Some(d) = config.duration_s {
             ConfigError::positive("duration_s", d).map_err(invalid)?;
         }
+        if let Some(hz) = config.record_depth_hz {
+            check_rate_hz("record_depth_hz", hz).map_err(invalid)?;
+        }
         config.zenoh.resolve_paths(base);
         config
             .zenoh
@@ -233,6 +251,20 @@ impl RobotProcess {
             out,
             sequence,
         })
+    }
+
+    /// What the recording writes: the scenario's `[metrics]` recording keys, the
+    /// robot file's `record_depth_hz` and `record_compression` where it sets them.
+    #[must_use]
+    pub fn record_options(&self) -> RecordOptions {
+        let mut options = record_options(&self.scenario.metrics);
+        if let Some(hz) = self.config.record_depth_hz {
+            options.depth_period_s = period_of_hz(hz);
+        }
+        if let Some(compression) = self.config.record_compression {
+            options.compression = compression;
+        }
+        options
     }
 }
 
@@ -320,7 +352,8 @@ pub async fn run(
     let journal_dir = scenario.robot.link.journal_dir_in(&process.out);
     let journal = LinkJournal::on_disk(&journal_dir, first_id)
         .map_err(|source| ProcessError::Journal { source })?;
-    let robot = match &process.sequence {
+    // A simulated robot keeps its world: the rock surface goes into the recording.
+    let (robot, world) = match &process.sequence {
         Some(sequence) => {
             tracing::info!(
                 robot = id,
@@ -330,20 +363,24 @@ pub async fn run(
             );
             let mut config = scenario.robot.clone();
             config.link = config.link.with_team(scenario.robots);
-            replaying_robot(
+            let robot = replaying_robot(
                 &format!("robot{id}"),
                 &config,
                 sequence.clone(),
                 scenario.vehicle.odometry_rate_hz,
                 journal,
-            )
+            );
+            (robot, None)
         }
         None => {
             let world = scenario.world.build().map_err(ProcessError::World)?;
-            simulated_robot(scenario, &world, id as usize, journal)
+            (
+                simulated_robot(scenario, &world, id as usize, journal),
+                Some(world),
+            )
         }
-    }
-    .map_err(|source| ProcessError::Assemble { id, source })?;
+    };
+    let robot = robot.map_err(|source| ProcessError::Assemble { id, source })?;
     let transport = Arc::new(
         ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
             .map_err(|source| ProcessError::Transport {
@@ -413,8 +450,12 @@ pub async fn run(
             source,
         })?;
         let path = process.out.join(RUN_RECORDING);
-        let recorder =
-            Recorder::create(&path, Clock::wall_from_now()).map_err(ProcessError::Recording)?;
+        let options = process.record_options();
+        let mut recorder = Recorder::create_with(&path, Clock::wall_from_now(), options)
+            .map_err(ProcessError::Recording)?;
+        if let Some(world) = &world {
+            record_world(&mut recorder, world.as_ref());
+        }
         let recorder = SharedRecorder::new(recorder);
         executor.add_tap(recorder.clone());
         Some(recorder)
@@ -568,6 +609,8 @@ fn write_robot_files(
                 sequence: None,
                 zenoh: zenoh(i),
                 record: true,
+                record_depth_hz: None,
+                record_compression: None,
             };
             let file = dir.join(format!("robot{i}.toml"));
             let text = toml::to_string(&config).map_err(std::io::Error::other)?;
@@ -646,4 +689,50 @@ pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, Proces
         .build()
         .map_err(ProcessError::Runtime)?;
     runtime.block_on(run(process, shutdown_signal()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A robot file next to a scenario that asks for depth frames and lz4.
+    fn load(robot_file: &str) -> Result<RobotProcess, ProcessError> {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("team.toml"),
+            "robots = 2\n[metrics]\nrecord_depth_hz = 2.0\nrecord_compression = \"lz4\"\n",
+        )
+        .unwrap();
+        let path = dir.path().join("robot0.toml");
+        std::fs::write(
+            &path,
+            format!("robot = 0\nscenario = \"team.toml\"\n{robot_file}"),
+        )
+        .unwrap();
+        RobotProcess::load(&path)
+    }
+
+    #[test]
+    fn recording_keys_come_from_the_scenario_unless_the_robot_file_sets_them() {
+        let options = load("").unwrap().record_options();
+        assert_eq!(options.depth_period_s, Some(0.5));
+        assert_eq!(options.compression, Compression::Lz4);
+        assert_eq!(options.grid_period_s, Some(1.0));
+        let options = load("record_depth_hz = 0.0\nrecord_compression = \"none\"\n")
+            .unwrap()
+            .record_options();
+        assert_eq!(options.depth_period_s, None);
+        assert_eq!(options.compression, Compression::None);
+        for (bad, expected) in [
+            (
+                "record_depth_hz = 31.0\n",
+                "`record_depth_hz` must be between 0 and 30 Hz",
+            ),
+            ("record_compression = \"gz\"\n", "unknown variant `gz`"),
+        ] {
+            let e = load(bad).unwrap_err();
+            let chain = troupe_core::ErrorChain(&e).to_string();
+            assert!(chain.contains(expected), "{chain}");
+        }
+    }
 }

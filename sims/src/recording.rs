@@ -11,7 +11,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 use troupe_actors::runtime::Time;
-use troupe_record::{RecordOptions, Recorder, schemas};
+use troupe_record::{RecordOptions, Recorder, period_of_hz, schemas};
 
 use crate::report::run_charts;
 use crate::scenario::{MetricsConfig, Scenario};
@@ -44,10 +44,10 @@ pub struct CoverageSample {
 /// What `[metrics]` asks a run's recorder to write of the bulky topics.
 #[must_use]
 pub fn record_options(metrics: &MetricsConfig) -> RecordOptions {
-    let period = |hz: f64| (hz > 0.0).then(|| 1.0 / hz);
     RecordOptions {
-        grid_period_s: period(metrics.record_grid_hz),
-        depth_period_s: period(metrics.record_depth_hz),
+        grid_period_s: period_of_hz(metrics.record_grid_hz),
+        depth_period_s: period_of_hz(metrics.record_depth_hz),
+        compression: metrics.record_compression,
         ..RecordOptions::default()
     }
 }
@@ -475,10 +475,13 @@ mod tests {
         let options = record_options(&metrics);
         assert_eq!(options.grid_period_s, Some(1.0));
         assert_eq!(options.depth_period_s, None);
+        assert_eq!(options.compression, troupe_record::Compression::Zstd);
         metrics.record_grid_hz = 0.0;
         metrics.record_depth_hz = 2.0;
+        metrics.record_compression = troupe_record::Compression::None;
         let options = record_options(&metrics);
         assert_eq!(options.grid_period_s, None);
         assert_eq!(options.depth_period_s, Some(0.5));
+        assert_eq!(options.compression, troupe_record::Compression::None);
     }
 }

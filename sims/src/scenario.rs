@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use troupe_comms::simnet::SimNetConfig;
 use troupe_core::ConfigError;
+use troupe_record::Compression;
 use troupe_robot::RobotConfig;
 use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
@@ -42,6 +43,9 @@ pub struct MetricsConfig {
     /// Recorded depth frames per robot per second (`foxglove.RawImage`, about 100 kB
     /// each at the default 160 × 120); 0, the default, records none.
     pub record_depth_hz: f64,
+    /// How `run.mcap`'s chunks are compressed: `"zstd"` (the default), `"lz4"` or
+    /// `"none"`.
+    pub record_compression: Compression,
 }
 
 impl Default for MetricsConfig {
@@ -54,6 +58,7 @@ impl Default for MetricsConfig {
             record: true,
             record_grid_hz: 1.0,
             record_depth_hz: 0.0,
+            record_compression: Compression::default(),
         }
     }
 }

@@ -47,6 +47,8 @@ fn robot_file(dir: &Path, i: usize, endpoints: &[String], duration_s: Option<f64
             ..ZenohConfig::default()
         },
         record: false,
+        record_depth_hz: None,
+        record_compression: None,
     };
     let file = dir.join(format!("robot{i}.toml"));
     std::fs::write(&file, toml::to_string(&config).expect("toml")).expect("robot file");

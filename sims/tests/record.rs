@@ -157,6 +157,11 @@ fn a_run_is_recorded_without_changing_it_and_reads_back() {
         report["ellipsoids_compared"].as_u64().unwrap() > 0,
         "{report}"
     );
+    assert_eq!(
+        report["compression"],
+        serde_json::json!(["zstd"]),
+        "chunks are zstd by default"
+    );
 }
 
 #[test]
@@ -184,8 +189,14 @@ fn free_ports(n: usize) -> Vec<u16> {
 }
 
 /// Channels (and message counts) of a process or base recording, read and
-/// schema-checked by `check_run.py FILE.mcap`; `None` without the venv.
-fn checked_channels(file: &Path) -> Option<serde_json::Map<String, serde_json::Value>> {
+/// checked by `check_run.py FILE.mcap` (schemas; `/world` and depth images where
+/// present), and the compressions its chunks name; `None` without the venv.
+fn checked_channels(
+    file: &Path,
+) -> Option<(
+    serde_json::Map<String, serde_json::Value>,
+    serde_json::Value,
+)> {
     let python = root().join(".venv-mcap/bin/python");
     let out = Command::new(&python)
         .arg(root().join("scripts/mcap/check_run.py"))
@@ -204,13 +215,18 @@ fn checked_channels(file: &Path) -> Option<serde_json::Map<String, serde_json::V
         String::from_utf8_lossy(&out.stderr)
     );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    Some(report.as_object().unwrap().clone())
+    Some((
+        report["channels"].as_object().unwrap().clone(),
+        report["compression"].clone(),
+    ))
 }
 
 /// `troupe launch` (3 robots, 20 s) with a base station connected to them: each robot
 /// process's `run.mcap` and the base's open with the independent reader, every message
 /// valid under its channel's schema, with the channels a robot publishes (and, for
-/// the base, what it receives).
+/// the base, what it receives). The robots record the world's surface once and, as
+/// the scenario's `[metrics]` asks, depth frames at 1 Hz in lz4 chunks; the base
+/// writes uncompressed chunks (`record_compression = "none"`).
 #[test]
 fn robot_processes_and_the_base_station_record_what_they_did() {
     let python = root().join(".venv-mcap/bin/python");
@@ -226,7 +242,11 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("team.toml"), "name = \"rec\"\nrobots = 3\n").unwrap();
+    std::fs::write(
+        dir.path().join("team.toml"),
+        "name = \"rec\"\nrobots = 3\n\n[metrics]\nrecord_depth_hz = 1.0\nrecord_compression = \"lz4\"\n",
+    )
+    .unwrap();
     let ports = free_ports(4);
     // `troupe launch` puts robot i on BASE_PORT + i.
     let robots: Vec<String> = (0..3)
@@ -235,7 +255,7 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
     std::fs::write(
         dir.path().join("base.toml"),
         format!(
-            "scenario = \"team.toml\"\nout = \"station\"\n\n[zenoh]\nlisten = [\"tcp/127.0.0.1:{}\"]\nconnect = [{}]\n",
+            "scenario = \"team.toml\"\nout = \"station\"\nrecord_compression = \"none\"\n\n[zenoh]\nlisten = [\"tcp/127.0.0.1:{}\"]\nconnect = [{}]\n",
             ports[3],
             robots.join(", ")
         ),
@@ -277,7 +297,18 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
 
     for i in 0..3 {
         let file = dir.path().join(format!("out/rec/robot{i}/run.mcap"));
-        let channels = checked_channels(&file).expect("the venv was checked above");
+        let (channels, compression) = checked_channels(&file).expect("the venv was checked above");
+        assert_eq!(
+            compression,
+            serde_json::json!(["lz4"]),
+            "{}",
+            file.display()
+        );
+        assert_eq!(
+            channels.get("/world"),
+            Some(&serde_json::json!(1)),
+            "{channels:?}"
+        );
         for channel in [
             "pose",
             "plan",
@@ -300,13 +331,14 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
             );
         }
         assert!(channels["/tf"].as_u64() > channels[&format!("/robot{i}/pose")].as_u64());
-        assert!(
-            !channels.contains_key(&format!("/robot{i}/depth")),
-            "depth is off by default"
-        );
+        // 1 Hz over the 20 s run, the first frame when the camera starts.
+        let depth = channels[&format!("/robot{i}/depth")].as_u64().unwrap();
+        assert!((5..=21).contains(&depth), "robot{i}: {depth} depth frames");
     }
     let station = dir.path().join("station/run.mcap");
-    let channels = checked_channels(&station).expect("the venv was checked above");
+    let (channels, compression) = checked_channels(&station).expect("the venv was checked above");
+    assert_eq!(compression, serde_json::json!([""]), "uncompressed chunks");
+    assert!(!channels.contains_key("/world"), "the base knows no world");
     // The base (robot 3) connects to every robot and records each one it hears.
     let heard = (0..3)
         .filter(|j| {

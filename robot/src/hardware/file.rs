@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::ZenohConfig;
+use troupe_record::{Compression, check_rate_hz};
 
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
@@ -46,6 +47,14 @@ pub struct HardwareFile {
     /// status) in Foxglove's schemas, in wall time; `false` turns it off.
     #[serde(default = "record_by_default")]
     pub record: bool,
+    /// Depth frames recorded per second (`/robot<id>/depth`, `32FC1` metres, about
+    /// 4 bytes a pixel before compression); 0, the default, records none.
+    #[serde(default)]
+    pub record_depth_hz: f64,
+    /// How `run.mcap`'s chunks are compressed: `"zstd"` (the default), `"lz4"` or
+    /// `"none"`.
+    #[serde(default)]
+    pub record_compression: Compression,
 }
 
 fn record_by_default() -> bool {
@@ -169,6 +178,7 @@ impl HardwareFile {
         if let Some(d) = self.duration_s {
             ConfigError::positive("duration_s", d).map_err(config)?;
         }
+        check_rate_hz("record_depth_hz", self.record_depth_hz).map_err(config)?;
         if let Some(c) = &self.camera {
             let positive = [c.fx, c.fy, c.max_depth_m]
                 .iter()
@@ -262,6 +272,8 @@ mod tests {
         assert!(f.mavlink.setpoint_rate_hz >= 20.0);
         // The one fence feeds the plan check too.
         assert_eq!(f.robot.collision.geofence, Some(f.mavlink.geofence));
+        assert_eq!(f.record_depth_hz, 0.0);
+        assert_eq!(f.record_compression, troupe_record::Compression::Zstd);
         assert!(
             robot
                 .out
@@ -324,6 +336,14 @@ mod tests {
                 "`duration_s` must be",
             ),
             (text.replacen("id = 0", "id = \"zero\"", 1), "`id`, line 8"),
+            (
+                text.replacen("id = 0", "id = 0\nrecord_depth_hz = 90.0", 1),
+                "`record_depth_hz` must be between 0 and 30 Hz, got 90",
+            ),
+            (
+                text.replacen("id = 0", "id = 0\nrecord_compression = \"gzip\"", 1),
+                "unknown variant `gzip`, expected one of `zstd`, `lz4`, `none`",
+            ),
             (
                 text.replace("connect = [\"tcp/10", "connect = [\"nowhere\", \"tcp/10"),
                 "invalid `[zenoh]` table",

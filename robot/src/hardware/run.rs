@@ -16,7 +16,7 @@ use troupe_actors::runtime::{
 };
 use troupe_actors::sensor::FrameSource;
 use troupe_comms::zenoh::{ZenohStats, ZenohTransport};
-use troupe_record::{Clock, Recorder, RecordingStats, SharedRecorder};
+use troupe_record::{Clock, RecordOptions, Recorder, RecordingStats, SharedRecorder, period_of_hz};
 
 use super::file::{HardwareError, HardwareRobot};
 use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
@@ -283,8 +283,13 @@ async fn fly(
             source,
         })?;
         let path = robot.out.join("run.mcap");
-        let recorder =
-            Recorder::create(&path, Clock::wall_from_now()).map_err(HardwareError::Recording)?;
+        let options = RecordOptions {
+            depth_period_s: period_of_hz(robot.file.record_depth_hz),
+            compression: robot.file.record_compression,
+            ..RecordOptions::default()
+        };
+        let recorder = Recorder::create_with(&path, Clock::wall_from_now(), options)
+            .map_err(HardwareError::Recording)?;
         let recorder = SharedRecorder::new(recorder);
         executor.add_tap(recorder.clone());
         Some(recorder)
