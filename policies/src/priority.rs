@@ -24,9 +24,9 @@
 //!
 //! Deviation from the thesis (on by default, [`PriorityConfig::clear_of_lower_priority`]):
 //! a robot also keeps its candidates clear of nearby peers of *lower* priority, modelled
-//! as following their committed plan until they can react to ours
-//! ([`PriorityConfig::lower_priority_react_s`]: their replanning period plus the link's
-//! delay) and braking from there ([`PeerModel::Yielding`]); without a fresh plan, their
+//! as following their committed plan and braking to a stop at any moment until they
+//! must have reacted to ours ([`PriorityConfig::lower_priority_react_s`]: their
+//! replanning period plus the link's delay; [`PeerModel::Yielding`]); without a fresh plan, their
 //! stopping envelope. In §8.2.3 a higher-priority robot ignores them, which is safe only
 //! while they can always move out of its way in time; in the safety study a robot with
 //! nothing safe to do hovered and was flown into (0.22 m between centres), and two
@@ -150,8 +150,9 @@ pub enum PeerModel<'a> {
         /// Extra radius: distance flown since plus braking distance, metres.
         envelope_m: f64,
     },
-    /// A lower-priority peer: following its plan until `react_at`, then braking along
-    /// its velocity at `decel_mps2` to a stop, and holding there.
+    /// A lower-priority peer: following its plan until it brakes along its velocity at
+    /// `decel_mps2` to a stop, and holds there; it may brake at any moment up to
+    /// `react_at` ([`PeerModel::possible_positions`]).
     Yielding {
         /// Its fresh plan.
         plan: &'a Trajectory,
@@ -162,8 +163,34 @@ pub enum PeerModel<'a> {
     },
 }
 
+/// Where a robot following `plan` until `from` and braking from there along its
+/// velocity at `decel_mps2` to a stop (then holding) is at `t ≥ from`.
+fn braking_from(
+    plan: &Trajectory,
+    from: Time,
+    t: Time,
+    decel_mps2: f64,
+) -> Option<nalgebra::Point3<f64>> {
+    let s = plan.state_at(from)?;
+    let speed = s.velocity_mps.norm();
+    let tau = t
+        .saturating_since(from)
+        .as_secs_f64()
+        .min(speed / decel_mps2);
+    let travelled = speed * tau - 0.5 * decel_mps2 * tau * tau;
+    Some(
+        s.velocity_mps
+            .try_normalize(1e-12)
+            .map_or(s.position_m, |dir| s.position_m + dir * travelled.max(0.0)),
+    )
+}
+
+/// Step between the moments a yielding peer is assumed able to start braking, seconds.
+const REACTION_STEP_S: f64 = 0.1;
+
 impl PeerModel<'_> {
-    /// Where the peer is taken to be at `t` (`None` for an empty plan).
+    /// Where the peer is taken to be at `t` (`None` for an empty plan); a yielding peer
+    /// at its latest, braking only from `react_at`.
     #[must_use]
     pub fn position_at(&self, t: Time) -> Option<nalgebra::Point3<f64>> {
         match self {
@@ -177,18 +204,41 @@ impl PeerModel<'_> {
                 if t <= *react_at {
                     return plan.state_at(t).map(|s| s.position_m);
                 }
-                let s = plan.state_at(*react_at)?;
-                let speed = s.velocity_mps.norm();
-                let tau = t.saturating_since(*react_at).as_secs_f64();
-                let tau = tau.min(speed / decel_mps2);
-                let travelled = speed * tau - 0.5 * decel_mps2 * tau * tau;
-                Some(
-                    s.velocity_mps
-                        .try_normalize(1e-12)
-                        .map_or(s.position_m, |dir| s.position_m + dir * travelled.max(0.0)),
-                )
+                braking_from(plan, *react_at, t, *decel_mps2)
             }
         }
+    }
+
+    /// Everywhere the peer may be at `t` when the check is made at `now`: a yielding
+    /// peer may see our plan and brake at any moment from `now` to `react_at` (its next
+    /// planning round comes whenever it comes), so it may be at the braking stop from
+    /// any point of its plan in between — a peer that stopped early stays in the way
+    /// it was about to leave (in an 8-robot cave run, a robot flew into a lower-priority
+    /// peer that was expected to move on and stopped instead). Sampled every
+    /// [`REACTION_STEP_S`]; the other models give their one position.
+    #[must_use]
+    pub fn possible_positions(&self, now: Time, t: Time) -> Vec<nalgebra::Point3<f64>> {
+        let PeerModel::Yielding {
+            plan,
+            react_at,
+            decel_mps2,
+        } = self
+        else {
+            return self.position_at(t).into_iter().collect();
+        };
+        let last = t.min(*react_at);
+        let span_s = last.saturating_since(now).as_secs_f64();
+        let steps = (span_s / REACTION_STEP_S).ceil() as usize;
+        (0..=steps)
+            .filter_map(|k| {
+                let from = if k == steps {
+                    last
+                } else {
+                    now + std::time::Duration::from_secs_f64(REACTION_STEP_S * k as f64)
+                };
+                braking_from(plan, from, t, *decel_mps2)
+            })
+            .collect()
     }
 }
 
@@ -281,12 +331,17 @@ pub fn first_overlap(
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
-        let Some(other) = peer.position_at(t) else {
+        let Some(horizontal) = peer
+            .possible_positions(now, t)
+            .into_iter()
+            .map(|other| own.position_m - other)
+            .filter(|d| d.z.abs() < config.cylinder_height_m)
+            .map(|d| d.xy().norm())
+            .min_by(f64::total_cmp)
+        else {
             continue;
         };
-        let d = own.position_m - other;
-        let horizontal = d.xy().norm();
-        if horizontal < min_horizontal && d.z.abs() < config.cylinder_height_m {
+        if horizontal < min_horizontal {
             if i == 0 {
                 // Already too close (both committed at once, or a peer appeared): a
                 // candidate that never gets closer than now lets the pair separate;
@@ -574,6 +629,57 @@ mod tests {
         };
         let stop = model.position_at(t(20.0)).unwrap();
         assert!((stop.x - (-4.0 + 1.2 + 0.5)).abs() < 1e-9, "{stop}");
+    }
+
+    #[test]
+    fn a_lower_priority_peer_may_stop_before_it_leaves_the_way() {
+        let config = PriorityConfig::default();
+        // Peer 1 (priority 0) at the origin, its plan taking it +y at 1.5 m/s; robot 0
+        // (priority 5) would arrive where the peer is now 1.5 s later. Were the peer
+        // sure to keep to its plan until it can react (1.2 s), the spot would be free;
+        // but its next round may stop it at once, where it is.
+        let leaving = line(10.0, [0.0, 0.0, 1.0], [0.0, 3.0, 1.0], 1.5);
+        let peers = table_with(1, 0, Some((leaving, 10.0)), None);
+        let own = odom(10.0, [-2.0, 0.0, 1.0], [1.5, 0.0, 0.0]);
+        let into_the_spot = line(10.0, [-2.0, 0.0, 1.0], [0.0, 0.0, 1.0], 1.5);
+        let c = check_candidate(
+            &config,
+            t(10.0),
+            RobotId(0),
+            5,
+            &own,
+            &into_the_spot,
+            &peers,
+        );
+        assert!(
+            c.as_ref()
+                .is_some_and(|c| c.peer == RobotId(1) && !c.envelope),
+            "{c:?}"
+        );
+        // Where it may be: from where it is now to where it would stop after 1.2 s.
+        let plan = line(10.0, [0.0, 0.0, 1.0], [0.0, 3.0, 1.0], 1.5);
+        let model = PeerModel::Yielding {
+            plan: &plan,
+            react_at: t(11.2),
+            decel_mps2: 1.0,
+        };
+        let ys: Vec<f64> = model
+            .possible_positions(t(10.0), t(20.0))
+            .iter()
+            .map(|p| p.y)
+            .collect();
+        let (lo, hi) = ys
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), y| (a.min(*y), b.max(*y)));
+        // From where it is now (the plan's first knot has no velocity yet) to 1.8 m
+        // along its plan (1.2 s at 1.5 m/s) plus 1.125 m of braking (1.5² / 2).
+        assert!(lo.abs() < 1e-6 && (hi - 2.925).abs() < 1e-6, "{ys:?}");
+        let latest = model.position_at(t(20.0)).map(|p| p.y);
+        assert!(latest.is_some_and(|y| (y - 2.925).abs() < 1e-6));
+        // Passing well behind where it is now is still fine.
+        let own = odom(10.0, [-2.0, -3.0, 1.0], [1.5, 0.0, 0.0]);
+        let behind = line(10.0, [-2.0, -3.0, 1.0], [2.0, -3.0, 1.0], 1.5);
+        assert!(check_candidate(&config, t(10.0), RobotId(0), 5, &own, &behind, &peers).is_none());
     }
 
     #[test]
