@@ -29,7 +29,8 @@
 //! (the 0.5 % quantile of the points' "anchor" log-densities minus `ln 10¹⁰`; the anchor
 //! of a point is its most responsible component of the previous iteration, or its
 //! k-means++ centre at the start), lists every component in the grid cells its box
-//! overlaps, and evaluates a point on its cell's list only when its anchor proves
+//! overlaps (then narrows each cell's list for the run of points in it, see
+//! `run_blocks`), and evaluates a point on its run's list only when its anchor proves
 //! `max_b ℓ_b(x) − ln 10¹⁰ ≥ ℓ_anchor(x) − ln 10¹⁰ ≥ T`; the other points
 //! (about 0.5 %) are evaluated over all components. Every component left out therefore has
 //! responsibility below `1e-10` relative to the best one, so each responsibility is
@@ -418,8 +419,8 @@ fn sorted_grid(points: &[Vector4<f64>], init: &Gmm4) -> (PointGrid, Vec<u32>) {
     // Cell side: 1.5 × the median over components of the 3σ half-width along the widest
     // axis; clamped to [extent/512, extent/8]. Larger cells hold more components that do
     // not matter, smaller ones cost more lists; 1.5 was the fastest of 0.5–3 on the
-    // 160×120 room frame at σ = 0.02. (Any side gives the same fit: it only sets how
-    // many components a cell's list holds beyond those that matter.)
+    // 160×120 room frame at σ = 0.02. The side does not change which components are
+    // kept, only the order in which points are summed (so the last bits of a fit).
     let mut widths: Vec<f64> = init
         .covariances()
         .iter()
