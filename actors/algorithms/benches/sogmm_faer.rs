@@ -70,15 +70,17 @@ fn case(n_points: usize, n_comps: usize, stride: usize) -> Case {
     let mut rhs = Mat::<f64>::zeros(5, 4 * n_comps);
     for j in 0..n_comps {
         let k = (j * stride) % gmm.len();
-        let l = gmm.covariances()[k].cholesky().expect("positive definite").l();
+        let l = gmm.covariances()[k]
+            .cholesky()
+            .expect("positive definite")
+            .l();
         let u: Matrix4<f64> = l
             .solve_lower_triangular(&Matrix4::identity())
             .expect("invertible");
         let mu = gmm.means()[k];
         let log_det_half: f64 = (0..4).map(|a| l[(a, a)].ln()).sum();
-        soa.logc.push(
-            gmm.weights()[k].ln() - 2.0 * (2.0 * std::f64::consts::PI).ln() - log_det_half,
-        );
+        soa.logc
+            .push(gmm.weights()[k].ln() - 2.0 * (2.0 * std::f64::consts::PI).ln() - log_det_half);
         for a in 0..4 {
             soa.mean[a].push(mu[a]);
         }
@@ -146,7 +148,14 @@ fn by_loop(case: &Case, out: &mut [f64]) {
 }
 
 fn by_faer(case: &Case, y: &mut Mat<f64>, q: &mut [f64], out: &mut [f64]) {
-    matmul(y.as_mut(), Accum::Replace, &case.x1, &case.rhs, 1.0, Par::Seq);
+    matmul(
+        y.as_mut(),
+        Accum::Replace,
+        &case.x1,
+        &case.rhs,
+        1.0,
+        Par::Seq,
+    );
     let k = case.soa.logc.len();
     // Column by column (faer's matrices are column-major): q = Σ_r y_r² per point.
     for j in 0..k {
