@@ -791,8 +791,8 @@ fn max_first(values: &[f64]) -> (f64, usize) {
 #[inline(always)]
 pub(crate) fn exp_nonpositive(x: f64) -> f64 {
     const SHIFTER: f64 = 6_755_399_441_055_744.0; // 1.5 · 2⁵²: adding it rounds to an integer
-    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1; // 32 significant bits: k · LN2_HI is exact
-    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1; // 32 significant bits: k · LN2_HI is exact
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     let xc = if x >= -708.0 { x } else { -708.0 };
     let t = xc * std::f64::consts::LOG2_E + SHIFTER;
     let k = t - SHIFTER;
