@@ -29,7 +29,8 @@
 //! (the 0.5 % quantile of the points' "anchor" log-densities minus `ln 10¹⁰`; the anchor
 //! of a point is its most responsible component of the previous iteration, or its
 //! k-means++ centre at the start), lists every component in the grid cells its box
-//! overlaps, and evaluates a point on its cell's list only when its anchor proves
+//! overlaps (then narrows each cell's list for the run of points in it, see
+//! `run_blocks`), and evaluates a point on its run's list only when its anchor proves
 //! `max_b ℓ_b(x) − ln 10¹⁰ ≥ ℓ_anchor(x) − ln 10¹⁰ ≥ T`; the other points
 //! (about 0.5 %) are evaluated over all components. Every component left out therefore has
 //! responsibility below `1e-10` relative to the best one, so each responsibility is
@@ -39,6 +40,8 @@
 //! Determinism: points are processed in a fixed order (sorted by grid cell) in fixed
 //! chunks; each chunk accumulates its own sums, and the chunk sums are added in chunk
 //! order, so the result does not depend on the number of rayon threads.
+
+use std::ops::Range;
 
 use nalgebra::{Matrix4, Vector4};
 use rayon::prelude::*;
@@ -344,6 +347,7 @@ pub(crate) fn fit_em_anchored(
         })
         .collect();
     let cells: Vec<u32> = order.iter().map(|&i| grid.point_cell[i as usize]).collect();
+    let runs = cell_runs(&xs, &cells);
     let mut anchors: Vec<u32> = match anchors {
         Some(a) if a.len() == points.len() && a.iter().all(|&k| (k as usize) < m) => {
             order.iter().map(|&i| a[i as usize]).collect()
@@ -357,11 +361,11 @@ pub(crate) fn fit_em_anchored(
     let mut kept_total = 0usize;
     for _ in 0..config.max_iterations {
         let comps = factor(&params)?;
-        let (lists, anchor_ll, threshold) = match config.e_step {
+        let (blocks, anchor_ll, threshold) = match config.e_step {
             EStep::Dense => (None, vec![], f64::NEG_INFINITY),
             EStep::Restricted => {
                 let anchor_ll: Vec<f64> = xs
-                    .iter()
+                    .par_iter()
                     .zip(&anchors)
                     .map(|(x, &a)| comps[a as usize].log_density(x))
                     .collect();
@@ -369,15 +373,18 @@ pub(crate) fn fit_em_anchored(
                 let boxes: Vec<Option<([f64; 3], [f64; 3])>> = (0..m)
                     .map(|k| reach_box(&params.means[k], &params.covs[k], comps[k].logc, threshold))
                     .collect();
-                (Some(grid.component_lists(&boxes)), anchor_ll, threshold)
+                let lists = grid.component_lists(&boxes);
+                let blocks = run_blocks(&runs, &lists, &anchor_ll, threshold, &params, &comps);
+                (Some(blocks), anchor_ll, threshold)
             }
         };
+        let all = Blocks::new(&comps, vec![0, m], (0..m as u32).collect());
         let ctx = PassCtx {
             xs: &xs,
-            cells: &cells,
-            comps: &comps,
+            all: &all,
+            runs: &runs,
             means: &params.means,
-            lists: lists.as_ref(),
+            blocks: blocks.as_ref(),
             anchor_ll: &anchor_ll,
             threshold,
         };
@@ -409,8 +416,11 @@ pub(crate) fn fit_em_anchored(
 /// processing order: points sorted by cell, stable.
 fn sorted_grid(points: &[Vector4<f64>], init: &Gmm4) -> (PointGrid, Vec<u32>) {
     let xyz: Vec<[f64; 3]> = points.iter().map(|p| [p[0], p[1], p[2]]).collect();
-    // Cell side: half the median over components of the 3σ half-width along the widest
-    // axis; clamped to [extent/512, extent/8].
+    // Cell side: 1.5 × the median over components of the 3σ half-width along the widest
+    // axis; clamped to [extent/512, extent/8]. Larger cells hold more components that do
+    // not matter, smaller ones cost more lists; 1.5 was the fastest of 0.5–3 on the
+    // 160×120 room frame at σ = 0.02. The side does not change which components are
+    // kept, only the order in which points are summed (so the last bits of a fit).
     let mut widths: Vec<f64> = init
         .covariances()
         .iter()
@@ -433,7 +443,7 @@ fn sorted_grid(points: &[Vector4<f64>], init: &Gmm4) -> (PointGrid, Vec<u32>) {
         .map(|a| hi[a] - lo[a])
         .fold(0.0f64, f64::max)
         .max(1e-6);
-    let h = (0.5 * median).clamp(extent / 512.0, extent / 8.0);
+    let h = (1.5 * median).clamp(extent / 512.0, extent / 8.0);
     let grid = PointGrid::new(&xyz, h);
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
     order.sort_by_key(|&i| grid.point_cell[i as usize]);
@@ -495,10 +505,12 @@ fn reach_box(
 
 struct PassCtx<'a> {
     xs: &'a [[f64; 4]],
-    cells: &'a [u32],
-    comps: &'a [Whitened],
+    /// Every component, for the dense E-step and the fallback points.
+    all: &'a Blocks,
+    runs: &'a [Run],
     means: &'a [Vector4<f64>],
-    lists: Option<&'a CellLists>,
+    /// One block per run of [`Self::runs`] (restricted E-step).
+    blocks: Option<&'a Blocks>,
     anchor_ll: &'a [f64],
     threshold: f64,
 }
@@ -507,11 +519,12 @@ struct PassCtx<'a> {
 /// chunk order. Returns the totals and each point's most responsible component.
 fn fused_pass(ctx: &PassCtx<'_>, m: usize) -> (Partial, Vec<u32>) {
     let n = ctx.xs.len();
+    let arch = pulp::Arch::new();
     let chunks: Vec<(Partial, Vec<u32>)> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
             let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-            chunk_pass(ctx, m, range)
+            arch.dispatch(ChunkPass { ctx, m, range })
         })
         .collect();
     let mut total = Partial::new(m);
@@ -523,61 +536,220 @@ fn fused_pass(ctx: &PassCtx<'_>, m: usize) -> (Partial, Vec<u32>) {
     (total, anchors)
 }
 
-fn chunk_pass(ctx: &PassCtx<'_>, m: usize, range: std::ops::Range<usize>) -> (Partial, Vec<u32>) {
+/// A run of sorted points that share a grid cell, with the box of their positions.
+struct Run {
+    points: Range<usize>,
+    cell: u32,
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+/// The runs of equal cells in the sorted points.
+fn cell_runs(xs: &[[f64; 4]], cells: &[u32]) -> Vec<Run> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for i in 1..=cells.len() {
+        if i == cells.len() || cells[i] != cells[start] {
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for x in &xs[start..i] {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(x[a]);
+                    hi[a] = hi[a].max(x[a]);
+                }
+            }
+            runs.push(Run {
+                points: start..i,
+                cell: cells[start],
+                lo,
+                hi,
+            });
+            start = i;
+        }
+    }
+    runs
+}
+
+/// One block of candidate components per run: the run's cell list, narrowed to the
+/// components that can reach the run's own threshold
+/// `T_r = max(T, min_run (ℓ_anchor − ln 10¹⁰))` somewhere in the box of the run's
+/// points: per axis, the gap `g` from the mean to the box must satisfy
+/// `g² ≤ 2 (c_m − T_r) Σ_m,aa` (the reach box of the module doc, with a relative slack
+/// of 1e-9 against rounding). Every point of the run that is not a fallback has
+/// `max_b ℓ_b − ln 10¹⁰ ≥ T_r`, so a component left out is below its cut exactly as
+/// with the cell's list: the kept components, their order and so the fit are the same.
+fn run_blocks(
+    runs: &[Run],
+    lists: &CellLists,
+    anchor_ll: &[f64],
+    threshold: f64,
+    params: &Params,
+    comps: &[Whitened],
+) -> Blocks {
+    let mut start = Vec::with_capacity(runs.len() + 1);
+    start.push(0);
+    let mut ids: Vec<u32> = Vec::new();
+    for run in runs {
+        let t_run = anchor_ll[run.points.clone()]
+            .iter()
+            .fold(f64::INFINITY, |t, &l| t.min(l - LOG_TRUNCATION))
+            .max(threshold);
+        ids.extend(lists.get(run.cell).iter().copied().filter(|&k| {
+            let k = k as usize;
+            let k2 = 2.0 * (comps[k].logc - t_run) * (1.0 + 1e-9);
+            let (mean, cov) = (&params.means[k], &params.covs[k]);
+            k2 > 0.0
+                && (0..3).all(|a| {
+                    let g = (run.lo[a] - mean[a]).max(mean[a] - run.hi[a]).max(0.0);
+                    g * g <= k2 * cov[(a, a)]
+                })
+        }));
+        start.push(ids.len());
+    }
+    Blocks::new(comps, start, ids)
+}
+
+/// Blocks of components in structure-of-arrays layout (one slice per parameter, blocks
+/// one after another), so that [`Blocks::eval`] runs the arithmetic of
+/// [`Whitened::log_density`] over a block in a loop the compiler vectorises, with the
+/// same result bit for bit (no reassociation, no fused multiply-add).
+struct Blocks {
+    /// Block `b` is `start[b]..start[b + 1]`.
+    start: Vec<usize>,
+    ids: Vec<u32>,
+    mean: [Vec<f64>; 4],
+    u: [Vec<f64>; 10],
+    logc: Vec<f64>,
+}
+
+impl Blocks {
+    /// Blocks `start[b]..start[b + 1]` of the components `ids` (in that order).
+    fn new(comps: &[Whitened], start: Vec<usize>, ids: Vec<u32>) -> Self {
+        let n = ids.len();
+        let mut mean: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(n));
+        let mut u: [Vec<f64>; 10] = std::array::from_fn(|_| Vec::with_capacity(n));
+        let mut logc = Vec::with_capacity(n);
+        for &k in &ids {
+            let c = &comps[k as usize];
+            for (v, x) in mean.iter_mut().zip(c.mean) {
+                v.push(x);
+            }
+            for (v, x) in u.iter_mut().zip(c.u) {
+                v.push(x);
+            }
+            logc.push(c.logc);
+        }
+        Self {
+            start,
+            ids,
+            mean,
+            u,
+            logc,
+        }
+    }
+
+    /// The component ids of block `b`.
+    #[inline(always)]
+    fn ids(&self, b: usize) -> &[u32] {
+        &self.ids[self.start[b]..self.start[b + 1]]
+    }
+
+    /// `out[j] = ℓ_{ids[j]}(x)` over block `b`, exactly as [`Whitened::log_density`].
+    #[inline(always)]
+    fn eval(&self, b: usize, x: &[f64; 4], out: &mut Vec<f64>) {
+        let r = self.start[b]..self.start[b + 1];
+        let k = r.len();
+        out.clear();
+        out.resize(k, 0.0);
+        let out = &mut out[..k];
+        let m: [&[f64]; 4] = std::array::from_fn(|i| &self.mean[i][r.clone()]);
+        let u: [&[f64]; 10] = std::array::from_fn(|i| &self.u[i][r.clone()]);
+        let logc = &self.logc[r];
+        for j in 0..k {
+            let d0 = x[0] - m[0][j];
+            let d1 = x[1] - m[1][j];
+            let d2 = x[2] - m[2][j];
+            let d3 = x[3] - m[3][j];
+            let y0 = u[0][j] * d0;
+            let y1 = u[1][j] * d0 + u[2][j] * d1;
+            let y2 = u[3][j] * d0 + u[4][j] * d1 + u[5][j] * d2;
+            let y3 = u[6][j] * d0 + u[7][j] * d1 + u[8][j] * d2 + u[9][j] * d3;
+            out[j] = logc[j] - 0.5 * (y0 * y0 + y1 * y1 + y2 * y2 + y3 * y3);
+        }
+    }
+}
+
+/// [`chunk_pass`] compiled for the widest vector instructions the processor has (pulp's
+/// runtime dispatch: AVX2 where present, else the baseline). The arithmetic is the same
+/// in every version (Rust neither reassociates nor fuses floating-point operations), so
+/// the fit is bit-identical on any of them.
+struct ChunkPass<'a, 'b> {
+    ctx: &'a PassCtx<'b>,
+    m: usize,
+    range: Range<usize>,
+}
+
+impl pulp::WithSimd for ChunkPass<'_, '_> {
+    type Output = (Partial, Vec<u32>);
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        chunk_pass(self.ctx, self.m, self.range)
+    }
+}
+
+#[inline(always)]
+fn chunk_pass(ctx: &PassCtx<'_>, m: usize, range: Range<usize>) -> (Partial, Vec<u32>) {
     let mut part = Partial::new(m);
     let mut anchors = Vec::with_capacity(range.len());
-    let mut ids: Vec<u32> = Vec::with_capacity(m);
     let mut lls: Vec<f64> = Vec::with_capacity(m);
-    let all: Vec<u32> = (0..m as u32).collect();
+    let mut kept_ids: Vec<u32> = Vec::with_capacity(m);
+    // The run of the chunk's first point; runs are in point order.
+    let mut run = ctx.runs.partition_point(|r| r.points.end <= range.start);
     for i in range {
+        while ctx.runs[run].points.end <= i {
+            run += 1;
+        }
         let x = &ctx.xs[i];
-        let (candidates, truncate): (&[u32], bool) = match ctx.lists {
-            None => (&all, false),
-            Some(lists) => {
+        let (blocks, b, truncate) = match ctx.blocks {
+            None => (ctx.all, 0, false),
+            Some(blocks) => {
                 if ctx.anchor_ll[i] - LOG_TRUNCATION >= ctx.threshold {
-                    (lists.get(ctx.cells[i]), true)
+                    (blocks, run, true)
                 } else {
                     part.fallbacks += 1;
-                    (&all, true)
+                    (ctx.all, 0, true)
                 }
             }
         };
-        part.evaluated += candidates.len();
-        ids.clear();
-        lls.clear();
-        let mut best = (f64::NEG_INFINITY, 0u32);
-        for &k in candidates {
-            let l = ctx.comps[k as usize].log_density(x);
-            if l > best.0 {
-                best = (l, k);
-            }
-            ids.push(k);
-            lls.push(l);
-        }
-        let max = best.0;
+        let ids = blocks.ids(b);
+        part.evaluated += ids.len();
+        blocks.eval(b, x, &mut lls);
+        let (max, arg) = max_first(&lls);
         let cut = if truncate {
             max - LOG_TRUNCATION
         } else {
             f64::NEG_INFINITY
         };
-        // One exponential per kept component: e = exp(ℓ − max), γ = e / Σ e.
-        let mut s = 0.0;
+        // Keep ℓ − max of the components at or above the cut (in block order, without
+        // branches), then one exponential each: e = exp(ℓ − max), γ = e / Σ e.
+        kept_ids.resize(ids.len(), 0);
         let mut kept = 0;
         for j in 0..lls.len() {
             let l = lls[j];
-            if l >= cut {
-                let e = (l - max).exp();
-                s += e;
-                lls[kept] = e;
-                ids[kept] = ids[j];
-                kept += 1;
-            }
+            lls[kept] = l - max;
+            kept_ids[kept] = ids[j];
+            kept += usize::from(l >= cut);
         }
+        for e in &mut lls[..kept] {
+            *e = exp_nonpositive(*e);
+        }
+        let s: f64 = lls[..kept].iter().sum();
         part.ll += max + s.ln();
         part.kept += kept;
-        anchors.push(best.1);
+        anchors.push(ids[arg]);
         let inv_s = 1.0 / s;
-        for (&k, &e) in ids[..kept].iter().zip(&lls[..kept]) {
+        for (&k, &e) in kept_ids.iter().zip(&lls[..kept]) {
             let r = e * inv_s;
             let mu = &ctx.means[k as usize];
             let d = [x[0] - mu[0], x[1] - mu[1], x[2] - mu[2], x[3] - mu[3]];
@@ -585,6 +757,71 @@ fn chunk_pass(ctx: &PassCtx<'_>, m: usize, range: std::ops::Range<usize>) -> (Pa
         }
     }
     (part, anchors)
+}
+
+/// The largest value and the first index holding it (`(−∞, 0)` if empty); values must
+/// not be NaN. Four running maxima, so that the loop vectorises; the index is then the
+/// first match, as a left-to-right scan with `>` would pick.
+#[inline(always)]
+fn max_first(values: &[f64]) -> (f64, usize) {
+    let mut acc = [f64::NEG_INFINITY; 4];
+    let quads = values.chunks_exact(4);
+    let rest = quads.remainder();
+    for q in quads {
+        for t in 0..4 {
+            acc[t] = if q[t] > acc[t] { q[t] } else { acc[t] };
+        }
+    }
+    let mut max = acc
+        .into_iter()
+        .chain(rest.iter().copied())
+        .fold(f64::NEG_INFINITY, |a, b| if b > a { b } else { a });
+    if values.is_empty() {
+        max = f64::NEG_INFINITY;
+    }
+    let arg = values.iter().position(|&v| v == max).unwrap_or(0);
+    (max, arg)
+}
+
+/// `eˣ` for `x ≤ 0`, to within a few units in the last place (0 below −708, where `eˣ`
+/// underflows): `x = k ln 2 + r` with `|r| ≤ ½ ln 2` (Cody–Waite, `ln 2` in two parts),
+/// `eʳ` by its Taylor polynomial to degree 12 (truncation below 3·10⁻¹⁶ relative),
+/// `2ᵏ` from the exponent bits. Branch-free, so a loop over it vectorises, and the same
+/// bits on every processor and C library (unlike `f64::exp`).
+#[inline(always)]
+pub(crate) fn exp_nonpositive(x: f64) -> f64 {
+    const SHIFTER: f64 = 6_755_399_441_055_744.0; // 1.5 · 2⁵²: adding it rounds to an integer
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1; // 32 significant bits: k · LN2_HI is exact
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    let xc = if x >= -708.0 { x } else { -708.0 };
+    let t = xc * std::f64::consts::LOG2_E + SHIFTER;
+    let k = t - SHIFTER;
+    let r = (xc - k * LN2_HI) - k * LN2_LO;
+    let mut p = 1.0 / 479_001_600.0; // 1/12!
+    for c in [
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ] {
+        p = p * r + c;
+    }
+    // t's low bits hold k (two's complement): 2ᵏ has biased exponent k + 1023.
+    let scale = f64::from_bits(
+        t.to_bits()
+            .wrapping_sub(SHIFTER.to_bits())
+            .wrapping_add(1023)
+            << 52,
+    );
+    if x >= -708.0 { p * scale } else { 0.0 }
 }
 
 fn m_step(params: &mut Params, total: &Partial, n_points: usize, reg: f64) {
