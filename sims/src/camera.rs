@@ -9,9 +9,12 @@
 //! [`DepthFrame`] message, ready to publish.
 //!
 //! [`CameraParams::render`] sphere-traces a [`World`] on the CPU; see `render` for the
-//! exact rules. [`CameraRenderer`] renders on the backend named by
-//! [`CameraParams::backend`]: the CPU, or the wgpu compute shader of `gpu` (same rules
-//! in `f32`) for worlds that describe themselves with [`World::gpu_scene`].
+//! exact rules (each tile of [`TILE_PX`]² pixels first marches a cone holding all its
+//! rays, so a pixel's march starts where its tile is known to be free).
+//! [`CameraRenderer`] renders on the backend named by [`CameraParams::backend`]: the
+//! CPU, or the wgpu compute shader of `gpu` (same rules in `f32`, every pixel marched
+//! from the camera: the same surfaces within [`HIT_EPS_M`]) for worlds that describe
+//! themselves with [`World::gpu_scene`].
 
 mod backend;
 mod gpu;
@@ -21,7 +24,7 @@ pub use backend::{
     CameraBackend, CameraRenderer, Choice, GpuUnavailable, gpu_camera_available, resolve_backend,
 };
 pub use gpu::{GpuCamera, GpuContext, GpuError};
-pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION};
+pub use render::{HIT_EPS_M, LIGHT_HALF_DISTANCE_M, MAX_TRACE_STEPS, OVER_RELAXATION, TILE_PX};
 
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};

@@ -7,6 +7,11 @@
 //!    `sdf / lipschitz`), over-relaxed where provably safe (see `trace`). A hit is declared
 //!    when the safe step falls below [`HIT_EPS_M`]; the march gives up with no return once
 //!    no surface can lie before z-depth `range_m`, or after [`MAX_TRACE_STEPS`] steps.
+//!    The march starts where a cone holding the rays of the pixel's tile (squares of
+//!    [`TILE_PX`] pixels, then quarters of them) has been marched without touching a
+//!    surface (see `cone_start_m`): no ray of the tile meets a surface before that
+//!    distance, so the march finds the same first surface, within [`HIT_EPS_M`], as one
+//!    from the camera, in fewer steps.
 //! 2. Refine once: `t += sdf(p) / max(n·(-d), 0.25)`, exact for a plane.
 //! 3. The hit counts when its true z-depth `t * cos_axis <= range_m`.
 //! 4. Intensity = `albedo * max(n·(-d), 0) / (1 + (t / LIGHT_HALF_DISTANCE_M)^2)` (a point
@@ -44,8 +49,88 @@ struct Hit {
     normal: Vector3<f64>,
 }
 
-/// March from `origin` along unit `dir` up to ray length `t_max_m`; `origin_step_m` is
-/// `world.safe_step_m(origin)` (the same for every pixel, so computed once per frame).
+/// Edge of the square pixel tiles whose rays share a cone march, in pixels; each tile's
+/// quarters then continue with a narrower cone, down to tiles of [`MIN_TILE_PX`].
+pub const TILE_PX: usize = 8;
+/// Edge of the smallest tiles that are cone-marched, in pixels.
+const MIN_TILE_PX: usize = 2;
+/// A cone march stops once its step falls below this fraction of the empty radius at
+/// its axis (most of the ball is spent on the cone's width; narrower cones take over).
+const CONE_STOP_FRACTION: f64 = 0.5;
+/// Relative slack on a cone's half-width for rounding (far above its error).
+const CONE_SLACK: f64 = 1e-9;
+
+/// A start for the march of a ray: ray length `t_m` reached with no surface before it,
+/// and the certified empty radius `radius_m` around the point there.
+#[derive(Clone, Copy, Debug)]
+struct MarchStart {
+    t_m: f64,
+    radius_m: f64,
+}
+
+/// The unit direction of a pixel's ray, the cosine between it and the optical axis,
+/// and its largest ray length (z-depth `range_m`).
+#[derive(Clone, Copy, Debug)]
+struct PixelRay {
+    dir: Vector3<f64>,
+    cos_axis: f64,
+    t_max_m: f64,
+}
+
+/// How far every ray of `rays` (unit directions from `origin`) is free of surfaces,
+/// continuing from `start` (valid for all of them).
+///
+/// The cone's axis `c` is the normalised mean direction and `δ >= max |d_i - c|` its
+/// half-width; at axis point `q = origin + c t` with empty radius `r`, the point of ray
+/// `i` at length `s ∈ [t, t + r - δ t]` lies within `δ t + (s - t) <= r` of `q`, so every
+/// ray stays free up to `t + r - δ t`. The march (plain sphere tracing of the axis with
+/// the step shrunk by `δ t`) stops when that step falls below
+/// [`CONE_STOP_FRACTION`]` · r` or [`HIT_EPS_M`], after [`MAX_TRACE_STEPS`] steps, or
+/// once the cone is past every ray's `t_max_m`.
+fn cone_start_m(
+    world: &dyn World,
+    origin: &Point3<f64>,
+    rays: &[PixelRay],
+    start: MarchStart,
+) -> MarchStart {
+    let sum: Vector3<f64> = rays.iter().map(|r| r.dir).sum();
+    let Some(axis) = sum.try_normalize(1e-12) else {
+        return start;
+    };
+    let spread = rays
+        .iter()
+        .map(|r| (r.dir - axis).norm())
+        .fold(0.0, f64::max)
+        * (1.0 + CONE_SLACK);
+    let t_max_m = rays.iter().map(|r| r.t_max_m).fold(0.0, f64::max);
+    let mut t = start.t_m;
+    let mut radius = if t > 0.0 {
+        world.safe_step_m(&(origin + axis * t))
+    } else {
+        start.radius_m
+    };
+    for _ in 0..MAX_TRACE_STEPS {
+        let step = radius - spread * t;
+        if t > t_max_m || !(step >= CONE_STOP_FRACTION * radius && step >= HIT_EPS_M) {
+            break;
+        }
+        t += step;
+        radius = world.safe_step_m(&(origin + axis * t));
+    }
+    if t > 0.0 {
+        MarchStart {
+            t_m: t,
+            radius_m: f64::NAN,
+        }
+    } else {
+        // Still at the camera, where every ray's empty radius is the same.
+        start
+    }
+}
+
+/// March from `origin` along unit `dir` up to ray length `t_max_m`, from `start` (no
+/// surface before `start.t_m`; `start.radius_m` is `world.safe_step_m` there, or NaN when
+/// not yet known).
 ///
 /// Steps are over-relaxed by [`OVER_RELAXATION`] while it is safe: after stepping
 /// `ω·r0` from a point with empty radius `r0`, the step is kept only if the new point's
@@ -54,13 +139,21 @@ struct Hit {
 fn trace(
     world: &dyn World,
     origin: &Point3<f64>,
-    origin_step_m: f64,
+    start: MarchStart,
     dir: &Vector3<f64>,
     t_max_m: f64,
 ) -> Option<Hit> {
+    if start.t_m > t_max_m {
+        // No surface before t_max_m.
+        return None;
+    }
     let mut omega = OVER_RELAXATION;
-    let mut t = 0.0;
-    let mut radius = origin_step_m;
+    let mut t = start.t_m;
+    let mut radius = if start.radius_m.is_nan() {
+        world.safe_step_m(&(origin + dir * t))
+    } else {
+        start.radius_m
+    };
     for _ in 0..MAX_TRACE_STEPS {
         if radius < HIT_EPS_M {
             let p = origin + dir * t;
@@ -133,6 +226,91 @@ pub(super) fn noisy_depth_m(
     (!dropped && depth > 0.0).then_some(depth)
 }
 
+/// Rows `row0..` of the frame being rendered, in row-major order.
+struct Band<'a> {
+    row0: usize,
+    depth: &'a mut [f32],
+    intensity: &'a mut [f32],
+}
+
+/// Everything a tile's pixels share: the world, the camera and the frame's noise seed.
+struct TileJob<'a> {
+    cam: &'a CameraParams,
+    world: &'a dyn World,
+    origin: Point3<f64>,
+    noise_seed: u64,
+    width: usize,
+    /// Whether tiles are cone-marched (off only to compare with per-pixel marches).
+    cones: bool,
+}
+
+impl TileJob<'_> {
+    /// Renders the pixels `rays` (row-major, `cols` wide, the first at `(col0, row0)`
+    /// of `band`) into `band`, cone-marching the tile and then its quarters from `start`
+    /// (see `cone_start_m`).
+    fn render_tile(
+        &self,
+        rays: &[PixelRay],
+        cols: usize,
+        (col0, row0): (usize, usize),
+        start: MarchStart,
+        band: &mut Band<'_>,
+    ) {
+        let rows = rays.len() / cols;
+        let start = if self.cones {
+            cone_start_m(self.world, &self.origin, rays, start)
+        } else {
+            start
+        };
+        if cols > MIN_TILE_PX || rows > MIN_TILE_PX {
+            let (half_c, half_r) = (cols.div_ceil(2), rows.div_ceil(2));
+            let mut sub: Vec<PixelRay> = Vec::with_capacity(half_c * half_r);
+            for (r0, nr) in [(0, half_r), (half_r, rows - half_r)] {
+                for (c0, nc) in [(0, half_c), (half_c, cols - half_c)] {
+                    if nr == 0 || nc == 0 {
+                        continue;
+                    }
+                    sub.clear();
+                    for r in r0..r0 + nr {
+                        sub.extend_from_slice(&rays[r * cols + c0..r * cols + c0 + nc]);
+                    }
+                    self.render_tile(&sub, nc, (col0 + c0, row0 + r0), start, band);
+                }
+            }
+            return;
+        }
+        for (i, ray) in rays.iter().enumerate() {
+            let (col, row) = (col0 + i % cols, row0 + i / cols);
+            self.shade(ray, start, (col, row), band);
+        }
+    }
+
+    /// Traces pixel `(col, row)` of `band` from `start` and writes its return, if any
+    /// (steps 1–5 of the module doc).
+    fn shade(
+        &self,
+        ray: &PixelRay,
+        start: MarchStart,
+        (col, row): (usize, usize),
+        band: &mut Band<'_>,
+    ) {
+        let Some(hit) = trace(self.world, &self.origin, start, &ray.dir, ray.t_max_m) else {
+            return;
+        };
+        let local = row * self.width + col;
+        let index = (band.row0 * self.width + local) as u64;
+        let Some(d) = noisy_depth_m(self.cam, self.noise_seed, index, hit.t_m * ray.cos_axis)
+        else {
+            return;
+        };
+        let lambert = (-hit.normal.dot(&ray.dir)).max(0.0);
+        let falloff = 1.0 / (1.0 + (hit.t_m / LIGHT_HALF_DISTANCE_M).powi(2));
+        let value = (self.world.albedo(&hit.point) * lambert * falloff).clamp(0.0, 1.0);
+        band.depth[local] = d as f32;
+        band.intensity[local] = value as f32;
+    }
+}
+
 pub(super) fn render(
     cam: &CameraParams,
     world: &dyn World,
@@ -140,37 +318,76 @@ pub(super) fn render(
     body_pose: &Isometry3<f64>,
     noise_seed: u64,
 ) -> DepthFrame {
+    render_with(cam, world, stamp, body_pose, noise_seed, true)
+}
+
+/// [`render`] with every pixel marched from the camera (no cones), for comparisons.
+#[cfg(test)]
+pub(super) fn render_per_pixel(
+    cam: &CameraParams,
+    world: &dyn World,
+    stamp: Time,
+    body_pose: &Isometry3<f64>,
+    noise_seed: u64,
+) -> DepthFrame {
+    render_with(cam, world, stamp, body_pose, noise_seed, false)
+}
+
+fn render_with(
+    cam: &CameraParams,
+    world: &dyn World,
+    stamp: Time,
+    body_pose: &Isometry3<f64>,
+    noise_seed: u64,
+    cones: bool,
+) -> DepthFrame {
     let mut frame = cam.blank_frame(stamp, body_pose);
     let k = frame.intrinsics;
     let w = k.width as usize;
     let origin = Point3::from(body_pose.translation.vector);
     let rotation = body_pose.rotation;
     let range_m = cam.range_m;
-    let origin_step_m = world.safe_step_m(&origin);
-    let rows = frame
+    let start = MarchStart {
+        t_m: 0.0,
+        radius_m: world.safe_step_m(&origin),
+    };
+    let job = TileJob {
+        cam,
+        world,
+        origin,
+        noise_seed,
+        width: w,
+        cones,
+    };
+    let bands = frame
         .depth_m
-        .par_chunks_mut(w)
-        .zip(frame.intensity.par_chunks_mut(w));
-    rows.enumerate()
-        .for_each(|(row, (depth_row, intensity_row))| {
-            for col in 0..w {
-                let unit_depth = k.pixel_ray(col as u32, row as u32);
-                let cos_axis = 1.0 / unit_depth.norm();
-                let dir = rotation * (unit_depth * cos_axis);
-                let Some(hit) = trace(world, &origin, origin_step_m, &dir, range_m / cos_axis)
-                else {
-                    continue;
-                };
-                let index = (row * w + col) as u64;
-                let Some(depth) = noisy_depth_m(cam, noise_seed, index, hit.t_m * cos_axis) else {
-                    continue;
-                };
-                let lambert = (-hit.normal.dot(&dir)).max(0.0);
-                let falloff = 1.0 / (1.0 + (hit.t_m / LIGHT_HALF_DISTANCE_M).powi(2));
-                let intensity = (world.albedo(&hit.point) * lambert * falloff).clamp(0.0, 1.0);
-                depth_row[col] = depth as f32;
-                intensity_row[col] = intensity as f32;
+        .par_chunks_mut(w * TILE_PX)
+        .zip(frame.intensity.par_chunks_mut(w * TILE_PX));
+    bands.enumerate().for_each(|(index, (depth, intensity))| {
+        let row0 = index * TILE_PX;
+        let rows = depth.len() / w;
+        let mut band = Band {
+            row0,
+            depth,
+            intensity,
+        };
+        let mut rays = Vec::with_capacity(TILE_PX * TILE_PX);
+        for col0 in (0..w).step_by(TILE_PX) {
+            let cols = (w - col0).min(TILE_PX);
+            rays.clear();
+            for row in row0..row0 + rows {
+                for col in col0..col0 + cols {
+                    let unit_depth = k.pixel_ray(col as u32, row as u32);
+                    let cos_axis = 1.0 / unit_depth.norm();
+                    rays.push(PixelRay {
+                        dir: rotation * (unit_depth * cos_axis),
+                        cos_axis,
+                        t_max_m: range_m / cos_axis,
+                    });
+                }
             }
-        });
+            job.render_tile(&rays, cols, (col0, 0), start, &mut band);
+        }
+    });
     frame
 }

@@ -280,3 +280,111 @@ fn image_is_identical_for_any_thread_count() {
         );
     }
 }
+
+/// A world that counts its field evaluations.
+struct Counting<'a> {
+    inner: &'a dyn World,
+    evaluations: std::sync::atomic::AtomicUsize,
+}
+
+impl Counting<'_> {
+    fn count(&self) {
+        self.evaluations
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    fn take(&self) -> usize {
+        self.evaluations
+            .swap(0, std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl World for Counting<'_> {
+    fn sdf_m(&self, p: &Point3<f64>) -> f64 {
+        self.count();
+        self.inner.sdf_m(p)
+    }
+
+    fn lipschitz(&self) -> f64 {
+        self.inner.lipschitz()
+    }
+
+    fn safe_step_m(&self, p: &Point3<f64>) -> f64 {
+        self.count();
+        self.inner.safe_step_m(p)
+    }
+
+    fn albedo(&self, p: &Point3<f64>) -> f64 {
+        self.inner.albedo(p)
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.inner.bounds()
+    }
+}
+
+/// Poses along the default cave's first route: the start, looking along the tunnel, and
+/// points further on, some tilted (towards walls and floor at grazing angles).
+fn cave_poses(cave: &CaveWorld) -> Vec<Isometry3<f64>> {
+    let route = cave.centreline_route(0, 1);
+    (0..8)
+        .map(|i| {
+            let (a, b) = (route[3 * i], route[3 * i + 1]);
+            let yaw = (b.y - a.y).atan2(b.x - a.x) + 0.7 * f64::from(i as u32 % 3) - 0.7;
+            let pitch = [0.0, 0.3, -0.4, 0.1][i % 4];
+            pose(a.x, a.y, a.z, 0.0, pitch, yaw)
+        })
+        .collect()
+}
+
+#[test]
+fn cone_marched_tiles_find_the_same_surface_in_fewer_steps() {
+    let cam = CameraParams::default();
+    let cave = CaveWorld::generate(&CaveParams::default(), 1);
+    let counting = Counting {
+        inner: &cave,
+        evaluations: 0.into(),
+    };
+    let (mut tiled_evals, mut pixel_evals, mut hits, mut differ) = (0, 0, 0, 0);
+    for p in cave_poses(&cave) {
+        let tiled = cam.render(&counting, Time::ZERO, &p, 5);
+        tiled_evals += counting.take();
+        let per_pixel = render::render_per_pixel(&cam, &counting, Time::ZERO, &p, 5);
+        pixel_evals += counting.take();
+        let k = cam.intrinsics();
+        for (i, (a, b)) in tiled.depth_m.iter().zip(&per_pixel.depth_m).enumerate() {
+            if *a > 0.0 && *b > 0.0 {
+                hits += 1;
+            }
+            if (a - b).abs() < 3e-3 {
+                // Both marches end within HIT_EPS_M of the same surface point.
+                continue;
+            }
+            // Else a ray that passes within HIT_EPS_M of a surface without entering the
+            // rock (one march stopped there, the other went on), or that grazes a
+            // surface at the range limit: the ray is in free space up to the farther
+            // return.
+            differ += 1;
+            let (col, row) = (i as u32 % k.width, i as u32 / k.width);
+            let far = f64::from(a.max(*b));
+            let depth = if far > 0.0 { far - 5e-3 } else { cam.range_m };
+            let mut z = 0.0;
+            while z < depth {
+                let q = p * k.back_project(col, row, z);
+                assert!(
+                    cave.sdf_m(&q) > 0.0,
+                    "pixel {i} ({a} vs {b}) in rock at {z}"
+                );
+                z += 5e-4;
+            }
+        }
+    }
+    assert!(hits > 50_000, "{hits} hits");
+    assert!(differ * 1000 < hits, "{differ} of {hits} pixels differ");
+    // Measured: 1.83 M against 2.30 M (the cones save the cheap steps far from walls;
+    // the steps near a wall, which also evaluate the roughness, remain).
+    assert!(
+        tiled_evals * 10 < pixel_evals * 9,
+        "tiled {tiled_evals}, per pixel {pixel_evals} field evaluations"
+    );
+}
