@@ -215,7 +215,7 @@ impl PeerModel<'_> {
     /// any point of its plan in between — a peer that stopped early stays in the way
     /// it was about to leave (in an 8-robot cave run, a robot flew into a lower-priority
     /// peer that was expected to move on and stopped instead). Sampled every
-    /// [`REACTION_STEP_S`]; the other models give their one position.
+    /// 0.1 s; the other models give their one position.
     #[must_use]
     pub fn possible_positions(&self, now: Time, t: Time) -> Vec<nalgebra::Point3<f64>> {
         let PeerModel::Yielding {

@@ -50,7 +50,7 @@ struct Hit {
 }
 
 /// Edge of the square pixel tiles whose rays share a cone march, in pixels; each tile's
-/// quarters then continue with a narrower cone, down to tiles of [`MIN_TILE_PX`].
+/// quarters then continue with a narrower cone, down to tiles of `MIN_TILE_PX` (2 px).
 pub const TILE_PX: usize = 8;
 /// Edge of the smallest tiles that are cone-marched, in pixels.
 const MIN_TILE_PX: usize = 2;

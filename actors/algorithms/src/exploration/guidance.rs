@@ -183,7 +183,8 @@ fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
 fn claimed_by_assignment(
     memory: &FrontierMemory,
     open: &[(CellKey, f64)],
-    (own, own_m, own_extra_m): (RobotId, &Point3<f64>, &dyn Fn(&CellKey) -> f64),
+    (own, own_m): (RobotId, &Point3<f64>),
+    own_extra_m: &dyn Fn(&CellKey) -> f64,
     peers: &BTreeMap<RobotId, PeerIntent>,
     claim_radius_m: f64,
 ) -> BTreeSet<CellKey> {
@@ -329,7 +330,8 @@ impl GuidanceField {
             Coordination::Assignment => claimed_by_assignment(
                 memory,
                 &open,
-                (own, robot_m, &own_extra_m),
+                (own, robot_m),
+                &own_extra_m,
                 peers,
                 params.claim_radius_m,
             ),
