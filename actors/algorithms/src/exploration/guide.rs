@@ -28,13 +28,16 @@ pub struct Guide {
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
-    /// Progress towards `last_target`: the least route distance to it so far, metres,
-    /// and when the route last got [`PROGRESS_M`] shorter.
-    progress: Option<(f64, Time)>,
+    /// Progress towards the goal being tracked: its centre, the least route distance
+    /// to it so far, metres, and when the route last got [`PROGRESS_M`] shorter.
+    progress: Option<(Point3<f64>, f64, Time)>,
 }
 
 /// How much shorter the route to a goal must get to count as progress, metres.
 pub const PROGRESS_M: f64 = 0.5;
+
+/// Goals this close to the tracked one are the same opening, metres.
+pub const GOAL_RADIUS_M: f64 = 2.0;
 
 /// The sampling seed of a peer keyframe: the same keyframe always gives the same rays.
 fn keyframe_seed(robot: RobotId, id: u32) -> u64 {
@@ -149,30 +152,37 @@ impl Guide {
     /// The rule of goals that cannot be reached (explore_lite's progress timeout): a
     /// goal whose route has not got [`PROGRESS_M`] shorter for `limit_s` — a pocket
     /// under the floor the robot hovers beside, out of the camera's view — is given up
-    /// with the frontiers within [`PROGRESS_M`] · 4 of it. A new goal starts afresh.
+    /// with the frontiers within [`GOAL_RADIUS_M`] of it. The route's end moves between
+    /// neighbouring cells of one opening from round to round: a goal within
+    /// [`GOAL_RADIUS_M`] of the tracked one is the same goal; a farther one starts afresh.
     fn check_progress(&mut self, target: Option<CellKey>, route_m: f64, now: Time, limit_s: f64) {
         let Some(goal) = target.filter(|_| route_m.is_finite()) else {
             self.progress = None;
             return;
         };
-        let (best_m, since) = match self.progress {
-            Some((best_m, since)) if self.last_target == Some(goal) => (best_m, since),
-            _ => (route_m, now),
+        let goal_m = self.memory.centre(goal);
+        let (tracked_m, best_m, since) = match self.progress {
+            Some((tracked_m, best_m, since)) if (tracked_m - goal_m).norm() <= GOAL_RADIUS_M => {
+                (tracked_m, best_m, since)
+            }
+            _ => (goal_m, route_m, now),
         };
         if route_m <= best_m - PROGRESS_M {
-            self.progress = Some((route_m, now));
+            self.progress = Some((tracked_m, route_m, now));
         } else if now.saturating_since(since).as_secs_f64() >= limit_s {
-            let centre = self.memory.centre(goal);
             let memory = &self.memory;
             let near: Vec<CellKey> = memory
                 .frontiers()
-                .filter(|f| (memory.centre(*f) - centre).norm() <= 4.0 * PROGRESS_M)
+                .filter(|f| {
+                    (memory.centre(*f) - tracked_m).norm() <= GOAL_RADIUS_M
+                        || (memory.centre(*f) - goal_m).norm() <= GOAL_RADIUS_M
+                })
                 .collect();
             self.given_up.extend(near);
             self.given_up.insert(goal);
             self.progress = None;
         } else {
-            self.progress = Some((best_m, since));
+            self.progress = Some((tracked_m, best_m, since));
         }
     }
 
