@@ -324,32 +324,37 @@ pub fn first_overlap(
         PeerModel::Plan(plan) | PeerModel::Yielding { plan, .. } => (max_speed(plan), 0.0),
         PeerModel::Envelope { envelope_m, .. } => (0.0, *envelope_m),
     };
-    let mut min_horizontal = 2.0 * config.cylinder_radius_m
+    let min_horizontal = 2.0 * config.cylinder_radius_m
         + peer_extra
         + 0.5 * dt_s * (max_speed(candidate) + peer_speed);
+    // Already too close at the start (both committed at once, or a peer appeared): the
+    // least horizontal and vertical distances then; a candidate that never gets closer
+    // in either lets the pair separate, one that closes in (sideways, or climbing or
+    // sinking towards a peer above or below) is refused.
+    let mut too_close_at_start: Option<(f64, f64)> = None;
     for i in 0..n {
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
-        let Some(horizontal) = peer
+        let overlaps: Vec<(f64, f64)> = peer
             .possible_positions(now, t)
             .into_iter()
             .map(|other| own.position_m - other)
-            .filter(|d| d.z.abs() < config.cylinder_height_m)
-            .map(|d| d.xy().norm())
-            .min_by(f64::total_cmp)
-        else {
-            continue;
-        };
-        if horizontal < min_horizontal {
+            .map(|d| (d.xy().norm(), d.z.abs()))
+            .filter(|(h, v)| *h < min_horizontal && *v < config.cylinder_height_m)
+            .collect();
+        if let Some(&(first_h, _)) = overlaps.first() {
+            let least_h = overlaps.iter().map(|o| o.0).fold(first_h, f64::min);
             if i == 0 {
-                // Already too close (both committed at once, or a peer appeared): a
-                // candidate that never gets closer than now lets the pair separate;
-                // one that closes in is refused.
-                min_horizontal = horizontal;
+                let least_v = overlaps.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
+                too_close_at_start = Some((least_h, least_v));
                 continue;
             }
-            return Some((t_s, horizontal));
+            let closer =
+                |(h0, v0): (f64, f64)| overlaps.iter().any(|(h, v)| *h < h0 || *v < v0 - 1e-9);
+            if too_close_at_start.is_none_or(closer) {
+                return Some((t_s, least_h));
+            }
         }
         if horizon_s == 0.0 {
             break;
@@ -629,6 +634,23 @@ mod tests {
         };
         let stop = model.position_at(t(20.0)).unwrap();
         assert!((stop.x - (-4.0 + 1.2 + 0.5)).abs() < 1e-9, "{stop}");
+    }
+
+    #[test]
+    fn a_pair_already_too_close_may_not_close_in_vertically_either() {
+        let config = PriorityConfig::default();
+        // Peer 0 (higher priority) hovers 0.5 m to the side and 0.6 m above robot 1:
+        // their cylinders (0.8 m tall) already overlap. Climbing towards it keeps the
+        // horizontal distance and closes the vertical one (an 8-robot cave run ended
+        // with the bodies 0.56 m apart that way); sinking away is fine.
+        let hover = line(0.0, [0.5, 0.0, 1.6], [0.5, 0.0, 1.6], 1.0);
+        let peers = table_with(0, 5, Some((hover, 9.8)), None);
+        let own = odom(10.0, [0.0, 0.0, 1.0], [0.0; 3]);
+        let climb = line(10.0, [0.0, 0.0, 1.0], [0.0, 0.0, 1.3], 0.3);
+        let c = check_candidate(&config, t(10.0), RobotId(1), 0, &own, &climb, &peers);
+        assert!(c.is_some_and(|c| c.peer == RobotId(0)));
+        let sink = line(10.0, [0.0, 0.0, 1.0], [0.0, 0.0, 0.7], 0.3);
+        assert!(check_candidate(&config, t(10.0), RobotId(1), 0, &own, &sink, &peers).is_none());
     }
 
     #[test]
