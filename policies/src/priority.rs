@@ -336,23 +336,25 @@ pub fn first_overlap(
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
-        let overlaps: Vec<(f64, f64)> = peer
-            .possible_positions(now, t)
-            .into_iter()
-            .map(|other| own.position_m - other)
-            .map(|d| (d.xy().norm(), d.z.abs()))
-            .filter(|(h, v)| *h < min_horizontal && *v < config.cylinder_height_m)
-            .collect();
-        if let Some(&(first_h, _)) = overlaps.first() {
-            let least_h = overlaps.iter().map(|o| o.0).fold(first_h, f64::min);
+        // The least horizontal and vertical distances to the peer's overlapping
+        // positions, and whether one is closer than at the start.
+        let mut least: Option<(f64, f64)> = None;
+        let mut closer = false;
+        for other in peer.possible_positions(now, t) {
+            let d = own.position_m - other;
+            let (h, v) = (d.xy().norm(), d.z.abs());
+            if h >= min_horizontal || v >= config.cylinder_height_m {
+                continue;
+            }
+            least = Some(least.map_or((h, v), |(lh, lv)| (lh.min(h), lv.min(v))));
+            closer |= too_close_at_start.is_none_or(|(h0, v0)| h < h0 || v < v0 - 1e-9);
+        }
+        if let Some((least_h, least_v)) = least {
             if i == 0 {
-                let least_v = overlaps.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
                 too_close_at_start = Some((least_h, least_v));
                 continue;
             }
-            let closer =
-                |(h0, v0): (f64, f64)| overlaps.iter().any(|(h, v)| *h < h0 || *v < v0 - 1e-9);
-            if too_close_at_start.is_none_or(closer) {
+            if closer {
                 return Some((t_s, least_h));
             }
         }
