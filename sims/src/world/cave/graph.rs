@@ -122,11 +122,10 @@ impl CaveGraph {
         out
     }
 
-    /// The edges off the main chain, breadth first from the entrance (creation order
-    /// among siblings).
-    fn side_edges(&self) -> Vec<usize> {
-        let chain: std::collections::BTreeSet<usize> =
-            self.main_chain().into_iter().map(|(e, _)| e).collect();
+    /// The edges off the main chain (`chain`, from [`Self::main_chain`]), breadth first
+    /// from the entrance (creation order among siblings).
+    fn side_edges(&self, chain: &[(usize, usize)]) -> Vec<usize> {
+        let chain: std::collections::BTreeSet<usize> = chain.iter().map(|(e, _)| *e).collect();
         let mut queue = std::collections::VecDeque::from([self.entrance]);
         let mut out = Vec::new();
         while let Some(node) = queue.pop_front() {
@@ -187,7 +186,7 @@ impl CaveGraph {
         }
         // A team larger than the chain holds: the other tunnels, nearest the entrance
         // first, each start that far from every earlier one.
-        for e in self.side_edges() {
+        for e in self.side_edges(&chain) {
             let points = &self.edges[e].points;
             for j in 0..points.len() - 1 {
                 let (a, b) = (points[j], points[j + 1]);
