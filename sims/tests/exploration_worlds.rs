@@ -65,6 +65,15 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
             r["name"]
         );
         discovered_m3 += mine;
+        // One planning round per period (1 Hz, from the first grid snapshot on)
+        // however much the planner hears from its peers: storing their messages costs
+        // no modelled planning latency.
+        let rounds = r["topics"]["planner/report"]["messages"].as_u64().unwrap();
+        assert!(
+            (DURATION_S as u64 - 2..=DURATION_S as u64).contains(&rounds),
+            "{}: {rounds} planning rounds in {DURATION_S} s",
+            r["name"]
+        );
     }
     // Every explored cell was seen first by exactly one robot.
     let explored_m3 = summary["coverage"]["explored_volume_m3"].as_f64().unwrap();

@@ -67,6 +67,7 @@ pub struct Context<'a> {
     pub(crate) outbox: &'a mut Vec<Outgoing>,
     pub(crate) commands: &'a mut Vec<Command>,
     pub(crate) rng: &'a mut ChaCha8Rng,
+    pub(crate) bookkeeping: &'a mut bool,
 }
 
 impl Context<'_> {
@@ -130,6 +131,16 @@ impl Context<'_> {
     /// A zero period is rejected by the runtime with a warning.
     pub fn set_timer(&mut self, id: TimerId, period: Duration) {
         self.commands.push(Command::SetTimer { id, period });
+    }
+
+    /// Marks this handler call as bookkeeping — it only stored what arrived (the
+    /// latest odometry, a peer's plan) — so that the sim-time executor charges it no
+    /// compute latency. The modelled latency ([`LatencyModel`](crate::LatencyModel))
+    /// stands for the actor's real work (a planning round: thesis Table 4.1); charged
+    /// to every stored message, it would keep a planner that hears many peers busy
+    /// and delay its rounds. No effect under the real-time executor.
+    pub fn bookkeeping_only(&mut self) {
+        *self.bookkeeping = true;
     }
 
     /// Cancels a timer (no effect if it is not set).

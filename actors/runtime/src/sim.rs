@@ -5,7 +5,9 @@
 //! when an event is scheduled; nothing depends on wall-clock time or thread timing,
 //! so the same team, seed and inputs give bit-identical results. Each handler call
 //! is charged the compute latency of its actor's [`LatencyModel`](crate::LatencyModel):
-//! its outputs appear after that latency and the actor is busy until then.
+//! its outputs appear after that latency and the actor is busy until then. A call that
+//! only stored what arrived ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only))
+//! is charged nothing.
 
 use std::any::TypeId;
 use std::cmp::Ordering;
@@ -434,6 +436,11 @@ impl SimExecutor {
         let now = self.clock.now;
         let latency = slot.options.latency.sample(&mut slot.latency_rng);
         let outcome = slot.run_hook(Hook::Handle(&event), now, robot.id, &robot.name);
+        let latency = if slot.bookkeeping {
+            std::time::Duration::ZERO
+        } else {
+            latency
+        };
         drop(event);
         if outcome == HookOutcome::Stopped {
             robot.inputs[s].stop();

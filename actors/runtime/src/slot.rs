@@ -54,6 +54,9 @@ pub(crate) struct Slot {
     pub(crate) latency_rng: ChaCha8Rng,
     pub(crate) outbox: Vec<Outgoing>,
     pub(crate) commands: Vec<Command>,
+    /// The last handler call said it only stored what arrived
+    /// ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)).
+    pub(crate) bookkeeping: bool,
 }
 
 impl Slot {
@@ -72,6 +75,7 @@ impl Slot {
             latency_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_1a7e),
             outbox: Vec::new(),
             commands: Vec::new(),
+            bookkeeping: false,
         }
     }
 
@@ -108,6 +112,7 @@ impl Slot {
             return HookOutcome::Stopped;
         };
         let started = Instant::now();
+        self.bookkeeping = false;
         let mut ctx = Context {
             now,
             robot,
@@ -116,6 +121,7 @@ impl Slot {
             outbox: &mut self.outbox,
             commands: &mut self.commands,
             rng: &mut self.rng,
+            bookkeeping: &mut self.bookkeeping,
         };
         let is_handle = matches!(hook, Hook::Handle(_));
         let result = catch_unwind(AssertUnwindSafe(|| -> ActorResult {

@@ -138,6 +138,74 @@ fn sim_time_is_exact_and_latency_delays_outputs() {
     assert_eq!(times, vec![405_000_000, 805_000_000, 1_205_000_000]);
 }
 
+/// Stores every number it hears; publishes how many on each tick (its "round").
+struct Rounds {
+    heard: u64,
+    bookkeeping: bool,
+}
+
+impl Actor for Rounds {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&NUMBERS, QueuePolicy::fifo(1024));
+        ctx.set_timer(TICK, Duration::from_millis(100));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Message(_) => {
+                self.heard += 1;
+                if self.bookkeeping {
+                    ctx.bookkeeping_only();
+                }
+            }
+            Event::Timer(_) => ctx.publish(&DOUBLED, Number(self.heard)),
+        }
+        Ok(())
+    }
+}
+
+/// Output times (ms) of a round actor (50 ms per call) hearing a number every 5 ms.
+fn round_times_ms(bookkeeping: bool) -> Vec<u64> {
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let sink_seen = seen.clone();
+    let robot = RobotSpec::new("r0")
+        .with(ActorSpec::new("source", || Source {
+            next: 0,
+            limit: 1000,
+            period: Duration::from_millis(5),
+        }))
+        .with(
+            ActorSpec::new("rounds", move || Rounds {
+                heard: 0,
+                bookkeeping,
+            })
+            .with_latency(LatencyModel::fixed(0.05)),
+        )
+        .with(ActorSpec::new("sink", move || Sink {
+            seen: sink_seen.clone(),
+            policy: QueuePolicy::fifo(1024),
+        }));
+    let mut sim = SimExecutor::new(vec![robot], 1);
+    sim.run_until(Time::from_secs_f64(0.5));
+    let times = seen
+        .lock()
+        .unwrap()
+        .iter()
+        .map(|(_, t)| t.as_nanos() / 1_000_000)
+        .collect();
+    times
+}
+
+#[test]
+fn bookkeeping_calls_are_not_charged_the_modelled_latency() {
+    // Storing a number is free: every round's output comes 50 ms after its tick.
+    assert_eq!(round_times_ms(true), vec![150, 250, 350, 450]);
+    // Charged 50 ms per stored number, the actor falls behind its own timer.
+    let charged = round_times_ms(false);
+    assert!(charged.len() < 4, "{charged:?}");
+    assert!(charged.first().is_none_or(|&t| t > 150), "{charged:?}");
+}
+
 #[test]
 fn keep_latest_drops_are_counted_while_busy() {
     let seen = Arc::new(Mutex::new(Vec::new()));

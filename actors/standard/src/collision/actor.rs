@@ -339,7 +339,11 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
         if let Event::Message(m) = event {
             if let Some(round) = m.get_arc(&PLAN_CANDIDATES) {
                 self.decide(&round, ctx);
-            } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
+                return Ok(());
+            }
+            // Everything else is stored for the next decision.
+            ctx.bookkeeping_only();
+            if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
                 self.snapshot = Some(snapshot);
             } else if let Some(odometry) = m.get_arc(&ODOMETRY) {
                 self.odometry = Some(odometry);

@@ -189,6 +189,7 @@ impl<B: ExplorationBehaviour> Actor for ExplorerActor<B> {
                     }
                     d.committed = Some(plan.trajectory.clone());
                 }
+                ctx.bookkeeping_only();
             }
             Event::Timer(_) if self.deferred.is_some() => self.offer(ctx),
             Event::Timer(_) => {

@@ -216,6 +216,7 @@ impl Actor for GridActor {
             Event::Message(m) => {
                 if let Some(odometry) = m.get(&ODOMETRY) {
                     self.on_odometry(odometry);
+                    ctx.bookkeeping_only();
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
                     self.on_keyframe(KeyframeSource::Peer(peer.robot), &peer.keyframe, true);
                 } else if let Some(own) = m.get(&KEYFRAME) {

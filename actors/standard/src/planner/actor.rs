@@ -409,8 +409,12 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 {
                     self.committed = Some(Committed::clone(reference));
                 }
+                // Stored for the next round (the frontier memory's update included):
+                // the modelled planning latency is charged to rounds only.
+                ctx.bookkeeping_only();
             }
             Event::Timer(PHASE) => {
+                ctx.bookkeeping_only();
                 ctx.cancel_timer(PHASE);
                 ctx.set_timer(REPLAN, self.replan_period());
             }

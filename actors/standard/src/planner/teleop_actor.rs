@@ -144,6 +144,7 @@ impl Actor for TeleopActor {
                 } else if let Some(command) = m.get_arc(&TELEOP_COMMAND) {
                     self.command = Some(command);
                 }
+                ctx.bookkeeping_only();
             }
             Event::Timer(_) => self.plan(ctx),
         }

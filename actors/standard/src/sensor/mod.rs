@@ -56,6 +56,7 @@ impl<S: FrameSource> Actor for SensorActor<S> {
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.latest = Some(odometry);
                 }
+                ctx.bookkeeping_only();
             }
             Event::Timer(_) => {
                 if let Some(frame) = self.source.capture(ctx.now(), self.latest.as_deref())? {
