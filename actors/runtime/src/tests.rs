@@ -187,13 +187,11 @@ fn round_times_ms(bookkeeping: bool) -> Vec<u64> {
         }));
     let mut sim = SimExecutor::new(vec![robot], 1);
     sim.run_until(Time::from_secs_f64(0.5));
-    let times = seen
-        .lock()
+    seen.lock()
         .unwrap()
         .iter()
         .map(|(_, t)| t.as_nanos() / 1_000_000)
-        .collect();
-    times
+        .collect()
 }
 
 #[test]
