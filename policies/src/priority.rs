@@ -33,6 +33,7 @@
 //! robots that committed within one round met head on.
 
 use serde::{Deserialize, Serialize};
+pub use troupe_actors::collision::peers::must_yield;
 use troupe_actors::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
 use troupe_actors::msgs::Odometry;
 use troupe_actors::runtime::{ConfigError, RobotId, Time};
@@ -113,17 +114,6 @@ impl PriorityConfig {
             ));
         }
         Ok(())
-    }
-}
-
-/// Whether this robot (`me`, priority `mine`) must avoid a peer (`peer`, `theirs`):
-/// higher priority wins, ties go to the lower robot id. A peer whose priority is
-/// unknown (no plan yet) is avoided.
-#[must_use]
-pub fn must_yield(me: RobotId, mine: u16, peer: RobotId, theirs: Option<u16>) -> bool {
-    match theirs {
-        None => true,
-        Some(theirs) => theirs > mine || (theirs == mine && peer < me),
     }
 }
 

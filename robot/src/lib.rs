@@ -216,9 +216,11 @@ pub fn assemble(
         let check = config.collision.actor();
         let peers = config.collision.peers;
         let operator = config.collision.operator_commands;
+        let (limits, knot_step_s) = (config.planner.round.limits, config.planner.knot_step_s);
         robot.add(
             ActorSpec::new("collision", move || {
-                let actor = CollisionActor::new(check.clone(), PriorityAvoidance::new(peers));
+                let actor = CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
+                    .braking_for_peers(limits, knot_step_s);
                 if operator {
                     actor.obeying_operator()
                 } else {

@@ -27,6 +27,17 @@ impl PeerTrack {
     }
 }
 
+/// Whether this robot (`me`, priority `mine`) must avoid a peer (`peer`, `theirs`):
+/// higher priority wins, ties go to the lower robot id (thesis §8.2.3). A peer whose
+/// priority is unknown (no plan yet) is avoided.
+#[must_use]
+pub fn must_yield(me: RobotId, mine: u16, peer: RobotId, theirs: Option<u16>) -> bool {
+    match theirs {
+        None => true,
+        Some(theirs) => theirs > mine || (theirs == mine && peer < me),
+    }
+}
+
 /// Latest odometry and plan per peer, keyed by robot.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PeerTable {

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use super::primitives::{FlatState, Primitive};
+use super::primitives::{Action, DynamicLimits, FlatState, Primitive};
 use crate::trajectory::{Knot, Trajectory};
 use troupe_core::Time;
 
@@ -21,6 +21,20 @@ pub struct Committed {
 }
 
 impl Committed {
+    /// Braking from `root` at `now`: the shortest feasible stopping primitive within
+    /// `limits`, then hovering where it ends (the fail-safe commitment, thesis §4.1.3);
+    /// `None` when no stop is feasible from `root`.
+    #[must_use]
+    pub fn braking(limits: &DynamicLimits, root: &FlatState, now: Time) -> Option<Committed> {
+        let stopping = limits.stopping(root)?;
+        Some(Committed {
+            start: now,
+            switch_s: stopping.duration_s(),
+            stopping: Primitive::forward_arc(&stopping.end_state(), Action::STOP, 1.0),
+            primitive: stopping,
+        })
+    }
+
     /// The reference state at `t`.
     pub fn state_at(&self, t: Time) -> FlatState {
         let s = (t - self.start).as_secs_f64();

@@ -20,6 +20,13 @@
 //! while the operator holds the robot ([`OPERATOR_HOLD`], sent from the base), and
 //! answers with a [`PlanDecision`]. Every rejection is counted by reason and logged;
 //! the counters go out on [`COLLISION_STATUS`] after each round.
+//!
+//! Between rounds ([`CollisionActor::braking_for_peers`]): a new plan from a peer this
+//! robot must yield to is checked against what the robot has committed, and when they
+//! conflict the robot brakes at once — a higher-priority peer expects it to have
+//! reacted within `lower_priority_react_s` (1.2 s, troupe-policies' priority check),
+//! which the next planning round alone (up to a period later, after the link's
+//! delay) does not guarantee.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -31,15 +38,17 @@ use serde::{Deserialize, Serialize};
 use super::body::{BodyConfig, BodyError};
 use super::geofence::{Geofence, GeofenceConfig};
 use super::operator::{OPERATOR_HOLD, OperatorHold};
-use super::peers::{PeerAvoidance, PeerTable};
+use super::peers::{PeerAvoidance, PeerTable, must_yield};
 use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection,
 };
+use crate::planner::committed::Committed;
+use crate::planner::primitives::DynamicLimits;
 use crate::planner::round::clear_path;
 use crate::trajectory::Trajectory;
 use troupe_runtime::{
-    Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
+    Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, RobotId, Time, Topic,
 };
 
 /// Settings of the collision actor (the world part; the peer part is the policy's).
@@ -105,6 +114,9 @@ pub struct CollisionStatus {
     pub held: u64,
     /// This robot's priority in the last round.
     pub priority: u16,
+    /// Times the robot braked between rounds because a peer it must yield to sent a
+    /// plan that conflicts with the committed one.
+    pub braked_for_peers: u64,
 }
 impl Message for CollisionStatus {}
 
@@ -163,6 +175,11 @@ pub struct CollisionActor<P> {
     operator: bool,
     held: bool,
     status: CollisionStatus,
+    /// Limits and knot spacing of braking between rounds
+    /// ([`CollisionActor::braking_for_peers`]).
+    braking: Option<(DynamicLimits, f64)>,
+    /// The plan committed last, while it is not a stop.
+    committed: Option<Plan>,
 }
 
 impl<P: PeerAvoidance> CollisionActor<P> {
@@ -188,7 +205,68 @@ impl<P: PeerAvoidance> CollisionActor<P> {
             operator: false,
             held: false,
             status: CollisionStatus::default(),
+            braking: None,
+            committed: None,
         }
+    }
+
+    /// The same actor, braking between rounds when a peer it must yield to sends a
+    /// plan that conflicts with the committed one (module docs): the stop is the
+    /// shortest within `limits` from the committed reference's state, sampled every
+    /// `knot_step_s` (the planner's).
+    #[must_use]
+    pub fn braking_for_peers(mut self, limits: DynamicLimits, knot_step_s: f64) -> Self {
+        self.braking = Some((limits, knot_step_s));
+        self
+    }
+
+    /// A peer's new plan has been stored: brakes now if the peer is one this robot
+    /// must yield to and its plan conflicts with the committed one. Returns whether it
+    /// braked.
+    fn brake_if_in_the_way_of(&mut self, peer: RobotId, ctx: &mut Context<'_>) -> bool {
+        let (Some((limits, knot_step_s)), Some(plan)) = (self.braking, &self.committed) else {
+            return false;
+        };
+        let Some(reference) = &plan.reference else {
+            return false;
+        };
+        let now = ctx.now();
+        let mine = self.avoidance.priority(now);
+        let theirs = self
+            .peers
+            .iter()
+            .find(|(id, _)| *id == peer)
+            .and_then(|(_, t)| t.priority());
+        if theirs.is_none() || !must_yield(ctx.robot(), mine, peer, theirs) {
+            return false;
+        }
+        let own = match &self.odometry {
+            Some(o) => (**o).clone(),
+            None => return false,
+        };
+        let conflict =
+            self.avoidance
+                .conflict(now, ctx.robot(), &own, &plan.trajectory, &self.peers);
+        if conflict.is_none_or(|c| c.peer != peer || c.envelope) {
+            return false;
+        }
+        let Some(stop) = Committed::braking(&limits, &reference.state_at(now), now) else {
+            return false;
+        };
+        tracing::info!(robot = ctx.robot_name(), time = %now, peer = peer.0, "a peer's new plan crosses the committed one: braking");
+        self.status.braked_for_peers += 1;
+        self.committed = None;
+        ctx.publish(
+            &PLAN,
+            Plan {
+                stamp: now,
+                trajectory: stop.trajectory(knot_step_s),
+                reference: Some(Box::new(stop)),
+                stopping: true,
+            },
+        );
+        ctx.publish(&COLLISION_STATUS, self.status.clone());
+        true
     }
 
     fn judge(
@@ -309,6 +387,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                 }
             }
         };
+        self.committed = (!plan.stopping).then(|| plan.clone());
         ctx.publish(&PLAN, plan);
         ctx.publish(
             &PLAN_DECISION,
@@ -341,6 +420,12 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
                 self.decide(&round, ctx);
                 return Ok(());
             }
+            if let Some(plan) = m.get_arc(&PEER_PLAN) {
+                self.peers.update_plan(&plan);
+                if self.brake_if_in_the_way_of(plan.robot, ctx) {
+                    return Ok(());
+                }
+            }
             // Everything else is stored for the next decision.
             ctx.bookkeeping_only();
             if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
@@ -349,8 +434,6 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
                 self.odometry = Some(odometry);
             } else if let Some(peer) = m.get_arc(&PEER_ODOMETRY) {
                 self.peers.update_odometry(&peer);
-            } else if let Some(plan) = m.get_arc(&PEER_PLAN) {
-                self.peers.update_plan(&plan);
             } else if let Some(&OperatorHold { held }) = m.get(&OPERATOR_HOLD) {
                 if held != self.held {
                     tracing::info!(robot = ctx.robot_name(), held, "operator hold");

@@ -23,7 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::committed::{Committed, replanning_root};
-use super::primitives::{FlatState, Primitive};
+use super::primitives::FlatState;
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
 use crate::msgs::{
@@ -196,21 +196,6 @@ impl<S: ActionSelection> PlannerActor<S> {
         self
     }
 
-    /// The stopping trajectory from `root` as a committed reference.
-    fn stop_from(&self, root: &FlatState, now: Time) -> Option<Committed> {
-        let stopping = self.config.round.limits.stopping(root)?;
-        Some(Committed {
-            start: now,
-            primitive: stopping.clone(),
-            switch_s: stopping.duration_s(),
-            stopping: Primitive::forward_arc(
-                &stopping.end_state(),
-                super::primitives::Action::STOP,
-                1.0,
-            ),
-        })
-    }
-
     /// Sends the round's candidates to the collision actor, best first: the
     /// selection's choice, then the rest by decreasing reward.
     fn defer(
@@ -221,7 +206,7 @@ impl<S: ActionSelection> PlannerActor<S> {
         choice: Option<usize>,
         ctx: &mut Context<'_>,
     ) {
-        let Some(stop) = self.stop_from(root, now) else {
+        let Some(stop) = Committed::braking(&self.config.round.limits, root, now) else {
             return;
         };
         let mut order: Vec<usize> = (0..candidates.len())
@@ -335,7 +320,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             },
             None => {
                 tracing::debug!(robot = ctx.robot_name(), time = %now, candidates = candidates.len(), "no safe action: stopping");
-                let Some(stop) = self.stop_from(&root, now) else {
+                let Some(stop) = Committed::braking(&self.config.round.limits, &root, now) else {
                     return;
                 };
                 stop

@@ -10,7 +10,6 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::committed::{Committed, replanning_root};
-use super::primitives::Primitive;
 use super::round::RoundConfig;
 use super::teleop::{TeleopCommand, TeleopParams, closest_safe_primitive};
 use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, Plan};
@@ -98,20 +97,10 @@ impl TeleopActor {
             },
             None => {
                 tracing::debug!(robot = ctx.robot_name(), time = %now, "teleop: nothing safe, stopping");
-                let Some(stopping) = round.limits.stopping(&root) else {
+                let Some(stop) = Committed::braking(&round.limits, &root, now) else {
                     return;
                 };
-                let hold = Primitive::forward_arc(
-                    &stopping.end_state(),
-                    super::primitives::Action::STOP,
-                    1.0,
-                );
-                Committed {
-                    start: now,
-                    switch_s: stopping.duration_s(),
-                    primitive: stopping,
-                    stopping: hold,
-                }
+                stop
             }
         };
         ctx.publish(

@@ -1,0 +1,198 @@
+//! The collision actor with the priority check brakes between planning rounds when a
+//! peer it must yield to sends a plan across the one it committed (thesis §8.2.3; the
+//! higher-priority peer counts on it to react within `lower_priority_react_s`).
+
+#![allow(clippy::unwrap_used)]
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use troupe_actors::collision::{COLLISION_STATUS, CollisionActor, CollisionActorConfig};
+use troupe_actors::msgs::{
+    CandidatePlan, ODOMETRY, Odometry, PEER_PLAN, PLAN, PLAN_CANDIDATES, PeerPlan, Plan,
+    PlanCandidates,
+};
+use troupe_actors::planner::committed::Committed;
+use troupe_actors::planner::primitives::{Action, DynamicLimits, FlatState, Primitive};
+use troupe_actors::runtime::{
+    Actor, ActorResult, ActorSpec, Context, Event, Publication, RobotId, RobotSpec, SimExecutor,
+    Time, TimerId,
+};
+use troupe_actors::trajectory::{Knot, Trajectory};
+use troupe_policies::priority::{PriorityAvoidance, PriorityConfig};
+
+const KNOT_STEP_S: f64 = 0.1;
+
+/// Our robot at rest at the origin, 1 m up.
+fn start() -> FlatState {
+    FlatState::at_rest(Vector3::new(0.0, 0.0, 1.0), 0.0)
+}
+
+/// Flying +x from the origin from `now`: the primitive until 1 s, then its stop.
+fn forward(limits: &DynamicLimits, now: Time) -> Committed {
+    let action = Action {
+        vx_mps: 1.0,
+        vy_mps: 0.0,
+        vz_mps: 0.0,
+        yaw_rate_rad_s: 0.0,
+    };
+    let primitive = Primitive::forward_arc(&start(), action, 2.0);
+    let stopping = limits.stopping(&primitive.state_at(1.0)).unwrap();
+    Committed {
+        start: now,
+        primitive,
+        switch_s: 1.0,
+        stopping,
+    }
+}
+
+/// A peer's straight flight from `a` to `b` at 2 m/s, from `t0`.
+fn peer_line(t0: Time, a: Point3<f64>, b: Point3<f64>) -> Trajectory {
+    let duration_s = (b - a).norm() / 2.0;
+    let n = (duration_s / KNOT_STEP_S).ceil() as usize;
+    Trajectory::new(
+        (0..=n)
+            .map(|i| Knot {
+                time: t0 + Duration::from_secs_f64(duration_s * i as f64 / n as f64),
+                position_m: a + (b - a) * (i as f64 / n as f64),
+                yaw_rad: 0.0,
+            })
+            .collect(),
+    )
+    .unwrap()
+}
+
+/// Plays the rest of the robot: odometry at 0.5 s, one planning round at 1 s (the
+/// forward flight), and the peer's plan at 1.5 s.
+struct Script {
+    tick: u32,
+    limits: DynamicLimits,
+    /// The peer's id, priority, and where it flies from and to.
+    peer: (RobotId, u16, Point3<f64>, Point3<f64>),
+}
+
+impl Actor for Script {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(TimerId(0), Duration::from_millis(500));
+        Ok(())
+    }
+    fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        self.tick += 1;
+        let now = ctx.now();
+        match self.tick {
+            1 => ctx.publish(
+                &ODOMETRY,
+                Odometry {
+                    stamp: now,
+                    pose: Isometry3::translation(0.0, 0.0, 1.0),
+                    velocity_mps: Vector3::zeros(),
+                },
+            ),
+            2 => {
+                let plan = forward(&self.limits, now);
+                let stop = Committed::braking(&self.limits, &start(), now).unwrap();
+                ctx.publish(
+                    &PLAN_CANDIDATES,
+                    PlanCandidates {
+                        round: 1,
+                        stamp: now,
+                        candidates: vec![CandidatePlan {
+                            trajectory: plan.trajectory(KNOT_STEP_S),
+                            switch_at: now + Duration::from_secs(1),
+                            reference: Some(plan),
+                            reward: 1.0,
+                        }],
+                        stop: stop.trajectory(KNOT_STEP_S),
+                        stop_reference: Some(stop),
+                    },
+                );
+            }
+            3 => {
+                let (robot, priority, a, b) = self.peer;
+                ctx.publish(
+                    &PEER_PLAN,
+                    PeerPlan {
+                        robot,
+                        priority,
+                        plan: Plan::new(now, peer_line(now, a, b)),
+                        received_at: now,
+                    },
+                );
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// The plans our robot commits and how often it braked for peers, with a peer
+/// (`id`, `priority`) flying from `a` to `b` announced at 1.5 s.
+fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>, u64) {
+    let limits = DynamicLimits::default();
+    let peer = (RobotId(id), priority, Point3::from(a), Point3::from(b));
+    let robot = RobotSpec::new("r0")
+        .with(ActorSpec::new("script", move || Script {
+            tick: 0,
+            limits,
+            peer,
+        }))
+        .with(ActorSpec::new("collision", move || {
+            CollisionActor::new(
+                CollisionActorConfig::default(),
+                PriorityAvoidance::new(PriorityConfig::default()),
+            )
+            .braking_for_peers(limits, KNOT_STEP_S)
+        }));
+    let log = Arc::new(Mutex::new((Vec::new(), 0)));
+    let tap = log.clone();
+    let mut exec = SimExecutor::new(vec![robot], 1);
+    exec.add_tap(move |p: &Publication<'_>| {
+        let mut log = tap.lock().unwrap();
+        if let Some(plan) = p.get(&PLAN) {
+            log.0.push(plan.clone());
+        }
+        if let Some(status) = p.get(&COLLISION_STATUS) {
+            log.1 = status.braked_for_peers;
+        }
+    });
+    exec.run_until(Time::from_secs_f64(3.0));
+    let _ = exec.finish();
+    let log = log.lock().unwrap();
+    (log.0.clone(), log.1)
+}
+
+#[test]
+fn a_robot_brakes_at_once_when_a_peer_it_must_yield_to_plans_across_its_path() {
+    let limits = DynamicLimits::default();
+    // Head on, along our path, from a peer of higher priority.
+    let (plans, braked) = fly_with_peer(1, 5, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+    assert_eq!(braked, 1);
+    assert_eq!(plans.len(), 2, "{plans:?}");
+    assert!(!plans[0].stopping);
+    let stop = &plans[1];
+    assert!(stop.stopping);
+    assert_eq!(stop.stamp, Time::from_secs_f64(1.5));
+    // It brakes from where the committed flight had it at 1.5 s, and stops short of
+    // where that flight would have stopped.
+    let committed = forward(&limits, Time::from_secs_f64(1.0));
+    let here = committed.state_at(Time::from_secs_f64(1.5)).position_m();
+    let first = stop.trajectory.knots()[0].position_m;
+    assert!((first.coords - here).norm() < 1e-9, "{first} vs {here}");
+    let stopped_x = stop.trajectory.knots().last().unwrap().position_m.x;
+    let planned_x = plans[0].trajectory.knots().last().unwrap().position_m.x;
+    assert!(stopped_x < planned_x, "{stopped_x} vs {planned_x}");
+    let reference = stop.reference.as_ref().unwrap();
+    let end = reference.state_at(stop.trajectory.end_time());
+    assert!(end.velocity_mps().norm() < 1e-6);
+}
+
+#[test]
+fn a_robot_keeps_its_plan_for_peers_out_of_the_way_or_of_lower_priority() {
+    // The same peer flight, but the peer must yield to us (same priority, higher id).
+    let (plans, braked) = fly_with_peer(3, 0, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+    assert_eq!((plans.len(), braked), (1, 0));
+    // A peer of higher priority flying elsewhere.
+    let (plans, braked) = fly_with_peer(1, 5, [6.0, 8.0, 1.0], [0.0, 8.0, 1.0]);
+    assert_eq!((plans.len(), braked), (1, 0));
+}
