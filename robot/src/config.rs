@@ -277,6 +277,14 @@ impl RobotConfig {
         self.grid.validate().map_err(|e| e.within("grid"))?;
         positive("planner.rate_hz", self.planner.rate_hz)?;
         positive("planner.knot_step_s", self.planner.knot_step_s)?;
+        non_negative("planner.lead_s", self.planner.lead_s)?;
+        if self.planner.lead_s >= 1.0 / self.planner.rate_hz {
+            return Err(ConfigError::new(
+                "planner.lead_s",
+                "must be shorter than the replanning period (1 / planner.rate_hz)",
+                self.planner.lead_s,
+            ));
+        }
         positive(
             "planner.round.planning_period_s",
             self.planner.round.planning_period_s,

@@ -82,6 +82,34 @@ impl Trajectory {
         &self.knots
     }
 
+    /// `next`, continuing this trajectory from `from` until `next` begins: this one's
+    /// state at `from` and its knots up to `next`'s first, then `next` (a plan that
+    /// takes over from a future reference point, thesis §4.1.3, with the flight that
+    /// leads there). When `next` begins at or before `from`, `next` alone.
+    #[must_use]
+    pub fn continued_by(&self, from: Time, next: &Trajectory) -> Trajectory {
+        let Some(start) = next.knots.first().map(|k| k.time) else {
+            return self.clone();
+        };
+        let Some(here) = self.state_at(from).filter(|_| from < start) else {
+            return next.clone();
+        };
+        let mut knots = Vec::with_capacity(self.knots.len() + next.knots.len() + 1);
+        knots.push(Knot {
+            time: from,
+            position_m: here.position_m,
+            yaw_rad: here.yaw_rad,
+        });
+        knots.extend(
+            self.knots
+                .iter()
+                .filter(|k| k.time > from && k.time < start)
+                .copied(),
+        );
+        knots.extend_from_slice(&next.knots);
+        Trajectory { knots }
+    }
+
     /// Time of the last knot.
     #[must_use]
     pub fn end_time(&self) -> Time {
@@ -161,6 +189,38 @@ mod tests {
         assert_eq!(before.velocity_mps, Vector3::zeros());
         let after = traj.state_at(Time::from_secs_f64(10.0)).unwrap();
         assert_eq!(after.position_m.x, 4.0);
+    }
+
+    #[test]
+    fn a_later_plan_continues_the_flight_that_leads_to_it() {
+        let old = Trajectory::new(
+            (0..=10)
+                .map(|i| knot(f64::from(i) * 0.2, f64::from(i) * 0.2, 0.0))
+                .collect(),
+        )
+        .unwrap();
+        let next = Trajectory::new(vec![knot(1.2, 1.2, 0.0), knot(2.2, 1.2, 0.0)]).unwrap();
+        let joined = old.continued_by(Time::from_secs_f64(0.5), &next);
+        let times_ms: Vec<u64> = joined
+            .knots()
+            .iter()
+            .map(|k| k.time.as_nanos() / 1_000_000)
+            .collect();
+        assert_eq!(times_ms, vec![500, 600, 800, 1000, 1200, 2200]);
+        // Continuous: the old flight until the new plan begins, then the new plan.
+        for t in [0.5, 0.7, 1.1, 1.2, 1.7, 3.0] {
+            let t = Time::from_secs_f64(t);
+            let expected = if t < Time::from_secs_f64(1.2) {
+                &old
+            } else {
+                &next
+            };
+            let (a, b) = (joined.state_at(t).unwrap(), expected.state_at(t).unwrap());
+            assert!((a.position_m - b.position_m).norm() < 1e-9, "{t}");
+        }
+        // A plan that begins at or before `from` replaces the old one outright.
+        assert_eq!(old.continued_by(Time::from_secs_f64(1.2), &next), next);
+        assert_eq!(old.continued_by(Time::from_secs_f64(1.5), &next), next);
     }
 
     #[test]

@@ -125,3 +125,57 @@ fn scripted_teleoperation_passes_the_window_slowing_down_at_it() {
         "slowest before the window {at_window} m/s, approach at {approach} m/s"
     );
 }
+
+/// Thesis §4.1.3: a round plans from a future reference point and its plan takes over
+/// there; the flight already committed leads to it. So every plan a robot commits —
+/// candidates, stops, and brakes for a crossing peer — continues the one before at the
+/// moment it reaches the vehicle: no jump in the reference the vehicle follows.
+#[test]
+fn committed_plans_take_over_without_a_jump() {
+    use std::collections::BTreeMap;
+    use std::sync::{Arc, Mutex};
+    use troupe_actors::msgs::{PLAN, Plan};
+    use troupe_runtime::{Publication, Time};
+
+    let scenario = Scenario {
+        name: "plan_continuity".into(),
+        seed: 2,
+        duration_s: 30.0,
+        robots: 2,
+        ..Scenario::default()
+    };
+    type PlansByRobot = BTreeMap<u32, Vec<(Time, Plan)>>;
+    let plans: Arc<Mutex<PlansByRobot>> = Arc::default();
+    let tap = plans.clone();
+    let mut team = Team::new(&scenario).expect("assemble");
+    team.add_tap(move |p: &Publication<'_>| {
+        if let Some(plan) = p.get(&PLAN) {
+            let mut plans = tap.lock().unwrap_or_else(|e| e.into_inner());
+            plans
+                .entry(p.robot.0)
+                .or_default()
+                .push((p.time, plan.clone()));
+        }
+    });
+    let summary = team.run(|_| {}).summary;
+    assert_eq!(summary.collisions, 0);
+    let plans = plans.lock().unwrap_or_else(|e| e.into_inner());
+    assert_eq!(plans.len(), 2);
+    for (robot, plans) in plans.iter() {
+        assert!(plans.len() >= 25, "robot {robot}: {} plans", plans.len());
+        let mut worst_m = 0.0f64;
+        for pair in plans.windows(2) {
+            let ((_, before), (at, after)) = (&pair[0], &pair[1]);
+            let (a, b) = (
+                before.trajectory.state_at(*at),
+                after.trajectory.state_at(*at),
+            );
+            let jump_m = (a.expect("knots").position_m - b.expect("knots").position_m).norm();
+            worst_m = worst_m.max(jump_m);
+        }
+        assert!(
+            worst_m < 1e-6,
+            "robot {robot}: the reference jumped {worst_m} m"
+        );
+    }
+}

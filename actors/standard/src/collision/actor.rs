@@ -178,7 +178,7 @@ pub struct CollisionActor<P> {
     /// Limits and knot spacing of braking between rounds
     /// ([`CollisionActor::braking_for_peers`]).
     braking: Option<(DynamicLimits, f64)>,
-    /// The plan committed last, while it is not a stop.
+    /// The plan committed last.
     committed: Option<Plan>,
 }
 
@@ -227,7 +227,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         let (Some((limits, knot_step_s)), Some(plan)) = (self.braking, &self.committed) else {
             return false;
         };
-        let Some(reference) = &plan.reference else {
+        let Some(reference) = plan.reference.as_ref().filter(|_| !plan.stopping) else {
             return false;
         };
         let now = ctx.now();
@@ -250,21 +250,24 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         if conflict.is_none_or(|c| c.peer != peer || c.envelope) {
             return false;
         }
-        let Some(stop) = Committed::braking(&limits, &reference.state_at(now), now) else {
+        // Before the committed plan takes over, the flight that leads to it is kept:
+        // the stop begins where it does.
+        let from = now.max(reference.start);
+        let Some(stop) = Committed::braking(&limits, &reference.state_at(from), from) else {
             return false;
         };
         tracing::info!(robot = ctx.robot_name(), time = %now, peer = peer.0, "a peer's new plan crosses the committed one: braking");
         self.status.braked_for_peers += 1;
-        self.committed = None;
-        ctx.publish(
-            &PLAN,
-            Plan {
-                stamp: now,
-                trajectory: stop.trajectory(knot_step_s),
-                reference: Some(Box::new(stop)),
-                stopping: true,
-            },
-        );
+        let brake = Plan {
+            stamp: now,
+            trajectory: plan
+                .trajectory
+                .continued_by(now, &stop.trajectory(knot_step_s)),
+            reference: Some(Box::new(stop)),
+            stopping: true,
+        };
+        self.committed = Some(brake.clone());
+        ctx.publish(&PLAN, brake);
         ctx.publish(&COLLISION_STATUS, self.status.clone());
         true
     }
@@ -364,12 +367,18 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         self.avoidance.record_round(now, blocked_by_peers);
         self.status.rounds += 1;
         self.status.priority = self.avoidance.priority(now);
+        // A round's plans begin a little ahead of it (the planner's `lead_s`): the
+        // flight committed before leads there.
+        let continued = |trajectory: &Trajectory| match &self.committed {
+            Some(last) => last.trajectory.continued_by(now, trajectory),
+            None => trajectory.clone(),
+        };
         let plan = match chosen.and_then(|i| round.candidates.get(i)) {
             Some(c) => {
                 self.status.committed += 1;
                 Plan {
                     stamp: now,
-                    trajectory: c.trajectory.clone(),
+                    trajectory: continued(&c.trajectory),
                     reference: c.reference.clone().map(Box::new),
                     stopping: false,
                 }
@@ -381,13 +390,13 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                 }
                 Plan {
                     stamp: now,
-                    trajectory: round.stop.clone(),
+                    trajectory: continued(&round.stop),
                     reference: round.stop_reference.clone().map(Box::new),
                     stopping: true,
                 }
             }
         };
-        self.committed = (!plan.stopping).then(|| plan.clone());
+        self.committed = Some(plan.clone());
         ctx.publish(&PLAN, plan);
         ctx.publish(
             &PLAN_DECISION,

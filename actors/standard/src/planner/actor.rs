@@ -30,6 +30,7 @@ use crate::msgs::{
     CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
 };
+use crate::trajectory::Trajectory;
 use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
@@ -82,6 +83,13 @@ pub struct PlannerConfig {
     pub round: RoundConfig,
     /// Spacing of the knots sent to the vehicle, seconds.
     pub knot_step_s: f64,
+    /// A round plans from the committed reference this far ahead of its own time
+    /// (thesis §4.1.3: replanning from a future reference point), and its plan takes
+    /// over there; until then the robot keeps flying what it had committed, so a plan
+    /// decided within this time joins the flight without a jump. It should exceed a
+    /// round's compute time plus the collision decision (0.1 s + 0.005 s modelled in
+    /// simulation), seconds, below the replanning period.
+    pub lead_s: f64,
     /// Team frontier memory, global guidance and implicit coordination.
     pub guidance: GuidanceConfig,
 }
@@ -92,6 +100,7 @@ impl Default for PlannerConfig {
             rate_hz: 1.0,
             round: RoundConfig::default(),
             knot_step_s: 0.1,
+            lead_s: 0.2,
             guidance: GuidanceConfig::default(),
         }
     }
@@ -161,6 +170,8 @@ pub struct PlannerActor<S> {
     snapshot: Option<Arc<GridSnapshot>>,
     odometry: Option<Arc<Odometry>>,
     committed: Option<Committed>,
+    /// What this planner last sent the vehicle (when it commits itself).
+    last_trajectory: Option<Trajectory>,
     deferred: bool,
     round: u64,
     guide: Option<Guide>,
@@ -182,6 +193,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             snapshot: None,
             odometry: None,
             committed: None,
+            last_trajectory: None,
             deferred: false,
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
@@ -200,13 +212,13 @@ impl<S: ActionSelection> PlannerActor<S> {
     /// selection's choice, then the rest by decreasing reward.
     fn defer(
         &mut self,
-        now: Time,
+        (now, start): (Time, Time),
         root: &FlatState,
         candidates: &[Candidate],
         choice: Option<usize>,
         ctx: &mut Context<'_>,
     ) {
-        let Some(stop) = Committed::braking(&self.config.round.limits, root, now) else {
+        let Some(stop) = Committed::braking(&self.config.round.limits, root, start) else {
             return;
         };
         let mut order: Vec<usize> = (0..candidates.len())
@@ -222,7 +234,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             .map(|&i| {
                 let c = &candidates[i];
                 Committed {
-                    start: now,
+                    start,
                     primitive: c.primitive.clone(),
                     switch_s: period_s.min(c.primitive.duration_s()),
                     stopping: c.stopping.clone(),
@@ -242,7 +254,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                     .map(|(c, &i)| CandidatePlan {
                         trajectory: c.trajectory(step),
                         reference: Some(c.clone()),
-                        switch_at: now + Duration::from_secs_f64(c.switch_s),
+                        switch_at: start + Duration::from_secs_f64(c.switch_s),
                         reward: candidates[i].reward,
                     })
                     .collect(),
@@ -258,7 +270,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             return;
         };
         let now = ctx.now();
-        let root = replanning_root(self.committed.as_ref(), now, &odometry.pose);
+        let start = now + Duration::from_secs_f64(self.config.lead_s);
+        let root = replanning_root(self.committed.as_ref(), start, &odometry.pose);
         let round = &self.config.round;
         let here = nalgebra::Point3::from(root.position_m());
         let own = ctx.robot();
@@ -308,19 +321,19 @@ impl<S: ActionSelection> PlannerActor<S> {
                     guided,
                 },
             );
-            self.defer(now, &root, &candidates, choice, ctx);
+            self.defer((now, start), &root, &candidates, choice, ctx);
             return;
         }
         let committed = match choice.and_then(|i| candidates.get(i)) {
             Some(c) => Committed {
-                start: now,
+                start,
                 primitive: c.primitive.clone(),
                 switch_s: round.planning_period_s.min(c.primitive.duration_s()),
                 stopping: c.stopping.clone(),
             },
             None => {
                 tracing::debug!(robot = ctx.robot_name(), time = %now, candidates = candidates.len(), "no safe action: stopping");
-                let Some(stop) = Committed::braking(&self.config.round.limits, &root, now) else {
+                let Some(stop) = Committed::braking(&self.config.round.limits, &root, start) else {
                     return;
                 };
                 stop
@@ -336,11 +349,17 @@ impl<S: ActionSelection> PlannerActor<S> {
             },
         );
         let stopping = choice.and_then(|i| candidates.get(i)).is_none();
+        let planned = committed.trajectory(self.config.knot_step_s);
+        let trajectory = match &self.last_trajectory {
+            Some(last) => last.continued_by(now, &planned),
+            None => planned,
+        };
+        self.last_trajectory = Some(trajectory.clone());
         ctx.publish(
             &PLAN,
             Plan {
                 stamp: now,
-                trajectory: committed.trajectory(self.config.knot_step_s),
+                trajectory,
                 reference: Some(Box::new(committed.clone())),
                 stopping,
             },
