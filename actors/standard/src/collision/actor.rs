@@ -27,6 +27,12 @@
 //! reacted within `lower_priority_react_s` (1.2 s, troupe-policies' priority check),
 //! which the next planning round alone (up to a period later, after the link's
 //! delay) does not guarantee.
+//!
+//! A planning round's plans take over a little after the round (the planner's
+//! `lead_s`); every plan committed is sent continued from the one before
+//! ([`Trajectory::continued_by`]), and a round decided after its plans should have
+//! taken over is refused and counted (`late_rounds`): the robot keeps its committed
+//! flight, which ends in its stop, rather than jump.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -117,6 +123,10 @@ pub struct CollisionStatus {
     /// Times the robot braked between rounds because a peer it must yield to sent a
     /// plan that conflicts with the committed one.
     pub braked_for_peers: u64,
+    /// Rounds refused because they came after their plans should have taken over (the
+    /// planner's `lead_s` overrun): the robot kept the flight committed, which ends in
+    /// its stop.
+    pub late_rounds: u64,
 }
 impl Message for CollisionStatus {}
 
@@ -334,6 +344,16 @@ impl<P: PeerAvoidance> CollisionActor<P> {
 
     fn decide(&mut self, round: &PlanCandidates, ctx: &mut Context<'_>) {
         let now = ctx.now();
+        // A round whose plans begin before now would make the reference jump by what
+        // the robot flew since; the committed flight, which ends in its stop, is kept
+        // (thesis §4.1.3: the robot replans from a future reference point).
+        let takes_over = round.stop_reference.as_ref().map(|r| r.start);
+        if !self.held && self.committed.is_some() && takes_over.is_some_and(|start| start < now) {
+            self.status.late_rounds += 1;
+            tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, "round decided after its plans should have taken over: kept the committed flight");
+            ctx.publish(&COLLISION_STATUS, self.status.clone());
+            return;
+        }
         let mut rejected = Vec::new();
         let mut chosen = None;
         let candidates = if self.held {
@@ -578,6 +598,72 @@ mod tests {
         let _ = exec.finish();
         let log = log.lock().unwrap();
         (log.0.clone(), log.1.clone(), log.2.clone())
+    }
+
+    /// Publishes a round at 1 s whose plans take over at 1.2 s, then one at 2 s whose
+    /// plans should have taken over at 1.7 s (a planner that overran).
+    struct LateRounds(u64);
+
+    impl Actor for LateRounds {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(0), Duration::from_secs(1));
+            Ok(())
+        }
+        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            use crate::planner::primitives::FlatState;
+            self.0 += 1;
+            let now = ctx.now();
+            let start = match self.0 {
+                1 => now + Duration::from_millis(200),
+                2 => Time::from_secs_f64(1.7),
+                _ => return Ok(()),
+            };
+            let hover = FlatState::at_rest(nalgebra::Vector3::new(0.0, 0.0, 1.0), 0.0);
+            let stop = Committed::braking(&DynamicLimits::default(), &hover, start).unwrap();
+            ctx.publish(
+                &PLAN_CANDIDATES,
+                PlanCandidates {
+                    round: self.0,
+                    stamp: now,
+                    candidates: vec![CandidatePlan {
+                        trajectory: stop.trajectory(0.1),
+                        reference: Some(stop.clone()),
+                        switch_at: start,
+                        reward: 1.0,
+                    }],
+                    stop: stop.trajectory(0.1),
+                    stop_reference: Some(stop),
+                },
+            );
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_round_decided_after_its_plans_should_have_taken_over_is_refused() {
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("rounds", || LateRounds(0)))
+            .with(ActorSpec::new("collision", || {
+                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max: 100.0 })
+            }));
+        let log = Arc::new(Mutex::new((0, None)));
+        let tap = log.clone();
+        let mut exec = SimExecutor::new(vec![robot], 1);
+        exec.add_tap(move |p: &Publication<'_>| {
+            let mut log = tap.lock().unwrap();
+            if p.get(&PLAN).is_some() {
+                log.0 += 1;
+            }
+            if let Some(s) = p.get(&COLLISION_STATUS) {
+                log.1 = Some(s.clone());
+            }
+        });
+        exec.run_until(Time::from_secs_f64(2.5));
+        let _ = exec.finish();
+        let (plans, status) = log.lock().unwrap().clone();
+        let status = status.unwrap();
+        assert_eq!(plans, 1, "only the round on time commits");
+        assert_eq!((status.rounds, status.late_rounds), (1, 1));
     }
 
     #[test]
