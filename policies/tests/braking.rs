@@ -64,7 +64,8 @@ fn peer_line(t0: Time, a: Point3<f64>, b: Point3<f64>) -> Trajectory {
 }
 
 /// Plays the rest of the robot: odometry at 0.5 s, one planning round at 1 s (the
-/// forward flight), and the peer's plan at 1.5 s.
+/// forward flight), the peer's plan at 1.5 s, and at 2 s a round planned from the
+/// forward flight as if nothing had happened (taking over at 2.2 s).
 struct Script {
     tick: u32,
     limits: DynamicLimits,
@@ -108,6 +109,22 @@ impl Actor for Script {
                     },
                 );
             }
+            4 => {
+                let flight = forward(&self.limits, Time::from_secs_f64(1.0));
+                let start = now + Duration::from_millis(200);
+                let stop =
+                    Committed::braking(&self.limits, &flight.state_at(start), start).unwrap();
+                ctx.publish(
+                    &PLAN_CANDIDATES,
+                    PlanCandidates {
+                        round: 2,
+                        stamp: now,
+                        candidates: Vec::new(),
+                        stop: stop.trajectory(KNOT_STEP_S),
+                        stop_reference: Some(stop),
+                    },
+                );
+            }
             3 => {
                 let (robot, priority, a, b) = self.peer;
                 ctx.publish(
@@ -126,9 +143,10 @@ impl Actor for Script {
     }
 }
 
-/// The plans our robot commits and how often it braked for peers, with a peer
-/// (`id`, `priority`) flying from `a` to `b` announced at 1.5 s.
-fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>, u64) {
+/// The plans our robot commits, how often it braked for peers and how many rounds it
+/// refused as stale, with a peer (`id`, `priority`) flying from `a` to `b` announced
+/// at 1.5 s.
+fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>, u64, u64) {
     let limits = DynamicLimits::default();
     let peer = (RobotId(id), priority, Point3::from(a), Point3::from(b));
     let robot = RobotSpec::new("r0")
@@ -144,7 +162,7 @@ fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>
             )
             .braking_for_peers(limits, KNOT_STEP_S)
         }));
-    let log = Arc::new(Mutex::new((Vec::new(), 0)));
+    let log = Arc::new(Mutex::new((Vec::new(), 0, 0)));
     let tap = log.clone();
     let mut exec = SimExecutor::new(vec![robot], 1);
     exec.add_tap(move |p: &Publication<'_>| {
@@ -154,20 +172,24 @@ fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>
         }
         if let Some(status) = p.get(&COLLISION_STATUS) {
             log.1 = status.braked_for_peers;
+            log.2 = status.stale_rounds;
         }
     });
     exec.run_until(Time::from_secs_f64(3.0));
     let _ = exec.finish();
     let log = log.lock().unwrap();
-    (log.0.clone(), log.1)
+    (log.0.clone(), log.1, log.2)
 }
 
 #[test]
 fn a_robot_brakes_at_once_when_a_peer_it_must_yield_to_plans_across_its_path() {
     let limits = DynamicLimits::default();
     // Head on, along our path, from a peer of higher priority.
-    let (plans, braked) = fly_with_peer(1, 5, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+    let (plans, braked, stale) = fly_with_peer(1, 5, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
     assert_eq!(braked, 1);
+    // The round at 2 s was planned from the forward flight the brake replaced: it
+    // would jump back onto it, and is refused.
+    assert_eq!(stale, 1);
     assert_eq!(plans.len(), 2, "{plans:?}");
     assert!(!plans[0].stopping);
     let stop = &plans[1];
@@ -190,9 +212,10 @@ fn a_robot_brakes_at_once_when_a_peer_it_must_yield_to_plans_across_its_path() {
 #[test]
 fn a_robot_keeps_its_plan_for_peers_out_of_the_way_or_of_lower_priority() {
     // The same peer flight, but the peer must yield to us (same priority, higher id).
-    let (plans, braked) = fly_with_peer(3, 0, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
-    assert_eq!((plans.len(), braked), (1, 0));
+    // (The round at 2 s continues the forward flight: committed.)
+    let (plans, braked, stale) = fly_with_peer(3, 0, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+    assert_eq!((plans.len(), braked, stale), (2, 0, 0));
     // A peer of higher priority flying elsewhere.
-    let (plans, braked) = fly_with_peer(1, 5, [6.0, 8.0, 1.0], [0.0, 8.0, 1.0]);
-    assert_eq!((plans.len(), braked), (1, 0));
+    let (plans, braked, stale) = fly_with_peer(1, 5, [6.0, 8.0, 1.0], [0.0, 8.0, 1.0]);
+    assert_eq!((plans.len(), braked, stale), (2, 0, 0));
 }

@@ -31,8 +31,9 @@
 //! A planning round's plans take over a little after the round (the planner's
 //! `lead_s`); every plan committed is sent continued from the one before
 //! ([`Trajectory::continued_by`]), and a round decided after its plans should have
-//! taken over is refused and counted (`late_rounds`): the robot keeps its committed
-//! flight, which ends in its stop, rather than jump.
+//! taken over, or planned from a reference replaced since (a brake), is refused and
+//! counted (`stale_rounds`): the robot keeps its committed flight, which ends in its
+//! stop, rather than jump.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -123,10 +124,11 @@ pub struct CollisionStatus {
     /// Times the robot braked between rounds because a peer it must yield to sent a
     /// plan that conflicts with the committed one.
     pub braked_for_peers: u64,
-    /// Rounds refused because they came after their plans should have taken over (the
-    /// planner's `lead_s` overrun): the robot kept the flight committed, which ends in
-    /// its stop.
-    pub late_rounds: u64,
+    /// Rounds refused because their plans would not continue the committed flight:
+    /// decided after they should have taken over (the planner's `lead_s` overran), or
+    /// planned from a reference replaced since (a brake). The robot kept the flight
+    /// committed, which ends in its stop.
+    pub stale_rounds: u64,
 }
 impl Message for CollisionStatus {}
 
@@ -342,15 +344,29 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         }
     }
 
+    /// Whether the plans of `round` continue the committed flight: they take over after
+    /// `now` from the committed reference's state there. A round that fails this would
+    /// make the reference jump — by what the robot flew since it should have taken
+    /// over, or to where a replaced reference would have led — so the committed flight,
+    /// which ends in its stop, is kept instead (thesis §4.1.3: the robot replans from a
+    /// future reference point). Rounds without references (routes) always continue.
+    fn continues_committed(&self, round: &PlanCandidates, now: Time) -> bool {
+        let (Some(committed), Some(planned)) = (
+            self.committed.as_ref().and_then(|p| p.reference.as_deref()),
+            round.stop_reference.as_ref(),
+        ) else {
+            return true;
+        };
+        let start = planned.start;
+        let there = committed.state_at(start.max(committed.start)).position_m();
+        start >= now && (planned.state_at(start).position_m() - there).norm() < 1e-9
+    }
+
     fn decide(&mut self, round: &PlanCandidates, ctx: &mut Context<'_>) {
         let now = ctx.now();
-        // A round whose plans begin before now would make the reference jump by what
-        // the robot flew since; the committed flight, which ends in its stop, is kept
-        // (thesis §4.1.3: the robot replans from a future reference point).
-        let takes_over = round.stop_reference.as_ref().map(|r| r.start);
-        if !self.held && self.committed.is_some() && takes_over.is_some_and(|start| start < now) {
-            self.status.late_rounds += 1;
-            tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, "round decided after its plans should have taken over: kept the committed flight");
+        if !self.held && !self.continues_committed(round, now) {
+            self.status.stale_rounds += 1;
+            tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, "round would not continue the committed flight: kept it");
             ctx.publish(&COLLISION_STATUS, self.status.clone());
             return;
         }
@@ -663,7 +679,7 @@ mod tests {
         let (plans, status) = log.lock().unwrap().clone();
         let status = status.unwrap();
         assert_eq!(plans, 1, "only the round on time commits");
-        assert_eq!((status.rounds, status.late_rounds), (1, 1));
+        assert_eq!((status.rounds, status.stale_rounds), (1, 1));
     }
 
     #[test]
