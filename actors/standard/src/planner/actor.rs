@@ -100,7 +100,7 @@ impl Default for PlannerConfig {
             rate_hz: 1.0,
             round: RoundConfig::default(),
             knot_step_s: 0.1,
-            lead_s: 0.2,
+            lead_s: 0.11,
             guidance: GuidanceConfig::default(),
         }
     }
