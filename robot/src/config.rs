@@ -351,6 +351,9 @@ mod tests {
         let mut c = RobotConfig::default();
         c.latency_s.sensor = -1.0;
         assert_eq!(c.validate().unwrap_err().key, "latency_s.sensor");
+        let mut c = RobotConfig::default();
+        c.planner.lead_s = 1.0; // a whole replanning period at 1 Hz
+        assert_eq!(c.validate().unwrap_err().key, "planner.lead_s");
         let c = RobotConfig {
             behaviour: "x".into(),
             ..RobotConfig::default()
