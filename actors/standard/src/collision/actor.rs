@@ -349,12 +349,20 @@ impl<P: PeerAvoidance> CollisionActor<P> {
     /// make the reference jump — by what the robot flew since it should have taken
     /// over, or to where a replaced reference would have led — so the committed flight,
     /// which ends in its stop, is kept instead (thesis §4.1.3: the robot replans from a
-    /// future reference point). Rounds without references (routes) always continue.
+    /// future reference point). Rounds without references (routes) always continue,
+    /// and so does any round once the committed flight is over and the robot hovers
+    /// where it ended (a restarted planner, which lost the reference, plans from the
+    /// body's pose).
     fn continues_committed(&self, round: &PlanCandidates, now: Time) -> bool {
-        let (Some(committed), Some(planned)) = (
-            self.committed.as_ref().and_then(|p| p.reference.as_deref()),
-            round.stop_reference.as_ref(),
-        ) else {
+        let (Some(last), Some(planned)) = (self.committed.as_ref(), round.stop_reference.as_ref())
+        else {
+            return true;
+        };
+        let Some(committed) = last
+            .reference
+            .as_deref()
+            .filter(|_| now < last.trajectory.end_time())
+        else {
             return true;
         };
         let start = planned.start;
