@@ -15,8 +15,8 @@ use crate::actor::Actor;
 /// actor handles nothing else before then; meanwhile its queues fill and apply their
 /// policies. This is how mapping latency (0.4 s in thesis Table 4.1) or a planning
 /// budget shows up in a simulated run. Calls that only store what arrived
-/// ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)) are not charged. The real-time executor ignores it (latency is
-/// whatever the handler really takes).
+/// ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)) are not charged.
+/// The real-time executor ignores it (latency is whatever the handler really takes).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum LatencyModel {
