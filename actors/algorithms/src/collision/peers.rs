@@ -70,6 +70,12 @@ impl PeerTable {
         }
     }
 
+    /// What is known of `peer`, if it has been heard from.
+    #[must_use]
+    pub fn get(&self, peer: RobotId) -> Option<&PeerTrack> {
+        self.tracks.get(&peer)
+    }
+
     /// Every peer heard from, by robot id.
     pub fn iter(&self) -> impl Iterator<Item = (RobotId, &PeerTrack)> {
         self.tracks.iter().map(|(id, t)| (*id, t))

@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 use super::body::{BodyConfig, BodyError};
 use super::geofence::{Geofence, GeofenceConfig};
 use super::operator::{OPERATOR_HOLD, OperatorHold};
-use super::peers::{PeerAvoidance, PeerTable, must_yield};
+use super::peers::{PeerAvoidance, PeerTable, PeerTrack, must_yield};
 use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection,
@@ -244,11 +244,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         };
         let now = ctx.now();
         let mine = self.avoidance.priority(now);
-        let theirs = self
-            .peers
-            .iter()
-            .find(|(id, _)| *id == peer)
-            .and_then(|(_, t)| t.priority());
+        let theirs = self.peers.get(peer).and_then(PeerTrack::priority);
         if theirs.is_none() || !must_yield(ctx.robot(), mine, peer, theirs) {
             return false;
         }
@@ -595,8 +591,18 @@ mod tests {
     /// Runs the rounds through a collision actor with `config` and a [`Wall`] at
     /// `x_max`, with `extra` beside them, for 3.5 s.
     fn run_with(config: CollisionActorConfig, x_max: f64, extra: Option<ActorSpec>) -> Log {
+        run_rounds(ActorSpec::new("rounds", || Rounds(0)), config, x_max, extra)
+    }
+
+    /// [`run_with`] with another source of planning rounds.
+    fn run_rounds(
+        rounds: ActorSpec,
+        config: CollisionActorConfig,
+        x_max: f64,
+        extra: Option<ActorSpec>,
+    ) -> Log {
         let mut robot = RobotSpec::new("r0")
-            .with(ActorSpec::new("rounds", || Rounds(0)))
+            .with(rounds)
             .with(ActorSpec::new("collision", move || {
                 CollisionActor::new(config.clone(), Wall { x_max }).obeying_operator()
             }));
@@ -665,28 +671,10 @@ mod tests {
 
     #[test]
     fn a_round_decided_after_its_plans_should_have_taken_over_is_refused() {
-        let robot = RobotSpec::new("r0")
-            .with(ActorSpec::new("rounds", || LateRounds(0)))
-            .with(ActorSpec::new("collision", || {
-                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max: 100.0 })
-            }));
-        let log = Arc::new(Mutex::new((0, None)));
-        let tap = log.clone();
-        let mut exec = SimExecutor::new(vec![robot], 1);
-        exec.add_tap(move |p: &Publication<'_>| {
-            let mut log = tap.lock().unwrap();
-            if p.get(&PLAN).is_some() {
-                log.0 += 1;
-            }
-            if let Some(s) = p.get(&COLLISION_STATUS) {
-                log.1 = Some(s.clone());
-            }
-        });
-        exec.run_until(Time::from_secs_f64(2.5));
-        let _ = exec.finish();
-        let (plans, status) = log.lock().unwrap().clone();
+        let rounds = ActorSpec::new("rounds", || LateRounds(0));
+        let (_, plans, status) = run_rounds(rounds, CollisionActorConfig::default(), 100.0, None);
         let status = status.unwrap();
-        assert_eq!(plans, 1, "only the round on time commits");
+        assert_eq!(plans.len(), 1, "only the round on time commits");
         assert_eq!((status.rounds, status.stale_rounds), (1, 1));
     }
 

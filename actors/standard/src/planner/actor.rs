@@ -30,7 +30,6 @@ use crate::msgs::{
     CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
 };
-use crate::trajectory::Trajectory;
 use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
@@ -170,8 +169,6 @@ pub struct PlannerActor<S> {
     snapshot: Option<Arc<GridSnapshot>>,
     odometry: Option<Arc<Odometry>>,
     committed: Option<Committed>,
-    /// What this planner last sent the vehicle (when it commits itself).
-    last_trajectory: Option<Trajectory>,
     deferred: bool,
     round: u64,
     guide: Option<Guide>,
@@ -193,7 +190,6 @@ impl<S: ActionSelection> PlannerActor<S> {
             snapshot: None,
             odometry: None,
             committed: None,
-            last_trajectory: None,
             deferred: false,
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
@@ -349,12 +345,14 @@ impl<S: ActionSelection> PlannerActor<S> {
             },
         );
         let stopping = choice.and_then(|i| candidates.get(i)).is_none();
-        let planned = committed.trajectory(self.config.knot_step_s);
-        let trajectory = match &self.last_trajectory {
-            Some(last) => last.continued_by(now, &planned),
+        // The flight that leads to the new plan: the previous one, which took over
+        // before now (`lead_s` is below the period).
+        let step_s = self.config.knot_step_s;
+        let planned = committed.trajectory(step_s);
+        let trajectory = match &self.committed {
+            Some(last) => last.trajectory(step_s).continued_by(now, &planned),
             None => planned,
         };
-        self.last_trajectory = Some(trajectory.clone());
         ctx.publish(
             &PLAN,
             Plan {
