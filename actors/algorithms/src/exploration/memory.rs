@@ -186,31 +186,45 @@ impl FrontierMemory {
         if tallies.is_empty() {
             return update;
         }
+        // The memory cell of each fine cell along each axis (by its centre), relative
+        // to the first one in the window; `None` outside it.
+        let coarse = |axis: usize, first: i64| -> Vec<Option<usize>> {
+            (0..dims[axis])
+                .map(|c| {
+                    let centre_m = lo[axis] + (c as f64 + 0.5) * res;
+                    let k = (centre_m / self.cell_m).floor() as i64 - first;
+                    (0..n[axis] as i64).contains(&k).then_some(k as usize)
+                })
+                .collect()
+        };
+        let (kx, ky, kz) = (coarse(0, rx.0), coarse(1, ry.0), coarse(2, rz.0));
         let values = grid.values();
-        for (i, value) in values.iter().enumerate() {
-            let c = grid.cell_at(i);
-            let p = geometry.cell_centre(c);
-            let k = [
-                (p.x / self.cell_m).floor() as i64 - rx.0,
-                (p.y / self.cell_m).floor() as i64 - ry.0,
-                (p.z / self.cell_m).floor() as i64 - rz.0,
-            ];
-            if (0..3).any(|a| k[a] < 0 || k[a] >= n[a] as i64) {
-                continue;
+        let mut i = 0;
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                let row = i;
+                i += dims[0];
+                let (Some(cy), Some(cz)) = (ky[y], kz[z]) else {
+                    continue;
+                };
+                for (x, cx) in kx.iter().enumerate() {
+                    let Some(cx) = *cx else { continue };
+                    let i = row + x;
+                    let t = &mut tallies[cx + n[0] * (cy + n[1] * cz)];
+                    if grid.classify(values[i]) != CellState::Unknown {
+                        t.known += 1;
+                    }
+                    if snapshot
+                        .frontier_distance_m
+                        .get(i)
+                        .is_some_and(|d| *d == 0.0)
+                    {
+                        t.frontier += 1;
+                    }
+                    let clearance = snapshot.unsafe_distance_m.get(i).copied().unwrap_or(0.0);
+                    t.max_clearance_m = t.max_clearance_m.max(clearance);
+                }
             }
-            let t = &mut tallies[k[0] as usize + n[0] * (k[1] as usize + n[1] * k[2] as usize)];
-            if grid.classify(*value) != CellState::Unknown {
-                t.known += 1;
-            }
-            if snapshot
-                .frontier_distance_m
-                .get(i)
-                .is_some_and(|d| *d == 0.0)
-            {
-                t.frontier += 1;
-            }
-            let clearance = snapshot.unsafe_distance_m.get(i).copied().unwrap_or(0.0);
-            t.max_clearance_m = t.max_clearance_m.max(clearance);
         }
         for z in 0..n[2] {
             for y in 0..n[1] {

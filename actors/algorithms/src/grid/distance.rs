@@ -1,6 +1,8 @@
 //! Exact Euclidean distance transform (Felzenszwalb & Huttenlocher, 2012): linear
 //! time, separable over the three axes, on squared distances.
 
+use rayon::prelude::*;
+
 use super::{CellState, LocalGrid};
 
 /// Squared-distance transform along one line: `f` holds 0 at sources and `INF`
@@ -85,45 +87,92 @@ fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [f64]) {
 pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> Vec<f64> {
     let [nx, ny, nz] = dims;
     let mut d = vec![0.0; sources.len()];
-    for (src, out) in sources.chunks(nx.max(1)).zip(d.chunks_mut(nx.max(1))) {
-        binary_line(|q| src[q], out);
+    if d.is_empty() {
+        return d;
     }
-    let longest = nx.max(ny).max(nz);
-    let (mut v, mut z, mut out) = (
-        vec![0usize; longest],
-        vec![0.0; longest + 1],
-        vec![0.0; longest],
+    // Along x: each row on its own.
+    d.par_chunks_mut(nx)
+        .zip(sources.par_chunks(nx))
+        .for_each(|(out, src)| binary_line(|q| src[q], out));
+    // Along y: each z-slab (contiguous) on its own.
+    d.par_chunks_mut(nx * ny).for_each_init(
+        || Scratch::new(ny, nx),
+        |scratch, plane| {
+            scratch.transform(plane, ny, nx);
+        },
     );
-    // The lines along y (then z) of one slab, one after another: copied in and out in
-    // memory order, so the strided lines cost no cache misses.
-    let mut slab = vec![0.0; nx * longest];
-    // (line length, stride along the line, slab count, stride between slabs)
-    for (n, q_stride, slabs, b_stride) in [(ny, nx, nz, nx * ny), (nz, nx * ny, ny, nx)] {
-        for b in 0..slabs {
-            for q in 0..n {
-                let row = b * b_stride + q * q_stride;
-                for (a, x) in d[row..row + nx].iter().enumerate() {
-                    slab[a * n + q] = *x;
+    // Along z: each y-row of the volume is gathered, transformed and written back.
+    let planes: Vec<Option<Vec<f64>>> = (0..ny)
+        .into_par_iter()
+        .map_init(
+            || Scratch::new(nz, nx),
+            |scratch, y| {
+                let mut columns = vec![0.0; nx * nz];
+                for q in 0..nz {
+                    let row = y * nx + q * nx * ny;
+                    columns[q * nx..(q + 1) * nx].copy_from_slice(&d[row..row + nx]);
                 }
-            }
-            for line in slab[..nx * n].chunks_mut(n.max(1)) {
-                let all_zero = line.iter().all(|x| *x == 0.0);
-                if !all_zero && !line.iter().all(|x| x.is_infinite()) {
-                    transform_line(line, &mut v, &mut z, &mut out);
-                }
-            }
-            for q in 0..n {
-                let row = b * b_stride + q * q_stride;
-                for (a, x) in d[row..row + nx].iter_mut().enumerate() {
-                    *x = slab[a * n + q];
-                }
+                scratch.transform(&mut columns, nz, nx).then_some(columns)
+            },
+        )
+        .collect();
+    for (y, columns) in planes.into_iter().enumerate() {
+        if let Some(columns) = columns {
+            for q in 0..nz {
+                let row = y * nx + q * nx * ny;
+                d[row..row + nx].copy_from_slice(&columns[q * nx..(q + 1) * nx]);
             }
         }
     }
-    for x in &mut d {
-        *x = x.sqrt() * cell_m;
-    }
+    d.par_iter_mut().for_each(|x| *x = x.sqrt() * cell_m);
     d
+}
+
+/// Scratch buffers for the lines of one plane.
+struct Scratch {
+    v: Vec<usize>,
+    z: Vec<f64>,
+    out: Vec<f64>,
+    slab: Vec<f64>,
+}
+
+impl Scratch {
+    /// Buffers for `nx` lines of `n` cells.
+    fn new(n: usize, nx: usize) -> Self {
+        Scratch {
+            v: vec![0; n],
+            z: vec![0.0; n + 1],
+            out: vec![0.0; n],
+            slab: vec![0.0; nx * n],
+        }
+    }
+
+    /// Transforms the `nx` lines of `plane`, which holds `n` rows of `nx` cells (line
+    /// `a` is cell `a` of every row), in place; `false` if no line changed. Lines all
+    /// 0 or all infinite map to themselves and are skipped.
+    fn transform(&mut self, plane: &mut [f64], n: usize, nx: usize) -> bool {
+        for q in 0..n {
+            for (a, x) in plane[q * nx..(q + 1) * nx].iter().enumerate() {
+                self.slab[a * n + q] = *x;
+            }
+        }
+        let mut changed = false;
+        for line in self.slab[..nx * n].chunks_mut(n.max(1)) {
+            let all_zero = line.iter().all(|x| *x == 0.0);
+            if !all_zero && !line.iter().all(|x| x.is_infinite()) {
+                transform_line(line, &mut self.v, &mut self.z, &mut self.out);
+                changed = true;
+            }
+        }
+        if changed {
+            for q in 0..n {
+                for (a, x) in plane[q * nx..(q + 1) * nx].iter_mut().enumerate() {
+                    *x = self.slab[a * n + q];
+                }
+            }
+        }
+        changed
+    }
 }
 
 /// Distance from each cell to the nearest unsafe (occupied or unknown) cell, metres

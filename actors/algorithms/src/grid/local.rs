@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use troupe_core::ConfigError;
 
-use crate::geometry::VoxelGrid;
+use crate::geometry::{Aabb, VoxelGrid};
 
 /// Log-odds update and classification rules (the standard inverse sensor model,
 /// paper IV-B; defaults follow OctoMap's: hit p = 0.7, miss p = 0.4, clamped to
@@ -390,6 +390,26 @@ impl LocalGrid {
         hit: bool,
         boxes: &[CellBox],
     ) {
+        // A ray that passes no box (grown by a cell for the walk's rounding) changes
+        // nothing: skip its walk. Most sample rays of a rebuild miss the thin slabs a
+        // window move uncovers.
+        let (Some(g0), Some(g1)) = (self.lattice_coords(origin), self.lattice_coords(end)) else {
+            return;
+        };
+        let corner = Vector3::from(self.corner.map(|c| c as f64));
+        let meets = |b: &CellBox| {
+            let lattice_box = Aabb {
+                min: Point3::from(corner + Vector3::from(b.min.map(|v| v as f64))),
+                max: Point3::from(corner + Vector3::from(b.max.map(|v| v as f64))),
+            };
+            lattice_box
+                .expanded(1.0)
+                .clip_ray(&Point3::from(g0), &(g1 - g0), 0.0, 1.0)
+                .is_some()
+        };
+        if !boxes.iter().any(meets) {
+            return;
+        }
         self.insert_ray_where(origin, end, hit, |c| boxes.iter().any(|b| b.contains(c)));
     }
 
@@ -483,18 +503,24 @@ impl LocalGrid {
         let shift = [0, 1, 2].map(|i| corner[i] as i64 - self.corner[i] as i64);
         let mut cells = vec![0.0; self.cells.len()];
         let d = self.dims;
-        for z in 0..d[2] {
-            for y in 0..d[1] {
-                for x in 0..d[0] {
-                    let old = [
-                        x as i64 + shift[0],
-                        y as i64 + shift[1],
-                        z as i64 + shift[2],
-                    ];
-                    if (0..3).all(|i| old[i] >= 0 && old[i] < d[i] as i64) {
-                        let old = old.map(|v| v as usize);
-                        cells[x + d[0] * (y + d[1] * z)] = self.cells[self.index(old)];
-                    }
+        // The new indices whose old cell (new + shift) lies in the old box, per axis.
+        let kept = |i: usize| {
+            let n = d[i] as i64;
+            (
+                (-shift[i]).clamp(0, n) as usize,
+                (n - shift[i]).clamp(0, n) as usize,
+            )
+        };
+        let ((x0, x1), (y0, y1), (z0, z1)) = (kept(0), kept(1), kept(2));
+        if x0 < x1 {
+            let old_x0 = (x0 as i64 + shift[0]) as usize;
+            for z in z0..z1 {
+                for y in y0..y1 {
+                    let old_y = (y as i64 + shift[1]) as usize;
+                    let old_z = (z as i64 + shift[2]) as usize;
+                    let from = self.index([old_x0, old_y, old_z]);
+                    let to = x0 + d[0] * (y + d[1] * z);
+                    cells[to..to + (x1 - x0)].copy_from_slice(&self.cells[from..from + (x1 - x0)]);
                 }
             }
         }

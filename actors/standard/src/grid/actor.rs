@@ -273,10 +273,12 @@ impl Actor for GridActor {
                 if let Some(snapshot) = self.hca_snapshot(ctx.now()) {
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
                 } else if let Some(grid) = &self.grid {
+                    let (unsafe_distance_m, frontier_distance_m) =
+                        rayon::join(|| unsafe_distance(grid), || frontier_distance(grid));
                     let snapshot = GridSnapshot {
                         stamp: ctx.now(),
-                        unsafe_distance_m: unsafe_distance(grid),
-                        frontier_distance_m: frontier_distance(grid),
+                        unsafe_distance_m,
+                        frontier_distance_m,
                         grid: grid.clone(),
                     };
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
