@@ -115,4 +115,8 @@ impl SimNetwork for ScenarioNetwork {
         }
         *lock(&self.stats) = self.net.stats();
     }
+
+    fn min_delay(&self) -> std::time::Duration {
+        std::time::Duration::from_nanos(self.net.min_latency_ns())
+    }
 }

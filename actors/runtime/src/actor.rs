@@ -92,6 +92,9 @@ pub type ActorResult = Result<(), ActorError>;
 /// see [`ActorOptions`](crate::ActorOptions)) stands for the time a handler takes.
 /// Heavy but finite compute is fine, including `rayon` inside a handler, as long as
 /// results do not depend on thread timing (use ordered collects, not racy reductions).
+/// The sim-time executor runs the robots of a team on several threads at once: actors
+/// of different robots must share nothing mutable except through topics and the link
+/// (within one robot, anything goes — its actors never run at the same time there).
 /// Messages published inside a hook are delivered when it returns (in sim time:
 /// after the modelled latency).
 ///

@@ -94,6 +94,14 @@ pub trait SimNetwork: Send {
         team_size: usize,
         deliveries: &mut Vec<(RobotId, Time)>,
     );
+
+    /// A lower bound on every delivery's delay (arrival − `now` in
+    /// [`SimNetwork::route`]). The sim-time executor runs the robots side by side
+    /// through windows this long: nothing one robot sends within a window can reach
+    /// another before it ends. Zero (the default) allows no overlap beyond one instant.
+    fn min_delay(&self) -> Duration {
+        Duration::ZERO
+    }
 }
 
 /// A lossless network with a fixed one-way latency and unlimited rate.
@@ -115,5 +123,9 @@ impl SimNetwork for IdealNetwork {
     ) {
         let arrival = now + self.latency;
         deliveries.extend(to.recipients(from, team_size).map(|r| (r, arrival)));
+    }
+
+    fn min_delay(&self) -> Duration {
+        self.latency
     }
 }

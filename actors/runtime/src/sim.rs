@@ -1,18 +1,26 @@
 //! The deterministic sim-time executor: every robot of a team in one discrete-event
-//! loop.
+//! simulation, the robots side by side on the available cores.
 //!
-//! Events are ordered by `(time, sequence)`, where the sequence number is assigned
-//! when an event is scheduled; nothing depends on wall-clock time or thread timing,
-//! so the same team, seed and inputs give bit-identical results. Each handler call
-//! is charged the compute latency of its actor's [`LatencyModel`](crate::LatencyModel):
-//! its outputs appear after that latency and the actor is busy until then. A call that
-//! only stored what arrived ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only))
-//! is charged nothing.
+//! Each robot has its own event queue, ordered by `(time, sequence)`, where the
+//! sequence number is the robot's own count of scheduled events. The robots advance
+//! together through windows as long as the network's least delay
+//! ([`SimNetwork::min_delay`]): nothing a robot sends within a window can reach
+//! another before the window ends, so within it each robot's events depend only on
+//! its own state, and the robots may run on any threads in any order. Between windows
+//! what the robots published goes to the [taps](crate::Tap) and the network in
+//! `(time, robot, order of publication)` order. Nothing depends on wall-clock time or
+//! thread timing, so the same team, seed and inputs give bit-identical results on any
+//! number of threads. Each handler call is charged the compute latency of its actor's
+//! [`LatencyModel`](crate::LatencyModel): its outputs appear after that latency and the
+//! actor is busy until then. A call that only stored what arrived
+//! ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)) is charged nothing.
 
 use std::any::TypeId;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::sync::Arc;
+
+use rayon::prelude::*;
 
 use crate::context::Outgoing;
 use crate::inputs::Inputs;
@@ -22,27 +30,24 @@ use crate::slot::{Hook, HookOutcome, Slot};
 use crate::spec::RobotSpec;
 use crate::stats::RobotReport;
 use crate::tap::{Publication, Tap};
-use crate::topic::Received;
+use crate::topic::{Payload, Received};
 use troupe_core::RobotId;
 use troupe_core::Time;
 
+/// An event of one robot.
 enum Kind {
     Activate {
-        robot: u32,
         slot: u32,
     },
     Timer {
-        robot: u32,
         slot: u32,
         timer: u32,
         generation: u64,
     },
     Deliver {
-        robot: u32,
         outputs: Vec<Outgoing>,
     },
     Network {
-        to: u32,
         from: RobotId,
         bytes: Arc<[u8]>,
     },
@@ -72,7 +77,7 @@ impl Ord for Scheduled {
     }
 }
 
-/// The event queue and the clock.
+/// One robot's event queue and clock.
 struct Clock {
     heap: BinaryHeap<Scheduled>,
     now: Time,
@@ -89,12 +94,26 @@ impl Clock {
         let seq = self.next_seq();
         self.heap.push(Scheduled { time, seq, kind });
     }
+
+    /// When the next event is due, if any.
+    fn next_time(&self) -> Option<Time> {
+        self.heap.peek().map(|e| e.time)
+    }
 }
 
 #[derive(Clone, Copy, Default)]
 struct SlotSchedule {
     busy_until: Time,
     activation_pending: bool,
+}
+
+/// A publication that leaves its robot: for the taps and, a packet, the network.
+struct Outside {
+    time: Time,
+    topic: Arc<str>,
+    payload: Payload,
+    bytes: usize,
+    packet: bool,
 }
 
 struct SimRobot {
@@ -104,27 +123,28 @@ struct SimRobot {
     inputs: Vec<Inputs>,
     schedule: Vec<SlotSchedule>,
     registry: TopicRegistry,
+    clock: Clock,
+    /// What left the robot in the current window, in order.
+    outside: Vec<Outside>,
+    /// Publications go to `outside` for the taps too (not only packets).
+    observed: bool,
+    events: u64,
 }
 
 impl SimRobot {
     /// Schedules an activation of `slot` if it has input and none is pending.
-    fn wake(&mut self, clock: &mut Clock, slot: usize) {
+    fn wake(&mut self, slot: usize) {
         let state = &mut self.schedule[slot];
         if !state.activation_pending && self.inputs[slot].has_input() {
             state.activation_pending = true;
-            let at = state.busy_until.max(clock.now);
-            clock.schedule(
-                at,
-                Kind::Activate {
-                    robot: self.id.0,
-                    slot: slot as u32,
-                },
-            );
+            let at = state.busy_until.max(self.clock.now);
+            self.clock
+                .schedule(at, Kind::Activate { slot: slot as u32 });
         }
     }
 
     /// Applies the subscribe / timer commands a hook left behind.
-    fn apply_commands(&mut self, clock: &mut Clock, slot: usize) {
+    fn apply_commands(&mut self, slot: usize) {
         let commands = std::mem::take(&mut self.slots[slot].commands);
         for command in commands {
             let started = apply_command(
@@ -136,10 +156,9 @@ impl SimRobot {
                 &self.slots[slot].name,
             );
             if let Some(timer) = started {
-                clock.schedule(
-                    clock.now + timer.period,
+                self.clock.schedule(
+                    self.clock.now + timer.period,
                     Kind::Timer {
-                        robot: self.id.0,
                         slot: slot as u32,
                         timer: timer.index as u32,
                         generation: timer.generation,
@@ -148,86 +167,199 @@ impl SimRobot {
             }
         }
     }
-}
 
-/// Outside observers and the network, split from the robots for borrowing.
-struct World {
-    network: Box<dyn SimNetwork>,
-    taps: Vec<Box<dyn Tap>>,
-    team_size: usize,
-    deliveries: Vec<(RobotId, Time)>,
-}
-
-impl World {
-    /// Delivers publications of one robot to its subscribers, taps and the network.
-    fn route(&mut self, clock: &mut Clock, robot: &mut SimRobot, outputs: &mut Vec<Outgoing>) {
+    /// Delivers publications to this robot's subscribers; what must leave the robot
+    /// (for the taps, the network) is kept for the end of the window.
+    fn route(&mut self, outputs: &mut Vec<Outgoing>) {
         for out in outputs.drain(..) {
-            let entry = match robot.registry.entry(&out.topic, out.type_id, out.type_name) {
+            let entry = match self.registry.entry(&out.topic, out.type_id, out.type_name) {
                 Ok(entry) => entry,
                 Err(e) => {
-                    tracing::error!(robot = %robot.name, topic = %e.topic,
+                    tracing::error!(robot = %self.name, topic = %e.topic,
                         "dropped a publication of type {}: the topic carries {}", e.used, e.declared);
                     continue;
                 }
             };
             entry.stats.messages += 1;
             entry.stats.bytes += out.bytes as u64;
-            for tap in &mut self.taps {
-                tap.on_publish(&Publication {
-                    time: clock.now,
-                    robot: robot.id,
-                    topic: &entry.name,
-                    payload: &out.payload,
-                    bytes: out.bytes,
-                });
-            }
             for &(slot, sub) in &entry.subscribers {
-                let arrival = clock.next_seq();
+                let arrival = self.clock.next_seq();
                 let message = Received {
                     topic: entry.name.clone(),
                     payload: out.payload.clone(),
-                    published_at: clock.now,
+                    published_at: self.clock.now,
                     bytes: out.bytes,
                 };
-                if robot.inputs[slot].offer(sub, arrival, message) {
-                    let state = &mut robot.schedule[slot];
+                if self.inputs[slot].offer(sub, arrival, message) {
+                    let state = &mut self.schedule[slot];
                     if !state.activation_pending {
                         state.activation_pending = true;
-                        let at = state.busy_until.max(clock.now);
-                        clock.schedule(
-                            at,
-                            Kind::Activate {
-                                robot: robot.id.0,
-                                slot: slot as u32,
-                            },
-                        );
+                        let at = state.busy_until.max(self.clock.now);
+                        self.clock
+                            .schedule(at, Kind::Activate { slot: slot as u32 });
                     }
                 }
             }
-            if out.type_id == TypeId::of::<LinkTx>()
-                && *out.topic == *LINK_TX.name()
-                && let Some(packet) = out.payload.downcast_ref::<LinkTx>()
-            {
-                self.deliveries.clear();
-                self.network.route(
-                    clock.now,
-                    robot.id,
-                    packet.to,
-                    &packet.bytes,
-                    self.team_size,
-                    &mut self.deliveries,
-                );
-                for &(to, at) in &self.deliveries {
-                    clock.schedule(
-                        at.max(clock.now),
-                        Kind::Network {
-                            to: to.0,
-                            from: robot.id,
-                            bytes: packet.bytes.clone(),
-                        },
-                    );
-                }
+            let packet = out.type_id == TypeId::of::<LinkTx>() && *out.topic == *LINK_TX.name();
+            if packet || self.observed {
+                self.outside.push(Outside {
+                    time: self.clock.now,
+                    topic: entry.name.clone(),
+                    payload: out.payload,
+                    bytes: out.bytes,
+                    packet,
+                });
             }
+        }
+    }
+
+    /// Processes every event of this robot due at or before `limit`.
+    fn run_window(&mut self, limit: Time) {
+        while self.clock.next_time().is_some_and(|t| t <= limit) {
+            if let Some(event) = self.clock.heap.pop() {
+                self.clock.now = event.time;
+                self.events += 1;
+                self.dispatch(event.kind);
+            }
+        }
+    }
+
+    fn dispatch(&mut self, kind: Kind) {
+        match kind {
+            Kind::Activate { slot } => self.activate(slot as usize),
+            Kind::Timer {
+                slot,
+                timer,
+                generation,
+            } => {
+                let s = &mut self.inputs[slot as usize];
+                let t = &s.timers[timer as usize];
+                if t.generation != generation || !t.active || s.stopped {
+                    return;
+                }
+                let period = t.period;
+                let arrival = self.clock.next_seq();
+                s.tick(timer as usize, arrival);
+                self.clock.schedule(
+                    self.clock.now + period,
+                    Kind::Timer {
+                        slot,
+                        timer,
+                        generation,
+                    },
+                );
+                self.wake(slot as usize);
+            }
+            Kind::Deliver { mut outputs } => self.route(&mut outputs),
+            Kind::Network { from, bytes } => {
+                let message = Arc::new(LinkRx { from, bytes });
+                self.route(&mut vec![Outgoing::new(&LINK_RX, message)]);
+            }
+        }
+    }
+
+    fn activate(&mut self, s: usize) {
+        self.schedule[s].activation_pending = false;
+        let Some(event) = self.inputs[s].next_event() else {
+            return;
+        };
+        let slot = &mut self.slots[s];
+        let now = self.clock.now;
+        let latency = slot.options.latency.sample(&mut slot.latency_rng);
+        let outcome = slot.run_hook(Hook::Handle(&event), now, self.id, &self.name);
+        let latency = if slot.bookkeeping {
+            std::time::Duration::ZERO
+        } else {
+            latency
+        };
+        drop(event);
+        if outcome == HookOutcome::Stopped {
+            self.inputs[s].stop();
+        }
+        self.apply_commands(s);
+        let done = now + latency;
+        if outcome != HookOutcome::Stopped && !self.slots[s].outbox.is_empty() {
+            let mut outputs = std::mem::take(&mut self.slots[s].outbox);
+            if latency.is_zero() {
+                self.route(&mut outputs);
+                self.slots[s].outbox = outputs;
+            } else {
+                self.clock.schedule(done, Kind::Deliver { outputs });
+            }
+        }
+        self.schedule[s].busy_until = done;
+        self.wake(s);
+    }
+}
+
+/// The taps and the network, which see the robots' publications between windows.
+struct World {
+    network: Box<dyn SimNetwork>,
+    taps: Vec<Box<dyn Tap>>,
+    deliveries: Vec<(RobotId, Time)>,
+}
+
+impl World {
+    /// Hands what the robots published in the last window to the taps and sends the
+    /// packets, in `(time, robot, order)` order, scheduling their arrivals.
+    fn exchange(&mut self, robots: &mut [SimRobot]) {
+        let outside: Vec<Vec<Outside>> = robots
+            .iter_mut()
+            .map(|r| std::mem::take(&mut r.outside))
+            .collect();
+        let mut order: Vec<(Time, usize, usize)> = outside
+            .iter()
+            .enumerate()
+            .flat_map(|(r, items)| items.iter().enumerate().map(move |(i, o)| (o.time, r, i)))
+            .collect();
+        order.sort_unstable();
+        let team_size = robots.len();
+        for (time, r, i) in order {
+            let o = &outside[r][i];
+            let robot = RobotId(r as u32);
+            for tap in &mut self.taps {
+                tap.on_publish(&Publication {
+                    time,
+                    robot,
+                    topic: &o.topic,
+                    payload: &o.payload,
+                    bytes: o.bytes,
+                });
+            }
+            let Some(packet) = o
+                .packet
+                .then(|| o.payload.downcast_ref::<LinkTx>())
+                .flatten()
+            else {
+                continue;
+            };
+            self.deliveries.clear();
+            self.network.route(
+                time,
+                robot,
+                packet.to,
+                &packet.bytes,
+                team_size,
+                &mut self.deliveries,
+            );
+            for &(to, at) in &self.deliveries {
+                let Some(target) = robots.get_mut(to.0 as usize) else {
+                    continue;
+                };
+                // Never in a robot's past (a network faster than its `min_delay`).
+                let at = at.max(time).max(target.clock.now);
+                target.clock.schedule(
+                    at,
+                    Kind::Network {
+                        from: robot,
+                        bytes: packet.bytes.clone(),
+                    },
+                );
+            }
+        }
+        for (robot, mut items) in robots.iter_mut().zip(outside) {
+            items.clear();
+            robot.outside = items;
         }
     }
 }
@@ -264,10 +396,9 @@ impl World {
 /// ```
 pub struct SimExecutor {
     robots: Vec<SimRobot>,
-    clock: Clock,
+    now: Time,
     world: World,
     started: bool,
-    events: u64,
 }
 
 impl SimExecutor {
@@ -275,7 +406,6 @@ impl SimExecutor {
     /// to an [`IdealNetwork`] with zero latency.
     #[must_use]
     pub fn new(team: Vec<RobotSpec>, seed: u64) -> Self {
-        let team_size = team.len();
         let robots = team
             .into_iter()
             .enumerate()
@@ -293,24 +423,26 @@ impl SimExecutor {
                     inputs: slots.iter().map(|_| Inputs::default()).collect(),
                     slots,
                     registry: TopicRegistry::default(),
+                    clock: Clock {
+                        heap: BinaryHeap::new(),
+                        now: Time::ZERO,
+                        seq: 0,
+                    },
+                    outside: Vec::new(),
+                    observed: false,
+                    events: 0,
                 }
             })
             .collect();
         SimExecutor {
             robots,
-            clock: Clock {
-                heap: BinaryHeap::new(),
-                now: Time::ZERO,
-                seq: 0,
-            },
+            now: Time::ZERO,
             world: World {
                 network: Box::new(IdealNetwork::default()),
                 taps: Vec::new(),
-                team_size,
                 deliveries: Vec::new(),
             },
             started: false,
-            events: 0,
         }
     }
 
@@ -324,18 +456,21 @@ impl SimExecutor {
     /// Adds an observer of every publication.
     pub fn add_tap(&mut self, tap: impl Tap + 'static) {
         self.world.taps.push(Box::new(tap));
+        for robot in &mut self.robots {
+            robot.observed = true;
+        }
     }
 
     /// Current simulated time.
     #[must_use]
     pub fn now(&self) -> Time {
-        self.clock.now
+        self.now
     }
 
     /// Events processed so far.
     #[must_use]
     pub fn events_processed(&self) -> u64 {
-        self.events
+        self.robots.iter().map(|r| r.events).sum()
     }
 
     /// Starts every actor (called by [`SimExecutor::run_until`] if needed).
@@ -344,9 +479,9 @@ impl SimExecutor {
             return;
         }
         self.started = true;
-        let now = self.clock.now;
-        let mut initial = Vec::new();
+        let now = self.now;
         for robot in &mut self.robots {
+            robot.clock.now = now;
             for s in 0..robot.slots.len() {
                 let slot = &mut robot.slots[s];
                 if !slot.instantiate(now)
@@ -355,116 +490,55 @@ impl SimExecutor {
                 {
                     robot.inputs[s].stop();
                 }
-                robot.apply_commands(&mut self.clock, s);
-                let outputs = std::mem::take(&mut robot.slots[s].outbox);
-                if !outputs.is_empty() {
-                    initial.push((robot.id.0 as usize, outputs));
-                }
+                robot.apply_commands(s);
+            }
+            for s in 0..robot.slots.len() {
+                let mut outputs = std::mem::take(&mut robot.slots[s].outbox);
+                robot.route(&mut outputs);
             }
         }
-        for (r, mut outputs) in initial {
-            self.world
-                .route(&mut self.clock, &mut self.robots[r], &mut outputs);
-        }
+        self.world.exchange(&mut self.robots);
     }
 
     /// Processes every event up to and including `end`, then sets the clock to `end`.
+    ///
+    /// The robots run side by side through windows of the network's
+    /// [`min_delay`](SimNetwork::min_delay) (one instant when it is zero), on the
+    /// threads of the current rayon pool.
     pub fn run_until(&mut self, end: Time) {
         self.start();
-        while self.clock.heap.peek().is_some_and(|e| e.time <= end) {
-            if let Some(event) = self.clock.heap.pop() {
-                self.clock.now = event.time;
-                self.events += 1;
-                self.dispatch(event.kind);
+        let lookahead_ns =
+            u64::try_from(self.world.network.min_delay().as_nanos()).unwrap_or(u64::MAX);
+        while let Some(first) = self.robots.iter().filter_map(|r| r.clock.next_time()).min() {
+            if first > end {
+                break;
             }
-        }
-        self.clock.now = self.clock.now.max(end);
-    }
-
-    fn dispatch(&mut self, kind: Kind) {
-        match kind {
-            Kind::Activate { robot, slot } => self.activate(robot as usize, slot as usize),
-            Kind::Timer {
-                robot,
-                slot,
-                timer,
-                generation,
-            } => {
-                let r = &mut self.robots[robot as usize];
-                let s = &mut r.inputs[slot as usize];
-                let t = &s.timers[timer as usize];
-                if t.generation != generation || !t.active || s.stopped {
-                    return;
-                }
-                let period = t.period;
-                let arrival = self.clock.next_seq();
-                s.tick(timer as usize, arrival);
-                self.clock.schedule(
-                    self.clock.now + period,
-                    Kind::Timer {
-                        robot,
-                        slot,
-                        timer,
-                        generation,
-                    },
-                );
-                r.wake(&mut self.clock, slot as usize);
-            }
-            Kind::Deliver { robot, mut outputs } => {
-                self.world.route(
-                    &mut self.clock,
-                    &mut self.robots[robot as usize],
-                    &mut outputs,
-                );
-            }
-            Kind::Network { to, from, bytes } => {
-                let message = Arc::new(LinkRx { from, bytes });
-                let mut outputs = vec![Outgoing::new(&LINK_RX, message)];
-                self.world
-                    .route(&mut self.clock, &mut self.robots[to as usize], &mut outputs);
-            }
-        }
-    }
-
-    fn activate(&mut self, r: usize, s: usize) {
-        let robot = &mut self.robots[r];
-        robot.schedule[s].activation_pending = false;
-        let Some(event) = robot.inputs[s].next_event() else {
-            return;
-        };
-        let slot = &mut robot.slots[s];
-        let now = self.clock.now;
-        let latency = slot.options.latency.sample(&mut slot.latency_rng);
-        let outcome = slot.run_hook(Hook::Handle(&event), now, robot.id, &robot.name);
-        let latency = if slot.bookkeeping {
-            std::time::Duration::ZERO
-        } else {
-            latency
-        };
-        drop(event);
-        if outcome == HookOutcome::Stopped {
-            robot.inputs[s].stop();
-        }
-        robot.apply_commands(&mut self.clock, s);
-        let done = now + latency;
-        if outcome != HookOutcome::Stopped && !robot.slots[s].outbox.is_empty() {
-            if latency.is_zero() {
-                let mut outputs = std::mem::take(&mut robot.slots[s].outbox);
-                self.world.route(&mut self.clock, robot, &mut outputs);
-                robot.slots[s].outbox = outputs;
+            let limit = if lookahead_ns == 0 {
+                first
             } else {
-                let outputs = std::mem::take(&mut robot.slots[s].outbox);
-                self.clock.schedule(
-                    done,
-                    Kind::Deliver {
-                        robot: r as u32,
-                        outputs,
-                    },
-                );
+                Time::from_nanos(first.as_nanos().saturating_add(lookahead_ns - 1)).min(end)
+            };
+            let busy = self
+                .robots
+                .iter()
+                .filter(|r| r.clock.next_time().is_some_and(|t| t <= limit))
+                .count();
+            if busy > 1 {
+                self.robots
+                    .par_iter_mut()
+                    .for_each(|robot| robot.run_window(limit));
+            } else {
+                for robot in &mut self.robots {
+                    robot.run_window(limit);
+                }
             }
+            self.now = self.now.max(limit);
+            self.world.exchange(&mut self.robots);
         }
-        robot.schedule[s].busy_until = done;
-        robot.wake(&mut self.clock, s);
+        self.now = self.now.max(end);
+        for robot in &mut self.robots {
+            robot.clock.now = robot.clock.now.max(self.now);
+        }
     }
 
     /// Per-robot counters so far.
@@ -488,7 +562,7 @@ impl SimExecutor {
     /// Calls every actor's stop hook and returns the per-robot reports.
     pub fn finish(mut self) -> Vec<RobotReport> {
         self.start();
-        let now = self.clock.now;
+        let now = self.now;
         for robot in &mut self.robots {
             for slot in &mut robot.slots {
                 if slot.is_running() {

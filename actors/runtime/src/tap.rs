@@ -32,8 +32,10 @@ impl Publication<'_> {
     }
 }
 
-/// Sees every publication of every robot, in delivery order. Under the sim-time
-/// executor it is called from the event loop, so what it records is deterministic.
+/// Sees every publication of every robot. Under the sim-time executor it is called
+/// between the windows in which the robots run side by side, in `(time, robot, order
+/// of publication)` order, so what it records is deterministic; it must not reach into
+/// the robots.
 pub trait Tap: Send {
     /// Called once per publication.
     fn on_publish(&mut self, publication: &Publication<'_>);

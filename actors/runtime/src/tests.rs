@@ -287,10 +287,13 @@ impl Actor for ParallelWork {
     }
 }
 
-fn parallel_run(seed: u64) -> Vec<u64> {
-    let out = Arc::new(Mutex::new(Vec::new()));
-    let robots = (0..2)
-        .map(|i| {
+/// Each robot's results, in order (robots run side by side: each has its own list).
+fn parallel_run(seed: u64) -> Vec<Vec<u64>> {
+    let outs: Vec<_> = (0..2).map(|_| Arc::new(Mutex::new(Vec::new()))).collect();
+    let robots = outs
+        .iter()
+        .enumerate()
+        .map(|(i, out)| {
             let o = out.clone();
             RobotSpec::new(format!("r{i}")).with(
                 ActorSpec::new("work", move || ParallelWork { out: o.clone() }).with_latency(
@@ -305,14 +308,14 @@ fn parallel_run(seed: u64) -> Vec<u64> {
     let mut sim = SimExecutor::new(robots, seed);
     sim.run_until(Time::from_secs_f64(0.5));
     drop(sim.finish());
-    out.lock().unwrap().clone()
+    outs.iter().map(|o| o.lock().unwrap().clone()).collect()
 }
 
 #[test]
 fn same_seed_same_results_with_rayon_inside() {
     let a = parallel_run(11);
     let b = parallel_run(11);
-    assert!(!a.is_empty());
+    assert!(a.iter().all(|r| !r.is_empty()));
     assert_eq!(a, b);
     assert_ne!(a, parallel_run(12));
 }
@@ -555,4 +558,97 @@ fn late_subscriptions_receive_every_later_message_under_both_executors() {
     let rt_values: Vec<u64> = rt_seen.lock().unwrap().iter().map(|(v, _)| *v).collect();
     assert_eq!(rt_values, expected);
     assert_eq!(rt_reports[0].topics["late"].messages, 21);
+}
+
+/// Gossips a running hash of everything it heard, at random moments.
+struct Gossip {
+    heard: u64,
+}
+
+impl Actor for Gossip {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&LINK_RX, QueuePolicy::fifo(64));
+        ctx.set_timer(TICK, Duration::from_millis(7));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        match event {
+            Event::Timer(_) => {
+                let salt: u64 = ctx.rng().random();
+                let mut bytes = self.heard.to_le_bytes().to_vec();
+                bytes.extend_from_slice(&salt.to_le_bytes());
+                ctx.publish(
+                    &LINK_TX,
+                    LinkTx {
+                        to: Destination::Broadcast,
+                        bytes: Arc::from(bytes),
+                    },
+                );
+            }
+            Event::Message(m) => {
+                if let Some(rx) = m.get(&LINK_RX) {
+                    for b in rx.bytes.iter() {
+                        self.heard = (self.heard ^ u64::from(*b)).wrapping_mul(0x100_0000_01b3);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Every publication of a gossiping team, as its taps saw them, run on `threads`.
+fn gossip_run(threads: usize) -> Vec<(Time, RobotId, String, Vec<u8>)> {
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let s = seen.clone();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| {
+            let robots = (0..4)
+                .map(|i| {
+                    RobotSpec::new(format!("r{i}")).with(
+                        ActorSpec::new("gossip", || Gossip { heard: 0 }).with_latency(
+                            LatencyModel::Uniform {
+                                min_s: 0.001,
+                                max_s: 0.02,
+                            },
+                        ),
+                    )
+                })
+                .collect();
+            let mut sim = SimExecutor::new(robots, 5).with_network(IdealNetwork {
+                latency: Duration::from_millis(5),
+            });
+            sim.add_tap(move |p: &Publication<'_>| {
+                let bytes = p
+                    .get(&LINK_TX)
+                    .map(|tx| tx.bytes.to_vec())
+                    .or_else(|| p.get(&LINK_RX).map(|rx| rx.bytes.to_vec()))
+                    .unwrap_or_default();
+                s.lock()
+                    .unwrap()
+                    .push((p.time, p.robot, p.topic.to_string(), bytes));
+            });
+            sim.run_until(Time::from_secs_f64(0.5));
+            drop(sim.finish());
+        });
+    let seen = seen.lock().unwrap().clone();
+    seen
+}
+
+#[test]
+fn a_team_runs_the_same_on_one_thread_and_on_several() {
+    let one = gossip_run(1);
+    // Busy handlers coalesce ticks: each robot gossips some 15 times and hears the
+    // other three.
+    assert!(one.len() > 150, "{} publications", one.len());
+    assert!(one.iter().any(|(_, _, topic, _)| topic == "link/rx"));
+    assert!(
+        one.windows(2).all(|w| (w[0].0, w[0].1) <= (w[1].0, w[1].1)),
+        "the taps see publications in (time, robot) order"
+    );
+    assert_eq!(one, gossip_run(4));
+    assert_eq!(one, gossip_run(2));
 }

@@ -146,6 +146,19 @@ impl SimNet {
         })
     }
 
+    /// The least one-way delay of any frame on any pair, nanoseconds: every
+    /// [`SimNet::route`] delivery arrives at least this long after it was sent
+    /// (serialisation, jitter and reordering only add to it).
+    #[must_use]
+    pub fn min_latency_ns(&self) -> u64 {
+        self.overrides
+            .values()
+            .chain(std::iter::once(&self.config.default))
+            .map(|m| s_to_ns(m.latency_s))
+            .min()
+            .unwrap_or(0)
+    }
+
     /// The link model of a directed pair.
     #[must_use]
     pub fn model(&self, from: u32, to: u32) -> &LinkModel {
