@@ -634,8 +634,7 @@ fn gossip_run(threads: usize) -> Vec<(Time, RobotId, String, Vec<u8>)> {
             sim.run_until(Time::from_secs_f64(0.5));
             drop(sim.finish());
         });
-    let seen = seen.lock().unwrap().clone();
-    seen
+    seen.lock().unwrap().clone()
 }
 
 #[test]

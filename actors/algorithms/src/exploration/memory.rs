@@ -200,11 +200,11 @@ impl FrontierMemory {
         let (kx, ky, kz) = (coarse(0, rx.0), coarse(1, ry.0), coarse(2, rz.0));
         let values = grid.values();
         let mut i = 0;
-        for z in 0..dims[2] {
-            for y in 0..dims[1] {
+        for cz in &kz {
+            for cy in &ky {
                 let row = i;
                 i += dims[0];
-                let (Some(cy), Some(cz)) = (ky[y], kz[z]) else {
+                let (Some(cy), Some(cz)) = (*cy, *cz) else {
                     continue;
                 };
                 for (x, cx) in kx.iter().enumerate() {
