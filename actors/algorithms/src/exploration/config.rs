@@ -64,11 +64,6 @@ pub struct GuidanceConfig {
     /// pockets under the floor, crevices behind boulders — would otherwise hold the
     /// robot for the rest of the run. `None` never gives up.
     pub give_up_after_s: Option<f64>,
-    /// Time a peer spends near a remembered frontier counts towards giving it up as
-    /// this robot's own does: what one robot hovered beside without seeing into does
-    /// not draw the others down the same tunnel (a peer's position is the start of its
-    /// latest plan, heard at 1 Hz over the link).
-    pub watch_with_peers: bool,
     /// A goal (the remembered frontier the robot's route leads to) whose route has not
     /// got 0.5 m shorter for this long is given up, seconds (a progress timeout, as in
     /// ROS' explore_lite); `None` never.
@@ -95,7 +90,6 @@ impl Default for GuidanceConfig {
             switch_penalty_m: 0.0,
             look_ahead_m: 1.0,
             give_up_after_s: Some(4.0),
-            watch_with_peers: true,
             give_up_without_progress_s: None,
             give_up_radius_m: 3.0,
         }

@@ -20,8 +20,6 @@ pub struct Guide {
     config: GuidanceConfig,
     memory: FrontierMemory,
     peers: BTreeMap<RobotId, PeerIntent>,
-    /// When each peer's latest plan arrived.
-    heard_at: BTreeMap<RobotId, Time>,
     retired_by_peers: u64,
     /// Seconds spent near each remembered frontier while it stayed one.
     watched_s: BTreeMap<CellKey, f64>,
@@ -37,10 +35,6 @@ pub struct Guide {
 
 /// How much shorter the route to a goal must get to count as progress, metres.
 pub const PROGRESS_M: f64 = 0.5;
-
-/// A peer counts as watching the frontiers near it while its latest plan is at most
-/// this old, seconds (plans come at 1 Hz; a silent peer watches nothing).
-pub const PEER_WATCH_S: f64 = 3.0;
 
 /// Goals this close to the tracked one are the same opening, metres.
 pub const GOAL_RADIUS_M: f64 = 2.0;
@@ -58,7 +52,6 @@ impl Guide {
             config,
             memory: FrontierMemory::new(config.cell_m, config.max_cells),
             peers: BTreeMap::new(),
-            heard_at: BTreeMap::new(),
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),
             given_up: BTreeSet::new(),
@@ -110,7 +103,6 @@ impl Guide {
             return;
         }
         self.memory.mark_body(&first.position_m);
-        self.heard_at.insert(peer.robot, peer.received_at);
         self.peers.insert(
             peer.robot,
             PeerIntent {
@@ -196,9 +188,8 @@ impl Guide {
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
-    /// `robot_m` — or, with [`GuidanceConfig::watch_with_peers`], of a peer whose plan
-    /// arrived within [`PEER_WATCH_S`] — once per call; a frontier watched for
-    /// [`GuidanceConfig::give_up_after_s`] in all is given up. The count survives a frontier's flicker (the window's frontier mask
+    /// `robot_m`; a frontier watched for [`GuidanceConfig::give_up_after_s`] in all is
+    /// given up. The count survives a frontier's flicker (the window's frontier mask
     /// drops and restores cells at a surface's edge as rays accumulate); cells the
     /// memory forgets are forgotten here too, so both stay bounded by the memory.
     fn watch(&mut self, robot_m: &Point3<f64>, now: Time) {
@@ -213,18 +204,9 @@ impl Guide {
         let known = |k: &CellKey| memory.record(*k) != CellRecord::default();
         self.watched_s.retain(|k, _| known(k));
         self.given_up.retain(known);
-        let mut watchers = vec![*robot_m];
-        if self.config.watch_with_peers {
-            watchers.extend(self.peers.iter().filter_map(|(id, peer)| {
-                let heard = self.heard_at.get(id)?;
-                (now.saturating_since(*heard).as_secs_f64() <= PEER_WATCH_S)
-                    .then_some(peer.position_m)
-            }));
-        }
-        let radius_m = self.config.give_up_radius_m;
         for f in memory.frontiers() {
-            let centre = memory.centre(f);
-            if self.given_up.contains(&f) || watchers.iter().all(|w| (centre - w).norm() > radius_m)
+            if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
+                || self.given_up.contains(&f)
             {
                 continue;
             }

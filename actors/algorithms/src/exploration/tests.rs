@@ -289,8 +289,27 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     assert!(left(target(&mut guides[1], 1, &follow)));
     // Robot 0 commits towards the left branch; robot 1 hears its plan and takes the
     // right one, while robot 0, hearing robot 1 head right, keeps left.
-    let plan =
-        |robot: u32, from: Point3<f64>, to: Point3<f64>| peer_plan(robot, from, to, Time::ZERO);
+    let plan = |robot: u32, from: Point3<f64>, to: Point3<f64>| crate::team::PeerPlan {
+        robot: RobotId(robot),
+        priority: 0,
+        plan: crate::plan::Plan::new(
+            Time::ZERO,
+            crate::trajectory::Trajectory::new(vec![
+                crate::trajectory::Knot {
+                    time: Time::ZERO,
+                    position_m: from,
+                    yaw_rad: 0.0,
+                },
+                crate::trajectory::Knot {
+                    time: Time::from_nanos(2_000_000_000),
+                    position_m: to,
+                    yaw_rad: 0.0,
+                },
+            ])
+            .expect("a trajectory"),
+        ),
+        received_at: Time::ZERO,
+    };
     guides[1].observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));
     let follow_target = target(&mut guides[1], 1, &follow);
     assert!(right(follow_target), "{follow_target:?}");
@@ -457,65 +476,4 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
         }
     }
     assert_eq!(when, Some(6));
-}
-
-/// A peer's plan from `from` to `to` over 2 s, received at `received_at`.
-fn peer_plan(
-    robot: u32,
-    from: Point3<f64>,
-    to: Point3<f64>,
-    received_at: Time,
-) -> crate::team::PeerPlan {
-    crate::team::PeerPlan {
-        robot: RobotId(robot),
-        priority: 0,
-        plan: crate::plan::Plan::new(
-            Time::ZERO,
-            crate::trajectory::Trajectory::new(vec![
-                crate::trajectory::Knot {
-                    time: Time::ZERO,
-                    position_m: from,
-                    yaw_rad: 0.0,
-                },
-                crate::trajectory::Knot {
-                    time: Time::from_nanos(2_000_000_000),
-                    position_m: to,
-                    yaw_rad: 0.0,
-                },
-            ])
-            .expect("a trajectory"),
-        ),
-        received_at,
-    }
-}
-
-#[test]
-fn time_a_peer_spends_beside_a_frontier_counts_towards_giving_it_up() {
-    // The dead-end tunnel: its frontier at x ≈ 0; this robot far off at x = 10, a peer
-    // hovering beside the frontier at x = 2.
-    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
-    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
-    let (far, near) = (Point3::new(10.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0));
-    let run = |config: GuidanceConfig, heard_every_s: Option<u32>| {
-        let mut guide = Guide::new(config);
-        guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
-        guide.observe_peer_plan(&peer_plan(1, near, near, Time::ZERO));
-        for s in 0..20 {
-            if heard_every_s.is_some_and(|every| s % every == 0) {
-                guide.observe_peer_plan(&peer_plan(1, near, near, second(f64::from(s))));
-            }
-            guide.field((RobotId(0), &far), second(f64::from(s)));
-        }
-        guide.given_up().len()
-    };
-    let config = GuidanceConfig::default();
-    assert!(config.watch_with_peers, "on by default");
-    assert!(run(config, Some(1)) > 0, "the peer's watch counts");
-    let alone = GuidanceConfig {
-        watch_with_peers: false,
-        ..config
-    };
-    assert_eq!(run(alone, Some(1)), 0, "only this robot's own watch counts");
-    // A peer that fell silent beside it (last heard at 0 s) watches for 3 s at most.
-    assert_eq!(run(config, None), 0, "a silent peer watches nothing");
 }
