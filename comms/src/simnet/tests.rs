@@ -272,3 +272,26 @@ fn pair_overrides_and_config_validation() {
     bad.default.radius_m = Some(-1.0);
     assert_eq!(key(bad), "default.radius_m");
 }
+
+#[test]
+fn no_frame_arrives_sooner_than_the_least_latency() {
+    // The sim-time executor runs robots side by side for this long between exchanges.
+    let config: SimNetConfig = toml::from_str(
+        "[default]\nlatency_s = 0.02\njitter_s = 0.01\nreorder_probability = 0.2\n\
+         duplicate_probability = 0.2\nrate_bps = 2000000\n\
+         [[pairs]]\nfrom = 1\nto = 0\nlink = { latency_s = 0.005, jitter_s = 0.003 }\n",
+    )
+    .unwrap();
+    let mut n = SimNet::new(config, 3).unwrap();
+    assert_eq!(n.min_latency_ns(), 5 * MS);
+    let mut earliest = u64::MAX;
+    for i in 0..5_000u64 {
+        let (from, to) = if i % 2 == 0 { (0, 1) } else { (1, 0) };
+        let sent = i * 3 * MS;
+        for d in n.route(sent, from, to, 1_200, &[]).deliveries {
+            earliest = earliest.min(d.arrival_ns - sent);
+        }
+    }
+    assert!(earliest >= n.min_latency_ns(), "{earliest} ns");
+    assert!(earliest < 6 * MS, "the bound is tight: {earliest} ns");
+}

@@ -82,7 +82,8 @@ fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [f64]) {
 ///
 /// Lines whose values are all 0 (every cell a source, common in a grid that is mostly
 /// unknown) or all infinite (no source yet) are left as they are: the transform maps
-/// them to themselves.
+/// them to themselves. The lines are transformed on the rayon pool, each on its own, so
+/// the result does not depend on the thread count.
 #[must_use]
 pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> Vec<f64> {
     let [nx, ny, nz] = dims;

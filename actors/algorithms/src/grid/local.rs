@@ -503,14 +503,7 @@ impl LocalGrid {
         let shift = [0, 1, 2].map(|i| corner[i] as i64 - self.corner[i] as i64);
         let mut cells = vec![0.0; self.cells.len()];
         let d = self.dims;
-        // The new indices whose old cell (new + shift) lies in the old box, per axis.
-        let kept = |i: usize| {
-            let n = d[i] as i64;
-            (
-                (-shift[i]).clamp(0, n) as usize,
-                (n - shift[i]).clamp(0, n) as usize,
-            )
-        };
+        let kept = |i: usize| kept_range(d[i], shift[i]);
         let ((x0, x1), (y0, y1), (z0, z1)) = (kept(0), kept(1), kept(2));
         if x0 < x1 {
             let old_x0 = (x0 as i64 + shift[0]) as usize;
@@ -530,18 +523,23 @@ impl LocalGrid {
     }
 }
 
+/// Along one axis of `n` cells moved by `shift`, the new indices `lo..hi` whose old cell
+/// (`new + shift`) lies in the old box.
+fn kept_range(n: usize, shift: i64) -> (usize, usize) {
+    let n = n as i64;
+    (
+        (-shift).clamp(0, n) as usize,
+        (n - shift).clamp(0, n) as usize,
+    )
+}
+
 /// The part of a box of `dims` cells, moved by `shift` cells, that the old box did
 /// not cover, as at most three disjoint boxes: a slab across x, then one across y
 /// outside it, then one across z outside both.
 fn novel_boxes(dims: [usize; 3], shift: [i64; 3]) -> Vec<CellBox> {
     let mut boxes = Vec::new();
     // The range of the old box along each axis, in new local indices, clamped.
-    let kept = |i: usize| -> (usize, usize) {
-        let n = dims[i] as i64;
-        let lo = (-shift[i]).clamp(0, n) as usize;
-        let hi = (n - shift[i]).clamp(0, n) as usize;
-        (lo, hi)
-    };
+    let kept = |i: usize| kept_range(dims[i], shift[i]);
     let mut lo = [0usize; 3];
     let mut hi = dims;
     for axis in 0..3 {
