@@ -69,8 +69,8 @@ fn peer_line(t0: Time, a: Point3<f64>, b: Point3<f64>) -> Trajectory {
 struct Script {
     tick: u32,
     limits: DynamicLimits,
-    /// The peer's id, priority, and where it flies from and to.
-    peer: (RobotId, u16, Point3<f64>, Point3<f64>),
+    /// The peers' ids, priorities, and where they fly from and to, announced in order.
+    peers: Vec<(RobotId, u16, Point3<f64>, Point3<f64>)>,
 }
 
 impl Actor for Script {
@@ -126,16 +126,17 @@ impl Actor for Script {
                 );
             }
             3 => {
-                let (robot, priority, a, b) = self.peer;
-                ctx.publish(
-                    &PEER_PLAN,
-                    PeerPlan {
-                        robot,
-                        priority,
-                        plan: Plan::new(now, peer_line(now, a, b)),
-                        received_at: now,
-                    },
-                );
+                for &(robot, priority, a, b) in &self.peers {
+                    ctx.publish(
+                        &PEER_PLAN,
+                        PeerPlan {
+                            robot,
+                            priority,
+                            plan: Plan::new(now, peer_line(now, a, b)),
+                            received_at: now,
+                        },
+                    );
+                }
             }
             _ => {}
         }
@@ -147,13 +148,21 @@ impl Actor for Script {
 /// refused as stale, with a peer (`id`, `priority`) flying from `a` to `b` announced
 /// at 1.5 s.
 fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>, u64, u64) {
+    fly_with_peers(&[(id, priority, a, b)])
+}
+
+/// [`fly_with_peer`] with several peers, their plans announced in this order.
+fn fly_with_peers(peers: &[(u32, u16, [f64; 3], [f64; 3])]) -> (Vec<Plan>, u64, u64) {
     let limits = DynamicLimits::default();
-    let peer = (RobotId(id), priority, Point3::from(a), Point3::from(b));
+    let peers: Vec<_> = peers
+        .iter()
+        .map(|&(id, priority, a, b)| (RobotId(id), priority, Point3::from(a), Point3::from(b)))
+        .collect();
     let robot = RobotSpec::new("r0")
         .with(ActorSpec::new("script", move || Script {
             tick: 0,
             limits,
-            peer,
+            peers: peers.clone(),
         }))
         .with(ActorSpec::new("collision", move || {
             CollisionActor::new(
@@ -218,4 +227,18 @@ fn a_robot_keeps_its_plan_for_peers_out_of_the_way_or_of_lower_priority() {
     // A peer of higher priority flying elsewhere.
     let (plans, braked, stale) = fly_with_peer(1, 5, [6.0, 8.0, 1.0], [0.0, 8.0, 1.0]);
     assert_eq!((plans.len(), braked, stale), (2, 0, 0));
+}
+
+#[test]
+fn a_robot_brakes_for_a_peer_it_must_yield_to_whatever_other_peers_do() {
+    // Robot 1 (same priority as ours: it yields to us) flies at us head-on from 3 m and
+    // is announced first; then robot 2, of higher priority, from 6 m, 0.4 m beside that
+    // path. Robot 1 is in the way too, but the check of robot 2's plan is about robot 2
+    // (it failed while the first conflict of all peers was taken: robot 1's).
+    let (plans, braked, _) = fly_with_peers(&[
+        (1, 0, [3.0, 0.0, 1.0], [-3.0, 0.0, 1.0]),
+        (2, 5, [6.0, 0.4, 1.0], [0.0, 0.4, 1.0]),
+    ]);
+    assert_eq!(braked, 1, "{plans:?}");
+    assert!(plans[1].stopping);
 }

@@ -76,6 +76,20 @@ impl PeerTable {
         self.tracks.get(&peer)
     }
 
+    /// A table of `peer` alone (empty if it has not been heard from): to check one
+    /// peer's plan whatever the others do.
+    #[must_use]
+    pub fn only(&self, peer: RobotId) -> PeerTable {
+        PeerTable {
+            tracks: self
+                .tracks
+                .get(&peer)
+                .map(|t| (peer, t.clone()))
+                .into_iter()
+                .collect(),
+        }
+    }
+
     /// Every peer heard from, by robot id.
     pub fn iter(&self) -> impl Iterator<Item = (RobotId, &PeerTrack)> {
         self.tracks.iter().map(|(id, t)| (*id, t))

@@ -252,10 +252,13 @@ impl<P: PeerAvoidance> CollisionActor<P> {
             Some(o) => (**o).clone(),
             None => return false,
         };
-        let conflict =
-            self.avoidance
-                .conflict(now, ctx.robot(), &own, &plan.trajectory, &self.peers);
-        if conflict.is_none_or(|c| c.peer != peer || c.envelope) {
+        // The sender's plan alone: another peer in the way (one that yields to us, or
+        // whose plan went stale) must not hide it.
+        let sender = self.peers.only(peer);
+        let conflict = self
+            .avoidance
+            .conflict(now, ctx.robot(), &own, &plan.trajectory, &sender);
+        if conflict.is_none_or(|c| c.envelope) {
             return false;
         }
         // Before the committed plan takes over, the flight that leads to it is kept:
