@@ -364,13 +364,15 @@ impl World {
     }
 }
 
-/// Runs a team of robots in simulated time.
+/// Runs a team of robots in simulated time, side by side on the rayon pool (see the
+/// [module docs](self)).
 ///
-/// Events are ordered by `(time, sequence)`, where the sequence number is assigned
-/// when an event is scheduled; nothing depends on wall-clock time or thread timing,
-/// so the same team, seed and inputs give bit-identical results. Each handler call
-/// is charged the compute latency of its actor's [`LatencyModel`](crate::LatencyModel):
-/// its outputs appear after that latency and the actor is busy until then.
+/// Each robot's events are ordered by `(time, sequence)`, where the sequence number is
+/// assigned when an event is scheduled; nothing depends on wall-clock time or thread
+/// timing, so the same team, seed and inputs give bit-identical results on any number
+/// of threads. Each handler call is charged the compute latency of its actor's
+/// [`LatencyModel`](crate::LatencyModel): its outputs appear after that latency and the
+/// actor is busy until then.
 ///
 /// ```
 /// use std::time::Duration;
