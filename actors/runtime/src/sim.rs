@@ -364,8 +364,11 @@ impl World {
     }
 }
 
-/// Runs a team of robots in simulated time, side by side on the rayon pool (see the
-/// [module docs](self)).
+/// Runs a team of robots in simulated time, side by side on the rayon pool: through
+/// windows as long as the network's [`min_delay`](SimNetwork::min_delay), in which no
+/// robot can hear from another; between windows the [taps](Tap) and the network see
+/// what was published, in `(time, robot, order of publication)` order. Actors of
+/// different robots must share nothing mutable outside topics and the link.
 ///
 /// Each robot's events are ordered by `(time, sequence)`, where the sequence number is
 /// assigned when an event is scheduled; nothing depends on wall-clock time or thread
