@@ -199,14 +199,12 @@ impl FrontierMemory {
         };
         let (kx, ky, kz) = (coarse(0, rx.0), coarse(1, ry.0), coarse(2, rz.0));
         let values = grid.values();
-        let mut i = 0;
-        for cz in &kz {
-            for cy in &ky {
-                let row = i;
-                i += dims[0];
+        for (z, cz) in kz.iter().enumerate() {
+            for (y, cy) in ky.iter().enumerate() {
                 let (Some(cy), Some(cz)) = (*cy, *cz) else {
                     continue;
                 };
+                let row = dims[0] * (y + dims[1] * z);
                 for (x, cx) in kx.iter().enumerate() {
                     let Some(cx) = *cx else { continue };
                     let i = row + x;
