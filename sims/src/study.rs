@@ -275,7 +275,8 @@ impl Study {
         Ok(())
     }
 
-    /// Every combination of levels under every seed, in a fixed order.
+    /// Every combination of levels under every seed, in a fixed order: seed by seed, so a
+    /// sweep cut short (and resumed later) holds about as many runs of each combination.
     pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
         let mut combos: Vec<Vec<&Level>> = vec![Vec::new()];
         for axis in &self.axes {
@@ -291,8 +292,8 @@ impl Study {
                 .collect();
         }
         let mut variants = Vec::new();
-        for combo in &combos {
-            for &seed in &self.seeds {
+        for &seed in &self.seeds {
+            for combo in &combos {
                 let labels: Vec<String> = combo.iter().map(|l| l.label.clone()).collect();
                 let mut name = self.name.clone();
                 for l in &labels {
@@ -1016,7 +1017,10 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         assert_eq!(variants[7].scenario.robot.speed_mps, 1.5);
         assert_eq!(variants[0].scenario.robots, 1);
         assert_eq!(variants[0].scenario.duration_s, 5.0);
-        assert_eq!(variants[1].scenario.seed, 2);
+        // Seed by seed: every combination of seed 1 before seed 2.
+        assert_eq!(variants[1].name, "s-1.0-two-s1");
+        assert_eq!(variants[4].name, "s-1.0-one-s2");
+        assert_eq!(variants[4].scenario.seed, 2);
     }
 
     #[test]

@@ -38,14 +38,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fp = frame_points(&d, &g, &intr, &pose)?;
     println!("{} points, σ = {sigma}", fp.len());
     println!(
-        "{:>4} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
-        "seed", "M", "iters", "ms_shift", "kmeans_ms", "init_ms", "em_ms", "fit_ms", "ms/iter"
+        "{:>4} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6}",
+        "seed",
+        "M",
+        "iters",
+        "ms_shift",
+        "kmeans_ms",
+        "init_ms",
+        "em_ms",
+        "fit_ms",
+        "ms/iter",
+        "evals",
+        "kept"
     );
     for seed in 0..seeds {
         let (mut t_ms, mut t_km, mut t_init, mut t_em, mut t_fit) =
             (vec![], vec![], vec![], vec![], vec![]);
         let mut iters = 0;
         let mut m = 0;
+        let (mut evals, mut kept) = (0.0, 0.0);
         for _ in 0..reps {
             let t = Instant::now();
             let modes = mean_shift_modes(&fp.depth_intensity, sigma, &MeanShiftConfig::default());
@@ -77,11 +88,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             t_fit.push(t.elapsed().as_secs_f64());
             iters = fit.report.em.iterations;
             m = fit.gmm.len();
+            evals = fit.report.em.mean_components_per_point;
+            kept = fit.report.em.mean_kept_per_point;
             let _ = report;
         }
         let em = median(t_em);
         println!(
-            "{seed:>4} {m:>5} {iters:>5} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.2}",
+            "{seed:>4} {m:>5} {iters:>5} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {evals:>6.1} {kept:>6.1}",
             median(t_ms) * 1e3,
             median(t_km) * 1e3,
             median(t_init) * 1e3,
