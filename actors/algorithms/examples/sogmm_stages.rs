@@ -23,6 +23,19 @@ fn arg<T: std::str::FromStr>(i: usize, default: T) -> T {
         .unwrap_or(default)
 }
 
+/// FNV-1a over the bits of every parameter: equal when two fits are bit-identical.
+fn fit_bits(gmm: &troupe_algorithms::mixture::Gmm4) -> u64 {
+    let values = gmm
+        .weights()
+        .iter()
+        .copied()
+        .chain(gmm.means().iter().flat_map(|m| m.iter().copied()))
+        .chain(gmm.covariances().iter().flat_map(|c| c.iter().copied()));
+    values.fold(0xcbf2_9ce4_8422_2325, |h, v| {
+        (h ^ v.to_bits()).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
@@ -38,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fp = frame_points(&d, &g, &intr, &pose)?;
     println!("{} points, σ = {sigma}", fp.len());
     println!(
-        "{:>4} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6}",
+        "{:>4} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>16}",
         "seed",
         "M",
         "iters",
@@ -49,7 +62,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "fit_ms",
         "ms/iter",
         "evals",
-        "kept"
+        "kept",
+        "fit_bits"
     );
     for seed in 0..seeds {
         let (mut t_ms, mut t_km, mut t_init, mut t_em, mut t_fit) =
@@ -57,6 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut iters = 0;
         let mut m = 0;
         let (mut evals, mut kept) = (0.0, 0.0);
+        let mut bits = 0u64;
         for _ in 0..reps {
             let t = Instant::now();
             let modes = mean_shift_modes(&fp.depth_intensity, sigma, &MeanShiftConfig::default());
@@ -90,11 +105,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             m = fit.gmm.len();
             evals = fit.report.em.mean_components_per_point;
             kept = fit.report.em.mean_kept_per_point;
+            bits = fit_bits(&fit.gmm);
             let _ = report;
         }
         let em = median(t_em);
         println!(
-            "{seed:>4} {m:>5} {iters:>5} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {evals:>6.1} {kept:>6.1}",
+            "{seed:>4} {m:>5} {iters:>5} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {evals:>6.1} {kept:>6.1} {bits:016x}",
             median(t_ms) * 1e3,
             median(t_km) * 1e3,
             median(t_init) * 1e3,

@@ -60,6 +60,14 @@ const ANCHOR_QUANTILE: f64 = 0.005;
 /// Points per accumulation chunk (fixed: part of the summation order).
 const CHUNK: usize = 2048;
 
+/// Components per rayon task in the per-iteration work outside the pass (factoring,
+/// summing the chunks); any value gives the same bits.
+const COMPONENTS_PER_TASK: usize = 64;
+
+/// Runs of points per rayon task when their candidate blocks are built; any value
+/// gives the same blocks.
+const RUNS_PER_TASK: usize = 128;
+
 /// How the E-step visits components.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EStep {
@@ -145,24 +153,35 @@ impl Partial {
         }
     }
 
-    fn add(&mut self, other: &Partial) {
-        for (a, b) in self.n.iter_mut().zip(&other.n) {
-            *a += b;
+    /// The sum of `parts` added in their order (so the same bits on any number of
+    /// threads); the components are summed side by side.
+    fn sum(parts: &[&Partial], m: usize) -> Self {
+        let mut total = Partial::new(m);
+        total
+            .n
+            .par_iter_mut()
+            .zip(total.s1.par_iter_mut())
+            .zip(total.s2.par_iter_mut())
+            .enumerate()
+            .with_min_len(COMPONENTS_PER_TASK)
+            .for_each(|(k, ((n, s1), s2))| {
+                for p in parts {
+                    *n += p.n[k];
+                    for (a, b) in s1.iter_mut().zip(&p.s1[k]) {
+                        *a += b;
+                    }
+                    for (a, b) in s2.iter_mut().zip(&p.s2[k]) {
+                        *a += b;
+                    }
+                }
+            });
+        for p in parts {
+            total.ll += p.ll;
+            total.evaluated += p.evaluated;
+            total.kept += p.kept;
+            total.fallbacks += p.fallbacks;
         }
-        for (a, b) in self.s1.iter_mut().zip(&other.s1) {
-            for k in 0..4 {
-                a[k] += b[k];
-            }
-        }
-        for (a, b) in self.s2.iter_mut().zip(&other.s2) {
-            for k in 0..10 {
-                a[k] += b[k];
-            }
-        }
-        self.ll += other.ll;
-        self.evaluated += other.evaluated;
-        self.kept += other.kept;
-        self.fallbacks += other.fallbacks;
+        total
     }
 
     #[inline(always)]
@@ -248,17 +267,21 @@ impl Whitened {
     }
 }
 
+/// Every component's [`Whitened`] form, side by side; the error names the first
+/// component (in index order) whose covariance is not positive definite.
 fn factor(params: &Params) -> Result<Vec<Whitened>, SogmmError> {
-    params
-        .weights
-        .iter()
-        .zip(&params.means)
-        .zip(&params.covs)
+    let factored: Vec<Option<Whitened>> = (0..params.weights.len())
+        .into_par_iter()
+        .with_min_len(COMPONENTS_PER_TASK)
+        .map(|k| Whitened::new(params.weights[k], &params.means[k], &params.covs[k]))
+        .collect();
+    factored
+        .into_iter()
         .enumerate()
-        .map(|(component, ((w, mean), cov))| {
-            Whitened::new(*w, mean, cov).ok_or(SogmmError::Mixture(
-                MixtureError::NotPositiveDefinite { component },
-            ))
+        .map(|(component, w)| {
+            w.ok_or(SogmmError::Mixture(MixtureError::NotPositiveDefinite {
+                component,
+            }))
         })
         .collect()
 }
@@ -527,12 +550,9 @@ fn fused_pass(ctx: &PassCtx<'_>, m: usize) -> (Partial, Vec<u32>) {
             arch.dispatch(ChunkPass { ctx, m, range })
         })
         .collect();
-    let mut total = Partial::new(m);
-    let mut anchors = Vec::with_capacity(n);
-    for (p, a) in &chunks {
-        total.add(p);
-        anchors.extend_from_slice(a);
-    }
+    let parts: Vec<&Partial> = chunks.iter().map(|(p, _)| p).collect();
+    let total = Partial::sum(&parts, m);
+    let anchors = chunks.iter().flat_map(|(_, a)| a.iter().copied()).collect();
     (total, anchors)
 }
 
@@ -586,25 +606,38 @@ fn run_blocks(
     params: &Params,
     comps: &[Whitened],
 ) -> Blocks {
+    let narrowed: Vec<(Vec<u32>, Vec<usize>)> = runs
+        .par_chunks(RUNS_PER_TASK)
+        .map(|chunk| {
+            let mut ids: Vec<u32> = Vec::new();
+            let mut ends = Vec::with_capacity(chunk.len());
+            for run in chunk {
+                let t_run = anchor_ll[run.points.clone()]
+                    .iter()
+                    .fold(f64::INFINITY, |t, &l| t.min(l - LOG_TRUNCATION))
+                    .max(threshold);
+                ids.extend(lists.get(run.cell).iter().copied().filter(|&k| {
+                    let k = k as usize;
+                    let k2 = 2.0 * (comps[k].logc - t_run) * (1.0 + 1e-9);
+                    let (mean, cov) = (&params.means[k], &params.covs[k]);
+                    k2 > 0.0
+                        && (0..3).all(|a| {
+                            let g = (run.lo[a] - mean[a]).max(mean[a] - run.hi[a]).max(0.0);
+                            g * g <= k2 * cov[(a, a)]
+                        })
+                }));
+                ends.push(ids.len());
+            }
+            (ids, ends)
+        })
+        .collect();
     let mut start = Vec::with_capacity(runs.len() + 1);
     start.push(0);
-    let mut ids: Vec<u32> = Vec::new();
-    for run in runs {
-        let t_run = anchor_ll[run.points.clone()]
-            .iter()
-            .fold(f64::INFINITY, |t, &l| t.min(l - LOG_TRUNCATION))
-            .max(threshold);
-        ids.extend(lists.get(run.cell).iter().copied().filter(|&k| {
-            let k = k as usize;
-            let k2 = 2.0 * (comps[k].logc - t_run) * (1.0 + 1e-9);
-            let (mean, cov) = (&params.means[k], &params.covs[k]);
-            k2 > 0.0
-                && (0..3).all(|a| {
-                    let g = (run.lo[a] - mean[a]).max(mean[a] - run.hi[a]).max(0.0);
-                    g * g <= k2 * cov[(a, a)]
-                })
-        }));
-        start.push(ids.len());
+    let mut ids: Vec<u32> = Vec::with_capacity(narrowed.iter().map(|(i, _)| i.len()).sum());
+    for (chunk_ids, ends) in &narrowed {
+        let offset = ids.len();
+        start.extend(ends.iter().map(|e| offset + e));
+        ids.extend_from_slice(chunk_ids);
     }
     Blocks::new(comps, start, ids)
 }
