@@ -91,6 +91,18 @@ impl Guide {
         update
     }
 
+    /// Folds the cells a peer observed in, by their centres in our world frame (its
+    /// occupancy-grid change sets, when the team shares grids instead of keyframes):
+    /// they retire the frontiers they lie in ([`FrontierMemory::observe_cells`]).
+    pub fn observe_peer_cells(
+        &mut self,
+        centres: impl IntoIterator<Item = Point3<f64>>,
+    ) -> MemoryUpdate {
+        let update = self.memory.observe_cells(centres);
+        self.retired_by_peers += update.retired as u64;
+        update
+    }
+
     /// Records where a peer is and where it is heading (its plan's first and last
     /// knots); its position is passable.
     pub fn observe_peer_plan(&mut self, peer: &PeerPlan) {

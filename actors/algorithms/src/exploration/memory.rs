@@ -43,7 +43,8 @@ pub struct MemoryUpdate {
 /// Bounds: at most `max_cells` cells (about 64 bytes each with the map's overhead,
 /// 16 MiB at the default 262 144); [`Self::observe_window`] takes time linear in the
 /// window's fine cells plus `log n` per coarse cell of the window;
-/// [`Self::observe_keyframe`] `samples × (ray length / cell_m) × 4 × log n`.
+/// [`Self::observe_keyframe`] `samples × (ray length / cell_m) × 4 × log n`;
+/// [`Self::observe_cells`] `log n` per cell given.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrontierMemory {
     cell_m: f64,
@@ -300,9 +301,34 @@ impl FrontierMemory {
                 }
             }
         }
-        crossed.sort_unstable();
-        crossed.dedup();
-        for key in crossed {
+        self.mark_seen(crossed, &mut update);
+        update
+    }
+
+    /// Folds cells a peer observed in (its occupancy-grid change sets: thesis §8.2.5's
+    /// "OG" sharing), given by their centres: each memory cell holding one is seen and
+    /// no longer a frontier, as with the cells a peer keyframe's rays cross
+    /// ([`Self::observe_keyframe`]). A change set holds the free cells along the peer's
+    /// rays and the surfaces they end on, so it retires what its rays crossed. Time
+    /// `O(c log c + c log n)` for `c` centres.
+    pub fn observe_cells(
+        &mut self,
+        centres: impl IntoIterator<Item = Point3<f64>>,
+    ) -> MemoryUpdate {
+        let mut update = MemoryUpdate::default();
+        let keys: Vec<CellKey> = centres
+            .into_iter()
+            .filter_map(|c| self.key_of(&c))
+            .collect();
+        self.mark_seen(keys, &mut update);
+        update
+    }
+
+    /// Marks `keys` seen and not frontiers (each once, in key order).
+    fn mark_seen(&mut self, mut keys: Vec<CellKey>, update: &mut MemoryUpdate) {
+        keys.sort_unstable();
+        keys.dedup();
+        for key in keys {
             let old = self.record(key);
             let seen = CellRecord {
                 seen: true,
@@ -310,10 +336,9 @@ impl FrontierMemory {
                 ..old
             };
             if seen != old {
-                self.write(key, seen, &mut update);
+                self.write(key, seen, update);
             }
         }
-        update
     }
 
     /// Marks the cell of a body position passable and seen (a robot is there: own or a

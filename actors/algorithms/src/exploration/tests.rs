@@ -143,6 +143,49 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
 }
 
 #[test]
+fn memory_retires_a_frontier_a_peers_change_set_sees() {
+    // The tunnel of the keyframe test; the peer shares occupancy-grid change sets: the
+    // centres of the 0.2 m cells its rays updated.
+    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
+    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let mut guide = Guide::new(GuidanceConfig::default());
+    guide.observe_snapshot(&snapshot, 0.67);
+    let frontiers = guide.memory().frontiers().count();
+    assert!(frontiers > 0);
+    let cells = |x: std::ops::Range<i32>| {
+        let mut centres = Vec::new();
+        for i in x {
+            for j in -9..10 {
+                for k in -4..5 {
+                    centres.push(Point3::new(
+                        0.2 * f64::from(i) + 0.1,
+                        0.2 * f64::from(j) + 0.1,
+                        0.2 * f64::from(k) + 0.1,
+                    ));
+                }
+            }
+        }
+        centres
+    };
+    // Cells behind the frontiers (x < 4 m) retire nothing.
+    assert_eq!(guide.observe_peer_cells(cells(0..20)).retired, 0);
+    assert_eq!(guide.memory().frontiers().count(), frontiers);
+    // Cells observed down the tunnel (x from 4 to 10 m) retire every frontier.
+    let update = guide.observe_peer_cells(cells(20..50));
+    assert_eq!(update.retired, frontiers);
+    assert_eq!(guide.memory().frontiers().count(), 0);
+    assert_eq!(guide.retired_by_peers(), frontiers as u64);
+    assert!(guide.memory().record([8, 0, 0]).seen);
+    // Hostile centres are skipped.
+    assert_eq!(
+        guide
+            .observe_peer_cells([Point3::new(f64::NAN, 0.0, 0.0)])
+            .cells,
+        0
+    );
+}
+
+#[test]
 fn a_full_memory_keeps_its_bound_and_counts_what_it_drops() {
     let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
     let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);

@@ -104,6 +104,24 @@ pub enum ChangeSetError {
     Invalid(#[from] ContentError),
 }
 
+/// The centres of the changed cells of `set` (a peer's, at the team's voxel size
+/// `resolution_m`), in order, moved into our world frame by `frame` (Eq. 8.1) when the
+/// peer's differs. `set` must be valid ([`GridChangeSet::validate`]).
+pub fn cell_centres<'a>(
+    set: &'a GridChangeSet,
+    resolution_m: f64,
+    frame: Option<&'a Isometry3<f64>>,
+) -> impl Iterator<Item = Point3<f64>> + 'a {
+    let [w, h] = [set.dims.width, set.dims.height].map(|v| v as usize);
+    let origin = Vector3::from(set.origin_m.map(f64::from));
+    set.changes.iter().map(move |c| {
+        let i = c.index as usize;
+        let local = Vector3::new((i % w) as f64, ((i / w) % h) as f64, (i / (w * h)) as f64);
+        let centre = Point3::from(origin + (local + Vector3::repeat(0.5)) * resolution_m);
+        frame.map_or(centre, |t| t * centre)
+    })
+}
+
 /// The receiver's side (module docs).
 #[derive(Clone, Debug, Default)]
 pub struct PeerCells {
@@ -126,17 +144,12 @@ impl PeerCells {
         grid: &mut LocalGrid,
     ) -> Result<usize, ChangeSetError> {
         set.validate()?;
-        let [w, h] = [set.dims.width, set.dims.height].map(|v| v as usize);
-        let res = grid.resolution_m();
-        let origin = Vector3::from(set.origin_m.map(f64::from));
         let mut applied = 0;
-        for c in &set.changes {
-            let i = c.index as usize;
-            let local = Vector3::new((i % w) as f64, ((i / w) % h) as f64, (i / (w * h)) as f64);
-            let mut centre = Point3::from(origin + (local + Vector3::repeat(0.5)) * res);
-            if let Some(t) = frame {
-                centre = t * centre;
-            }
+        for (c, centre) in set
+            .changes
+            .iter()
+            .zip(cell_centres(set, grid.resolution_m(), frame))
+        {
             let Some(cell) = grid.lattice_cell_of(&centre) else {
                 continue;
             };

@@ -12,7 +12,8 @@
 //!
 //! With guidance on (`[robot.planner.guidance]`, the default) the planner also keeps a
 //! team frontier memory ([`troupe_algorithms::exploration`]): every grid snapshot, the
-//! peers' keyframes ([`PEER_KEYFRAME`]) and plans ([`PEER_PLAN`]) feed it, and its
+//! peers' keyframes ([`PEER_KEYFRAME`]) or, in a team sharing grids, their change sets
+//! ([`PEER_GRID_CHANGES`]), and their plans ([`PEER_PLAN`]) feed it, and its
 //! rounds score the frontier reward over the route distance to the remembered
 //! frontiers (beyond the window), avoiding those peers are heading to.
 
@@ -26,9 +27,10 @@ use super::committed::{Committed, replanning_root};
 use super::primitives::FlatState;
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
+use crate::grid::changeset::cell_centres;
 use crate::msgs::{
-    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_KEYFRAME, PEER_PLAN, PLAN,
-    PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
+    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
+    PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
 };
 use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
@@ -376,6 +378,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         if self.guide.is_some() {
             ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
             ctx.subscribe(&PEER_PLAN, QueuePolicy::fifo(16));
+            ctx.subscribe(&PEER_GRID_CHANGES, QueuePolicy::fifo(64));
         }
         let period_s = self.replan_period().as_secs_f64();
         let phase_s = round_phase_s(ctx.robot().0, period_s);
@@ -405,6 +408,17 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 } else if let Some(peer) = m.get(&PEER_PLAN) {
                     if let Some(guide) = self.guide.as_mut() {
                         guide.observe_peer_plan(peer);
+                    }
+                } else if let Some(peer) = m.get(&PEER_GRID_CHANGES) {
+                    // The voxel size is team configuration (thesis §8.2.5): ours.
+                    if let (Some(guide), Some(snapshot)) = (self.guide.as_mut(), &self.snapshot)
+                        && peer.set.validate().is_ok()
+                    {
+                        guide.observe_peer_cells(cell_centres(
+                            &peer.set,
+                            snapshot.resolution_m(),
+                            peer.frame.as_ref(),
+                        ));
                     }
                 } else if let Some(plan) = m.get(&PLAN)
                     && let Some(reference) = &plan.reference
