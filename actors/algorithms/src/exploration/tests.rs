@@ -97,11 +97,16 @@ fn keyframe_towards(
     }
 }
 
+/// The window (20 × 20 × 4 m, at the origin) of a tunnel along x that is seen up to
+/// x = 6 m and open (unknown) beyond.
+fn tunnel_seen_to_6_m() -> GridSnapshot {
+    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
+    window(Point3::origin(), [20.0, 20.0, 4.0], &world)
+}
+
 #[test]
 fn memory_retires_a_frontier_a_peers_keyframe_sees() {
-    // A tunnel along x, seen up to x = 6 m and open (unknown) beyond.
-    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
-    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let snapshot = tunnel_seen_to_6_m();
     let mut guide = Guide::new(GuidanceConfig::default());
     guide.observe_snapshot(&snapshot, 0.67);
     let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
@@ -144,10 +149,9 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
 
 #[test]
 fn memory_retires_a_frontier_a_peers_change_set_sees() {
-    // The tunnel of the keyframe test; the peer shares occupancy-grid change sets: the
-    // centres of the 0.2 m cells its rays updated.
-    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
-    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    // The peer shares occupancy-grid change sets: the centres of the 0.2 m cells its
+    // rays updated.
+    let snapshot = tunnel_seen_to_6_m();
     let mut guide = Guide::new(GuidanceConfig::default());
     guide.observe_snapshot(&snapshot, 0.67);
     let frontiers = guide.memory().frontiers().count();
@@ -187,8 +191,7 @@ fn memory_retires_a_frontier_a_peers_change_set_sees() {
 
 #[test]
 fn a_full_memory_keeps_its_bound_and_counts_what_it_drops() {
-    let world = tunnels(vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])], |p| p.x < 6.0);
-    let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
+    let snapshot = tunnel_seen_to_6_m();
     let mut memory = FrontierMemory::new(1.0, 50);
     let update = memory.observe_window(&snapshot, 0.67, 4);
     assert_eq!(memory.cell_count(), 50);
