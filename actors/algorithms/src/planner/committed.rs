@@ -21,12 +21,13 @@ pub struct Committed {
 }
 
 impl Committed {
-    /// Braking from `root` at `now`: the shortest feasible stopping primitive within
-    /// `limits`, then hovering where it ends (the fail-safe commitment, thesis §4.1.3);
-    /// `None` when no stop is feasible from `root`.
+    /// Braking from `root` at `now`: the feasible stopping primitive within `limits`
+    /// that strays least from `root` ([`DynamicLimits::braking`]), then hovering where
+    /// it ends (the fail-safe commitment, thesis §4.1.3); `None` when no stop is
+    /// feasible from `root`.
     #[must_use]
     pub fn braking(limits: &DynamicLimits, root: &FlatState, now: Time) -> Option<Committed> {
-        let stopping = limits.stopping(root)?;
+        let stopping = limits.braking(root)?;
         Some(Committed {
             start: now,
             switch_s: stopping.duration_s(),
