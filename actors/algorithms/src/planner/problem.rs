@@ -5,6 +5,7 @@
 //! only; tree search (MCTS) expands deeper states through the same calls.
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use super::csqmi::view_information;
 use super::library;
@@ -136,10 +137,14 @@ impl<'a> PlanningProblem<'a> {
         Some(self.score(from, index, primitive, stopping))
     }
 
-    /// Every feasible, safe child of `from`, scored, in library order.
+    /// Every feasible, safe child of `from`, scored, in library order. The children
+    /// are built on the rayon pool (each on its own, collected in order: the same
+    /// result on any number of threads), so a planning round uses the cores that the
+    /// other robots of a simulated team leave idle.
     #[must_use]
     pub fn children(&self, from: &FlatState) -> Vec<Candidate> {
         (0..self.actions.len())
+            .into_par_iter()
             .filter_map(|i| self.child(from, i))
             .collect()
     }
