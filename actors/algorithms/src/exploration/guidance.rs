@@ -8,6 +8,7 @@ use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::hash::BuildHasherDefault;
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use troupe_core::RobotId;
 
@@ -189,15 +190,21 @@ fn claimed_by_assignment(
     claim_radius_m: f64,
 ) -> BTreeSet<CellKey> {
     let cell_m = memory.cell_m();
-    let robots = std::iter::once((own, *own_m)).chain(
-        peers
-            .iter()
-            .filter(|(id, _)| **id != own)
-            .map(|(id, peer)| (*id, peer.position_m)),
-    );
+    let robots: Vec<(RobotId, Point3<f64>)> = std::iter::once((own, *own_m))
+        .chain(
+            peers
+                .iter()
+                .filter(|(id, _)| **id != own)
+                .map(|(id, peer)| (*id, peer.position_m)),
+        )
+        .collect();
+    // The robots' Dijkstras are independent: on the rayon pool, in robot order.
+    let routes: Vec<Reached> = robots
+        .par_iter()
+        .map(|(_, position_m)| routes_from(memory, position_m))
+        .collect();
     let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
-    for (id, position_m) in robots {
-        let routes = routes_from(memory, &position_m);
+    for (&(id, _), routes) in robots.iter().zip(&routes) {
         for &(f, extra_m) in open {
             let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
             let cost_m = extra_m
