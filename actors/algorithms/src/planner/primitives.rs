@@ -473,7 +473,7 @@ mod tests {
             )
             .expect("feasible");
         for k in 0..=12 {
-            // Speeding up from rest, at full speed, and slowing along a stop.
+            // Speeding up from rest (τ = 1 s), then at full speed.
             let root = go.state_at(0.1 * f64::from(k));
             let brake = limits.braking(&root).expect("a stop is feasible");
             let shortest = limits.stopping(&root).expect("a stop is feasible");
