@@ -974,3 +974,42 @@ fn exp_of_the_e_step_matches_the_c_library() {
     assert_eq!(super::em::exp_nonpositive(-709.0), 0.0);
     assert_eq!(super::em::exp_nonpositive(f64::NEG_INFINITY), 0.0);
 }
+
+#[test]
+fn max_first_agrees_with_a_left_to_right_scan() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for len in 0..40 {
+        for _ in 0..50 {
+            // Few distinct values, so ties are common; −∞ among them.
+            let values: Vec<f64> = (0..len)
+                .map(|_| match rng.random_range(0..5) {
+                    0 => f64::NEG_INFINITY,
+                    v => f64::from(v),
+                })
+                .collect();
+            let mut scan = (f64::NEG_INFINITY, 0);
+            for (j, &v) in values.iter().enumerate() {
+                if v > scan.0 {
+                    scan = (v, j);
+                }
+            }
+            assert_eq!(super::em::max_first(&values), scan, "{values:?}");
+        }
+    }
+}
+
+#[test]
+fn log_sum_is_the_sum_of_the_logarithms() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let values: Vec<f64> = (0..5000).map(|_| rng.random_range(1.0..800.0)).collect();
+    let mut log_sum = super::em::LogSum::default();
+    values.iter().for_each(|&s| log_sum.push(s));
+    let direct: f64 = values.iter().map(|s| s.ln()).sum();
+    // The product is ~10^12000: far beyond f64, kept as mantissa and exponent.
+    assert!(
+        (log_sum.ln() - direct).abs() < 1e-9 * direct,
+        "{} vs {direct}",
+        log_sum.ln()
+    );
+    assert_eq!(super::em::LogSum::default().ln(), 0.0);
+}
