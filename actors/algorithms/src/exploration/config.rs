@@ -68,6 +68,13 @@ pub struct GuidanceConfig {
     /// got 0.5 m shorter for this long is given up, seconds (a progress timeout, as in
     /// ROS' explore_lite); `None` never.
     pub give_up_without_progress_s: Option<f64>,
+    /// A given-up frontier is looked for again this long after it was given up,
+    /// seconds; `None`: never. Time near a frontier counts on every pass, so a real
+    /// opening beside a junction the robots cross again and again can be given up
+    /// with the pockets; 100 s is long enough that what was given up does not pull a
+    /// robot back while new space lies nearby (it flies 100 m or more meanwhile), and
+    /// short enough that such an opening is found again within a 700 s mission.
+    pub retry_given_up_after_s: Option<f64>,
     /// How close the robot must be for time to count towards giving a frontier up,
     /// metres (about the camera's useful range).
     pub give_up_radius_m: f64,
@@ -92,6 +99,7 @@ impl Default for GuidanceConfig {
             give_up_after_s: Some(4.0),
             give_up_without_progress_s: None,
             give_up_radius_m: 3.0,
+            retry_given_up_after_s: Some(100.0),
         }
     }
 }
@@ -137,6 +145,9 @@ impl GuidanceConfig {
         ConfigError::non_negative("switch_penalty_m", self.switch_penalty_m)?;
         if let Some(s) = self.give_up_after_s {
             ConfigError::positive("give_up_after_s", s)?;
+        }
+        if let Some(s) = self.retry_given_up_after_s {
+            ConfigError::positive("retry_given_up_after_s", s)?;
         }
         if let Some(s) = self.give_up_without_progress_s {
             ConfigError::positive("give_up_without_progress_s", s)?;

@@ -25,6 +25,8 @@ pub struct Guide {
     watched_s: BTreeMap<CellKey, f64>,
     /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired.
     given_up: BTreeSet<CellKey>,
+    /// When each frontier of `given_up` was given up.
+    given_up_at: BTreeMap<CellKey, Time>,
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
@@ -55,6 +57,7 @@ impl Guide {
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),
             given_up: BTreeSet::new(),
+            given_up_at: BTreeMap::new(),
             last_field: None,
             last_target: None,
             progress: None,
@@ -161,6 +164,13 @@ impl Guide {
         field
     }
 
+    /// Gives up frontier `f` at `now`.
+    fn give_up(&mut self, f: CellKey, now: Time) {
+        if self.given_up.insert(f) {
+            self.given_up_at.insert(f, now);
+        }
+    }
+
     /// The rule of goals that cannot be reached (explore_lite's progress timeout): a
     /// goal whose route has not got [`PROGRESS_M`] shorter for `limit_s` — a pocket
     /// under the floor the robot hovers beside, out of the camera's view — is given up
@@ -190,8 +200,9 @@ impl Guide {
                         || (memory.centre(*f) - goal_m).norm() <= GOAL_RADIUS_M
                 })
                 .collect();
-            self.given_up.extend(near);
-            self.given_up.insert(goal);
+            for f in near.into_iter().chain(std::iter::once(goal)) {
+                self.give_up(f, now);
+            }
             self.progress = None;
         } else {
             self.progress = Some((tracked_m, best_m, since));
@@ -216,6 +227,23 @@ impl Guide {
         let known = |k: &CellKey| memory.record(*k) != CellRecord::default();
         self.watched_s.retain(|k, _| known(k));
         self.given_up.retain(known);
+        self.given_up_at.retain(|k, _| known(k));
+        // Given up for long enough: looked for again (the time near a frontier counts
+        // on every pass, so a real opening beside a junction crossed again and again
+        // may have been given up with the pockets).
+        if let Some(retry_s) = self.config.retry_given_up_after_s {
+            let expired: Vec<CellKey> = self
+                .given_up_at
+                .iter()
+                .filter(|(_, at)| now.saturating_since(**at).as_secs_f64() >= retry_s)
+                .map(|(k, _)| *k)
+                .collect();
+            for k in expired {
+                self.given_up_at.remove(&k);
+                self.given_up.remove(&k);
+                self.watched_s.remove(&k);
+            }
+        }
         for f in memory.frontiers() {
             if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
                 || self.given_up.contains(&f)
@@ -224,8 +252,8 @@ impl Guide {
             }
             let watched_s = self.watched_s.entry(f).or_insert(0.0);
             *watched_s += dt_s;
-            if *watched_s >= limit_s {
-                self.given_up.insert(f);
+            if *watched_s >= limit_s && self.given_up.insert(f) {
+                self.given_up_at.insert(f, now);
             }
         }
     }

@@ -447,6 +447,43 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
 }
 
 #[test]
+fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
+    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let config = GuidanceConfig::default();
+    let retry_s = config.retry_given_up_after_s.expect("on by default");
+    let mut guide = Guide::new(config);
+    let (near, far) = (Point3::new(2.0, 0.0, 0.0), Point3::new(10.0, 0.0, 0.0));
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    let frontiers = guide.memory().frontiers().count();
+    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
+    // Hovering beside it: given up (the rule of the test above) at about 4 s.
+    for s in 0..10 {
+        guide.field((RobotId(0), &near), second(f64::from(s)));
+    }
+    assert!(!guide.given_up().is_empty());
+    let given_up_by_s = 10.0;
+    // Away from it, it stays given up until the retry time has passed, then pulls again.
+    let mut back = None;
+    for s in 10..150 {
+        let field = guide.field((RobotId(0), &far), second(f64::from(s)));
+        if back.is_none() && field.frontier_count() == frontiers {
+            back = Some(f64::from(s));
+        }
+    }
+    let back = back.expect("never looked for again");
+    assert!(
+        (retry_s..=retry_s + given_up_by_s).contains(&back),
+        "looked for again at {back} s"
+    );
+    assert!(guide.given_up().is_empty());
+    // Still not seen into: hovering beside it gives it up again.
+    for s in 150..160 {
+        guide.field((RobotId(0), &near), second(f64::from(s)));
+    }
+    assert!(!guide.given_up().is_empty());
+}
+
+#[test]
 fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_nearer() {
     // A tunnel seen for |x| ≤ 5: frontiers at both ends.
     let world = tunnels(vec![([-15.0, -2.0, -1.0], [15.0, 2.0, 1.0])], |p| {
