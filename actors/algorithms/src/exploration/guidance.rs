@@ -10,7 +10,7 @@ use std::hash::BuildHasherDefault;
 use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use troupe_core::RobotId;
+use troupe_core::{RobotId, Time};
 
 use super::memory::{CellKey, FrontierMemory};
 
@@ -288,7 +288,7 @@ impl GuidanceField {
         memory: &FrontierMemory,
         (own, robot_m): (RobotId, &Point3<f64>),
         peers: &BTreeMap<RobotId, PeerIntent>,
-        given_up: &BTreeSet<CellKey>,
+        given_up: &BTreeMap<CellKey, Time>,
         last_target: Option<CellKey>,
         params: &FieldParams,
     ) -> Self {
@@ -296,7 +296,7 @@ impl GuidanceField {
         let open = weigh_regions(
             memory
                 .frontiers()
-                .filter(|f| !given_up.contains(f))
+                .filter(|f| !given_up.contains_key(f))
                 .collect(),
             params.min_region_cells,
             params.small_region_penalty_m,

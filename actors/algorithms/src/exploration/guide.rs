@@ -1,7 +1,7 @@
 //! One robot's guide: its frontier memory, what it knows of where its peers are
 //! heading, and the rule that decides when a planning round follows the global field.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 
 use nalgebra::Point3;
 use troupe_core::{RobotId, Time};
@@ -23,10 +23,9 @@ pub struct Guide {
     retired_by_peers: u64,
     /// Seconds spent near each remembered frontier while it stayed one.
     watched_s: BTreeMap<CellKey, f64>,
-    /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired.
-    given_up: BTreeSet<CellKey>,
-    /// When each frontier of `given_up` was given up.
-    given_up_at: BTreeMap<CellKey, Time>,
+    /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired,
+    /// and when each was given up.
+    given_up: BTreeMap<CellKey, Time>,
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
@@ -56,8 +55,7 @@ impl Guide {
             peers: BTreeMap::new(),
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),
-            given_up: BTreeSet::new(),
-            given_up_at: BTreeMap::new(),
+            given_up: BTreeMap::new(),
             last_field: None,
             last_target: None,
             progress: None,
@@ -128,9 +126,10 @@ impl Guide {
     }
 
     /// Remembered frontiers this robot has given up (watched for
-    /// [`GuidanceConfig::give_up_after_s`] from nearby without seeing into them).
+    /// [`GuidanceConfig::give_up_after_s`] from nearby without seeing into them), with
+    /// when each was given up.
     #[must_use]
-    pub fn given_up(&self) -> &BTreeSet<CellKey> {
+    pub fn given_up(&self) -> &BTreeMap<CellKey, Time> {
         &self.given_up
     }
 
@@ -164,13 +163,6 @@ impl Guide {
         field
     }
 
-    /// Gives up frontier `f` at `now`.
-    fn give_up(&mut self, f: CellKey, now: Time) {
-        if self.given_up.insert(f) {
-            self.given_up_at.insert(f, now);
-        }
-    }
-
     /// The rule of goals that cannot be reached (explore_lite's progress timeout): a
     /// goal whose route has not got [`PROGRESS_M`] shorter for `limit_s` — a pocket
     /// under the floor the robot hovers beside, out of the camera's view — is given up
@@ -201,7 +193,7 @@ impl Guide {
                 })
                 .collect();
             for f in near.into_iter().chain(std::iter::once(goal)) {
-                self.give_up(f, now);
+                self.given_up.entry(f).or_insert(now);
             }
             self.progress = None;
         } else {
@@ -226,34 +218,28 @@ impl Guide {
         let memory = &self.memory;
         let known = |k: &CellKey| memory.record(*k) != CellRecord::default();
         self.watched_s.retain(|k, _| known(k));
-        self.given_up.retain(known);
-        self.given_up_at.retain(|k, _| known(k));
-        // Given up for long enough: looked for again (the time near a frontier counts
+        // Given up long enough ago: looked for again (the time near a frontier counts
         // on every pass, so a real opening beside a junction crossed again and again
         // may have been given up with the pockets).
-        if let Some(retry_s) = self.config.retry_given_up_after_s {
-            let expired: Vec<CellKey> = self
-                .given_up_at
-                .iter()
-                .filter(|(_, at)| now.saturating_since(**at).as_secs_f64() >= retry_s)
-                .map(|(k, _)| *k)
-                .collect();
-            for k in expired {
-                self.given_up_at.remove(&k);
-                self.given_up.remove(&k);
-                self.watched_s.remove(&k);
+        let retry_s = self.config.retry_given_up_after_s.unwrap_or(f64::INFINITY);
+        let watched_s = &mut self.watched_s;
+        self.given_up.retain(|k, at| {
+            let keep = known(k) && now.saturating_since(*at).as_secs_f64() < retry_s;
+            if !keep {
+                watched_s.remove(k);
             }
-        }
+            keep
+        });
         for f in memory.frontiers() {
             if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
-                || self.given_up.contains(&f)
+                || self.given_up.contains_key(&f)
             {
                 continue;
             }
             let watched_s = self.watched_s.entry(f).or_insert(0.0);
             *watched_s += dt_s;
-            if *watched_s >= limit_s && self.given_up.insert(f) {
-                self.given_up_at.insert(f, now);
+            if *watched_s >= limit_s {
+                self.given_up.entry(f).or_insert(now);
             }
         }
     }
