@@ -822,11 +822,13 @@ fn keep_at_or_above(
 /// in `[1, 2)` (rescaled by a power of two after every factor, which is exact) and a
 /// sum of binary exponents. The product rounds once per factor (relative error below
 /// `n · 2⁻⁵³` for `n` factors), so the sum is within `n · 1.1·10⁻¹⁶` nats of the sum of
-/// the logarithms.
+/// the logarithms. A value that is not positive and finite (a degenerate point) adds
+/// its own logarithm (`−∞` or NaN) instead, as a sum of logarithms would.
 #[derive(Default)]
 pub(crate) struct LogSum {
     mantissa: f64,
     exponent: i64,
+    degenerate: f64,
 }
 
 impl LogSum {
@@ -834,6 +836,10 @@ impl LogSum {
 
     #[inline(always)]
     pub(crate) fn push(&mut self, s: f64) {
+        if !(s > 0.0 && s.is_finite()) {
+            self.degenerate += s.ln();
+            return;
+        }
         let product = if self.mantissa == 0.0 {
             s
         } else {
@@ -846,9 +852,9 @@ impl LogSum {
 
     pub(crate) fn ln(&self) -> f64 {
         if self.mantissa == 0.0 {
-            return 0.0;
+            return self.degenerate;
         }
-        self.mantissa.ln() + self.exponent as f64 * std::f64::consts::LN_2
+        self.mantissa.ln() + self.exponent as f64 * std::f64::consts::LN_2 + self.degenerate
     }
 }
 

@@ -1012,4 +1012,13 @@ fn log_sum_is_the_sum_of_the_logarithms() {
         log_sum.ln()
     );
     assert_eq!(super::em::LogSum::default().ln(), 0.0);
+    // A degenerate value gives what its logarithm would.
+    let mut with_zero = super::em::LogSum::default();
+    with_zero.push(2.0);
+    with_zero.push(0.0);
+    assert_eq!(with_zero.ln(), f64::NEG_INFINITY);
+    let mut with_nan = super::em::LogSum::default();
+    with_nan.push(f64::NAN);
+    with_nan.push(3.0);
+    assert!(with_nan.ln().is_nan());
 }
