@@ -822,13 +822,24 @@ fn keep_at_or_above(
 /// in `[1, 2)` (rescaled by a power of two after every factor, which is exact) and a
 /// sum of binary exponents. The product rounds once per factor (relative error below
 /// `n · 2⁻⁵³` for `n` factors), so the sum is within `n · 1.1·10⁻¹⁶` nats of the sum of
-/// the logarithms. A value that is not positive and finite (a degenerate point) adds
-/// its own logarithm (`−∞` or NaN) instead, as a sum of logarithms would.
-#[derive(Default)]
+/// the logarithms. A value outside the normal positive range a product can take (a
+/// degenerate point: 0, subnormal, huge, infinite or NaN) adds its own logarithm
+/// instead, as a sum of logarithms would.
 pub(crate) struct LogSum {
     mantissa: f64,
     exponent: i64,
     degenerate: f64,
+}
+
+impl Default for LogSum {
+    /// The empty sum: the product 1.
+    fn default() -> Self {
+        Self {
+            mantissa: 1.0,
+            exponent: 0,
+            degenerate: 0.0,
+        }
+    }
 }
 
 impl LogSum {
@@ -836,24 +847,17 @@ impl LogSum {
 
     #[inline(always)]
     pub(crate) fn push(&mut self, s: f64) {
-        if !(s > 0.0 && s.is_finite()) {
+        if !(s.is_normal() && s > 0.0 && s < f64::MAX / 2.0) {
             self.degenerate += s.ln();
             return;
         }
-        let product = if self.mantissa == 0.0 {
-            s
-        } else {
-            self.mantissa * s
-        };
+        let product = self.mantissa * s;
         let bits = product.to_bits();
         self.exponent += ((bits & Self::EXPONENT_MASK) >> 52) as i64 - 1023;
         self.mantissa = f64::from_bits((bits & !Self::EXPONENT_MASK) | (1023 << 52));
     }
 
     pub(crate) fn ln(&self) -> f64 {
-        if self.mantissa == 0.0 {
-            return self.degenerate;
-        }
         self.mantissa.ln() + self.exponent as f64 * std::f64::consts::LN_2 + self.degenerate
     }
 }
@@ -875,8 +879,8 @@ pub(crate) fn max_first(values: &[f64]) -> (f64, usize) {
             at[t] = if better { (4 * q + t) as u64 } else { at[t] };
         }
     }
-    let mut max = f64::NEG_INFINITY;
-    let mut arg = usize::MAX;
+    // All −∞ (or none): the first index.
+    let (mut max, mut arg) = (f64::NEG_INFINITY, 0);
     for t in 0..4 {
         if acc[t] > max || (acc[t] == max && (at[t] as usize) < arg) {
             (max, arg) = (acc[t], at[t] as usize);
@@ -888,12 +892,7 @@ pub(crate) fn max_first(values: &[f64]) -> (f64, usize) {
             (max, arg) = (v, base + j);
         }
     }
-    if arg == usize::MAX || values.is_empty() {
-        // every value −∞ (or none): the first one
-        (f64::NEG_INFINITY, 0)
-    } else {
-        (max, arg)
-    }
+    (max, arg)
 }
 
 /// `eˣ` for `x ≤ 0`, to within a few units in the last place (0 below −708, where `eˣ`
