@@ -24,6 +24,12 @@ pub struct CellRecord {
     pub passable: bool,
     /// It holds a frontier: free space next to unknown space, not yet observed beyond.
     pub frontier: bool,
+    /// A window once showed it known with not one fine frontier cell: it is explored,
+    /// and no later view makes it a frontier again. A window that moves back over
+    /// explored space is rebuilt from keyframe samples (thesis §3.2.3), sparser than
+    /// the frames that first filled it, and its gaps would otherwise come back as
+    /// frontiers all along a flown tunnel.
+    pub settled: bool,
 }
 
 /// What one update changed.
@@ -157,9 +163,9 @@ impl FrontierMemory {
     /// frames and the peers' keyframes near it, so it is the best knowledge there):
     /// seen if any fine cell is known, passable if a fine cell keeps `margin_m` from
     /// unsafe space, a frontier if it holds at least `min_frontier_cells` fine frontier
-    /// cells ([`frontier_mask`](crate::grid::frontier::frontier_mask)). A remembered
-    /// frontier the window no longer shows is retired. Cells beyond the window keep what
-    /// the memory knew.
+    /// cells ([`frontier_mask`](crate::grid::frontier::frontier_mask)) and was never
+    /// [`settled`](CellRecord::settled). A remembered frontier the window no longer
+    /// shows is retired. Cells beyond the window keep what the memory knew.
     pub fn observe_window(
         &mut self,
         snapshot: &GridSnapshot,
@@ -234,10 +240,13 @@ impl FrontierMemory {
                         (ry.0 + y as i64) as i32,
                         (rz.0 + z as i64) as i32,
                     ];
+                    let old = self.record(key);
+                    let settled = old.settled || (t.known > 0 && t.frontier == 0);
                     let record = CellRecord {
-                        seen: t.known > 0,
+                        seen: t.known > 0 || settled,
                         passable: t.max_clearance_m >= margin_m,
-                        frontier: t.frontier as usize >= min_frontier_cells,
+                        frontier: !settled && t.frontier as usize >= min_frontier_cells,
+                        settled,
                     };
                     if record == CellRecord::default() {
                         // Nothing known: forget it (a frontier here is retired).

@@ -148,6 +148,44 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
 }
 
 #[test]
+fn explored_space_stays_explored_when_a_rebuilt_window_shows_gaps_in_it() {
+    let tunnel = || vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])];
+    // First look: the tunnel known up to x = 8 m.
+    let first = window(
+        Point3::origin(),
+        [20.0, 20.0, 4.0],
+        tunnels(tunnel(), |p| p.x < 8.0),
+    );
+    // The same window rebuilt from keyframe samples: a third of the cells between
+    // x = 1 m and 5 m were crossed by no sample ray.
+    let gappy = |p: &Point3<f64>| {
+        let hole = ((p.x * 5.0).floor() + (p.y * 5.0).floor() + (p.z * 5.0).floor()) as i64;
+        p.x < 8.0 && !((1.0..5.0).contains(&p.x) && hole.rem_euclid(3) == 0)
+    };
+    let rebuilt = window(
+        Point3::origin(),
+        [20.0, 20.0, 4.0],
+        tunnels(tunnel(), gappy),
+    );
+    let in_gaps = |k: &CellKey| (1..5).contains(&k[0]);
+    let ahead = |k: &CellKey| (7..=8).contains(&k[0]);
+
+    // Seen only sparsely, the gaps are frontiers (so the check below can fail) ...
+    let mut fresh = Guide::new(GuidanceConfig::default());
+    fresh.observe_snapshot(&rebuilt, 0.67);
+    assert!(fresh.memory().frontiers().any(|k| in_gaps(&k)));
+    // ... but not where the memory already saw everything; the open end stays one.
+    let mut guide = Guide::new(GuidanceConfig::default());
+    guide.observe_snapshot(&first, 0.67);
+    assert!(!guide.memory().frontiers().any(|k| in_gaps(&k)));
+    guide.observe_snapshot(&rebuilt, 0.67);
+    let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
+    assert!(!frontiers.iter().any(in_gaps), "{frontiers:?}");
+    assert!(frontiers.iter().any(ahead), "{frontiers:?}");
+    assert!(guide.memory().record([2, 0, 0]).settled);
+}
+
+#[test]
 fn memory_retires_a_frontier_a_peers_change_set_sees() {
     // The peer shares occupancy-grid change sets: the centres of the 0.2 m cells its
     // rays updated.
