@@ -55,6 +55,11 @@ pub struct CameraParams {
     /// Where frames are rendered: `"cpu"`, `"gpu"` or `"auto"` (the GPU when a Vulkan
     /// adapter is found and the world has a GPU description, else the CPU).
     pub backend: CameraBackend,
+    /// Render only every n-th pixel in u and v, from pixel `(0, 0)`; the others report
+    /// no return. A robot whose grid and mapper read every second pixel
+    /// (`pixel_stride = 2`) gets the same frames from 2 as from 1, a quarter of the
+    /// rays later. 1 (the default) renders every pixel.
+    pub render_stride: u32,
 }
 
 impl Default for CameraParams {
@@ -68,6 +73,7 @@ impl Default for CameraParams {
             depth_noise_std_m: 0.0,
             dropout_prob: 0.0,
             backend: CameraBackend::Auto,
+            render_stride: 1,
         }
     }
 }
@@ -88,6 +94,9 @@ impl CameraParams {
             if !(v.is_finite() && v > 0.0 && v < 180.0) {
                 return Err(ConfigError::new(key, "must be in (0, 180)", v));
             }
+        }
+        if self.render_stride == 0 {
+            return Err(ConfigError::new("render_stride", "must be at least 1", 0));
         }
         ConfigError::positive("range_m", self.range_m)?;
         ConfigError::non_negative("depth_noise_std_m", self.depth_noise_std_m)?;
@@ -130,6 +139,32 @@ impl CameraParams {
             intrinsics,
             depth_m: vec![0.0; pixels],
             intensity: vec![0.0; pixels],
+        }
+    }
+
+    /// Whether pixel `(col, row)` is rendered ([`CameraParams::render_stride`]).
+    #[must_use]
+    pub fn renders(&self, col: usize, row: usize) -> bool {
+        let stride = self.render_stride.max(1) as usize;
+        col % stride == 0 && row % stride == 0
+    }
+
+    /// Clears the returns of the pixels this camera does not render (for backends that
+    /// render every pixel), so every backend reports the same pixels.
+    pub(crate) fn clear_unrendered(&self, frame: &mut DepthFrame) {
+        if self.render_stride <= 1 {
+            return;
+        }
+        let width = frame.intrinsics.width as usize;
+        for (i, (d, v)) in frame
+            .depth_m
+            .iter_mut()
+            .zip(frame.intensity.iter_mut())
+            .enumerate()
+        {
+            if !self.renders(i % width, i / width) {
+                (*d, *v) = (0.0, 0.0);
+            }
         }
     }
 

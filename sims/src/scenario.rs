@@ -103,6 +103,7 @@ impl Default for Scenario {
             camera: CameraParams {
                 depth_noise_std_m: 0.01,
                 dropout_prob: 0.01,
+                render_stride: 2,
                 ..CameraParams::default()
             },
             robot: RobotConfig::default(),
@@ -222,6 +223,33 @@ impl Scenario {
                 "metrics.coverage_pixel_stride",
                 "must be ≥ 1, got 0".into(),
             ));
+        }
+        // A pixel the camera does not render reads as no return: every reader must
+        // stay on its lattice.
+        let render_stride = u64::from(self.camera.render_stride);
+        for (key, stride) in [
+            (
+                "robot.grid.pixel_stride",
+                u64::from(self.robot.grid.pixel_stride),
+            ),
+            (
+                "robot.mapper.pixel_stride",
+                u64::from(self.robot.mapper.pixel_stride),
+            ),
+            (
+                "metrics.coverage_pixel_stride",
+                m.coverage_pixel_stride as u64,
+            ),
+        ] {
+            if stride % render_stride != 0 {
+                return Err(invalid(
+                    key,
+                    format!(
+                        "must be a multiple of camera.render_stride ({render_stride}): the \
+                         camera renders no other pixel; got {stride}"
+                    ),
+                ));
+            }
         }
         if !(m.sample_period_s.is_finite() && m.sample_period_s >= 0.01) {
             return Err(invalid(

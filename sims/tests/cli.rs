@@ -35,6 +35,11 @@ fn malformed_scenarios_get_one_clear_error_and_write_nothing() {
     rejected("[robot]\nsensor_rate_hz = 0.0\n", "robot.sensor_rate_hz");
     rejected("[camera]\nhfov_deg = true\n", "camera.hfov_deg");
     rejected("robots = [\n", "bad.toml");
+    rejected("[camera]\nrender_stride = 0\n", "camera.render_stride");
+    rejected(
+        "[camera]\nrender_stride = 2\n[robot.grid]\npixel_stride = 1\n",
+        "robot.grid.pixel_stride",
+    );
     rejected(
         "[metrics]\nog_change_set_resolutions_m = [0.1, 0.0]\n",
         "metrics.og_change_set_resolutions_m[1]",

@@ -207,7 +207,10 @@ impl CameraRenderer {
     ) -> Result<DepthFrame, GpuError> {
         if let Some(gpu) = &mut self.gpu {
             match gpu.render(stamp, body_pose, noise_seed) {
-                Ok(frame) => return Ok(frame),
+                Ok(mut frame) => {
+                    self.params.clear_unrendered(&mut frame);
+                    return Ok(frame);
+                }
                 Err(e) if self.params.backend == CameraBackend::Gpu => return Err(e),
                 Err(e) => {
                     tracing::warn!("GPU camera failed ({e}); rendering on the CPU from now on");

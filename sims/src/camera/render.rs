@@ -16,7 +16,10 @@
 //! 3. The hit counts when its true z-depth `t * cos_axis <= range_m`.
 //! 4. Intensity = `albedo * max(n·(-d), 0) / (1 + (t / LIGHT_HALF_DISTANCE_M)^2)` (a point
 //!    light at the camera), clamped to `[0, 1]`.
-//! 5. Noise: with probability `dropout_prob` the pixel has no return; otherwise Gaussian
+//! 5. Only the pixels on the [`CameraParams::render_stride`] lattice are traced (the
+//!    tiles and their cones are the same, so those pixels get the bits a full frame
+//!    gives them); the others report no return.
+//! 6. Noise: with probability `dropout_prob` the pixel has no return; otherwise Gaussian
 //!    noise of `depth_noise_std_m` is added to the depth (after the range test, so a noisy
 //!    depth may slightly exceed `range_m`); a noisy depth `<= 0` is reported as no return.
 //!    The random numbers come from a hash of `(noise_seed, pixel index)`.
@@ -211,7 +214,7 @@ impl PixelRng {
     }
 }
 
-/// Step 5 of the module doc for the pixel with row-major `index` and noise-free z-depth
+/// Step 6 of the module doc for the pixel with row-major `index` and noise-free z-depth
 /// `depth_m`: the reported depth, or `None` for a dropout or a depth `<= 0`. Shared by
 /// the CPU and GPU paths, so both draw the same noise.
 pub(super) fn noisy_depth_m(
@@ -257,6 +260,12 @@ impl TileJob<'_> {
         band: &mut Band<'_>,
     ) {
         let rows = rays.len() / cols;
+        let stride = self.cam.render_stride.max(1) as usize;
+        let on_lattice = |first: usize, n: usize| first.div_ceil(stride) * stride < first + n;
+        if !(on_lattice(col0, cols) && on_lattice(band.row0 + row0, rows)) {
+            // No pixel of the tile is rendered: its cone serves nobody.
+            return;
+        }
         let start = if self.cones {
             cone_start_m(self.world, &self.origin, rays, start)
         } else {
@@ -281,12 +290,14 @@ impl TileJob<'_> {
         }
         for (i, ray) in rays.iter().enumerate() {
             let (col, row) = (col0 + i % cols, row0 + i / cols);
-            self.shade(ray, start, (col, row), band);
+            if self.cam.renders(col, band.row0 + row) {
+                self.shade(ray, start, (col, row), band);
+            }
         }
     }
 
     /// Traces pixel `(col, row)` of `band` from `start` and writes its return, if any
-    /// (steps 1–5 of the module doc).
+    /// (steps 1–6 of the module doc).
     fn shade(
         &self,
         ray: &PixelRay,

@@ -281,6 +281,46 @@ fn image_is_identical_for_any_thread_count() {
     }
 }
 
+#[test]
+fn a_strided_render_gives_the_full_frames_pixels_on_its_lattice_and_nothing_else() {
+    let full = CameraParams {
+        depth_noise_std_m: 0.005,
+        dropout_prob: 0.05,
+        ..CameraParams::default()
+    };
+    let cave = CaveWorld::generate(&CaveParams::default(), 1);
+    let counting = Counting {
+        inner: &cave,
+        evaluations: std::sync::atomic::AtomicUsize::new(0),
+    };
+    for p in cave_poses(&cave) {
+        let all = full.render(&counting, Time::ZERO, &p, 3);
+        let all_evaluations = counting.take();
+        for stride in [2u32, 3, 4, 16] {
+            let cam = CameraParams {
+                render_stride: stride,
+                ..full.clone()
+            };
+            let some = cam.render(&counting, Time::ZERO, &p, 3);
+            assert!(counting.take() < all_evaluations, "stride {stride}");
+            let mut returns = 0;
+            for row in 0..full.height {
+                for col in 0..full.width {
+                    let (d, v) = (depth_at(&some, col, row), intensity_at(&some, col, row));
+                    if cam.renders(col as usize, row as usize) {
+                        assert_eq!(d.to_bits(), depth_at(&all, col, row).to_bits());
+                        assert_eq!(v.to_bits(), intensity_at(&all, col, row).to_bits());
+                        returns += usize::from(d > 0.0);
+                    } else {
+                        assert_eq!((d, v), (0.0, 0.0), "({col}, {row}) stride {stride}");
+                    }
+                }
+            }
+            assert!(returns > 0, "stride {stride}");
+        }
+    }
+}
+
 /// A world that counts its field evaluations.
 struct Counting<'a> {
     inner: &'a dyn World,

@@ -7,14 +7,22 @@ use crate::frame::DepthFrame;
 use crate::keyframe::Keyframe;
 
 /// How far a pixel without a return may be taken as free space, metres: the sensor's
-/// range when none of its eight neighbours has a return either (open space), else the
-/// nearest neighbouring return less `margin_m` (a dropout, or a sphere-traced ray that
-/// gave up at a grazing surface, inside a surface the neighbours did see: the ray
-/// certainly crosses free space that far, and taking it to the range would clear a
-/// ray straight through that surface — the safety study found robots flying into
-/// boxes that such rays had cleared). `None` for a pixel with a return.
+/// range when none of its eight neighbours on the `stride` lattice (the pixels `stride`
+/// away in u and v, the ones a reader of every `stride`-th pixel reads) has a return
+/// either (open space), else the nearest neighbouring return less `margin_m` (a
+/// dropout, or a sphere-traced ray that gave up at a grazing surface, inside a surface
+/// the neighbours did see: the ray certainly crosses free space that far, and taking
+/// it to the range would clear a ray straight through that surface — the safety study
+/// found robots flying into boxes that such rays had cleared). A frame's every
+/// `stride`-th pixel therefore gives what the frame decimated by `stride` gives at
+/// stride 1. `None` for a pixel with a return.
 #[must_use]
-pub fn free_range_m(frame: &DepthFrame, row: usize, col: usize, margin_m: f64) -> Option<f64> {
+pub fn free_range_m(
+    frame: &DepthFrame,
+    (row, col): (usize, usize),
+    stride: usize,
+    margin_m: f64,
+) -> Option<f64> {
     let (w, h) = (
         frame.intrinsics.width as usize,
         frame.intrinsics.height as usize,
@@ -22,11 +30,14 @@ pub fn free_range_m(frame: &DepthFrame, row: usize, col: usize, margin_m: f64) -
     if frame.depth_m.get(row * w + col).is_none_or(|d| *d > 0.0) {
         return None;
     }
-    let rows = row.saturating_sub(1)..=(row + 1).min(h.saturating_sub(1));
-    let nearest = rows
-        .flat_map(|r| {
-            (col.saturating_sub(1)..=(col + 1).min(w.saturating_sub(1))).map(move |c| r * w + c)
-        })
+    let s = stride.max(1);
+    let around = |i: usize, n: usize| {
+        [i.checked_sub(s), Some(i), Some(i + s).filter(|j| *j < n)]
+            .into_iter()
+            .flatten()
+    };
+    let nearest = around(row, h)
+        .flat_map(|r| around(col, w).map(move |c| r * w + c))
         .filter_map(|i| frame.depth_m.get(i).copied())
         .filter(|d| *d > 0.0)
         .fold(f32::INFINITY, f32::min);
@@ -53,7 +64,7 @@ pub fn insert_frame(grid: &mut LocalGrid, frame: &DepthFrame, stride: u32) {
             let ray = k.pixel_ray(col as u32, row as u32);
             let (z, hit) = if depth > 0.0 {
                 (f64::from(depth), true)
-            } else if let Some(range_m) = free_range_m(frame, row, col, margin_m) {
+            } else if let Some(range_m) = free_range_m(frame, (row, col), stride, margin_m) {
                 (range_m, false)
             } else {
                 continue;
@@ -81,7 +92,7 @@ pub fn frame_scans(frame: &DepthFrame, stride: u32, margin_m: f64) -> FrameScans
             let ray = k.pixel_ray(col as u32, row as u32);
             if depth > 0.0 {
                 hits.push(origin + frame.pose.rotation * (ray * f64::from(depth)));
-            } else if let Some(range_m) = free_range_m(frame, row, col, margin_m) {
+            } else if let Some(range_m) = free_range_m(frame, (row, col), stride, margin_m) {
                 misses.push(origin + frame.pose.rotation * (ray * range_m));
             }
         }

@@ -546,10 +546,10 @@ fn a_dropout_in_a_wall_clears_nothing_behind_it() {
         intensity: vec![0.5; 40 * 30],
     };
     // The dropout is free only up to its neighbours' wall, two cells short.
-    assert_eq!(free_range_m(&frame, 15, 20, 0.4), Some(2.0 - 0.4));
-    assert_eq!(free_range_m(&frame, 1, 20, 0.4), Some(k.max_depth_m));
-    assert_eq!(free_range_m(&frame, 3, 20, 0.4), Some(2.0 - 0.4)); // next to the wall
-    assert_eq!(free_range_m(&frame, 10, 20, 0.4), None); // a return
+    assert_eq!(free_range_m(&frame, (15, 20), 1, 0.4), Some(2.0 - 0.4));
+    assert_eq!(free_range_m(&frame, (1, 20), 1, 0.4), Some(k.max_depth_m));
+    assert_eq!(free_range_m(&frame, (3, 20), 1, 0.4), Some(2.0 - 0.4)); // next to the wall
+    assert_eq!(free_range_m(&frame, (10, 20), 1, 0.4), None); // a return
     let mut grid = LocalGrid::centred(
         &Point3::origin(),
         &Vector3::new(12.0, 12.0, 8.0),
@@ -562,4 +562,27 @@ fn a_dropout_in_a_wall_clears_nothing_behind_it() {
     assert_eq!(grid.state(behind), CellState::Unknown);
     let wall = grid.cell_of(&Point3::new(2.0, 0.0, 0.0)).unwrap();
     assert_eq!(grid.state(wall), CellState::Occupied);
+
+    // Read every second pixel, the free range looks at the pixels read: a camera that
+    // renders only those (the others no return) gives the same ranges.
+    let mut sparse = frame.clone();
+    for (i, d) in sparse.depth_m.iter_mut().enumerate() {
+        if (i % 40) % 2 == 1 || (i / 40) % 2 == 1 {
+            *d = 0.0;
+        }
+    }
+    let mut dropped = frame.clone();
+    dropped.depth_m[16 * 40 + 20] = 0.0;
+    sparse.depth_m[16 * 40 + 20] = 0.0;
+    for row in (0..30).step_by(2) {
+        for col in (0..40).step_by(2) {
+            assert_eq!(
+                free_range_m(&dropped, (row, col), 2, 0.4),
+                free_range_m(&sparse, (row, col), 2, 0.4),
+                "({row}, {col})"
+            );
+        }
+    }
+    assert_eq!(free_range_m(&sparse, (16, 20), 2, 0.4), Some(2.0 - 0.4));
+    assert_eq!(free_range_m(&sparse, (0, 20), 2, 0.4), Some(k.max_depth_m));
 }
