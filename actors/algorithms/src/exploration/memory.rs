@@ -24,8 +24,10 @@ pub struct CellRecord {
     pub passable: bool,
     /// It holds a frontier: free space next to unknown space, not yet observed beyond.
     pub frontier: bool,
-    /// A window once showed it known with not one fine frontier cell: it is explored,
-    /// and no later view makes it a frontier again. A window that moves back over
+    /// A window once showed free space in it and not one fine frontier cell (no free
+    /// cell next to an unknown one): it is explored, and no later view makes it a
+    /// frontier again. (Cells seen only as surface are not settled: free space found
+    /// in them later may border the unknown.) A window that moves back over
     /// explored space is rebuilt from keyframe samples (thesis §3.2.3), sparser than
     /// the frames that first filled it, and its gaps would otherwise come back as
     /// frontiers all along a flown tunnel.
@@ -63,6 +65,7 @@ pub struct FrontierMemory {
 #[derive(Clone, Copy, Default)]
 struct Tally {
     known: u32,
+    free: u32,
     frontier: u32,
     max_clearance_m: f64,
 }
@@ -216,8 +219,13 @@ impl FrontierMemory {
                     let Some(cx) = *cx else { continue };
                     let i = row + x;
                     let t = &mut tallies[cx + n[0] * (cy + n[1] * cz)];
-                    if grid.classify(values[i]) != CellState::Unknown {
-                        t.known += 1;
+                    match grid.classify(values[i]) {
+                        CellState::Unknown => {}
+                        CellState::Free => {
+                            t.known += 1;
+                            t.free += 1;
+                        }
+                        CellState::Occupied => t.known += 1,
                     }
                     if snapshot
                         .frontier_distance_m
@@ -241,7 +249,7 @@ impl FrontierMemory {
                         (rz.0 + z as i64) as i32,
                     ];
                     let old = self.record(key);
-                    let settled = old.settled || (t.known > 0 && t.frontier == 0);
+                    let settled = old.settled || (t.free > 0 && t.frontier == 0);
                     let record = CellRecord {
                         seen: t.known > 0 || settled,
                         passable: t.max_clearance_m >= margin_m,
