@@ -146,7 +146,7 @@ impl CameraParams {
     #[must_use]
     pub fn renders(&self, col: usize, row: usize) -> bool {
         let stride = self.render_stride.max(1) as usize;
-        col % stride == 0 && row % stride == 0
+        col.is_multiple_of(stride) && row.is_multiple_of(stride)
     }
 
     /// Clears the returns of the pixels this camera does not render (for backends that
