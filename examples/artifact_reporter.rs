@@ -8,8 +8,9 @@
 //! keyframes. Each robot keeps the team's deduplicated list; the run's
 //! `summary.json` scores it against the placed artifacts.
 //!
-//! The same run from a scenario file: `[world.artifacts] count = 8` and
-//! `[robot.artifacts] enabled = true` (see docs/user-messages.md).
+//! The same run from a scenario file: `[world.artifacts] count = 8`,
+//! `[robot.artifacts] enabled = true` and `[camera] render_stride = 1` (see
+//! docs/user-messages.md).
 //!
 //! Run: `cargo run --release -p troupe-tests --example artifact_reporter [seed] [seconds]`
 
@@ -29,6 +30,8 @@ fn main() -> anyhow::Result<()> {
     };
     scenario.world.artifacts.count = 8;
     scenario.robot.artifacts.enabled = true;
+    // The detector reads every pixel (the default camera renders every second one).
+    scenario.camera.render_stride = 1;
     let output = Team::new(&scenario)?.run(|_| {});
     let summary = &output.summary;
     for robot in &summary.per_robot {

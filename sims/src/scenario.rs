@@ -251,6 +251,15 @@ impl Scenario {
                 ));
             }
         }
+        if self.robot.artifacts.enabled && render_stride != 1 {
+            return Err(invalid(
+                "camera.render_stride",
+                format!(
+                    "must be 1 with [robot.artifacts] enabled: the artifact detector reads \
+                     every pixel; got {render_stride}"
+                ),
+            ));
+        }
         if !(m.sample_period_s.is_finite() && m.sample_period_s >= 0.01) {
             return Err(invalid(
                 "metrics.sample_period_s",

@@ -143,7 +143,7 @@ fn reports_reach_the_peer_and_a_late_base_through_a_robot_crash() {
     // Many artifacts, so that robot 0 finds one soon after it starts.
     std::fs::write(
         dir.path().join("team.toml"),
-        "name = \"artifacts\"\nrobots = 2\n\n[world.artifacts]\ncount = 40\nmin_spacing_m = 2.0\n\n\
+        "name = \"artifacts\"\nrobots = 2\n\n[camera]\nrender_stride = 1\n\n[world.artifacts]\ncount = 40\nmin_spacing_m = 2.0\n\n\
          [robot.artifacts]\nenabled = true\n\n[robot.link.shared.\"artifacts/report\"]\n\
          class = \"plan\"\npolicy = \"store_and_forward\"\n",
     )

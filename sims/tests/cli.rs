@@ -41,6 +41,10 @@ fn malformed_scenarios_get_one_clear_error_and_write_nothing() {
         "robot.grid.pixel_stride",
     );
     rejected(
+        "[robot.artifacts]\nenabled = true\n",
+        "camera.render_stride",
+    );
+    rejected(
         "[metrics]\nog_change_set_resolutions_m = [0.1, 0.0]\n",
         "metrics.og_change_set_resolutions_m[1]",
     );

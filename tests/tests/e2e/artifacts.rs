@@ -15,6 +15,7 @@ fn artifact_reports_cross_the_link_and_every_list_is_the_union() {
     };
     scenario.world.artifacts.count = 8;
     scenario.robot.artifacts.enabled = true;
+    scenario.camera.render_stride = 1; // the detector reads every pixel
     let output = run(&scenario);
     let s = &output.summary;
     let score = s.artifact_score.as_ref().expect("artifacts were placed");

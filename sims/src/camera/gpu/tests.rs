@@ -356,6 +356,25 @@ fn auto_picks_a_hardware_gpu_gpu_takes_any_and_cpu_stays_on_the_cpu() {
                     .render(room.as_ref(), Time::ZERO, &pose, 1)
                     .valid_pixels()
             );
+            // Rendering every second pixel, it reports the pixels the CPU reports.
+            let strided = CameraParams {
+                render_stride: 2,
+                ..forced.clone()
+            };
+            let mut gpu = CameraRenderer::new(room.clone(), strided.clone()).expect("gpu");
+            let img = gpu.render(Time::ZERO, &pose, 1).expect("frame");
+            let width = img.intrinsics.width as usize;
+            for (i, d) in img.depth_m.iter().enumerate() {
+                if !strided.renders(i % width, i / width) {
+                    assert_eq!(*d, 0.0, "pixel {i}");
+                }
+            }
+            assert_eq!(
+                img.valid_pixels(),
+                strided
+                    .render(room.as_ref(), Time::ZERO, &pose, 1)
+                    .valid_pixels()
+            );
         }
         (Err(_), Err(reason)) => assert!(
             matches!(reason, GpuUnavailable::Gpu(GpuError::NoAdapter(_))),
