@@ -29,6 +29,14 @@ fn bench_camera(c: &mut Criterion) {
     c.bench_function("render_160x120_cave", |b| {
         b.iter(|| cam.render(black_box(&cave), Time::ZERO, black_box(&pose), 0));
     });
+    // The default scenario's camera: every second pixel, all the standard robot reads.
+    let strided = CameraParams {
+        render_stride: 2,
+        ..cam.clone()
+    };
+    c.bench_function("render_160x120_cave_stride2", |b| {
+        b.iter(|| strided.render(black_box(&cave), Time::ZERO, black_box(&pose), 0));
+    });
     let scene = cave.gpu_scene();
     match scene.map(|s| GpuCamera::new(&cam, &s)) {
         Some(Ok(mut gpu)) => {
