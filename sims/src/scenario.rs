@@ -159,6 +159,53 @@ impl Scenario {
         Ok(scenario)
     }
 
+    /// Checks that every reader of the camera's frames stays on the pixels it renders
+    /// ([`CameraParams::render_stride`]: a pixel not rendered reads as no return): the
+    /// grid's, mapper's and coverage meter's strides are multiples of it, and it is 1
+    /// when the artifact detector (which reads every pixel) runs. [`Self::validate`]
+    /// and [`crate::team::Team::new`] both apply it.
+    ///
+    /// # Errors
+    ///
+    /// The offending key, its rule and its value.
+    pub fn check_render_stride(&self) -> Result<(), ConfigError> {
+        let render_stride = u64::from(self.camera.render_stride);
+        for (key, stride) in [
+            (
+                "robot.grid.pixel_stride",
+                u64::from(self.robot.grid.pixel_stride),
+            ),
+            (
+                "robot.mapper.pixel_stride",
+                u64::from(self.robot.mapper.pixel_stride),
+            ),
+            (
+                "metrics.coverage_pixel_stride",
+                self.metrics.coverage_pixel_stride as u64,
+            ),
+        ] {
+            if stride % render_stride.max(1) != 0 {
+                return Err(ConfigError::new(
+                    key,
+                    format!(
+                        "must be a multiple of camera.render_stride ({render_stride}): the \
+                         camera renders no other pixel"
+                    ),
+                    stride,
+                ));
+            }
+        }
+        if self.robot.artifacts.enabled && render_stride != 1 {
+            return Err(ConfigError::new(
+                "camera.render_stride",
+                "must be 1 with [robot.artifacts] enabled: the artifact detector reads every \
+                 pixel",
+                render_stride,
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks every value; the error names the key.
     pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
         let invalid = |key: &str, reason: String| ScenarioError::Invalid {
@@ -224,42 +271,8 @@ impl Scenario {
                 "must be ≥ 1, got 0".into(),
             ));
         }
-        // A pixel the camera does not render reads as no return: every reader must
-        // stay on its lattice.
-        let render_stride = u64::from(self.camera.render_stride);
-        for (key, stride) in [
-            (
-                "robot.grid.pixel_stride",
-                u64::from(self.robot.grid.pixel_stride),
-            ),
-            (
-                "robot.mapper.pixel_stride",
-                u64::from(self.robot.mapper.pixel_stride),
-            ),
-            (
-                "metrics.coverage_pixel_stride",
-                m.coverage_pixel_stride as u64,
-            ),
-        ] {
-            if stride % render_stride != 0 {
-                return Err(invalid(
-                    key,
-                    format!(
-                        "must be a multiple of camera.render_stride ({render_stride}): the \
-                         camera renders no other pixel; got {stride}"
-                    ),
-                ));
-            }
-        }
-        if self.robot.artifacts.enabled && render_stride != 1 {
-            return Err(invalid(
-                "camera.render_stride",
-                format!(
-                    "must be 1 with [robot.artifacts] enabled: the artifact detector reads \
-                     every pixel; got {render_stride}"
-                ),
-            ));
-        }
+        self.check_render_stride()
+            .map_err(|e| invalid(&e.key, format!("{}, got {}", e.rule, e.value)))?;
         if !(m.sample_period_s.is_finite() && m.sample_period_s >= 0.01) {
             return Err(invalid(
                 "metrics.sample_period_s",
@@ -317,6 +330,19 @@ mod tests {
             Scenario::default(),
             "scenarios/default.toml must spell out the built-in default"
         );
+    }
+
+    #[test]
+    fn a_team_assembled_in_code_is_held_to_the_render_stride_too() {
+        let mut scenario = Scenario {
+            duration_s: 1.0,
+            ..Scenario::default()
+        };
+        scenario.robot.artifacts.enabled = true;
+        let e = crate::team::Team::new(&scenario).err().expect("refused");
+        assert!(e.to_string().contains("camera.render_stride"), "{e}");
+        scenario.camera.render_stride = 1;
+        assert!(crate::team::Team::new(&scenario).is_ok());
     }
 
     #[test]

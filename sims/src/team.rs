@@ -282,6 +282,7 @@ impl Team {
         scenario: &Scenario,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
+        scenario.check_render_stride()?;
         let (world, artifact_truth) = scenario.world.build_with_artifacts().map_err(|e| {
             AssembleError::Config(troupe_robot::ConfigError::new(
                 "world.mesh.path",
