@@ -253,13 +253,18 @@ fn noise_and_dropout_statistics() {
     assert_ne!(img.depth_m, other.depth_m);
 }
 
-#[test]
-fn image_is_identical_for_any_thread_count() {
-    let cam = CameraParams {
+/// The default camera with a little depth noise and some dropouts.
+fn noisy_camera() -> CameraParams {
+    CameraParams {
         depth_noise_std_m: 0.005,
         dropout_prob: 0.05,
         ..CameraParams::default()
-    };
+    }
+}
+
+#[test]
+fn image_is_identical_for_any_thread_count() {
+    let cam = noisy_camera();
     let (cave, p) = cave_and_pose();
     let render_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -283,11 +288,7 @@ fn image_is_identical_for_any_thread_count() {
 
 #[test]
 fn a_strided_render_gives_the_full_frames_pixels_on_its_lattice_and_nothing_else() {
-    let full = CameraParams {
-        depth_noise_std_m: 0.005,
-        dropout_prob: 0.05,
-        ..CameraParams::default()
-    };
+    let full = noisy_camera();
     let cave = CaveWorld::generate(&CaveParams::default(), 1);
     let counting = Counting {
         inner: &cave,

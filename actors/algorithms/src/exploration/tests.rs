@@ -303,11 +303,22 @@ fn fly(
     (path, guided)
 }
 
+/// A 45 m tunnel along x, closed at x = 40 m, seen from x = 0 on: its frontier lies at
+/// x ≈ 0, 36 m from the dead end.
+fn dead_end_tunnel() -> impl Fn(&Point3<f64>) -> CellState {
+    tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0)
+}
+
+/// Sim time `s` seconds after the start.
+fn second(s: f64) -> Time {
+    Time::from_nanos((s * 1e9) as u64)
+}
+
 #[test]
 fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
     // A 45 m tunnel along x, closed at x = 40 m; everything from x = 0 on has been
     // seen, what lies before x = 0 has not (the frontier, 36 m from the dead end).
-    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let world = dead_end_tunnel();
     let mut guide = Some(Guide::new(GuidanceConfig::default()));
     // Remembered from when the robot passed the tunnel's start.
     if let Some(g) = guide.as_mut() {
@@ -436,7 +447,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
 #[test]
 fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     // The tunnel of the dead-end test: seen from x = 0 on, the frontier at x ≈ 0.
-    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let world = dead_end_tunnel();
     let config = GuidanceConfig::default();
     let limit_s = config.give_up_after_s.expect("on by default");
     let mut guide = Guide::new(config);
@@ -444,7 +455,6 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
     let frontiers = guide.memory().frontiers().count();
     assert!(frontiers > 0);
-    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
     // Far away, time does not count.
     let far = Point3::new(10.0, 0.0, 0.0);
     for s in 0..30 {
@@ -486,14 +496,13 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
 
 #[test]
 fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
-    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let world = dead_end_tunnel();
     let config = GuidanceConfig::default();
     let retry_s = config.retry_given_up_after_s.expect("on by default");
     let mut guide = Guide::new(config);
     let (near, far) = (Point3::new(2.0, 0.0, 0.0), Point3::new(10.0, 0.0, 0.0));
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
     let frontiers = guide.memory().frontiers().count();
-    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
     // Hovering beside it: given up (the rule of the test above) at about 4 s.
     for s in 0..10 {
         guide.field((RobotId(0), &near), second(f64::from(s)));
@@ -564,13 +573,12 @@ fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_neare
 #[test]
 fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
     // The dead-end tunnel seen from x = 0 on: the frontier at x ≈ 0.
-    let world = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| p.x >= 0.0);
+    let world = dead_end_tunnel();
     let config = GuidanceConfig {
         give_up_after_s: None,
         give_up_without_progress_s: Some(6.0),
         ..GuidanceConfig::default()
     };
-    let second = |s: f64| Time::from_nanos((s * 1e9) as u64);
     let fresh = || {
         let mut guide = Guide::new(config);
         guide.observe_snapshot(
