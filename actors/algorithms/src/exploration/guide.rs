@@ -27,8 +27,6 @@ pub struct Guide {
     /// and when each was given up.
     given_up: BTreeMap<CellKey, Time>,
     last_field: Option<Time>,
-    /// Where the robot was at the last [`Self::field`] (its trail is marked from there).
-    last_body_m: Option<Point3<f64>>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
     /// Progress towards the goal being tracked: its centre, the least route distance
@@ -59,7 +57,6 @@ impl Guide {
             watched_s: BTreeMap::new(),
             given_up: BTreeMap::new(),
             last_field: None,
-            last_body_m: None,
             last_target: None,
             progress: None,
         }
@@ -140,11 +137,7 @@ impl Guide {
     /// towards the frontiers near `robot_m` (giving up those watched too long) and
     /// builds the field for robot `own` there at `now`, with the peers' claims.
     pub fn field(&mut self, (own, robot_m): (RobotId, &Point3<f64>), now: Time) -> GuidanceField {
-        match self.last_body_m {
-            Some(last_m) => self.memory.mark_path(&last_m, robot_m),
-            None => self.memory.mark_body(robot_m),
-        };
-        self.last_body_m = Some(*robot_m);
+        self.memory.mark_body(robot_m);
         self.watch(robot_m, now);
         let field = GuidanceField::build(
             &self.memory,

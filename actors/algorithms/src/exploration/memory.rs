@@ -15,11 +15,6 @@ use crate::keyframe::Keyframe;
 /// Integer coordinates of a memory cell: `floor(p / cell_m)` per axis.
 pub type CellKey = [i32; 3];
 
-/// The longest step between two marks of a body's trail taken as flown
-/// ([`FrontierMemory::mark_path`]), metres: a robot flies at most a few metres between
-/// two planning rounds.
-pub const MAX_TRAIL_STEP_M: f64 = 4.0;
-
 /// What the memory holds about one cell.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct CellRecord {
@@ -37,12 +32,6 @@ pub struct CellRecord {
     /// the frames that first filled it, and its gaps would otherwise come back as
     /// frontiers all along a flown tunnel.
     pub settled: bool,
-    /// A robot's centre was in it (its own odometry or a peer's plan): it is
-    /// passable whatever a later window shows. A window rebuilt from sparse keyframe
-    /// samples can show less clearance than there was, and without this the cells a
-    /// robot flew through could stop being passable behind it, cutting it off from
-    /// every remembered frontier (traced in the default scenario, seed 14).
-    pub visited: bool,
 }
 
 /// What one update changed.
@@ -262,11 +251,10 @@ impl FrontierMemory {
                     let old = self.record(key);
                     let settled = old.settled || (t.free > 0 && t.frontier == 0);
                     let record = CellRecord {
-                        seen: t.known > 0 || settled || old.visited,
-                        passable: t.max_clearance_m >= margin_m || old.visited,
+                        seen: t.known > 0 || settled,
+                        passable: t.max_clearance_m >= margin_m,
                         frontier: !settled && t.frontier as usize >= min_frontier_cells,
                         settled,
-                        visited: old.visited,
                     };
                     if record == CellRecord::default() {
                         // Nothing known: forget it (a frontier here is retired).
@@ -370,44 +358,21 @@ impl FrontierMemory {
         }
     }
 
-    /// Marks the cell of a body position [`visited`](CellRecord::visited): seen and
-    /// passable for good (a robot is there: own or a peer's odometry).
+    /// Marks the cell of a body position passable and seen (a robot is there: own or a
+    /// peer's odometry).
     pub fn mark_body(&mut self, p: &Point3<f64>) -> MemoryUpdate {
         let mut update = MemoryUpdate::default();
-        self.mark_visited(p, &mut update);
-        update
-    }
-
-    /// Marks every cell on the straight path a body flew from `from` to `to` visited
-    /// (sampled every quarter cell), so that a robot's trail stays one connected run of
-    /// passable cells however far it moves between two marks. A jump longer than
-    /// [`MAX_TRAIL_STEP_M`] (a relocalisation, a reset pose) marks only `to`: the path
-    /// between is not known to be free.
-    pub fn mark_path(&mut self, from: &Point3<f64>, to: &Point3<f64>) -> MemoryUpdate {
-        let mut update = MemoryUpdate::default();
-        let length_m = (to - from).norm();
-        if length_m.is_finite() && length_m <= MAX_TRAIL_STEP_M {
-            let steps = (4.0 * length_m / self.cell_m).ceil() as usize;
-            for i in 0..steps {
-                let p = from + (to - from) * (i as f64 / steps as f64);
-                self.mark_visited(&p, &mut update);
+        if let Some(key) = self.key_of(p) {
+            let old = self.record(key);
+            let record = CellRecord {
+                seen: true,
+                passable: true,
+                ..old
+            };
+            if record != old {
+                self.write(key, record, &mut update);
             }
         }
-        self.mark_visited(to, &mut update);
         update
-    }
-
-    fn mark_visited(&mut self, p: &Point3<f64>, update: &mut MemoryUpdate) {
-        let Some(key) = self.key_of(p) else { return };
-        let old = self.record(key);
-        let record = CellRecord {
-            seen: true,
-            passable: true,
-            visited: true,
-            ..old
-        };
-        if record != old {
-            self.write(key, record, update);
-        }
     }
 }

@@ -347,41 +347,6 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
 }
 
 #[test]
-fn the_cells_a_robot_flew_through_stay_passable_when_a_rebuilt_window_shows_them_unknown() {
-    // The robot flew down the dead-end tunnel from x = 2 m to the end, 2.5 m between
-    // planning rounds (more than a memory cell), remembering the frontier at x ≈ 0.
-    let world = dead_end_tunnel();
-    let mut guide = Guide::new(GuidanceConfig::default());
-    let end = Point3::new(34.5, 0.0, 0.0);
-    for (round, x) in (0..14).map(|i| (i, 2.0 + 2.5 * f64::from(i))) {
-        let here = Point3::new(x, 0.0, 0.0);
-        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
-        guide.field((RobotId(0), &here), second(f64::from(round)));
-    }
-    assert!(
-        guide
-            .field((RobotId(0), &end), second(14.0))
-            .distance_m(&end)
-            .is_finite()
-    );
-    // A window rebuilt from sparse keyframe samples knows nothing of x = 14-18 m: no
-    // clearance there, so no cell of that stretch would be passable by the window alone.
-    let sparse = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |p| {
-        p.x >= 0.0 && !(14.0..18.0).contains(&p.x)
-    });
-    guide.observe_snapshot(
-        &window(Point3::new(20.0, 0.0, 0.0), [20.0, 20.0, 4.0], sparse),
-        0.67,
-    );
-    assert!(guide.memory().record([15, 0, 0]).visited);
-    // Its trail still joins the robot at the end to the frontier it remembers.
-    let field = guide.field((RobotId(0), &end), second(15.0));
-    let (route_m, target) = field.distance_at(&end);
-    assert!(route_m.is_finite() && route_m > 30.0, "{route_m}");
-    assert!(target.is_some_and(|k| k[0] <= 0), "{target:?}");
-}
-
-#[test]
 fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     // A stem along x from x = 0 to the fork at x = 10, two branches along ±y; the left
     // one was seen up to y = 6.5 m, the right one up to y = −7.5 m: its frontier is the
