@@ -309,6 +309,17 @@ impl<S: ActionSelection> PlannerActor<S> {
             target = ?field.as_ref().and_then(|f| f.target_of(&here)).zip(self.guide.as_ref()).map(|(k, g)| g.memory().centre(k).coords.as_slice().to_vec()),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
         );
+        for c in &candidates {
+            tracing::trace!(
+                robot = ctx.robot_name(),
+                time = %now,
+                action = ?c.primitive.action(),
+                information = c.information,
+                frontier_gain_m = c.frontier_gain_m,
+                reward = c.reward,
+                "candidate"
+            );
+        }
         if self.deferred {
             ctx.publish(
                 &PLANNING_REPORT,
