@@ -35,6 +35,11 @@ use troupe_core::{ConfigError, Time};
 use crate::world::World;
 
 /// Camera configuration; angles in degrees, lengths in metres.
+///
+/// A scenario's `[camera]` table changes only the keys it names: the others are those
+/// of [`CameraParams::standard`], the camera of the default scenario (depth noise,
+/// dropouts and render stride included). [`CameraParams::default`] is the same camera
+/// without noise or dropouts, rendering every pixel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CameraParams {
@@ -49,8 +54,10 @@ pub struct CameraParams {
     /// Largest z-depth that gives a return.
     pub range_m: f64,
     /// Standard deviation of the Gaussian noise added to each depth.
+    #[serde(default = "standard_depth_noise_std_m")]
     pub depth_noise_std_m: f64,
     /// Probability that a pixel returns nothing, independently per pixel.
+    #[serde(default = "standard_dropout_prob")]
     pub dropout_prob: f64,
     /// Where frames are rendered: `"cpu"`, `"gpu"` or `"auto"` (the GPU when a Vulkan
     /// adapter is found and the world has a GPU description, else the CPU).
@@ -59,7 +66,20 @@ pub struct CameraParams {
     /// no return. A robot whose grid and mapper read every second pixel
     /// (`pixel_stride = 2`) gets the same frames from 2 as from 1, a quarter of the
     /// rays later. 1 (the default) renders every pixel.
+    #[serde(default = "standard_render_stride")]
     pub render_stride: u32,
+}
+
+fn standard_depth_noise_std_m() -> f64 {
+    CameraParams::standard().depth_noise_std_m
+}
+
+fn standard_dropout_prob() -> f64 {
+    CameraParams::standard().dropout_prob
+}
+
+fn standard_render_stride() -> u32 {
+    CameraParams::standard().render_stride
 }
 
 impl Default for CameraParams {
@@ -79,6 +99,20 @@ impl Default for CameraParams {
 }
 
 impl CameraParams {
+    /// The standard robot's camera, as the default scenario flies it: D435-like
+    /// (thesis §4.2) with 1 cm depth noise and 1 % dropouts, rendering every second
+    /// pixel in u and v — all that the standard robot's grid, mapper and coverage meter
+    /// read.
+    #[must_use]
+    pub fn standard() -> Self {
+        Self {
+            depth_noise_std_m: 0.01,
+            dropout_prob: 0.01,
+            render_stride: 2,
+            ..Self::default()
+        }
+    }
+
     /// Checks every field.
     ///
     /// # Errors

@@ -100,12 +100,7 @@ impl Default for Scenario {
             duration_s: 120.0,
             robots: 2,
             world: WorldConfig::default(),
-            camera: CameraParams {
-                depth_noise_std_m: 0.01,
-                dropout_prob: 0.01,
-                render_stride: 2,
-                ..CameraParams::default()
-            },
+            camera: CameraParams::standard(),
             robot: RobotConfig::default(),
             vehicle: VehicleConfig::default(),
             network: SimNetConfig::default(),
@@ -330,6 +325,24 @@ mod tests {
             Scenario::default(),
             "scenarios/default.toml must spell out the built-in default"
         );
+    }
+
+    #[test]
+    fn a_partial_camera_table_changes_only_the_keys_it_names() {
+        let scenario = parse("[camera]\nbackend = \"cpu\"\nwidth = 80\n").unwrap();
+        assert_eq!(
+            scenario.camera,
+            CameraParams {
+                backend: CameraBackend::Cpu,
+                width: 80,
+                ..CameraParams::standard()
+            }
+        );
+        assert_eq!(
+            parse("[camera]\n").unwrap().camera,
+            Scenario::default().camera
+        );
+        assert_ne!(CameraParams::standard(), CameraParams::default());
     }
 
     #[test]
