@@ -65,7 +65,9 @@ pub struct CameraParams {
     /// Render only every n-th pixel in u and v, from pixel `(0, 0)`; the others report
     /// no return. A robot whose grid and mapper read every second pixel
     /// (`pixel_stride = 2`) gets the same frames from 2 as from 1, a quarter of the
-    /// rays later. 1 (the default) renders every pixel.
+    /// rays later. 1 renders every pixel ([`CameraParams::default`]); a scenario's
+    /// camera renders every second one unless its table says otherwise
+    /// ([`CameraParams::standard`]).
     #[serde(default = "standard_render_stride")]
     pub render_stride: u32,
 }
