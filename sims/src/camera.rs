@@ -41,7 +41,7 @@ use crate::world::World;
 /// dropouts and render stride included). [`CameraParams::default`] is the same camera
 /// without noise or dropouts, rendering every pixel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(deny_unknown_fields, default = "CameraParams::standard")]
 pub struct CameraParams {
     /// Image width in pixels.
     pub width: u32,
@@ -54,10 +54,8 @@ pub struct CameraParams {
     /// Largest z-depth that gives a return.
     pub range_m: f64,
     /// Standard deviation of the Gaussian noise added to each depth.
-    #[serde(default = "standard_depth_noise_std_m")]
     pub depth_noise_std_m: f64,
     /// Probability that a pixel returns nothing, independently per pixel.
-    #[serde(default = "standard_dropout_prob")]
     pub dropout_prob: f64,
     /// Where frames are rendered: `"cpu"`, `"gpu"` or `"auto"` (the GPU when a Vulkan
     /// adapter is found and the world has a GPU description, else the CPU).
@@ -68,20 +66,7 @@ pub struct CameraParams {
     /// rays later. 1 renders every pixel ([`CameraParams::default`]); a scenario's
     /// camera renders every second one unless its table says otherwise
     /// ([`CameraParams::standard`]).
-    #[serde(default = "standard_render_stride")]
     pub render_stride: u32,
-}
-
-fn standard_depth_noise_std_m() -> f64 {
-    CameraParams::standard().depth_noise_std_m
-}
-
-fn standard_dropout_prob() -> f64 {
-    CameraParams::standard().dropout_prob
-}
-
-fn standard_render_stride() -> u32 {
-    CameraParams::standard().render_stride
 }
 
 impl Default for CameraParams {
