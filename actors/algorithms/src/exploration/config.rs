@@ -78,6 +78,11 @@ pub struct GuidanceConfig {
     /// How close the robot must be for time to count towards giving a frontier up,
     /// metres (about the camera's useful range).
     pub give_up_radius_m: f64,
+    /// Send the peers what changed in this robot's memory every planning round, and
+    /// take theirs where this memory knows nothing (their frontiers, passable and
+    /// settled cells beyond this robot's window). Needs a world frame common to the
+    /// team (no `[[link.peer_frames]]`). Off by default (docs/exploration.md).
+    pub share_memory: bool,
 }
 
 impl Default for GuidanceConfig {
@@ -100,6 +105,7 @@ impl Default for GuidanceConfig {
             give_up_without_progress_s: None,
             give_up_radius_m: 3.0,
             retry_given_up_after_s: Some(100.0),
+            share_memory: false,
         }
     }
 }

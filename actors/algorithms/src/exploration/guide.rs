@@ -104,6 +104,20 @@ impl Guide {
         update
     }
 
+    /// What this robot's own observations changed in its memory since the last call
+    /// ([`FrontierMemory::take_changes`]), for its peers.
+    pub fn take_memory_changes(&mut self) -> Vec<(CellKey, CellRecord)> {
+        self.memory.take_changes()
+    }
+
+    /// Folds in the memory cells a peer sent ([`FrontierMemory::merge_peer_cells`]).
+    pub fn observe_peer_memory(
+        &mut self,
+        cells: impl IntoIterator<Item = (CellKey, CellRecord)>,
+    ) -> MemoryUpdate {
+        self.memory.merge_peer_cells(cells)
+    }
+
     /// Records where a peer is and where it is heading (its plan's first and last
     /// knots); its position is passable.
     pub fn observe_peer_plan(&mut self, peer: &PeerPlan) {

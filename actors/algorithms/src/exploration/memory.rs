@@ -3,7 +3,7 @@
 //! are (paper V-B's frontiers of the explored map; thesis §6.1.4 for sampling a GMM at
 //! any resolution).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use nalgebra::{Point3, Vector3};
 use rand::SeedableRng;
@@ -34,6 +34,29 @@ pub struct CellRecord {
     pub settled: bool,
 }
 
+impl CellRecord {
+    /// The record as four bits (seen 1, passable 2, frontier 4, settled 8), as peers
+    /// exchange it ([`FrontierMemory::take_changes`]).
+    #[must_use]
+    pub fn to_bits(self) -> u8 {
+        u8::from(self.seen)
+            | u8::from(self.passable) << 1
+            | u8::from(self.frontier) << 2
+            | u8::from(self.settled) << 3
+    }
+
+    /// The record of [`Self::to_bits`]; `None` for bits above the four.
+    #[must_use]
+    pub fn from_bits(bits: u8) -> Option<Self> {
+        (bits < 16).then_some(CellRecord {
+            seen: bits & 1 != 0,
+            passable: bits & 2 != 0,
+            frontier: bits & 4 != 0,
+            settled: bits & 8 != 0,
+        })
+    }
+}
+
 /// What one update changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MemoryUpdate {
@@ -59,6 +82,9 @@ pub struct FrontierMemory {
     max_cells: usize,
     cells: BTreeMap<CellKey, CellRecord>,
     dropped: u64,
+    /// Cells this robot's own observations wrote since [`Self::take_changes`] last ran
+    /// (bounded by the memory: at most `max_cells` keys).
+    changed: BTreeSet<CellKey>,
 }
 
 /// Per-cell tallies of the fine cells of a window.
@@ -83,6 +109,7 @@ impl FrontierMemory {
             max_cells: max_cells.max(1),
             cells: BTreeMap::new(),
             dropped: 0,
+            changed: BTreeSet::new(),
         }
     }
 
@@ -157,6 +184,9 @@ impl FrontierMemory {
             update.retired += 1;
         }
         self.cells.insert(key, record);
+        if old != Some(record) {
+            self.changed.insert(key);
+        }
         update.cells += 1;
         true
     }
@@ -356,6 +386,50 @@ impl FrontierMemory {
                 self.write(key, seen, update);
             }
         }
+    }
+
+    /// The cells whose record this robot's own observations changed since the last
+    /// call, with their records now, in key order (cells forgotten since are left out):
+    /// what a robot tells its peers of its memory each round. Cells merged from peers
+    /// ([`Self::merge_peer_cells`]) are not among them, so nothing is echoed back.
+    pub fn take_changes(&mut self) -> Vec<(CellKey, CellRecord)> {
+        let changed = std::mem::take(&mut self.changed);
+        changed
+            .into_iter()
+            .filter_map(|k| self.cells.get(&k).map(|r| (k, *r)))
+            .collect()
+    }
+
+    /// Folds in cells a peer's memory holds (its [`Self::take_changes`], in the same
+    /// world frame and cell size): a cell this memory knows nothing of takes the peer's
+    /// record — its frontiers, passable and settled cells beyond this robot's window —
+    /// and a cell the peer found passable becomes passable here (the route to the
+    /// peer's frontiers goes through it). What this robot saw itself otherwise stands.
+    /// New cells beyond `max_cells` are dropped and counted.
+    pub fn merge_peer_cells(
+        &mut self,
+        cells: impl IntoIterator<Item = (CellKey, CellRecord)>,
+    ) -> MemoryUpdate {
+        let mut update = MemoryUpdate::default();
+        for (key, peer) in cells {
+            let old = self.cells.get(&key).copied();
+            let record = match old {
+                None if peer != CellRecord::default() => peer,
+                Some(old) if peer.passable && !old.passable => CellRecord {
+                    passable: true,
+                    ..old
+                },
+                _ => continue,
+            };
+            if old.is_none() && self.cells.len() >= self.max_cells {
+                self.dropped += 1;
+                update.dropped += 1;
+                continue;
+            }
+            self.cells.insert(key, record);
+            update.cells += 1;
+        }
+        update
     }
 
     /// Marks the cell of a body position passable and seen (a robot is there: own or a

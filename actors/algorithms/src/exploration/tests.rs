@@ -148,6 +148,57 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
 }
 
 #[test]
+fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed() {
+    // The peer has seen the tunnel up to x = 6 m; this robot has seen nothing yet.
+    let snapshot = tunnel_seen_to_6_m();
+    let mut peer = Guide::new(GuidanceConfig::default());
+    peer.observe_snapshot(&snapshot, 0.67);
+    let changes = peer.take_memory_changes();
+    assert_eq!(changes.len(), peer.memory().cell_count());
+    assert!(peer.take_memory_changes().is_empty(), "each change once");
+    // The same view again changes no record, so there is nothing to send.
+    peer.observe_snapshot(&snapshot, 0.67);
+    assert!(peer.take_memory_changes().is_empty());
+    let mut own = Guide::new(GuidanceConfig::default());
+    let here = Point3::new(-1.5, 0.0, 0.0);
+    assert!(
+        !own.field((RobotId(0), &here), Time::ZERO)
+            .distance_m(&here)
+            .is_finite()
+    );
+    let _ = own.take_memory_changes();
+    let update = own.observe_peer_memory(changes.iter().copied());
+    // All but the one cell this robot already held (its own, marked by the field).
+    assert_eq!(update.cells, changes.len() - 1);
+    let frontiers: Vec<CellKey> = own.memory().frontiers().collect();
+    assert_eq!(frontiers, peer.memory().frontiers().collect::<Vec<_>>());
+    // The peer's passable cells lead this robot to them.
+    let field = own.field((RobotId(0), &here), second(1.0));
+    let route_m = field.distance_m(&here);
+    assert!(route_m.is_finite() && route_m > 5.0, "{route_m}");
+    // What came from the peer is not sent back: only this robot's own marks (its body).
+    let echoed = own.take_memory_changes();
+    assert!(echoed.len() <= 1, "{echoed:?}");
+    // Its own view stands: a cell it settled stays settled whatever a peer says.
+    let key = frontiers[0];
+    let mut other = Guide::new(GuidanceConfig::default());
+    let settled = CellRecord {
+        seen: true,
+        passable: true,
+        frontier: false,
+        settled: true,
+    };
+    other.observe_peer_memory([(key, settled)]);
+    let frontier = CellRecord {
+        frontier: true,
+        settled: false,
+        ..settled
+    };
+    assert_eq!(other.observe_peer_memory([(key, frontier)]).cells, 0);
+    assert_eq!(other.memory().record(key), settled);
+}
+
+#[test]
 fn explored_space_stays_explored_when_a_rebuilt_window_shows_gaps_in_it() {
     let tunnel = || vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])];
     // First look: the tunnel known up to x = 8 m.

@@ -24,10 +24,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::committed::{Committed, replanning_root};
+use super::memory_share::{MEMORY_CELLS, MemoryCells};
 use super::primitives::FlatState;
 use super::problem::PlanningProblem;
 use super::round::{Candidate, RoundConfig};
 use crate::grid::changeset::cell_centres;
+use crate::link::Peer;
 use crate::msgs::{
     CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
     PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
@@ -174,6 +176,10 @@ pub struct PlannerActor<S> {
     deferred: bool,
     round: u64,
     guide: Option<Guide>,
+    /// Where the link publishes the peers' memory cells.
+    peer_memory: Topic<Peer<MemoryCells>>,
+    /// Peer memory messages rejected (another cell edge, malformed cells).
+    rejected_memory_messages: u64,
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
@@ -195,6 +201,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             deferred: false,
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
+            peer_memory: MEMORY_CELLS.peer_topic(),
+            rejected_memory_messages: 0,
         }
     }
 
@@ -274,6 +282,15 @@ impl<S: ActionSelection> PlannerActor<S> {
         let here = nalgebra::Point3::from(root.position_m());
         let own = ctx.robot();
         let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
+        if self.config.guidance.share_memory
+            && let Some(guide) = self.guide.as_mut()
+        {
+            let changes = guide.take_memory_changes();
+            if !changes.is_empty() {
+                let cell_m = guide.memory().cell_m();
+                ctx.publish(&MEMORY_CELLS.topic(), MemoryCells::new(cell_m, &changes));
+            }
+        }
         if let Some(guide) = &self.guide {
             let memory = guide.memory();
             ctx.publish(
@@ -386,6 +403,10 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         if self.deferred {
             ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         }
+        if self.guide.is_some() && self.config.guidance.share_memory {
+            MEMORY_CELLS.share(ctx);
+            ctx.subscribe(&self.peer_memory, QueuePolicy::fifo(32));
+        }
         if self.guide.is_some() {
             ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
             ctx.subscribe(&PEER_PLAN, QueuePolicy::fifo(16));
@@ -430,6 +451,19 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                             snapshot.resolution_m(),
                             peer.frame.as_ref(),
                         ));
+                    }
+                } else if let Some(peer) = m.get(&self.peer_memory) {
+                    if let Some(guide) = self.guide.as_mut() {
+                        match peer.message.decode(guide.memory().cell_m()) {
+                            Ok(cells) => {
+                                guide.observe_peer_memory(cells);
+                            }
+                            Err(e) => {
+                                self.rejected_memory_messages += 1;
+                                tracing::warn!(robot = ctx.robot_name(), peer = %peer.robot, error = %e,
+                                    rejected = self.rejected_memory_messages, "peer memory cells rejected");
+                            }
+                        }
                     }
                 } else if let Some(plan) = m.get(&PLAN)
                     && let Some(reference) = &plan.reference

@@ -7,12 +7,14 @@
 //!   [`ScriptedTeleop`] publishes a timed command script in place of a joystick.
 
 mod actor;
+mod memory_share;
 mod teleop_actor;
 
 pub use actor::{
     ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
     REMEMBERED_FRONTIERS, RememberedFrontiers,
 };
+pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError};
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
 };

@@ -1,0 +1,146 @@
+//! The frontier memory shared with peers (`[robot.planner.guidance] share_memory`): each
+//! planning round a robot sends the cells its own observations changed in its memory, on
+//! a shared topic of the link, and folds in what its peers sent where its memory knows
+//! nothing — their remembered frontiers beyond its window, and the passable cells that
+//! lead there (issue 18's team frontier memory; docs/exploration.md).
+
+use serde::{Deserialize, Serialize};
+use troupe_algorithms::exploration::{CellKey, CellRecord};
+use troupe_runtime::Message;
+
+use crate::link::{SharePolicy, SharedTopic};
+
+/// Most cells one message may carry; a longer one is rejected whole.
+pub const MAX_SHARED_CELLS: usize = 65_536;
+
+/// Cell coordinates beyond this (in cells, per axis) are rejected.
+const MAX_CELL_INDEX: i32 = 100_000_000;
+
+/// Memory cells a robot's own observations changed since its last message.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MemoryCells {
+    /// Edge of the sender's memory cells, metres (team configuration: a receiver with
+    /// another edge rejects the message).
+    pub cell_m: f64,
+    /// Each cell's key (`floor(p / cell_m)` per axis, sender's world frame) and record
+    /// ([`CellRecord::to_bits`]).
+    pub cells: Vec<(CellKey, u8)>,
+}
+impl Message for MemoryCells {
+    fn payload_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + 13 * self.cells.len()
+    }
+}
+
+/// Where planners share their memory changes: store-and-forward at plan priority, since
+/// a lost message is a change the peer never hears of.
+pub const MEMORY_CELLS: SharedTopic<MemoryCells> = SharedTopic::new(
+    "exploration/memory",
+    1,
+    SharePolicy::store_and_forward_in_plan_class(),
+);
+
+/// Why a peer's memory cells were rejected.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum MemoryCellsError {
+    /// Another cell edge than ours.
+    #[error("cell edge {peer_m} m, ours {own_m} m")]
+    CellSize {
+        /// The peer's edge, metres.
+        peer_m: f64,
+        /// Ours, metres.
+        own_m: f64,
+    },
+    /// More than [`MAX_SHARED_CELLS`] cells.
+    #[error("{0} cells, more than {MAX_SHARED_CELLS}")]
+    TooMany(usize),
+    /// A record with bits beyond the four, or a key out of range.
+    #[error("cell {0} is malformed")]
+    Malformed(usize),
+}
+
+impl MemoryCells {
+    /// The message of `changes`.
+    #[must_use]
+    pub fn new(cell_m: f64, changes: &[(CellKey, CellRecord)]) -> Self {
+        MemoryCells {
+            cell_m,
+            cells: changes.iter().map(|(k, r)| (*k, r.to_bits())).collect(),
+        }
+    }
+
+    /// The cells, checked against a memory of `own_cell_m` cells: all or nothing.
+    pub fn decode(&self, own_cell_m: f64) -> Result<Vec<(CellKey, CellRecord)>, MemoryCellsError> {
+        if !(self.cell_m.is_finite() && (self.cell_m - own_cell_m).abs() <= 1e-9 * own_cell_m) {
+            return Err(MemoryCellsError::CellSize {
+                peer_m: self.cell_m,
+                own_m: own_cell_m,
+            });
+        }
+        if self.cells.len() > MAX_SHARED_CELLS {
+            return Err(MemoryCellsError::TooMany(self.cells.len()));
+        }
+        self.cells
+            .iter()
+            .enumerate()
+            .map(|(i, (key, bits))| {
+                let in_range = key.iter().all(|v| v.abs() <= MAX_CELL_INDEX);
+                match CellRecord::from_bits(*bits) {
+                    Some(record) if in_range => Ok((*key, record)),
+                    _ => Err(MemoryCellsError::Malformed(i)),
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(frontier: bool) -> CellRecord {
+        CellRecord {
+            seen: true,
+            passable: !frontier,
+            frontier,
+            settled: false,
+        }
+    }
+
+    #[test]
+    fn cells_round_trip_through_postcard() {
+        let changes = vec![([1, -2, 3], record(true)), ([-7, 0, 1], record(false))];
+        let message = MemoryCells::new(1.0, &changes);
+        let bytes = postcard::to_allocvec(&message).unwrap();
+        let back: MemoryCells = postcard::from_bytes(&bytes).unwrap();
+        assert_eq!(back.decode(1.0).unwrap(), changes);
+    }
+
+    #[test]
+    fn hostile_cells_are_rejected_whole() {
+        let good = MemoryCells::new(1.0, &[([0, 0, 0], record(true))]);
+        assert!(matches!(
+            good.decode(0.5),
+            Err(MemoryCellsError::CellSize { .. })
+        ));
+        let mut bits = good.clone();
+        bits.cells.push(([1, 1, 1], 16));
+        assert_eq!(bits.decode(1.0), Err(MemoryCellsError::Malformed(1)));
+        let mut far = good.clone();
+        far.cells.push(([i32::MAX, 0, 0], 1));
+        assert_eq!(far.decode(1.0), Err(MemoryCellsError::Malformed(1)));
+        let nan = MemoryCells {
+            cell_m: f64::NAN,
+            ..good.clone()
+        };
+        assert!(nan.decode(1.0).is_err());
+        let many = MemoryCells {
+            cell_m: 1.0,
+            cells: vec![([0, 0, 0], 1); MAX_SHARED_CELLS + 1],
+        };
+        assert_eq!(
+            many.decode(1.0),
+            Err(MemoryCellsError::TooMany(MAX_SHARED_CELLS + 1))
+        );
+    }
+}
