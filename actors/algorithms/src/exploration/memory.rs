@@ -82,8 +82,8 @@ pub struct FrontierMemory {
     max_cells: usize,
     cells: BTreeMap<CellKey, CellRecord>,
     dropped: u64,
-    /// Cells this robot's own observations wrote since [`Self::take_changes`] last ran
-    /// (bounded by the memory: at most `max_cells` keys).
+    /// Cells whose record this robot's own observations changed since
+    /// [`Self::take_changes`] last ran (bounded by the memory: at most `max_cells` keys).
     changed: BTreeSet<CellKey>,
 }
 

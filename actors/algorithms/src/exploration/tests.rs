@@ -179,7 +179,7 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     // What came from the peer is not sent back: only this robot's own marks (its body).
     let echoed = own.take_memory_changes();
     assert!(echoed.len() <= 1, "{echoed:?}");
-    // Its own view stands: a cell it settled stays settled whatever a peer says.
+    // A cell the memory holds keeps its record whatever a later message says.
     let key = frontiers[0];
     let mut other = Guide::new(GuidanceConfig::default());
     let settled = CellRecord {
