@@ -51,7 +51,11 @@ impl Guide {
     pub fn new(config: GuidanceConfig) -> Self {
         Guide {
             config,
-            memory: FrontierMemory::new(config.cell_m, config.max_cells),
+            memory: if config.share_memory {
+                FrontierMemory::new(config.cell_m, config.max_cells).tracking_changes()
+            } else {
+                FrontierMemory::new(config.cell_m, config.max_cells)
+            },
             peers: BTreeMap::new(),
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),

@@ -83,8 +83,10 @@ pub struct FrontierMemory {
     cells: BTreeMap<CellKey, CellRecord>,
     dropped: u64,
     /// Cells whose record this robot's own observations changed since
-    /// [`Self::take_changes`] last ran (bounded by the memory: at most `max_cells` keys).
+    /// [`Self::take_changes`] last ran (bounded by the memory: at most `max_cells` keys);
+    /// kept only when [`Self::tracking_changes`].
     changed: BTreeSet<CellKey>,
+    track_changes: bool,
 }
 
 /// Per-cell tallies of the fine cells of a window.
@@ -110,7 +112,16 @@ impl FrontierMemory {
             cells: BTreeMap::new(),
             dropped: 0,
             changed: BTreeSet::new(),
+            track_changes: false,
         }
+    }
+
+    /// The same memory keeping the set of cells its own observations change, for
+    /// [`Self::take_changes`] (memory sharing between robots).
+    #[must_use]
+    pub fn tracking_changes(mut self) -> Self {
+        self.track_changes = true;
+        self
     }
 
     /// Edge of a cell, metres.
@@ -184,7 +195,7 @@ impl FrontierMemory {
             update.retired += 1;
         }
         self.cells.insert(key, record);
-        if old != Some(record) {
+        if self.track_changes && old != Some(record) {
             self.changed.insert(key);
         }
         update.cells += 1;
@@ -390,7 +401,8 @@ impl FrontierMemory {
 
     /// The cells whose record this robot's own observations changed since the last
     /// call, with their records now, in key order (cells forgotten since are left out):
-    /// what a robot tells its peers of its memory each round. Cells merged from peers
+    /// what a robot tells its peers of its memory each round. Empty unless the memory
+    /// is [`tracking_changes`](Self::tracking_changes). Cells merged from peers
     /// ([`Self::merge_peer_cells`]) are not among them, so nothing is echoed back.
     pub fn take_changes(&mut self) -> Vec<(CellKey, CellRecord)> {
         let changed = std::mem::take(&mut self.changed);

@@ -151,7 +151,15 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
 fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed() {
     // The peer has seen the tunnel up to x = 6 m; this robot has seen nothing yet.
     let snapshot = tunnel_seen_to_6_m();
-    let mut peer = Guide::new(GuidanceConfig::default());
+    let sharing = GuidanceConfig {
+        share_memory: true,
+        ..GuidanceConfig::default()
+    };
+    // Without sharing no change is kept.
+    let mut alone = Guide::new(GuidanceConfig::default());
+    alone.observe_snapshot(&snapshot, 0.67);
+    assert!(alone.take_memory_changes().is_empty());
+    let mut peer = Guide::new(sharing);
     peer.observe_snapshot(&snapshot, 0.67);
     let changes = peer.take_memory_changes();
     assert_eq!(changes.len(), peer.memory().cell_count());
@@ -159,7 +167,7 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     // The same view again changes no record, so there is nothing to send.
     peer.observe_snapshot(&snapshot, 0.67);
     assert!(peer.take_memory_changes().is_empty());
-    let mut own = Guide::new(GuidanceConfig::default());
+    let mut own = Guide::new(sharing);
     let here = Point3::new(-1.5, 0.0, 0.0);
     assert!(
         !own.field((RobotId(0), &here), Time::ZERO)
