@@ -49,12 +49,13 @@ impl Guide {
     /// An empty guide.
     #[must_use]
     pub fn new(config: GuidanceConfig) -> Self {
+        let memory = FrontierMemory::new(config.cell_m, config.max_cells);
         Guide {
             config,
             memory: if config.share_memory {
-                FrontierMemory::new(config.cell_m, config.max_cells).tracking_changes()
+                memory.tracking_changes()
             } else {
-                FrontierMemory::new(config.cell_m, config.max_cells)
+                memory
             },
             peers: BTreeMap::new(),
             retired_by_peers: 0,
