@@ -36,7 +36,7 @@ use crate::msgs::{
 };
 use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
-    Actor, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
+    Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
 };
 
 /// Chooses among scored candidates. Implementations live in `troupe-policies`.
@@ -178,8 +178,6 @@ pub struct PlannerActor<S> {
     guide: Option<Guide>,
     /// Where the link publishes the peers' memory cells.
     peer_memory: Topic<Peer<MemoryCells>>,
-    /// Peer memory messages rejected (another cell edge, malformed cells).
-    rejected_memory_messages: u64,
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
@@ -202,7 +200,6 @@ impl<S: ActionSelection> PlannerActor<S> {
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
             peer_memory: MEMORY_CELLS.peer_topic(),
-            rejected_memory_messages: 0,
         }
     }
 
@@ -425,6 +422,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         match event {
             Event::Message(m) => {
+                let mut rejected = None;
                 if let Some(odometry) = m.get_arc(&ODOMETRY) {
                     self.odometry = Some(odometry);
                 } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
@@ -454,16 +452,21 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                     }
                 } else if let Some(peer) = m.get(&self.peer_memory) {
                     if let Some(guide) = self.guide.as_mut() {
-                        match peer.message.decode(guide.memory().cell_m()) {
-                            Ok(cells) => {
+                        // A rejected message is the handler's error: counted in the
+                        // actor's `errors` (summary.json) and logged, nothing merged.
+                        rejected = peer
+                            .message
+                            .decode(guide.memory().cell_m())
+                            .map(|cells| {
                                 guide.observe_peer_memory(cells);
-                            }
-                            Err(e) => {
-                                self.rejected_memory_messages += 1;
-                                tracing::warn!(robot = ctx.robot_name(), peer = %peer.robot, error = %e,
-                                    rejected = self.rejected_memory_messages, "peer memory cells rejected");
-                            }
-                        }
+                            })
+                            .map_err(|e| {
+                                ActorError::with_source(
+                                    format!("rejected memory cells from {}", peer.robot),
+                                    e,
+                                )
+                            })
+                            .err();
                     }
                 } else if let Some(plan) = m.get(&PLAN)
                     && let Some(reference) = &plan.reference
@@ -473,6 +476,9 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 // Stored for the next round (the frontier memory's update included):
                 // the modelled planning latency is charged to rounds only.
                 ctx.bookkeeping_only();
+                if let Some(e) = rejected {
+                    return Err(e);
+                }
             }
             Event::Timer(PHASE) => {
                 ctx.bookkeeping_only();

@@ -96,7 +96,18 @@ impl MemoryCells {
 
 #[cfg(test)]
 mod tests {
+    use std::time::Duration;
+
+    use rand_chacha::ChaCha8Rng;
+    use troupe_runtime::{
+        Actor, ActorResult, ActorSpec, Context, Event, RobotId, RobotSpec, SimExecutor, Time,
+        TimerId,
+    };
+
     use super::*;
+    use crate::link::Peer;
+    use crate::planner::round::Candidate;
+    use crate::planner::{ActionSelection, PlannerActor, PlannerConfig};
 
     fn record(frontier: bool) -> CellRecord {
         CellRecord {
@@ -142,5 +153,65 @@ mod tests {
             many.decode(1.0),
             Err(MemoryCellsError::TooMany(MAX_SHARED_CELLS + 1))
         );
+    }
+
+    /// Hands the planner one well-formed and one hostile message, as the link would.
+    struct Peers;
+
+    impl Actor for Peers {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(1), Duration::from_millis(100));
+            Ok(())
+        }
+        fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            if matches!(event, Event::Timer(_)) {
+                ctx.cancel_timer(TimerId(1));
+                let good = MemoryCells::new(1.0, &[([3, 0, 0], record(true))]);
+                let mut hostile = good.clone();
+                hostile.cells.push(([0, 0, 0], 0xff));
+                for message in [good, hostile] {
+                    ctx.publish(
+                        &MEMORY_CELLS.peer_topic(),
+                        Peer {
+                            robot: RobotId(1),
+                            sent_at: ctx.now(),
+                            received_at: ctx.now(),
+                            message,
+                        },
+                    );
+                }
+            }
+            Ok(())
+        }
+    }
+
+    struct First;
+
+    impl ActionSelection for First {
+        fn select(&mut self, candidates: &[Candidate], _: &mut ChaCha8Rng) -> Option<usize> {
+            (!candidates.is_empty()).then_some(0)
+        }
+    }
+
+    #[test]
+    fn a_planner_counts_a_hostile_peer_memory_message_as_an_error_and_keeps_running() {
+        let mut config = PlannerConfig::default();
+        config.guidance.share_memory = true;
+        let camera = troupe_algorithms::sogmm::synthetic::intrinsics(48, 36);
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("peers", || Peers))
+            .with(ActorSpec::new("planner", move || {
+                PlannerActor::new(config, camera, First)
+            }));
+        let mut sim = SimExecutor::new(vec![robot], 1);
+        sim.run_until(Time::from_secs_f64(2.0));
+        let report = sim.finish();
+        let planner = report[0]
+            .actors
+            .iter()
+            .find(|a| a.name == "planner")
+            .unwrap();
+        assert_eq!((planner.stats.errors, planner.stats.panics), (1, 0));
+        assert!(!planner.stats.stopped);
     }
 }
