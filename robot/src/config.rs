@@ -297,13 +297,6 @@ impl RobotConfig {
             .guidance
             .validate()
             .map_err(|e| e.within("planner.guidance"))?;
-        if self.planner.guidance.share_memory && !self.link.peer_frames.is_empty() {
-            return Err(ConfigError::new(
-                "planner.guidance.share_memory",
-                "needs a world frame common to the team: memory cells travel in the sender's frame, so not with [[link.peer_frames]]",
-                true,
-            ));
-        }
         if !troupe_policies::SELECTIONS.contains(&self.selection.as_str()) {
             return Err(ConfigError::new(
                 "selection",
@@ -375,18 +368,6 @@ mod tests {
         let mut c = RobotConfig::default();
         c.planner.guidance.cell_m = f64::NAN;
         assert_eq!(c.validate().unwrap_err().key, "planner.guidance.cell_m");
-        let mut c = RobotConfig::default();
-        c.planner.guidance.share_memory = true;
-        assert!(c.validate().is_ok());
-        c.link.peer_frames.push(troupe_actors::link::PeerFrame {
-            robot: 1,
-            translation_m: [1.0, 0.0, 0.0],
-            rotation_rpy_deg: [0.0; 3],
-        });
-        assert_eq!(
-            c.validate().unwrap_err().key,
-            "planner.guidance.share_memory"
-        );
     }
 
     #[test]

@@ -35,7 +35,7 @@ pub mod ros2;
 pub mod safety;
 pub mod toml_file;
 
-use nalgebra::Point3;
+use nalgebra::{Isometry3, Point3};
 use troupe_actors::artifacts::ArtifactActor;
 use troupe_actors::collision::{CollisionActor, OperatorActor};
 use troupe_actors::explorer::ExplorerActor;
@@ -44,7 +44,7 @@ use troupe_actors::link::{LinkActor, LinkJournal};
 use troupe_actors::mapper::MapperActor;
 use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_actors::planner::{PlannerActor, ScriptedTeleop, TeleopActor, TeleopConfig};
-use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
+use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotId, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
 use troupe_policies::priority::PriorityAvoidance;
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
@@ -176,11 +176,18 @@ pub fn assemble(
         let selection = selection_by_name(&config.selection)?;
         let planner = config.planner;
         let camera = parts.camera;
+        let peer_frames: Vec<(RobotId, Isometry3<f64>)> = config
+            .link
+            .peer_frames
+            .iter()
+            .map(|f| (RobotId(f.robot), f.transform()))
+            .collect();
         robot
             .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
             .add(
                 ActorSpec::new("planner", move || {
-                    let actor = PlannerActor::new(planner, camera, selection());
+                    let actor = PlannerActor::new(planner, camera, selection())
+                        .with_peer_frames(peer_frames.iter().copied());
                     if collision {
                         actor.deferring_to_collision()
                     } else {

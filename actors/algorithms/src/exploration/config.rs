@@ -80,8 +80,9 @@ pub struct GuidanceConfig {
     pub give_up_radius_m: f64,
     /// Send the peers what changed in this robot's memory every planning round, and
     /// take theirs where this memory knows nothing (their frontiers, passable and
-    /// settled cells beyond this robot's window). Needs a world frame common to the
-    /// team (no `[[link.peer_frames]]`). Off by default (docs/exploration.md).
+    /// settled cells beyond this robot's window); a peer's cells are moved into this
+    /// robot's world frame when its file gives that peer's (`[[link.peer_frames]]`).
+    /// Off by default (docs/exploration.md).
     pub share_memory: bool,
 }
 

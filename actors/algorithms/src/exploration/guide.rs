@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::Point3;
+use nalgebra::{Isometry3, Point3};
 use troupe_core::{RobotId, Time};
 
 use super::config::GuidanceConfig;
@@ -116,11 +116,28 @@ impl Guide {
     }
 
     /// Folds in the memory cells a peer sent ([`FrontierMemory::merge_peer_cells`]).
+    /// `frame` is the peer's world frame in ours when the team has none in common
+    /// (`[[link.peer_frames]]`, Eq. 8.1): each cell's centre is moved by it and the
+    /// record lands in our cell holding that point (cells beyond the memory's key
+    /// range are left out).
     pub fn observe_peer_memory(
         &mut self,
         cells: impl IntoIterator<Item = (CellKey, CellRecord)>,
+        frame: Option<&Isometry3<f64>>,
     ) -> MemoryUpdate {
-        self.memory.merge_peer_cells(cells)
+        let Some(frame) = frame else {
+            return self.memory.merge_peer_cells(cells);
+        };
+        let memory = &self.memory;
+        let moved: Vec<(CellKey, CellRecord)> = cells
+            .into_iter()
+            .filter_map(|(key, record)| {
+                memory
+                    .key_of(&(frame * memory.centre(key)))
+                    .map(|k| (k, record))
+            })
+            .collect();
+        self.memory.merge_peer_cells(moved)
     }
 
     /// Records where a peer is and where it is heading (its plan's first and last

@@ -175,7 +175,7 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
             .is_finite()
     );
     let _ = own.take_memory_changes();
-    let update = own.observe_peer_memory(changes.iter().copied());
+    let update = own.observe_peer_memory(changes.iter().copied(), None);
     // All but the one cell this robot already held (its own, marked by the field).
     assert_eq!(update.cells, changes.len() - 1);
     let frontiers: Vec<CellKey> = own.memory().frontiers().collect();
@@ -196,14 +196,42 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
         frontier: false,
         settled: true,
     };
-    other.observe_peer_memory([(key, settled)]);
+    other.observe_peer_memory([(key, settled)], None);
     let frontier = CellRecord {
         frontier: true,
         settled: false,
         ..settled
     };
-    assert_eq!(other.observe_peer_memory([(key, frontier)]).cells, 0);
+    assert_eq!(other.observe_peer_memory([(key, frontier)], None).cells, 0);
     assert_eq!(other.memory().record(key), settled);
+}
+
+#[test]
+fn a_peers_memory_cells_in_its_own_world_frame_land_where_they_are_in_ours() {
+    // The peer's world frame is ours turned by 90° about z and moved 10 m along x
+    // (Eq. 8.1): its cell [3, 0, 0] (centre (3.5, 0.5, 0.5)) is at (9.5, 3.5, 0.5) here.
+    let frame = Isometry3::new(
+        Vector3::new(10.0, 0.0, 0.0),
+        Vector3::z() * std::f64::consts::FRAC_PI_2,
+    );
+    let frontier = CellRecord {
+        seen: true,
+        passable: false,
+        frontier: true,
+        settled: false,
+    };
+    let mut guide = Guide::new(GuidanceConfig::default());
+    let update = guide.observe_peer_memory([([3, 0, 0], frontier)], Some(&frame));
+    assert_eq!(update.cells, 1);
+    assert_eq!(guide.memory().frontiers().collect::<Vec<_>>(), [[9, 3, 0]]);
+    // A cell the frame moves beyond the memory's key range is left out, not wrapped.
+    let far = Isometry3::translation(1e12, 0.0, 0.0);
+    assert_eq!(
+        guide
+            .observe_peer_memory([([0, 0, 0], frontier)], Some(&far))
+            .cells,
+        0
+    );
 }
 
 #[test]

@@ -17,9 +17,11 @@
 //! rounds score the frontier reward over the route distance to the remembered
 //! frontiers (beyond the window), avoiding those peers are heading to.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Duration;
 
+use nalgebra::Isometry3;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -36,7 +38,8 @@ use crate::msgs::{
 };
 use troupe_algorithms::exploration::{GuidanceConfig, Guide};
 use troupe_runtime::{
-    Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, Time, TimerId, Topic,
+    Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, RobotId, Time, TimerId,
+    Topic,
 };
 
 /// Chooses among scored candidates. Implementations live in `troupe-policies`.
@@ -178,6 +181,8 @@ pub struct PlannerActor<S> {
     guide: Option<Guide>,
     /// Where the link publishes the peers' memory cells.
     peer_memory: Topic<Peer<MemoryCells>>,
+    /// Each peer's world frame in ours, for peers without a frame in common with us.
+    peer_frames: BTreeMap<RobotId, Isometry3<f64>>,
 }
 
 impl<S: ActionSelection> PlannerActor<S> {
@@ -200,7 +205,20 @@ impl<S: ActionSelection> PlannerActor<S> {
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
             peer_memory: MEMORY_CELLS.peer_topic(),
+            peer_frames: BTreeMap::new(),
         }
+    }
+
+    /// The world frames of peers that share none with this robot (`[[link.peer_frames]]`,
+    /// Eq. 8.1): their memory cells are moved into ours
+    /// ([`Guide::observe_peer_memory`]). The link moves their keyframes and plans itself.
+    #[must_use]
+    pub fn with_peer_frames(
+        mut self,
+        frames: impl IntoIterator<Item = (RobotId, Isometry3<f64>)>,
+    ) -> Self {
+        self.peer_frames.extend(frames);
+        self
     }
 
     /// Publishes ranked candidates for a collision actor instead of committing, and
@@ -458,7 +476,8 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                             .message
                             .decode(guide.memory().cell_m())
                             .map(|cells| {
-                                guide.observe_peer_memory(cells);
+                                let frame = self.peer_frames.get(&peer.robot);
+                                guide.observe_peer_memory(cells, frame);
                             })
                             .map_err(|e| {
                                 ActorError::with_source(
