@@ -414,10 +414,12 @@ impl FrontierMemory {
 
     /// Folds in cells a peer's memory holds (its [`Self::take_changes`], in the same
     /// world frame and cell size): a cell this memory knows nothing of takes the peer's
-    /// record — its frontiers, passable and settled cells beyond this robot's window —
-    /// and a cell the peer found passable becomes passable here (the route to the
-    /// peer's frontiers goes through it). What this robot saw itself otherwise stands.
-    /// New cells beyond `max_cells` are dropped and counted.
+    /// record — its frontiers, passable and settled cells beyond this robot's window;
+    /// a cell the peer settled is settled here too (explored by the team: a frontier
+    /// here, the peer's own taken earlier included, is retired); and a cell the peer
+    /// found passable becomes passable here (the route to the peer's frontiers goes
+    /// through it). What this robot saw itself otherwise stands. New cells beyond
+    /// `max_cells` are dropped and counted.
     pub fn merge_peer_cells(
         &mut self,
         cells: impl IntoIterator<Item = (CellKey, CellRecord)>,
@@ -427,6 +429,12 @@ impl FrontierMemory {
             let old = self.cells.get(&key).copied();
             let record = match old {
                 None if peer != CellRecord::default() => peer,
+                Some(old) if peer.settled && !old.settled => CellRecord {
+                    seen: true,
+                    passable: old.passable || peer.passable,
+                    frontier: false,
+                    settled: true,
+                },
                 Some(old) if peer.passable && !old.passable => CellRecord {
                     passable: true,
                     ..old
@@ -437,6 +445,9 @@ impl FrontierMemory {
                 self.dropped += 1;
                 update.dropped += 1;
                 continue;
+            }
+            if old.is_some_and(|o| o.frontier) && !record.frontier {
+                update.retired += 1;
             }
             self.cells.insert(key, record);
             update.cells += 1;

@@ -176,8 +176,9 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     );
     let _ = own.take_memory_changes();
     let update = own.observe_peer_memory(changes.iter().copied(), None);
-    // All but the one cell this robot already held (its own, marked by the field).
-    assert_eq!(update.cells, changes.len() - 1);
+    // Every cell: the one this robot already held (its own, marked by the field) is
+    // one the peer settled, so it is settled here too.
+    assert_eq!(update.cells, changes.len());
     let frontiers: Vec<CellKey> = own.memory().frontiers().collect();
     assert_eq!(frontiers, peer.memory().frontiers().collect::<Vec<_>>());
     // The peer's passable cells lead this robot to them.
@@ -204,6 +205,15 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     };
     assert_eq!(other.observe_peer_memory([(key, frontier)], None).cells, 0);
     assert_eq!(other.memory().record(key), settled);
+    // A frontier here — its own, or one taken from the peer earlier — that the peer
+    // has since explored (settled) is retired: the peer's later word is not ignored.
+    let update = own.observe_peer_memory([(key, settled)], None);
+    assert_eq!((update.cells, update.retired), (1, 1));
+    assert_eq!(own.memory().record(key), settled);
+    assert!(
+        own.take_memory_changes().is_empty(),
+        "a peer's record is not echoed"
+    );
 }
 
 #[test]
