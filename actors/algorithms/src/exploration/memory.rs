@@ -183,9 +183,28 @@ impl FrontierMemory {
             .map(|(k, _)| *k)
     }
 
-    /// Writes a cell, unless it is new and the memory is full; `true` if written.
+    /// Writes a cell from this robot's own observations, unless it is new and the
+    /// memory is full; `true` if written. A change is kept for the peers when the
+    /// memory is [`tracking_changes`](Self::tracking_changes).
     fn write(&mut self, key: CellKey, record: CellRecord, update: &mut MemoryUpdate) -> bool {
         let old = self.cells.get(&key).copied();
+        let written = self.store(key, old, record, update);
+        if written && self.track_changes && old != Some(record) {
+            self.changed.insert(key);
+        }
+        written
+    }
+
+    /// Stores `record` over `old` (the cell's record now), unless the cell is new and
+    /// the memory is full (dropped and counted); counts a retired frontier; `true` if
+    /// stored.
+    fn store(
+        &mut self,
+        key: CellKey,
+        old: Option<CellRecord>,
+        record: CellRecord,
+        update: &mut MemoryUpdate,
+    ) -> bool {
         if old.is_none() && self.cells.len() >= self.max_cells {
             self.dropped += 1;
             update.dropped += 1;
@@ -195,9 +214,6 @@ impl FrontierMemory {
             update.retired += 1;
         }
         self.cells.insert(key, record);
-        if self.track_changes && old != Some(record) {
-            self.changed.insert(key);
-        }
         update.cells += 1;
         true
     }
@@ -441,16 +457,8 @@ impl FrontierMemory {
                 },
                 _ => continue,
             };
-            if old.is_none() && self.cells.len() >= self.max_cells {
-                self.dropped += 1;
-                update.dropped += 1;
-                continue;
-            }
-            if old.is_some_and(|o| o.frontier) && !record.frontier {
-                update.retired += 1;
-            }
-            self.cells.insert(key, record);
-            update.cells += 1;
+            // Not `write`: what came from a peer is not sent on.
+            self.store(key, old, record, &mut update);
         }
         update
     }
