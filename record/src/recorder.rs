@@ -14,6 +14,7 @@
 //! | `/robot<i>/grid` | `foxglove.PointCloud` | the local grid's occupied cells (centres, `intensity` = occupancy probability), at most once per [`RecordOptions::grid_period_s`] |
 //! | `/robot<i>/frontiers` | `foxglove.PointCloud` | the local grid's frontier cells, with each `/robot<i>/grid` message |
 //! | `/robot<i>/remembered_frontiers` | `foxglove.PointCloud` | the team frontier memory's frontier cells (planner, guidance on), at most once per [`RecordOptions::grid_period_s`] |
+//! | `/robot<i>/route` | `foxglove.SceneUpdate` | with each `remembered_frontiers` message: the route the guidance field leads along, to the frontier it leads to (line strip, replaced; empty when none) |
 //! | `/robot<i>/depth` | `foxglove.RawImage` | depth frames (`32FC1`, metres), only with [`RecordOptions::depth_period_s`], at most once per it |
 //! | `/robot<i>/peer_plans` | `foxglove.SceneUpdate` | peers' committed plans as received (entity `robot<j>/plan`) |
 //! | `/robot<i>/link` | `troupe.LinkStatus` | link counters per class (bytes, queue delay, drops) |
@@ -40,8 +41,8 @@ use crate::foxglove::{
     SceneUpdate, Timestamp,
 };
 use crate::scene::{
-    frontier_cloud, keyframe_cloud, keyframe_entity, mesh_entity, occupied_cloud, robot_color,
-    trajectory_line,
+    frontier_cloud, keyframe_cloud, keyframe_entity, mesh_entity, occupied_cloud, path_line,
+    robot_color, trajectory_line,
 };
 use crate::schemas::{self, Schema};
 use crate::writer::{Compression, RecordError, Recording};
@@ -451,6 +452,23 @@ impl Recorder {
                     memory.centres_m.iter().map(|c| (*c, memory.cell_m)),
                 );
                 self.write_cloud(&format!("/robot{i}/remembered_frontiers"), p.time, &cloud);
+                let mut entity =
+                    SceneEntity::new(self.stamp(memory.stamp), "world", format!("robot{i}/route"));
+                entity.metadata = vec![
+                    KeyValuePair::new("robot", i),
+                    KeyValuePair::new("cells", memory.route_m.len()),
+                ];
+                if let Some(goal) = memory.route_m.last() {
+                    entity.metadata.push(KeyValuePair::new(
+                        "goal",
+                        format!("{:.1} {:.1} {:.1}", goal.x, goal.y, goal.z),
+                    ));
+                }
+                entity.lines.push(path_line(
+                    memory.route_m.iter().copied(),
+                    robot_color(i, 0.5),
+                ));
+                self.write_scene(&format!("/robot{i}/route"), p.time, entity);
             }
         } else if let Some(frame) = p.get(&DEPTH_FRAME) {
             let period_s = self.options.depth_period_s;

@@ -114,16 +114,18 @@ pub fn keyframe_entity(owner: u32, keyframe: &Keyframe, at: Time) -> SceneEntity
 /// A trajectory's knots as a line strip.
 #[must_use]
 pub fn trajectory_line(trajectory: &Trajectory, color: Color) -> LinePrimitive {
+    path_line(trajectory.knots().iter().map(|k| k.position_m), color)
+}
+
+/// Points joined in order as a line strip of the plans' thickness.
+#[must_use]
+pub fn path_line(points: impl IntoIterator<Item = Point3<f64>>, color: Color) -> LinePrimitive {
     LinePrimitive {
         kind: LINE_STRIP,
         pose: Pose::default(),
         thickness: PLAN_LINE_M,
         scale_invariant: false,
-        points: trajectory
-            .knots()
-            .iter()
-            .map(|k| Vector3::from(k.position_m))
-            .collect(),
+        points: points.into_iter().map(Vector3::from).collect(),
         color,
         colors: Vec::new(),
         indices: Vec::new(),

@@ -17,7 +17,8 @@
   one of that keyframe's ellipsoids, with intensities in [0, 1];
 - the local grid clouds: occupied cells on one lattice of the grid's resolution,
   frontier cells none of them, at most `[metrics] record_grid_hz` a second; the
-  remembered frontiers on the memory's 1 m lattice; depth images only when
+  remembered frontiers on the memory's 1 m lattice, each set with a route over that
+  lattice, neighbour to neighbour, ending on one of them; depth images only when
   `[metrics] record_depth_hz` asks, each `32FC1` of the camera's size;
 - the world surface (`/world`): one message at time 0, a triangle list whose
   indices all name a vertex, and every robot pose inside its bounds;
@@ -54,7 +55,7 @@ SIGMAS = 2.0
 SCHEMAS = [
     (r"/tf", "foxglove.FrameTransform"),
     (r"/robot\d+/pose", "foxglove.PoseInFrame"),
-    (r"/robot\d+/(plan|candidates|keyframes|peer_keyframes|peer_plans)", "foxglove.SceneUpdate"),
+    (r"/robot\d+/(plan|candidates|keyframes|peer_keyframes|peer_plans|route)", "foxglove.SceneUpdate"),
     (r"/robot\d+/link", "troupe.LinkStatus"),
     (r"/robot\d+/sample", "troupe.Sample"),
     (r"/team/coverage", "troupe.Coverage"),
@@ -213,11 +214,27 @@ def check_grids(messages, robots, scenario, duration_s):
             occupied_total += len(occupied)
         expect(grid_hz == 0 or occupied_total > 0, f"robot{i}: no occupied cell recorded")
         remembered = 0
-        for t, cloud in memory:
+        routes = messages.get(f"/robot{i}/route", [])
+        expect(len(routes) == len(memory), f"robot{i}: {len(routes)} routes, {len(memory)} remembered-frontier sets")
+        routed = 0
+        for (t, cloud), (t_r, update) in zip(memory, routes):
             cells = cloud_points(cloud, f"/robot{i}/remembered_frontiers")
             if cells:
                 on_lattice(cells, cells[0][3], f"robot{i} remembered frontiers at {t}")
             remembered += len(cells)
+            # The route: passable memory cells, neighbour to neighbour, to a remembered frontier.
+            expect(t == t_r, f"robot{i}: route at {t_r}, remembered frontiers at {t}")
+            (entity,) = update["entities"]
+            route = [(p["x"], p["y"], p["z"]) for line in entity["lines"] for p in line["points"]]
+            if route:
+                cell_m = cells[0][3]
+                on_lattice(cells + [(*p, cell_m) for p in route], cell_m, f"robot{i} route at {t}")
+                steps = [math.dist(a, b) for a, b in zip(route, route[1:])]
+                expect(all(0 < d <= math.sqrt(3) * cell_m + 1e-6 for d in steps), f"robot{i}: route at {t} jumps")
+                goal = min(math.dist(route[-1], c[:3]) for c in cells)
+                expect(goal < 1e-6, f"robot{i}: route at {t} ends {goal} m from a remembered frontier")
+                routed += 1
+        expect(not memory or routed > 0, f"robot{i}: no route to a remembered frontier")
         if depth_hz > 0:
             expect(0 < len(depth) <= math.floor(duration_s * depth_hz) + 1, f"robot{i}: {len(depth)} depth frames")
         else:
@@ -225,7 +242,7 @@ def check_grids(messages, robots, scenario, duration_s):
         size = (camera.get("width", 160), camera.get("height", 120))
         for t, image in depth:
             check_depth(image, f"robot{i} at {t}", size)
-        counts[i] = {"grids": len(grids), "occupied_cells": occupied_total, "remembered_frontiers": remembered, "depth": len(depth)}
+        counts[i] = {"grids": len(grids), "occupied_cells": occupied_total, "remembered_frontiers": remembered, "routes": routed, "depth": len(depth)}
     return counts
 
 

@@ -12,6 +12,7 @@ use nalgebra::Point3;
 use serde::Serialize;
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
+use troupe_actors::planner::PLANNING_REPORT;
 
 use crate::network::Positions;
 use troupe_actors::runtime::{LINK_RX, Publication, Tap};
@@ -64,6 +65,13 @@ pub struct UnproductiveTime {
     total_s: f64,
     /// Longest interval so far, seconds.
     longest_s: f64,
+    /// The robot's planner last reported no remembered frontier (no report: unknown,
+    /// and the time counts).
+    no_frontiers: bool,
+    /// Unproductive time in the open interval while a frontier was remembered, seconds.
+    current_with_frontiers_s: f64,
+    /// Longest interval so far counting only that time, seconds.
+    longest_with_frontiers_s: f64,
 }
 
 impl UnproductiveTime {
@@ -88,11 +96,24 @@ impl UnproductiveTime {
         self.last_frame_s = Some(time_s);
         if recent_m3 >= UNPRODUCTIVE_MIN_NEW_M3 {
             self.current_s = 0.0;
+            self.current_with_frontiers_s = 0.0;
         } else if speed_mps >= UNPRODUCTIVE_SPEED_MPS {
             self.current_s += step_s;
             self.total_s += step_s;
             self.longest_s = self.longest_s.max(self.current_s);
+            if !self.no_frontiers {
+                self.current_with_frontiers_s += step_s;
+                self.longest_with_frontiers_s = self
+                    .longest_with_frontiers_s
+                    .max(self.current_with_frontiers_s);
+            }
         }
+    }
+
+    /// Records whether the robot's planner remembers a frontier to go to (from its
+    /// latest planning report), for the frames that follow.
+    pub fn remembers_frontiers(&mut self, remembers: bool) {
+        self.no_frontiers = !remembers;
     }
 
     /// Unproductive time so far, seconds.
@@ -105,6 +126,13 @@ impl UnproductiveTime {
     #[must_use]
     pub fn longest_s(&self) -> f64 {
         self.longest_s
+    }
+
+    /// The longest unproductive interval so far counting only the time while the robot
+    /// remembered a frontier, seconds (the open one included).
+    #[must_use]
+    pub fn longest_with_frontiers_s(&self) -> f64 {
+        self.longest_with_frontiers_s
     }
 }
 
@@ -152,7 +180,10 @@ pub struct RobotTruth {
     pub unproductive_s: f64,
     /// The longest unproductive interval, seconds (see [`UnproductiveTime`]).
     pub longest_unproductive_s: f64,
-    /// The tracker behind `unproductive_s` and `longest_unproductive_s`.
+    /// The longest unproductive interval counting only the time while the robot
+    /// remembered a frontier to go to, seconds (see [`UnproductiveTime`]).
+    pub longest_unproductive_with_frontiers_s: f64,
+    /// The tracker behind the three unproductive figures.
     #[serde(skip)]
     pub unproductive: UnproductiveTime,
 }
@@ -257,9 +288,17 @@ impl Tap for GroundTruthMonitor {
                 .frame(p.time.as_secs_f64(), new_m3, robot.speed_mps);
             robot.unproductive_s = robot.unproductive.total_s();
             robot.longest_unproductive_s = robot.unproductive.longest_s();
+            robot.longest_unproductive_with_frontiers_s =
+                robot.unproductive.longest_with_frontiers_s();
         } else if let Some(packet) = p.get(&LINK_RX) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.received_bytes += packet.bytes.len() as u64;
+            }
+        } else if let Some(report) = p.get(&PLANNING_REPORT) {
+            if let (Some(robot), Some(frontiers)) =
+                (lock_truth(&self.truth).robots.get_mut(r), report.frontiers)
+            {
+                robot.unproductive.remembers_frontiers(frontiers > 0);
             }
         } else if let Some(status) = p.get(&LINK_STATUS) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
@@ -401,6 +440,26 @@ mod tests {
         // (1.5 s); the steps of frames 2 to 6 counted.
         fly(&mut v, 0.0, 10.0, 0.08, 1.0);
         assert_eq!(v.total_s(), 1.25);
+    }
+
+    #[test]
+    fn time_without_a_remembered_frontier_pauses_the_interval_with_frontiers() {
+        let mut u = UnproductiveTime::default();
+        fly(&mut u, 0.0, 10.0, 0.0, 1.0); // 9.75 s with a frontier (no report: counts)
+        u.remembers_frontiers(false);
+        fly(&mut u, 10.0, 30.0, 0.0, 1.0); // 20 s with nothing left to go to
+        u.remembers_frontiers(true);
+        fly(&mut u, 30.0, 35.0, 0.0, 1.0); // 5 s more: the same interval
+        assert_eq!(u.longest_s(), 34.75);
+        assert_eq!(u.longest_with_frontiers_s(), 14.75);
+        fly(&mut u, 35.0, 36.0, 1.0, 1.0); // sees something: both intervals end
+        fly(&mut u, 36.0, 41.0, 0.0, 1.0);
+        assert_eq!(u.longest_with_frontiers_s(), 14.75);
+        assert_eq!(
+            u.total_s(),
+            34.75 + 3.25,
+            "the total counts every unproductive step"
+        );
     }
 
     #[test]

@@ -39,6 +39,7 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "discovered_m3",
     "unproductive_s",
     "longest_unproductive_s",
+    "longest_unproductive_with_frontiers_s",
 ];
 
 /// The time series as CSV text.
@@ -50,7 +51,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -70,7 +71,8 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.received_bytes,
             r.discovered_m3,
             r.unproductive_s,
-            r.longest_unproductive_s
+            r.longest_unproductive_s,
+            r.longest_unproductive_with_frontiers_s
         );
     }
     out

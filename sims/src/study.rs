@@ -504,6 +504,10 @@ pub struct RunRow {
     /// The longest unproductive interval of any robot, seconds (`None` as above).
     #[serde(default)]
     pub longest_unproductive_s: Option<f64>,
+    /// The longest unproductive interval of any robot counting only the time while it
+    /// remembered a frontier to go to, seconds (`None` as above).
+    #[serde(default)]
+    pub longest_unproductive_with_frontiers_s: Option<f64>,
 }
 
 impl RunRow {
@@ -568,6 +572,12 @@ impl RunRow {
                 s.per_robot
                     .iter()
                     .map(|r| r.truth.longest_unproductive_s)
+                    .fold(0.0, f64::max),
+            ),
+            longest_unproductive_with_frontiers_s: Some(
+                s.per_robot
+                    .iter()
+                    .map(|r| r.truth.longest_unproductive_with_frontiers_s)
                     .fold(0.0, f64::max),
             ),
         }
@@ -687,6 +697,7 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             "link_bytes_sent",
             "unproductive_s",
             "longest_unproductive_s",
+            "longest_unproductive_with_frontiers_s",
             "wall_s",
         ]
         .map(String::from),
@@ -717,6 +728,7 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             r.link_bytes_sent.to_string(),
             opt(r.unproductive_s),
             opt(r.longest_unproductive_s),
+            opt(r.longest_unproductive_with_frontiers_s),
             format!("{:.3}", r.wall_s),
         ]);
         cells.extend(og_resolutions.iter().map(|res| {
@@ -794,6 +806,7 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
             "unproductive_s_mean",
             "unproductive_s_ci95",
             "longest_unproductive_s_max",
+            "longest_unproductive_with_frontiers_s_max",
         ]
         .map(String::from),
     );
@@ -831,8 +844,13 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
             .iter()
             .filter_map(|r| r.longest_unproductive_s)
             .reduce(f64::max);
+        let longest_with_frontiers = group
+            .iter()
+            .filter_map(|r| r.longest_unproductive_with_frontiers_s)
+            .reduce(f64::max);
         cells.extend(mean_and_ci95_cells(&unproductive));
         cells.push(opt(longest));
+        cells.push(opt(longest_with_frontiers));
         for i in 0..study.coverage_levels.len() {
             let reached: Vec<f64> = group
                 .iter()
@@ -1094,6 +1112,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             og_change_set_bytes: vec![[0.1, 1000.0]],
             unproductive_s: Some(12.5),
             longest_unproductive_s: Some(8.0),
+            longest_unproductive_with_frontiers_s: Some(6.0),
         };
         let run_dir = dir.path().join(&variant.name);
         assert_eq!(
@@ -1174,6 +1193,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             og_change_set_bytes: Vec::new(),
             unproductive_s: None,
             longest_unproductive_s: None,
+            longest_unproductive_with_frontiers_s: None,
         }
     }
 
@@ -1230,6 +1250,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
                 time_to_coverage_s: vec![t, None],
                 unproductive_s: Some(2.0 * longest),
                 longest_unproductive_s: Some(longest),
+                longest_unproductive_with_frontiers_s: Some(longest / 2.0),
                 ..row_with_coverage(seed, 0.6)
             })
             .collect();
@@ -1251,6 +1272,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         assert_eq!(column("reached_90pct_runs"), "0");
         assert_eq!(column("unproductive_s_mean"), "34");
         assert_eq!(column("longest_unproductive_s_max"), "40");
+        assert_eq!(column("longest_unproductive_with_frontiers_s_max"), "20");
     }
 
     #[test]

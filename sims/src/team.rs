@@ -97,6 +97,9 @@ pub struct SeriesRow {
     pub unproductive_s: f64,
     /// The longest unproductive interval so far, seconds.
     pub longest_unproductive_s: f64,
+    /// The longest unproductive interval so far counting only the time while the robot
+    /// remembered a frontier to go to, seconds.
+    pub longest_unproductive_with_frontiers_s: f64,
 }
 
 /// Counters of one actor.
@@ -442,6 +445,7 @@ impl Team {
                     discovered_m3: r.discovered_m3,
                     unproductive_s: r.unproductive_s,
                     longest_unproductive_s: r.longest_unproductive_s,
+                    longest_unproductive_with_frontiers_s: r.longest_unproductive_with_frontiers_s,
                 });
             }
             drop(truth);

@@ -58,10 +58,16 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
         let mine = r["discovered_m3"].as_f64().unwrap();
         let total = r["unproductive_s"].as_f64().unwrap();
         let longest = r["longest_unproductive_s"].as_f64().unwrap();
+        let with_frontiers = r["longest_unproductive_with_frontiers_s"].as_f64().unwrap();
         assert!(mine > 0.0, "{} saw nothing first", r["name"]);
         assert!(
             (0.0..=total).contains(&longest) && total <= DURATION_S,
             "{}: longest {longest} s of {total} s",
+            r["name"]
+        );
+        assert!(
+            (0.0..=longest).contains(&with_frontiers),
+            "{}: {with_frontiers} s with frontiers of the longest {longest} s",
             r["name"]
         );
         discovered_m3 += mine;
@@ -94,7 +100,12 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
             .rev()
             .find(|row| row[column("robot")] == i.to_string())
             .unwrap();
-        for name in ["discovered_m3", "unproductive_s", "longest_unproductive_s"] {
+        for name in [
+            "discovered_m3",
+            "unproductive_s",
+            "longest_unproductive_s",
+            "longest_unproductive_with_frontiers_s",
+        ] {
             let cell: f64 = last[column(name)].parse().unwrap();
             // The same sums, added in a different order: equal to rounding.
             let summary = r[name].as_f64().unwrap();

@@ -321,6 +321,7 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
             "grid",
             "frontiers",
             "remembered_frontiers",
+            "route",
             "link",
         ] {
             let topic = format!("/robot{i}/{channel}");

@@ -320,6 +320,7 @@ mod tests {
             og_change_set_bytes: Vec::new(),
             unproductive_s: None,
             longest_unproductive_s: None,
+            longest_unproductive_with_frontiers_s: None,
         };
         save_finished_run(&run_dir, study, variant, &row).expect("record");
     }

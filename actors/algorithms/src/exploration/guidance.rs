@@ -439,6 +439,49 @@ impl GuidanceField {
     pub fn target_of(&self, p: &Point3<f64>) -> Option<CellKey> {
         self.distance_at(p).1
     }
+
+    /// The route from `p` to the frontier [`Self::target_of`] gives, as the centres of
+    /// the passable cells it crosses ending with the frontier cell's centre (empty off
+    /// the field): from the best cell next to `p`, each step goes to the neighbour on
+    /// which the field's distance falls most, down to the cell the frontier seeded. For
+    /// showing where a robot is heading (recordings); the planner itself reads only the
+    /// distances. Time and length: at most one step per reached cell.
+    #[must_use]
+    pub fn route_from(&self, p: &Point3<f64>) -> Vec<Point3<f64>> {
+        let Some(key) = self.key_of(p) else {
+            return Vec::new();
+        };
+        let Some((mut here, (mut here_m, target))) = std::iter::once((key, 0.0))
+            .chain(neighbours(key))
+            .filter_map(|(n, _)| self.distance_m.get(&n).map(|d| (n, *d)))
+            .min_by(|a, b| {
+                let via =
+                    |(n, (d, _)): &(CellKey, (f64, CellKey))| d + (p - self.centre(*n)).norm();
+                via(a).total_cmp(&via(b)).then_with(|| a.0.cmp(&b.0))
+            })
+        else {
+            return Vec::new();
+        };
+        let mut route = vec![self.centre(here)];
+        while route.len() <= self.distance_m.len() {
+            let next = neighbours(here)
+                .filter_map(|(n, step)| {
+                    let (d, t) = self.distance_m.get(&n)?;
+                    (*t == target && *d < here_m).then_some((n, *d, d + step * self.cell_m))
+                })
+                .min_by(|a, b| a.2.total_cmp(&b.2).then_with(|| a.0.cmp(&b.0)));
+            let Some((n, d, _)) = next else {
+                break;
+            };
+            (here, here_m) = (n, d);
+            route.push(self.centre(here));
+        }
+        if here != target {
+            // A passable frontier cell seeds itself; otherwise the frontier is one step on.
+            route.push(self.centre(target));
+        }
+        route
+    }
 }
 
 #[cfg(test)]

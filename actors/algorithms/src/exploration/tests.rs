@@ -444,6 +444,48 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
 }
 
 #[test]
+fn the_route_to_a_remembered_frontier_follows_passable_cells_and_is_as_long_as_the_field_says() {
+    let world = dead_end_tunnel();
+    let mut guide = Guide::new(GuidanceConfig::default());
+    for x in [4.0, 14.0, 24.0, 34.0] {
+        let here = Point3::new(x, 0.0, 0.0);
+        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+    }
+    let robot = Point3::new(37.2, 0.3, 0.1);
+    let field = guide.field((RobotId(0), &robot), Time::ZERO);
+    let route = field.route_from(&robot);
+    let memory = guide.memory();
+    let target = field
+        .target_of(&robot)
+        .expect("the field reaches the robot");
+    assert_eq!(
+        route.last(),
+        Some(&memory.centre(target)),
+        "ends at the frontier"
+    );
+    assert!((route[0] - robot).norm() < 1.8, "starts next to the robot");
+    let cell_m = memory.cell_m();
+    for step in route.windows(2) {
+        let d = (step[1] - step[0]).norm();
+        assert!(d > 0.0 && d <= 3f64.sqrt() * cell_m + 1e-9, "{step:?}");
+    }
+    // The cells on the way are passable; no penalty applies to a lone robot, so the
+    // way there is exactly the field's distance.
+    let record = |c: &Point3<f64>| memory.record(memory.key_of(c).unwrap());
+    assert!(route[..route.len() - 1].iter().all(|c| record(c).passable));
+    let length_m: f64 =
+        (route[0] - robot).norm() + route.windows(2).map(|w| (w[1] - w[0]).norm()).sum::<f64>();
+    assert!(
+        (length_m - field.distance_m(&robot)).abs() < 1e-9,
+        "{length_m} m along the route, {} m in the field",
+        field.distance_m(&robot)
+    );
+    assert!(length_m > 35.0, "the frontier lies at the tunnel's start");
+    // Off the field: no route.
+    assert!(field.route_from(&Point3::new(0.0, 50.0, 0.0)).is_empty());
+}
+
+#[test]
 fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     // A stem along x from x = 0 to the fork at x = 10, two branches along ±y; the left
     // one was seen up to y = 6.5 m, the right one up to y = −7.5 m: its frontier is the

@@ -36,7 +36,7 @@ use crate::msgs::{
     CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
     PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
 };
-use troupe_algorithms::exploration::{GuidanceConfig, Guide};
+use troupe_algorithms::exploration::{GuidanceConfig, GuidanceField, Guide};
 use troupe_runtime::{
     Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, RobotId, Time, TimerId,
     Topic,
@@ -123,6 +123,10 @@ pub struct PlanningReport {
     pub chosen_reward: Option<f64>,
     /// Whether the round followed the global guidance field.
     pub guided: bool,
+    /// Remembered frontiers that seed the round's guidance field — the ones that pull
+    /// this robot (given-up ones and ones no known route reaches left out); `None`
+    /// with guidance off.
+    pub frontiers: Option<usize>,
 }
 impl Message for PlanningReport {}
 
@@ -139,10 +143,14 @@ pub struct RememberedFrontiers {
     pub cell_m: f64,
     /// Centres of the remembered frontier cells, world frame, metres.
     pub centres_m: Vec<nalgebra::Point3<f64>>,
+    /// The route the round's guidance field leads along from the robot: centres of the
+    /// memory cells it crosses, ending at the frontier it leads to
+    /// ([`GuidanceField::route_from`]); empty when the field does not reach the robot.
+    pub route_m: Vec<nalgebra::Point3<f64>>,
 }
 impl Message for RememberedFrontiers {
     fn payload_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + 24 * self.centres_m.len()
+        std::mem::size_of::<Self>() + 24 * (self.centres_m.len() + self.route_m.len())
     }
 }
 
@@ -314,6 +322,9 @@ impl<S: ActionSelection> PlannerActor<S> {
                     stamp: now,
                     cell_m: memory.cell_m(),
                     centres_m: memory.frontiers().map(|k| memory.centre(k)).collect(),
+                    route_m: field
+                        .as_ref()
+                        .map_or_else(Vec::new, |f| f.route_from(&here)),
                 },
             );
         }
@@ -360,6 +371,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                     candidates: candidates.len(),
                     chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
                     guided,
+                    frontiers: field.as_ref().map(GuidanceField::frontier_count),
                 },
             );
             self.defer((now, start), &root, &candidates, choice, ctx);
@@ -387,6 +399,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                 candidates: candidates.len(),
                 chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
                 guided,
+                frontiers: field.as_ref().map(GuidanceField::frontier_count),
             },
         );
         let stopping = choice.and_then(|i| candidates.get(i)).is_none();
