@@ -442,8 +442,9 @@ impl GuidanceField {
 
     /// The route from `p` to the frontier [`Self::target_of`] gives, as the centres of
     /// the passable cells it crosses ending with the frontier cell's centre (empty off
-    /// the field): from the best cell next to `p`, each step goes to the neighbour on
-    /// which the field's distance falls most, down to the cell the frontier seeded. For
+    /// the field): from the best cell next to `p`, each step goes to the neighbour the
+    /// field reached that cell from (least distance plus step, towards the same
+    /// frontier), down to the cell the frontier seeded. For
     /// showing where a robot is heading (recordings); the planner itself reads only the
     /// distances. Time and length: at most one step per reached cell.
     #[must_use]
