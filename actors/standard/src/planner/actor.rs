@@ -305,6 +305,14 @@ impl<S: ActionSelection> PlannerActor<S> {
         let here = nalgebra::Point3::from(root.position_m());
         let own = ctx.robot();
         let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
+        if let Some(guide) = &self.guide
+            && tracing::enabled!(tracing::Level::DEBUG)
+        {
+            let memory = guide.memory();
+            for (key, _) in guide.given_up().iter().filter(|(_, at)| **at == now) {
+                tracing::debug!(robot = ctx.robot_name(), time = %now, frontier = ?memory.centre(*key).coords.as_slice(), position = ?here.coords.as_slice(), "gave up a remembered frontier");
+            }
+        }
         if self.config.guidance.share_memory
             && let Some(guide) = self.guide.as_mut()
         {
