@@ -402,18 +402,30 @@ impl GuidanceField {
     /// cell holding `p` and its 26 neighbours (∞ and `None` when none was reached).
     #[must_use]
     pub fn distance_at(&self, p: &Point3<f64>) -> (f64, Option<CellKey>) {
-        let Some(key) = self.key_of(p) else {
-            return (f64::INFINITY, None);
-        };
+        self.entry_at(p)
+            .map_or((f64::INFINITY, None), |e| (e.cost_m, Some(e.target)))
+    }
+
+    /// The reached cell `n` among the cell holding `p` and its 26 neighbours with the
+    /// least `d(n) + |p − centre(n)|` (that sum as `cost_m`; ties by frontier, then by
+    /// cell), where the route from `p` enters the field.
+    fn entry_at(&self, p: &Point3<f64>) -> Option<Entry> {
+        let key = self.key_of(p)?;
         std::iter::once((key, 0.0))
             .chain(neighbours(key))
             .filter_map(|(n, _)| {
-                self.distance_m
-                    .get(&n)
-                    .map(|(d, target)| (d + (p - self.centre(n)).norm(), *target))
+                self.distance_m.get(&n).map(|(d, target)| Entry {
+                    cost_m: d + (p - self.centre(n)).norm(),
+                    key: n,
+                    target: *target,
+                })
             })
-            .min_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(&b.1)))
-            .map_or((f64::INFINITY, None), |(d, t)| (d, Some(t)))
+            .min_by(|a, b| {
+                a.cost_m
+                    .total_cmp(&b.cost_m)
+                    .then_with(|| a.target.cmp(&b.target))
+                    .then_with(|| a.key.cmp(&b.key))
+            })
     }
 
     /// The route distance from `p` to the best frontier, metres (∞ off the field).
@@ -442,27 +454,22 @@ impl GuidanceField {
 
     /// The route from `p` to the frontier [`Self::target_of`] gives, as the centres of
     /// the passable cells it crosses ending with the frontier cell's centre (empty off
-    /// the field): from the best cell next to `p`, each step goes to the neighbour the
+    /// the field): from the cell where it enters the field next to `p`, each step goes to the neighbour the
     /// field reached that cell from (least distance plus step, towards the same
-    /// frontier), down to the cell the frontier seeded. For
-    /// showing where a robot is heading (recordings); the planner itself reads only the
-    /// distances. Time and length: at most one step per reached cell.
+    /// frontier), down to the cell the frontier seeded. For showing where a robot is
+    /// heading (recordings); the planner itself reads only the distances. Time and
+    /// length: at most one step per reached cell.
     #[must_use]
     pub fn route_from(&self, p: &Point3<f64>) -> Vec<Point3<f64>> {
-        let Some(key) = self.key_of(p) else {
-            return Vec::new();
-        };
-        let Some((mut here, (mut here_m, target))) = std::iter::once((key, 0.0))
-            .chain(neighbours(key))
-            .filter_map(|(n, _)| self.distance_m.get(&n).map(|d| (n, *d)))
-            .min_by(|a, b| {
-                let via =
-                    |(n, (d, _)): &(CellKey, (f64, CellKey))| d + (p - self.centre(*n)).norm();
-                via(a).total_cmp(&via(b)).then_with(|| a.0.cmp(&b.0))
-            })
+        let Some(Entry {
+            key: mut here,
+            target,
+            ..
+        }) = self.entry_at(p)
         else {
             return Vec::new();
         };
+        let mut here_m = self.distance_m[&here].0;
         let mut route = vec![self.centre(here)];
         while route.len() <= self.distance_m.len() {
             let next = neighbours(here)
