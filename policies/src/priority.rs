@@ -20,7 +20,10 @@
 //! A peer whose plan is older than [`PriorityConfig::stale_plan_s`], or that never sent
 //! one, is an obstacle at its last known position inflated by its stopping envelope: the
 //! distance it may have flown since (`|v| · age`) plus its braking distance
-//! `|v|² / (2 a)`.
+//! `|v|² / (2 a)`. Ages count on this robot's clock from the earlier of a message's
+//! stamp and its arrival (stamps are on the team clock, `troupe_core::TeamClock`, and
+//! the link rejects those more than `max_clock_ahead_s` ahead); a restarted peer's new
+//! run replaces what its earlier run said (`PeerTable`).
 //!
 //! Deviation from the thesis (on by default, [`PriorityConfig::clear_of_lower_priority`]):
 //! a robot also keeps its candidates clear of nearby peers of *lower* priority, modelled
@@ -245,9 +248,12 @@ pub fn peer_model<'a>(
     {
         return Some(PeerModel::Plan(&plan.plan.trajectory));
     }
+    // The age counts from the earlier of the stamp and the arrival: a sender's clock
+    // a little ahead of ours (the link rejects more than `max_clock_ahead_s`) must not
+    // make an old position look fresh.
     let from_odometry = track.odometry.as_ref().map(|o| {
         (
-            o.odometry.stamp,
+            o.odometry.stamp.min(o.received_at),
             nalgebra::Point3::from(o.odometry.pose.translation.vector),
             o.odometry.velocity_mps.norm(),
         )
@@ -509,6 +515,7 @@ mod tests {
                 robot: RobotId(peer),
                 priority,
                 plan: Plan::new(t(received), trajectory),
+                run_start_ns: 0,
                 received_at: t(received),
             });
         }
@@ -517,6 +524,7 @@ mod tests {
             table.update_odometry(&PeerOdometry {
                 robot: RobotId(peer),
                 odometry,
+                run_start_ns: 0,
                 received_at,
             });
         }

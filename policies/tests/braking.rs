@@ -133,6 +133,7 @@ impl Actor for Script {
                             robot,
                             priority,
                             plan: Plan::new(now, peer_line(now, a, b)),
+                            run_start_ns: 0,
                             received_at: now,
                         },
                     );

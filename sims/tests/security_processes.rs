@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{root, zenoh_python};
+use common::{root, seconds_of_day, strip_ansi, zenoh_python};
 use serde_json::Value;
 use troupe_actors::link::MAX_RECEIVED_BYTES;
 use troupe_comms::journal::{DiskJournal, Recovered};
@@ -693,34 +693,6 @@ fn a_flood_and_a_200_mb_message_leave_a_robot_process_as_it_was() {
         "{lines} log lines for {} rejected frames:\n{log}",
         rejections["not_in_roster"]
     );
-}
-
-/// `text` without its terminal colour sequences (`ESC [ … m`).
-fn strip_ansi(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut chars = text.chars();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            for c in chars.by_ref() {
-                if c == 'm' {
-                    break;
-                }
-            }
-        } else {
-            out.push(c);
-        }
-    }
-    out
-}
-
-/// Seconds since midnight of a tracing timestamp (`2026-11-26T07:50:01.123456Z`).
-fn seconds_of_day(stamp: &str) -> Option<f64> {
-    let time = stamp.split('T').nth(1)?.trim_end_matches('Z');
-    let mut parts = time.split(':');
-    let h: f64 = parts.next()?.parse().ok()?;
-    let m: f64 = parts.next()?.parse().ok()?;
-    let s: f64 = parts.next()?.parse().ok()?;
-    Some(3600.0 * h + 60.0 * m + s)
 }
 
 /// A robot's journal as a restart would find it.

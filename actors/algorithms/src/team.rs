@@ -12,8 +12,12 @@ use crate::plan::Plan;
 pub struct PeerOdometry {
     /// The peer.
     pub robot: RobotId,
-    /// Its odometry (stamp on the peer's clock).
+    /// Its odometry (stamped in this robot's run time, from the team clock).
     pub odometry: Odometry,
+    /// When the peer's current run began, on the team clock (the envelope's
+    /// `run_start_ns`): a later run than the one known means the peer restarted, and
+    /// what it said in its earlier run no longer holds.
+    pub run_start_ns: u64,
     /// When it arrived here.
     pub received_at: Time,
 }
@@ -44,8 +48,13 @@ pub struct PeerPlan {
     pub robot: RobotId,
     /// Its priority; larger values are avoided by smaller ones (§8.2.3).
     pub priority: u16,
-    /// The plan, moved into this robot's world frame.
+    /// The plan, moved into this robot's world frame (times in this robot's run
+    /// time, from the team clock).
     pub plan: Plan,
+    /// When the peer's current run began, on the team clock (the envelope's
+    /// `run_start_ns`): a later run than the one known means the peer restarted, and
+    /// what it said in its earlier run no longer holds.
+    pub run_start_ns: u64,
     /// When it arrived here.
     pub received_at: Time,
 }

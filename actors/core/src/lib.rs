@@ -4,6 +4,7 @@
 //! cores (`troupe-algorithms`) both speak, so that neither depends on the other:
 //!
 //! - [`Time`]: a point in a run's time (simulated or wall clock), integer nanoseconds;
+//! - [`TeamClock`]: where a run's time sits on the clock the team shares;
 //! - [`RobotId`]: a robot's index in its team;
 //! - [`Message`]: what may be published on a topic;
 //! - [`ErrorChain`]: an error and its causes on one line, for logs;
@@ -27,7 +28,7 @@ mod config;
 mod time;
 
 pub use config::ConfigError;
-pub use time::Time;
+pub use time::{TeamClock, Time};
 
 /// Index of a robot in its team.
 #[derive(

@@ -95,3 +95,71 @@ mod tests {
         assert_eq!(Time::MAX + Duration::from_secs(1), Time::MAX);
     }
 }
+
+/// Where a robot's run time sits on the clock its team shares.
+///
+/// Every robot counts [`Time`] from the start of its own run. Robots of one process
+/// (the simulator) share that start, so their times compare directly: the team
+/// clock is run time ([`TeamClock::SHARED`]). Robots in separate processes start at
+/// different moments and restart: there the team clock is Unix time (the hosts'
+/// clocks synchronised, e.g. by NTP or PTP, as any multi-robot ROS 2 system needs),
+/// and a process's run starts at its [`origin_ns`](TeamClock::origin_ns) on it.
+/// Stamps sent to other robots are on the team clock, so they keep increasing across
+/// a robot's restarts; the origin also names the run (its incarnation), so a
+/// restart is announced by every message of the new run.
+///
+/// ```
+/// use troupe_core::{TeamClock, Time};
+///
+/// let clock = TeamClock::starting_at(1_000);
+/// assert_eq!(clock.to_team_ns(Time::from_nanos(5)), 1_005);
+/// assert_eq!(clock.from_team_ns(1_005), Time::from_nanos(5));
+/// // Before this run began: the run's start.
+/// assert_eq!(clock.from_team_ns(10), Time::ZERO);
+/// assert_eq!(TeamClock::SHARED.to_team_ns(Time::from_nanos(7)), 7);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct TeamClock {
+    origin_ns: u64,
+}
+
+impl TeamClock {
+    /// The team clock of robots that share one run (the simulator): run time itself.
+    pub const SHARED: TeamClock = TeamClock { origin_ns: 0 };
+
+    /// A run that starts `origin_ns` nanoseconds into the team clock.
+    #[must_use]
+    pub const fn starting_at(origin_ns: u64) -> Self {
+        TeamClock { origin_ns }
+    }
+
+    /// A run that starts now on the host's clock (Unix time): the team clock of a
+    /// robot process.
+    #[must_use]
+    pub fn starting_now() -> Self {
+        let origin_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        TeamClock { origin_ns }
+    }
+
+    /// The run's start on the team clock, nanoseconds: it names the run, and a
+    /// restarted robot's is later than its previous run's.
+    #[must_use]
+    pub const fn origin_ns(self) -> u64 {
+        self.origin_ns
+    }
+
+    /// A time of this run on the team clock, nanoseconds.
+    #[must_use]
+    pub const fn to_team_ns(self, time: Time) -> u64 {
+        self.origin_ns.saturating_add(time.as_nanos())
+    }
+
+    /// A team-clock stamp as a time of this run; stamps from before the run began
+    /// are its start ([`Time::ZERO`]).
+    #[must_use]
+    pub const fn from_team_ns(self, team_ns: u64) -> Time {
+        Time::from_nanos(team_ns.saturating_sub(self.origin_ns))
+    }
+}

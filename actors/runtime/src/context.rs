@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::queue::QueuePolicy;
 use crate::topic::{Payload, Topic};
-use troupe_core::{Message, RobotId, Time};
+use troupe_core::{Message, RobotId, TeamClock, Time};
 
 /// Names one of an actor's timers. Actors pick their own ids (`const TICK: TimerId = TimerId(0);`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -68,6 +68,7 @@ pub struct Context<'a> {
     pub(crate) commands: &'a mut Vec<Command>,
     pub(crate) rng: &'a mut ChaCha8Rng,
     pub(crate) bookkeeping: &'a mut bool,
+    pub(crate) clock: TeamClock,
 }
 
 impl Context<'_> {
@@ -76,6 +77,15 @@ impl Context<'_> {
     #[must_use]
     pub fn now(&self) -> Time {
         self.now
+    }
+
+    /// Where this run's time sits on the clock the team shares: run time itself
+    /// under the sim-time executor ([`TeamClock::SHARED`]), Unix time from the
+    /// executor's start under the real-time one. What crosses to other robots is
+    /// stamped on it.
+    #[must_use]
+    pub fn team_clock(&self) -> TeamClock {
+        self.clock
     }
 
     /// This robot's index in the team.

@@ -41,8 +41,8 @@ use crate::spec::RobotSpec;
 use crate::stats::{RobotReport, TopicStats};
 use crate::tap::{Publication, Tap};
 use crate::topic::Received;
-use troupe_core::RobotId;
 use troupe_core::Time;
+use troupe_core::{RobotId, TeamClock};
 
 /// How often the transport's counters go out on [`LINK_TRANSPORT`], milliseconds.
 const TRANSPORT_STATS_PERIOD_MS: u64 = 1000;
@@ -412,6 +412,7 @@ impl RealtimeExecutor {
     /// Instantiates and starts every actor; nothing runs yet.
     fn prepare(self, transport: Option<Arc<dyn PacketTransport>>) -> Prepared {
         let epoch = Instant::now();
+        let clock = TeamClock::starting_now();
         let mut robots = Vec::new();
         let mut slots_per_robot = Vec::new();
         let mut pending_outputs = Vec::new();
@@ -421,7 +422,7 @@ impl RealtimeExecutor {
             let mut slots = Vec::new();
             let mut inboxes = Vec::new();
             for (s, actor) in spec.actors.into_iter().enumerate() {
-                let mut slot = Slot::new(actor, self.seed, id);
+                let mut slot = Slot::new(actor, self.seed, id, clock);
                 let mut inputs = Inputs::default();
                 if !slot.instantiate(Time::ZERO)
                     || slot.run_hook(Hook::Start, Time::ZERO, id, &spec.name)

@@ -31,8 +31,8 @@ use crate::spec::RobotSpec;
 use crate::stats::RobotReport;
 use crate::tap::{Publication, Tap};
 use crate::topic::{Payload, Received};
-use troupe_core::RobotId;
 use troupe_core::Time;
+use troupe_core::{RobotId, TeamClock};
 
 /// An event of one robot.
 enum Kind {
@@ -419,7 +419,7 @@ impl SimExecutor {
                 let slots: Vec<Slot> = spec
                     .actors
                     .into_iter()
-                    .map(|a| Slot::new(a, seed, id))
+                    .map(|a| Slot::new(a, seed, id, TeamClock::SHARED))
                     .collect();
                 SimRobot {
                     id,

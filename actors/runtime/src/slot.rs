@@ -14,8 +14,7 @@ use crate::context::{Command, Context, Outgoing};
 use crate::inputs::Inputs;
 use crate::spec::{ActorFactory, ActorOptions, ActorSpec};
 use crate::stats::{ActorReport, ActorStats};
-use troupe_core::RobotId;
-use troupe_core::Time;
+use troupe_core::{RobotId, TeamClock, Time};
 
 /// Which hook to run.
 pub(crate) enum Hook<'e> {
@@ -57,10 +56,12 @@ pub(crate) struct Slot {
     /// The last handler call said it only stored what arrived
     /// ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)).
     pub(crate) bookkeeping: bool,
+    /// The run's place on the team clock ([`Context::team_clock`](crate::Context::team_clock)).
+    clock: TeamClock,
 }
 
 impl Slot {
-    pub(crate) fn new(spec: ActorSpec, team_seed: u64, robot: RobotId) -> Self {
+    pub(crate) fn new(spec: ActorSpec, team_seed: u64, robot: RobotId, clock: TeamClock) -> Self {
         let seed = team_seed
             ^ stable_hash(spec.name.as_bytes()).rotate_left(17)
             ^ u64::from(robot.0).wrapping_mul(0x9e37_79b9_7f4a_7c15);
@@ -76,6 +77,7 @@ impl Slot {
             outbox: Vec::new(),
             commands: Vec::new(),
             bookkeeping: false,
+            clock,
         }
     }
 
@@ -122,6 +124,7 @@ impl Slot {
             commands: &mut self.commands,
             rng: &mut self.rng,
             bookkeeping: &mut self.bookkeeping,
+            clock: self.clock,
         };
         let is_handle = matches!(hook, Hook::Handle(_));
         let result = catch_unwind(AssertUnwindSafe(|| -> ActorResult {

@@ -34,7 +34,11 @@ pub use plan::{Plan, PlanKnot};
 pub use user::{MAX_USER_NAME_BYTES, UserMessage, valid_user_name};
 
 /// Version of the wire format. Receivers reject envelopes of any other version.
-pub const FORMAT_VERSION: u16 = 1;
+///
+/// Version 2 put stamps on the team clock (`troupe_core::TeamClock`: Unix time between
+/// processes) and added [`Envelope::run_start_ns`]; version 1 stamped messages from
+/// each process's own start, so they went backwards when a robot restarted.
+pub const FORMAT_VERSION: u16 = 2;
 
 /// Largest encoded envelope a receiver accepts, in bytes.
 pub const MAX_MESSAGE_BYTES: usize = 4 * 1024 * 1024;
@@ -127,29 +131,53 @@ pub struct Envelope {
     pub team: u32,
     /// Sending robot's index in the team.
     pub sender: u32,
+    /// When the sender's current run began, on the team clock, nanoseconds: it names
+    /// the run, so a larger value than before announces that the sender restarted
+    /// (0 in the simulator, where robots never restart their process).
+    pub run_start_ns: u64,
     /// Per-sender sequence number.
     pub sequence: u64,
     /// Traffic class (derived from the payload).
     pub class: Class,
-    /// Sender's clock (sim or wall time of its run), nanoseconds.
+    /// When it was made, on the team clock (sim time in the simulator, Unix time
+    /// between processes), nanoseconds; never before `run_start_ns`.
     pub stamp_ns: u64,
     /// The message.
     pub payload: Payload,
 }
 
 impl Envelope {
-    /// An envelope of the current format version; the class follows the payload.
+    /// An envelope of the current format version from a run that started at 0 on the
+    /// team clock (the simulator's); the class follows the payload.
     #[must_use]
     pub fn new(team: u32, sender: u32, sequence: u64, stamp_ns: u64, payload: Payload) -> Self {
         Envelope {
             version: FORMAT_VERSION,
             team,
             sender,
+            run_start_ns: 0,
             sequence,
             class: payload.class(),
             stamp_ns,
             payload,
         }
+    }
+
+    /// A message cannot be made before the run that made it.
+    fn check_stamps(&self) -> Result<(), ContentError> {
+        if self.stamp_ns < self.run_start_ns {
+            return Err(ContentError::Message(
+                "stamp is earlier than the start of the sender's run",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The same envelope from a run that started at `run_start_ns` on the team clock.
+    #[must_use]
+    pub fn from_run(mut self, run_start_ns: u64) -> Self {
+        self.run_start_ns = run_start_ns;
+        self
     }
 }
 
@@ -232,6 +260,7 @@ pub fn encode(envelope: &Envelope) -> Result<Vec<u8>, EncodeError> {
             payload: payload_class,
         });
     }
+    envelope.check_stamps()?;
     envelope.payload.validate()?;
     let bytes = postcard::to_allocvec(envelope)?;
     if bytes.len() > MAX_MESSAGE_BYTES {
@@ -263,6 +292,7 @@ pub fn decode(bytes: &[u8]) -> Result<Envelope, DecodeError> {
             payload: payload_class,
         });
     }
+    envelope.check_stamps()?;
     envelope.payload.validate()?;
     Ok(envelope)
 }

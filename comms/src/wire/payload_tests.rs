@@ -527,7 +527,7 @@ proptest! {
         body in proptest::collection::vec(any::<u8>(), 0..512),
     ) {
         // Header of a keyframe envelope, then a payload variant and random bytes.
-        let mut bytes = vec![FORMAT_VERSION as u8, 1, 1, 1, 2, 1, variant];
+        let mut bytes = vec![FORMAT_VERSION as u8, 1, 1, 0, 1, 2, 1, variant];
         bytes.extend(body);
         let _ = decode(&bytes);
     }

@@ -26,15 +26,38 @@ fn odometry_round_trips_and_has_a_fixed_size() {
     let e = odometry();
     let bytes = encode(&e).unwrap();
     assert_eq!(decode(&bytes).unwrap(), e);
-    // 1 (version) + 1 (team) + 1 (sender) + 1 (seq) + 1 (class) + 4 (stamp varint)
-    // + 1 (variant) + 10 × 8 (f64s).
-    assert_eq!(bytes.len(), 90);
+    // 1 (version) + 1 (team) + 1 (sender) + 1 (run start varint: 0) + 1 (seq)
+    // + 1 (class) + 4 (stamp varint) + 1 (variant) + 10 × 8 (f64s).
+    assert_eq!(bytes.len(), 91);
 }
 
 #[test]
 fn golden_header_bytes() {
     let bytes = encode(&odometry()).unwrap();
-    assert_eq!(&bytes[..5], &[FORMAT_VERSION as u8, 7, 1, 42, 0]);
+    assert_eq!(&bytes[..6], &[FORMAT_VERSION as u8, 7, 1, 0, 42, 0]);
+}
+
+#[test]
+fn a_run_start_travels_and_no_stamp_precedes_it() {
+    let unix_ns = 1_790_000_000_000_000_000;
+    let later = Envelope {
+        stamp_ns: unix_ns + 5,
+        ..odometry()
+    }
+    .from_run(unix_ns);
+    assert_eq!(decode(&encode(&later).unwrap()).unwrap(), later);
+    let before = Envelope {
+        stamp_ns: unix_ns - 1,
+        ..later.clone()
+    };
+    assert!(matches!(encode(&before), Err(EncodeError::Invalid(_))));
+    // Bytes that claim a run starting after the message: refused on receipt.
+    let forged = postcard::to_allocvec(&Envelope {
+        run_start_ns: unix_ns + 6,
+        ..later
+    })
+    .unwrap();
+    assert!(matches!(decode(&forged), Err(DecodeError::Invalid(_))));
 }
 
 #[test]
@@ -52,7 +75,7 @@ fn rejects_bad_input_with_reasons() {
     version[0] = 9;
     assert_eq!(decode(&version), Err(DecodeError::UnsupportedVersion(9)));
     let mut class = good.clone();
-    class[4] = 2;
+    class[5] = 2;
     assert!(matches!(
         decode(&class),
         Err(DecodeError::ClassMismatch { .. })

@@ -27,6 +27,7 @@ fn golden_user_message_bytes() {
         FORMAT_VERSION as u8, // version
         7,                    // team
         1,                    // sender
+        0,                    // run start (varint)
         3,                    // sequence
         1,                    // header class: Plan
         0xE8,

@@ -54,3 +54,33 @@ pub fn zenoh_python() -> Result<std::path::PathBuf, String> {
         ))
     }
 }
+
+/// `text` without its terminal colour sequences (`ESC [ … m`).
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn strip_ansi(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            for c in chars.by_ref() {
+                if c == 'm' {
+                    break;
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Seconds since midnight of a tracing timestamp (`2026-11-26T07:50:01.123456Z`).
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn seconds_of_day(stamp: &str) -> Option<f64> {
+    let time = stamp.split('T').nth(1)?.trim_end_matches('Z');
+    let mut parts = time.split(':');
+    let h: f64 = parts.next()?.parse().ok()?;
+    let m: f64 = parts.next()?.parse().ok()?;
+    let s: f64 = parts.next()?.parse().ok()?;
+    Some(3600.0 * h + 60.0 * m + s)
+}

@@ -10,9 +10,12 @@ use crate::team::{PeerOdometry, PeerPlan};
 use crate::trajectory::Trajectory;
 use troupe_core::{RobotId, Time};
 
-/// The latest of what arrived from one peer.
+/// The latest of what arrived from one peer, in its current run.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PeerTrack {
+    /// The peer's run this track belongs to (its start on the team clock): a message
+    /// from a later run replaces the whole track, one from an earlier run is ignored.
+    pub run_start_ns: u64,
     /// Latest odometry, if any.
     pub odometry: Option<PeerOdometry>,
     /// Latest committed plan (with the sender's priority), if any.
@@ -39,16 +42,36 @@ pub fn must_yield(me: RobotId, mine: u16, peer: RobotId, theirs: Option<u16>) ->
 }
 
 /// Latest odometry and plan per peer, keyed by robot.
+///
+/// Stamps are on the team clock (`troupe_core::TeamClock`), so they keep increasing
+/// across a peer's restarts; each message also names the peer's run, and a restart
+/// (a later run) voids what the earlier run said — its last plan no longer describes
+/// where the peer goes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PeerTable {
     tracks: BTreeMap<RobotId, PeerTrack>,
 }
 
 impl PeerTable {
+    /// The track of `robot` for a message of its run `run_start_ns`: a new run starts
+    /// a new track; `None` for a message of an earlier run (it arrived late).
+    fn track_of_run(&mut self, robot: RobotId, run_start_ns: u64) -> Option<&mut PeerTrack> {
+        let track = self.tracks.entry(robot).or_default();
+        if run_start_ns > track.run_start_ns {
+            *track = PeerTrack {
+                run_start_ns,
+                ..PeerTrack::default()
+            };
+        }
+        (run_start_ns == track.run_start_ns).then_some(track)
+    }
+
     /// Records a peer's odometry (an older stamp than the one held is ignored: the link
     /// may reorder).
     pub fn update_odometry(&mut self, odometry: &PeerOdometry) {
-        let track = self.tracks.entry(odometry.robot).or_default();
+        let Some(track) = self.track_of_run(odometry.robot, odometry.run_start_ns) else {
+            return;
+        };
         if track
             .odometry
             .as_ref()
@@ -60,7 +83,9 @@ impl PeerTable {
 
     /// Records a peer's plan (an older plan than the one held is ignored).
     pub fn update_plan(&mut self, plan: &PeerPlan) {
-        let track = self.tracks.entry(plan.robot).or_default();
+        let Some(track) = self.track_of_run(plan.robot, plan.run_start_ns) else {
+            return;
+        };
         if track
             .plan
             .as_ref()
@@ -164,5 +189,87 @@ impl PeerAvoidance for Box<dyn PeerAvoidance> {
 
     fn record_round(&mut self, now: Time, blocked_by_peers: bool) {
         (**self).record_round(now, blocked_by_peers);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point3, Vector3};
+
+    use super::*;
+    use crate::plan::Plan;
+    use crate::trajectory::Knot;
+
+    fn odometry(run_start_ns: u64, stamp_s: f64, x: f64) -> PeerOdometry {
+        PeerOdometry {
+            robot: RobotId(0),
+            odometry: Odometry {
+                stamp: Time::from_secs_f64(stamp_s),
+                pose: Isometry3::translation(x, 0.0, 1.0),
+                velocity_mps: Vector3::zeros(),
+            },
+            run_start_ns,
+            received_at: Time::from_secs_f64(stamp_s),
+        }
+    }
+
+    fn plan(run_start_ns: u64, stamp_s: f64) -> PeerPlan {
+        let at = Time::from_secs_f64(stamp_s);
+        let knot = |time, x| Knot {
+            time,
+            position_m: Point3::new(x, 0.0, 1.0),
+            yaw_rad: 0.0,
+        };
+        let trajectory = Trajectory::new(vec![
+            knot(at, 0.0),
+            knot(at + std::time::Duration::from_secs(2), 2.0),
+        ])
+        .expect("a trajectory");
+        PeerPlan {
+            robot: RobotId(0),
+            priority: 3,
+            plan: Plan::new(at, trajectory),
+            run_start_ns,
+            received_at: at,
+        }
+    }
+
+    #[test]
+    fn a_restart_voids_the_earlier_run_and_its_late_messages() {
+        let mut table = PeerTable::default();
+        table.update_plan(&plan(0, 50.0));
+        table.update_odometry(&odometry(0, 50.0, 1.0));
+        // The peer restarts at 60 s: its new run's odometry replaces the track, and
+        // the earlier run's plan no longer describes where it goes.
+        let restart_ns = 60_000_000_000;
+        table.update_odometry(&odometry(restart_ns, 60.5, 7.0));
+        let track = table.get(RobotId(0)).expect("heard from");
+        assert_eq!(track.run_start_ns, restart_ns);
+        assert_eq!(track.plan, None);
+        assert_eq!(
+            track.priority(),
+            None,
+            "avoided until it announces a priority"
+        );
+        // A message of the earlier run that arrives late changes nothing.
+        table.update_odometry(&odometry(0, 59.0, 3.0));
+        table.update_plan(&plan(0, 59.0));
+        let track = table.get(RobotId(0)).expect("heard from");
+        assert_eq!(track.plan, None);
+        let x = track
+            .odometry
+            .as_ref()
+            .map(|o| o.odometry.pose.translation.x);
+        assert_eq!(x, Some(7.0));
+        // Within one run, newer stamps win and older ones are ignored.
+        table.update_odometry(&odometry(restart_ns, 60.4, 5.0));
+        table.update_plan(&plan(restart_ns, 61.0));
+        let track = table.get(RobotId(0)).expect("heard from");
+        let x = track
+            .odometry
+            .as_ref()
+            .map(|o| o.odometry.pose.translation.x);
+        assert_eq!(x, Some(7.0));
+        assert_eq!(track.priority(), Some(3));
     }
 }

@@ -542,6 +542,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
             ])
             .expect("a trajectory"),
         ),
+        run_start_ns: 0,
         received_at: Time::ZERO,
     };
     guides[1].observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));

@@ -160,6 +160,8 @@ pub struct LinkActor {
     journaled_generation: Option<u64>,
     /// Messages received before a process restart, to publish again at start.
     replay: Vec<ReceivedMessage>,
+    /// Per peer, the latest of its runs heard (its start on the team clock).
+    peer_runs: BTreeMap<u32, u64>,
 }
 
 impl LinkActor {
@@ -194,6 +196,7 @@ impl LinkActor {
             lanes: Vec::new(),
             lanes_changed: false,
             replay: Vec::new(),
+            peer_runs: BTreeMap::new(),
         })
     }
 
@@ -321,13 +324,15 @@ impl LinkActor {
         ctx: &mut Context<'_>,
     ) -> ActorResult {
         let class = payload.class();
+        let clock = ctx.team_clock();
         let envelope = Envelope::new(
             self.config.team,
             ctx.robot().0,
             self.sequence,
-            stamp.as_nanos(),
+            clock.to_team_ns(stamp),
             payload,
-        );
+        )
+        .from_run(clock.origin_ns());
         let bytes = wire::encode(&envelope)
             .map_err(|e| ActorError::with_source("encoding a message", e))?;
         self.sequence += 1;
@@ -415,7 +420,12 @@ impl LinkActor {
         let Some(plan) = self.unsent_plan.take() else {
             return Ok(());
         };
-        let Some(wire_plan) = plan_to_wire(&plan, self.plans_sent, self.config.priority) else {
+        let Some(wire_plan) = plan_to_wire(
+            &plan,
+            self.plans_sent,
+            self.config.priority,
+            ctx.team_clock(),
+        ) else {
             return Ok(()); // an empty trajectory: nothing to share
         };
         self.plans_sent = self.plans_sent.wrapping_add(1);
@@ -544,7 +554,10 @@ impl LinkActor {
         match incoming {
             None => Ok(()),
             Some(Incoming::Message(message)) => {
-                let envelope = match self.open_envelope(from, &message.bytes) {
+                let opened = self
+                    .open_envelope(from, &message.bytes)
+                    .and_then(|envelope| self.not_ahead(from, envelope, ctx));
+                let envelope = match opened {
                     Ok(envelope) => envelope,
                     Err((reason, e)) => {
                         // Not a valid envelope of our team from this sender: it proves
@@ -853,17 +866,60 @@ impl LinkActor {
         Ok(envelope)
     }
 
+    /// Passes an envelope made no later than `max_clock_ahead_s` from now on the team
+    /// clock. (Messages replayed from the journal were checked when they arrived.)
+    fn not_ahead(
+        &self,
+        from: RobotId,
+        envelope: Envelope,
+        ctx: &Context<'_>,
+    ) -> Result<Envelope, (Rejection, ActorError)> {
+        let now_ns = ctx.team_clock().to_team_ns(ctx.now());
+        let ahead_s = envelope.stamp_ns.saturating_sub(now_ns) as f64 * 1e-9;
+        if ahead_s > self.config.max_clock_ahead_s {
+            return Err((
+                Rejection::FromTheFuture,
+                ActorError::msg(format!(
+                    "rejected a message from {from}: stamped {ahead_s:.3} s ahead of this \
+                     robot's clock (at most {} s; are the hosts' clocks synchronised?)",
+                    self.config.max_clock_ahead_s
+                )),
+            ));
+        }
+        Ok(envelope)
+    }
+
+    /// Keeps the latest run heard of each peer and says once when a peer restarted
+    /// (a message of a later run than before).
+    fn note_run(&mut self, from: RobotId, run_start_ns: u64, ctx: &Context<'_>) {
+        let known = self.peer_runs.entry(from.0).or_insert(run_start_ns);
+        if run_start_ns > *known {
+            let earlier = *known;
+            *known = run_start_ns;
+            tracing::info!(
+                robot = ctx.robot_name(),
+                peer = %from,
+                "{from} restarted ({:.3} s after its previous start): what it said before no \
+                 longer holds",
+                (run_start_ns - earlier) as f64 * 1e-9
+            );
+        }
+    }
+
     /// Publishes a checked envelope's payload on the peer topics; an invalid
     /// payload is an error.
     fn deliver(&mut self, from: RobotId, envelope: Envelope, ctx: &mut Context<'_>) -> ActorResult {
+        let clock = ctx.team_clock();
+        let stamp = clock.from_team_ns(envelope.stamp_ns);
+        let run_start_ns = envelope.run_start_ns;
+        self.note_run(from, run_start_ns, ctx);
         if let Payload::User(message) = &envelope.payload {
-            return self.receive_shared(from, Time::from_nanos(envelope.stamp_ns), message, ctx);
+            return self.receive_shared(from, stamp, message, ctx);
         }
         let frame = self.frame_of(from);
         if let Payload::Keyframe(keyframe) = &envelope.payload {
             let reject = |e| ActorError::with_source(format!("rejected a keyframe from {from}"), e);
-            let mut keyframe = keyframe_from_wire(keyframe, Time::from_nanos(envelope.stamp_ns))
-                .map_err(reject)?;
+            let mut keyframe = keyframe_from_wire(keyframe, stamp).map_err(reject)?;
             if let Some(t) = frame {
                 keyframe = transform_keyframe(&keyframe, &t).map_err(|e| {
                     ActorError::with_source(format!("rejected a keyframe from {from}"), e)
@@ -881,7 +937,7 @@ impl LinkActor {
         }
         if let Payload::Plan(p) = &envelope.payload {
             let reject = |e| ActorError::with_source(format!("rejected a plan from {from}"), e);
-            let mut plan = plan_from_wire(p, Time::from_nanos(envelope.stamp_ns))?;
+            let mut plan = plan_from_wire(p, stamp, clock)?;
             if let Some(t) = frame {
                 plan = transform_plan(&plan, &t).map_err(reject)?;
             }
@@ -891,6 +947,7 @@ impl LinkActor {
                     robot: from,
                     priority: p.priority,
                     plan,
+                    run_start_ns,
                     received_at: ctx.now(),
                 },
             );
@@ -920,12 +977,13 @@ impl LinkActor {
                 PeerOdometry {
                     robot: from,
                     odometry: Odometry {
-                        stamp: Time::from_nanos(envelope.stamp_ns),
+                        stamp,
                         pose: frame.map_or(pose, |t| t * pose),
                         velocity_mps: frame.map_or(Vector3::from(o.velocity_mps), |t| {
                             t.rotation * Vector3::from(o.velocity_mps)
                         }),
                     },
+                    run_start_ns,
                     received_at: ctx.now(),
                 },
             );
@@ -996,6 +1054,8 @@ impl LinkActor {
                 Ok(())
             }
             Event::Timer(REPLAY) => {
+                // Once: the timer is periodic, and nothing is left to replay.
+                ctx.cancel_timer(REPLAY);
                 self.replay_received(ctx);
                 Ok(())
             }

@@ -49,6 +49,11 @@ pub struct LinkConfig {
     /// what it misses is still kept for it, within its own bounds, and resent when
     /// it is heard again; seconds, 0 = never.
     pub peer_timeout_s: f64,
+    /// A message stamped further ahead of this robot's clock than this is rejected
+    /// and counted (`from_the_future`): a sender whose clock runs ahead, or a forged
+    /// stamp, would otherwise freeze what this robot knows of it. Robots on separate
+    /// hosts need clocks synchronised better than this (NTP, PTP); seconds.
+    pub max_clock_ahead_s: f64,
     /// Robot processes (`troupe robot`, `troupe-robot`): where the link's journal
     /// lives (`link.journal`: stored messages, acknowledgements, the next message
     /// id, messages received), relative to the robot's output directory; absent:
@@ -145,6 +150,7 @@ impl Default for LinkConfig {
             base_id: None,
             journal_dir: None,
             peer_timeout_s: DEFAULT_PEER_TIMEOUT_S,
+            max_clock_ahead_s: DEFAULT_MAX_CLOCK_AHEAD_S,
             peer_frames: Vec::new(),
             keyframe_encoding: KeyframeEncoding::default(),
             shared: BTreeMap::new(),
@@ -155,6 +161,10 @@ impl Default for LinkConfig {
 
 /// Default [`LinkConfig::peer_timeout_s`]: 100 periods of 10 Hz odometry.
 pub const DEFAULT_PEER_TIMEOUT_S: f64 = 10.0;
+
+/// Default [`LinkConfig::max_clock_ahead_s`]: five periods of 10 Hz odometry, far
+/// above what NTP keeps hosts apart on a LAN (milliseconds).
+pub const DEFAULT_MAX_CLOCK_AHEAD_S: f64 = 0.5;
 
 impl LinkConfig {
     /// Fills an empty [`roster`](Self::roster) with the team of `team_size`
@@ -212,6 +222,7 @@ impl LinkConfig {
         ConfigError::non_negative("odometry_rate_hz", self.odometry_rate_hz)?;
         ConfigError::non_negative("plan_rate_hz", self.plan_rate_hz)?;
         ConfigError::non_negative("peer_timeout_s", self.peer_timeout_s)?;
+        ConfigError::positive("max_clock_ahead_s", self.max_clock_ahead_s)?;
         self.shaper.validate().map_err(|e| e.within("shaper"))?;
         self.subscribe
             .validate()

@@ -10,13 +10,18 @@ use troupe_comms::wire;
 use crate::mapper::sogmm::Gmm4;
 use crate::msgs::{Keyframe, Plan};
 use crate::trajectory::{Knot, Trajectory};
-use troupe_runtime::{ActorError, Time};
+use troupe_runtime::{ActorError, TeamClock, Time};
 
 /// The wire form of a committed plan (thesis §8.2.3): knot times become `f32`
-/// seconds after the first knot, positions and yaw `f32`. `None` for an empty
-/// trajectory (nothing to share).
+/// seconds after the first knot, whose time goes on the team clock (`clock`: this
+/// run's), positions and yaw `f32`. `None` for an empty trajectory (nothing to share).
 #[must_use]
-pub fn plan_to_wire(plan: &Plan, plan_id: u32, priority: u16) -> Option<wire::Plan> {
+pub fn plan_to_wire(
+    plan: &Plan,
+    plan_id: u32,
+    priority: u16,
+    clock: TeamClock,
+) -> Option<wire::Plan> {
     let first = plan.trajectory.knots().first()?;
     let start = first.time;
     let knots = plan
@@ -36,14 +41,19 @@ pub fn plan_to_wire(plan: &Plan, plan_id: u32, priority: u16) -> Option<wire::Pl
     Some(wire::Plan {
         plan_id,
         priority,
-        start_ns: start.as_nanos(),
+        start_ns: clock.to_team_ns(start),
         knots,
     })
 }
 
-/// A received plan as the robot's type (knot times back on the sender's clock,
-/// `start_ns + t_s`); `stamp` is the envelope's stamp (when it was committed).
-pub fn plan_from_wire(plan: &wire::Plan, stamp: Time) -> Result<Plan, ActorError> {
+/// A received plan as the robot's type (knot times `start_ns + t_s` from the team
+/// clock into this run's time, `clock`); `stamp` is the envelope's stamp (when it was
+/// committed) in this run's time.
+pub fn plan_from_wire(
+    plan: &wire::Plan,
+    stamp: Time,
+    clock: TeamClock,
+) -> Result<Plan, ActorError> {
     let knots = plan
         .knots
         .iter()
@@ -51,7 +61,7 @@ pub fn plan_from_wire(plan: &wire::Plan, stamp: Time) -> Result<Plan, ActorError
             // Validated on decode: finite and ≥ 0; the cast saturates.
             let offset_ns = (f64::from(k.t_s) * 1e9).round() as u64;
             Knot {
-                time: Time::from_nanos(plan.start_ns.saturating_add(offset_ns)),
+                time: clock.from_team_ns(plan.start_ns.saturating_add(offset_ns)),
                 position_m: Point3::from(k.position_m.map(f64::from)),
                 yaw_rad: f64::from(k.yaw_rad),
             }

@@ -33,6 +33,10 @@ pub enum Rejection {
     /// A message on a topic only the base station may send (operator commands,
     /// [`ShareFrom::Base`](super::ShareFrom::Base)) from another id.
     NotFromBase,
+    /// The envelope is stamped further ahead of this robot's clock than
+    /// [`LinkConfig::max_clock_ahead_s`](super::LinkConfig::max_clock_ahead_s): the
+    /// sender's clock runs ahead, or the stamp is forged.
+    FromTheFuture,
 }
 
 impl Rejection {
@@ -49,6 +53,7 @@ impl Rejection {
             Rejection::InvalidPayload => "invalid_payload",
             Rejection::UnheldAck => "unheld_ack",
             Rejection::NotFromBase => "not_from_base",
+            Rejection::FromTheFuture => "from_the_future",
         }
     }
 }
@@ -74,6 +79,8 @@ pub struct RejectionCounts {
     pub unheld_ack: u64,
     /// See [`Rejection::NotFromBase`].
     pub not_from_base: u64,
+    /// See [`Rejection::FromTheFuture`].
+    pub from_the_future: u64,
 }
 
 impl RejectionCounts {
@@ -100,6 +107,7 @@ impl RejectionCounts {
             Rejection::InvalidPayload => &mut self.invalid_payload,
             Rejection::UnheldAck => &mut self.unheld_ack,
             Rejection::NotFromBase => &mut self.not_from_base,
+            Rejection::FromTheFuture => &mut self.from_the_future,
         }
     }
 
@@ -115,6 +123,7 @@ impl RejectionCounts {
             + self.invalid_payload
             + self.unheld_ack
             + self.not_from_base
+            + self.from_the_future
     }
 }
 

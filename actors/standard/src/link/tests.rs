@@ -9,7 +9,7 @@ use nalgebra::Point3;
 use super::*;
 use crate::msgs::Keyframe;
 use crate::trajectory::{Knot, Trajectory};
-use troupe_runtime::{ActorSpec, Publication, RobotSpec, SimExecutor};
+use troupe_runtime::{ActorSpec, LinkRx, Publication, RobotSpec, SimExecutor};
 
 const TICK: TimerId = TimerId(0);
 
@@ -728,4 +728,113 @@ fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
             > 8 * 1_000,
         "the received keyframes are on disk"
     );
+}
+
+/// Plays robot 0 on robot 1's network input: each `(at_s, envelope)` arrives as a
+/// one-fragment frame at `at_s`.
+struct Forger {
+    frames: Vec<(f64, Envelope)>,
+    next_id: u32,
+}
+
+impl Actor for Forger {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.set_timer(TICK, Duration::from_millis(50));
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if !matches!(event, Event::Timer(TICK)) {
+            return Ok(());
+        }
+        let now_s = ctx.now().as_secs_f64();
+        while self.frames.first().is_some_and(|(at, _)| *at <= now_s) {
+            let (_, envelope) = self.frames.remove(0);
+            let body = wire::encode(&envelope).expect("a valid envelope");
+            // A data frame of one fragment (troupe_comms::shaping::frame's layout).
+            let mut frame = vec![0, envelope.class.index() as u8, 0];
+            frame.extend_from_slice(&self.next_id.to_le_bytes());
+            frame.extend_from_slice(&0u16.to_le_bytes());
+            frame.extend_from_slice(&1u16.to_le_bytes());
+            frame.extend_from_slice(&body);
+            self.next_id += 1;
+            ctx.publish(
+                &LINK_RX,
+                LinkRx {
+                    from: RobotId(0),
+                    bytes: Arc::from(frame),
+                },
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Issue 45, item 1: stamps are on the team clock and every message names its
+/// sender's run, so a restarted peer is heard at once (and announced), while a stamp
+/// too far ahead of this robot's clock is rejected and counted.
+#[test]
+fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
+    let odometry = |run_start_ms: u64, stamp_ms: u64, x: f64| {
+        let ns = |ms: u64| ms * 1_000_000;
+        Envelope::new(
+            0,
+            0,
+            0,
+            ns(stamp_ms),
+            Payload::Odometry(wire::Odometry {
+                position_m: [x, 0.0, 1.0],
+                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                velocity_mps: [0.0; 3],
+            }),
+        )
+        .from_run(ns(run_start_ms))
+    };
+    let frames = vec![
+        (0.5, odometry(0, 450, 1.0)),
+        // An hour ahead: would hold robot 1's view of robot 0 for an hour.
+        (1.0, odometry(0, 3_600_000, 2.0)),
+        // Robot 0 restarted at 1.2 s: its new run is heard at once.
+        (1.5, odometry(1_200, 1_450, 3.0)),
+        // 0.4 s ahead is within the bound (clocks a little apart).
+        (2.0, odometry(1_200, 2_400, 4.0)),
+    ];
+    let team = vec![
+        RobotSpec::new("r0"),
+        RobotSpec::new("r1")
+            .with(link(&LinkConfig::default()))
+            .with(ActorSpec::new("forger", move || Forger {
+                frames: frames.clone(),
+                next_id: 0,
+            })),
+    ];
+    type Heard = Vec<(u64, u64, f64)>;
+    let heard: Arc<Mutex<Heard>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 5);
+    let (tap_heard, tap_status) = (heard.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&PEER_ODOMETRY) {
+            tap_heard.lock().unwrap().push((
+                o.run_start_ns,
+                o.odometry.stamp.as_nanos() / 1_000_000,
+                o.odometry.pose.translation.x,
+            ));
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            *tap_status.lock().unwrap() = Some(s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(3.5));
+    exec.finish();
+    let heard = heard.lock().unwrap().clone();
+    assert_eq!(
+        heard,
+        vec![
+            (0, 450, 1.0),
+            (1_200_000_000, 1_450, 3.0),
+            (1_200_000_000, 2_400, 4.0)
+        ]
+    );
+    let status = status.lock().unwrap().clone().expect("a status");
+    assert_eq!(status.rejections.from_the_future, 1);
+    assert_eq!(status.rejections.total(), 1);
 }
