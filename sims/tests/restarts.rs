@@ -24,6 +24,8 @@ use troupe_comms::zenoh::key_expr;
 use troupe_sims::process::{loopback_endpoints, write_team};
 
 const TEAM: u32 = 45;
+/// Where robot 0 restarts on robot 1's line (x = 0, from y = −6 to 6).
+const RESTART_Y_M: f64 = 2.5;
 
 /// The team's scenario with robot 0 hovering at `start0`; robot 1 flies its line.
 fn scenario(start0: [f64; 3]) -> String {
@@ -156,7 +158,11 @@ fn a_restarted_robot_is_avoided_at_once_and_a_far_future_stamp_is_rejected() {
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::write(dir.path().join("team.toml"), scenario([-4.0, 0.0, 1.5])).expect("scenario");
     // Robot 1 is near y = 0.5 when robot 0 is back (13 s into its flight at 0.5 m/s).
-    std::fs::write(dir.path().join("restart.toml"), scenario([0.0, 2.5, 1.5])).expect("scenario");
+    std::fs::write(
+        dir.path().join("restart.toml"),
+        scenario([0.0, RESTART_Y_M, 1.5]),
+    )
+    .expect("scenario");
     let ports = free_ports(2);
     let endpoints = loopback_endpoints(&ports);
     let files = write_team(dir.path(), Path::new("team.toml"), &endpoints, None).expect("files");
@@ -221,6 +227,21 @@ fn a_restarted_robot_is_avoided_at_once_and_a_far_future_stamp_is_rejected() {
         first - restarted_at <= 3.0,
         "robot 1's first reaction came {:.2} s after the restart was announced:\n{log}",
         first - restarted_at
+    );
+    // Robot 1 never reached robot 0's place (bodies of 0.3 m: 0.6 m between centres is
+    // contact); with stamps from each process's start it flew through to y = 6.
+    let track = std::fs::read_to_string(dir.path().join("robot1/trajectory.csv")).expect("track");
+    let closest_m = track
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let v: Vec<f64> = l.split(',').filter_map(|x| x.parse().ok()).collect();
+            (v.len() == 4).then(|| v[1].hypot(v[2] - RESTART_Y_M))
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        closest_m > 0.6,
+        "robot 1 came within {closest_m:.2} m of robot 0"
     );
     let summary: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("robot1/summary.json")).expect("summary"),
