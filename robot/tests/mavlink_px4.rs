@@ -16,10 +16,11 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde_json::Value;
 use troupe_actors::msgs::{
-    DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan,
+    DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan, VEHICLE_HOLD,
 };
 use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, RealtimeExecutor, RobotSpec, Time, TimerId,
+    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec,
+    Time, TimerId,
 };
 use troupe_actors::trajectory::{Knot, Trajectory};
 use troupe_robot::frames::{enu_to_ned, yaw_enu_to_ned};
@@ -84,20 +85,47 @@ fn knot(at_s: f64, x: f64, y: f64, z: f64, yaw_rad: f64) -> Knot {
     }
 }
 
-/// Commits one plan at start and again every second (as a planner would).
+/// Commits one plan at start and again every second (as a planner would). While the
+/// vehicle holds (`vehicle/hold`) it commits hovering where it holds, and afterwards
+/// the plan's velocity from there (as the collision actor and the planner do).
 struct Mission {
     plan: Trajectory,
+    hold: Option<(Point3<f64>, f64)>,
+    /// Where and when the last hold ended.
+    resumed: Option<(Point3<f64>, Time)>,
 }
 
 const REPUBLISH: TimerId = TimerId(0);
 
+impl Mission {
+    fn new(plan: Trajectory) -> Self {
+        Mission {
+            plan,
+            hold: None,
+            resumed: None,
+        }
+    }
+}
+
 impl Actor for Mission {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&VEHICLE_HOLD, QueuePolicy::LATEST);
         ctx.set_timer(REPUBLISH, Duration::from_secs(1));
         self.publish(ctx);
         Ok(())
     }
-    fn handle(&mut self, _: &Event, ctx: &mut Context<'_>) -> ActorResult {
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if let Event::Message(m) = event {
+            let Some(hold) = m.get(&VEHICLE_HOLD) else {
+                return Ok(());
+            };
+            match (self.hold, hold.at) {
+                (None, Some(_)) => {}
+                (Some((at, _)), None) => self.resumed = Some((at, ctx.now())),
+                _ => return Ok(()),
+            }
+            self.hold = hold.at;
+        }
         self.publish(ctx);
         Ok(())
     }
@@ -106,7 +134,39 @@ impl Actor for Mission {
 impl Mission {
     fn publish(&self, ctx: &mut Context<'_>) {
         let stamp = ctx.now();
-        ctx.publish(&PLAN, Plan::new(stamp, self.plan.clone()));
+        let plan = match (self.hold, self.resumed) {
+            (Some((at, yaw_rad)), _) => Trajectory::new(vec![Knot {
+                time: stamp,
+                position_m: at,
+                yaw_rad,
+            }])
+            .expect("a knot"),
+            // The plan's velocity from where the vehicle held, from when it resumed.
+            (None, Some((at, from))) => {
+                let (Some(a), Some(b)) = (
+                    self.plan.state_at(from),
+                    self.plan.state_at(from + Duration::from_secs(10)),
+                ) else {
+                    return;
+                };
+                let shift = at - a.position_m;
+                Trajectory::new(vec![
+                    Knot {
+                        time: from,
+                        position_m: at,
+                        yaw_rad: a.yaw_rad,
+                    },
+                    Knot {
+                        time: from + Duration::from_secs(10),
+                        position_m: b.position_m + shift,
+                        yaw_rad: b.yaw_rad,
+                    },
+                ])
+                .expect("two knots")
+            }
+            (None, None) => self.plan.clone(),
+        };
+        ctx.publish(&PLAN, Plan::new(stamp, plan));
     }
 }
 
@@ -245,9 +305,7 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let (off_from_s, off_until_s) = scenario.frames_off_s;
     let robot = RobotSpec::new("r0")
         .with(vehicle)
-        .with(ActorSpec::new("mission", move || Mission {
-            plan: plan.clone(),
-        }))
+        .with(ActorSpec::new("mission", move || Mission::new(plan.clone())))
         .with(ActorSpec::new("camera", move || Camera {
             off_from_s,
             off_until_s,
@@ -364,7 +422,8 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
             (&sp["src_system"], &sp["src_component"]),
             (&1.into(), &191.into())
         );
-        assert_eq!(sp["type_mask"], 0x800, "yaw rate ignored only");
+        // A plan of knots (no primitive) has no acceleration to give: ignored too.
+        assert_eq!(sp["type_mask"], 0x800 | 0x1c0, "yaw rate and acceleration ignored");
     }
     // Each setpoint is the plan's ENU reference at its time, converted to NED.
     let mut compared = 0;
@@ -493,12 +552,20 @@ async fn a_sensor_timeout_holds_then_resumes() {
         );
         assert_eq!(position_ned(sp), position_ned(first_hold));
     }
-    // Tracking resumes once frames return.
+    // Tracking resumes once frames return, from where the vehicle held: no setpoint
+    // steps more than 5 cm (the plan had moved on 0.75 m meanwhile).
     let resumed = setpoints
         .iter()
         .find(|sp| outcome.run_time(sp) > off_until_s && !is_hold(sp))
         .expect("tracking resumed");
     assert!(outcome.run_time(resumed) < off_until_s + 0.3);
+    let largest_step_m = setpoints
+        .windows(2)
+        .filter(|w| outcome.run_time(&w[1]) > hold_s)
+        .map(|w| (position_ned(&w[1]) - position_ned(&w[0])).norm())
+        .fold(0.0, f64::max);
+    println!("largest setpoint step after the hold began: {largest_step_m:.4} m");
+    assert!(largest_step_m <= 0.05, "a setpoint stepped {largest_step_m:.3} m");
     assert!(
         outcome
             .status

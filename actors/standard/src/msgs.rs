@@ -14,6 +14,7 @@
 //! | `plan/decision` | [`PlanDecision`] | collision → planner |
 //! | `grid/changes` | [`GridChanges`] | local grid → link (occupancy-grid map sharing) |
 //! | `peer/grid_changes` | [`PeerGridChanges`] | link → local grid |
+//! | `vehicle/hold` | [`VehicleHold`] | vehicle driver → collision |
 //! | `link/tx`, `link/rx` | [`LinkTx`](troupe_runtime::LinkTx), [`LinkRx`](troupe_runtime::LinkRx) | link ↔ network |
 
 use nalgebra::Isometry3;
@@ -50,6 +51,24 @@ pub const PEER_PLAN: Topic<PeerPlan> = Topic::new("peer/plan");
 pub const PLAN_CANDIDATES: Topic<PlanCandidates> = Topic::new("plan/candidates");
 /// The collision actor's verdict on a planning round.
 pub const PLAN_DECISION: Topic<PlanDecision> = Topic::new("plan/decision");
+/// Whether the vehicle driver holds the robot where it stands.
+pub const VEHICLE_HOLD: Topic<VehicleHold> = Topic::new("vehicle/hold");
+
+/// A vehicle driver holds the robot where it stands instead of following the committed
+/// plan (a hardware robot's sensor or odometry timeout, an autopilot heartbeat lost
+/// and back, a reference outside the geofence), or no longer does. While it holds, the
+/// collision actor commits hovering there, so that planning goes on from where the
+/// robot is and the driver resumes on a plan that starts where it holds, without a
+/// jump to where the flight committed before the hold would have led.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VehicleHold {
+    /// When the hold began or ended.
+    pub stamp: Time,
+    /// Where it holds (world frame) and its heading (radians); `None`: it follows the
+    /// plan again.
+    pub at: Option<(nalgebra::Point3<f64>, f64)>,
+}
+impl Message for VehicleHold {}
 
 /// Changed cells of this robot's own occupancy observations since the last set: the
 /// occupancy-grid map sharing the thesis compares GMM keyframes with (§8.2.5, "OG").

@@ -25,8 +25,9 @@ pub fn full_state_mask() -> PositionTargetTypemask {
 
 /// The message for a setpoint, in `MAV_FRAME_LOCAL_NED`. A track or a hold at a known
 /// position sets position, velocity, acceleration and yaw (a hold with zero velocity
-/// and acceleration); a hold with no known position sets zero velocity and zero yaw
-/// rate only. An unknown hold heading ignores yaw and sets zero yaw rate.
+/// and acceleration; a track without an acceleration, from a route's knots, marks it
+/// ignored); a hold with no known position sets zero velocity and zero yaw rate only.
+/// An unknown hold heading ignores yaw and sets zero yaw rate.
 #[must_use]
 pub fn position_target(
     setpoint: &Setpoint,
@@ -45,9 +46,14 @@ pub fn position_target(
             position_m,
             yaw_rad,
             ..
-        } => (position_m.map(|p| p.coords), zero, zero, yaw_rad),
+        } => (position_m.map(|p| p.coords), zero, Some(zero), yaw_rad),
     };
     let mut mask = PositionTargetTypemask::empty();
+    if acceleration.is_none() {
+        mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE;
+    }
     if position.is_none() {
         mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
             | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
@@ -60,7 +66,7 @@ pub fn position_target(
     }
     let p = enu_to_ned(&position.unwrap_or(zero));
     let v = enu_to_ned(&velocity);
-    let a = enu_to_ned(&acceleration);
+    let a = enu_to_ned(&acceleration.unwrap_or(zero));
     SET_POSITION_TARGET_LOCAL_NED_DATA {
         time_boot_ms,
         x: p.x as f32,
@@ -98,7 +104,7 @@ mod tests {
         let sp = Setpoint::Track(Reference {
             position_m: Point3::new(3.0, 2.0, 1.5),
             velocity_mps: Vector3::new(1.0, -0.5, 0.2),
-            acceleration_mps2: Vector3::new(0.1, 0.2, -0.3),
+            acceleration_mps2: Some(Vector3::new(0.1, 0.2, -0.3)),
             yaw_rad: 0.0,
         });
         let m = position_target(&sp, TARGET, 1234);
@@ -111,6 +117,16 @@ mod tests {
         assert!((f64::from(m.yaw) - FRAC_PI_2).abs() < 1e-6);
         assert_eq!(m.type_mask.bits(), 0x800);
         assert_eq!(m.coordinate_frame, MavFrame::MAV_FRAME_LOCAL_NED);
+        let knots = Setpoint::Track(Reference {
+            acceleration_mps2: None,
+            ..match sp {
+                Setpoint::Track(r) => r,
+                Setpoint::Hold { .. } => unreachable!("a track"),
+            }
+        });
+        let without = position_target(&knots, TARGET, 0);
+        // No acceleration to give: marked ignored (bits 6–8), not sent as zero.
+        assert_eq!(without.type_mask.bits(), 0x800 | 0x40 | 0x80 | 0x100);
         assert_eq!(
             (m.target_system, m.target_component, m.time_boot_ms),
             (1, 1, 1234)

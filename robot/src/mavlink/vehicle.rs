@@ -8,7 +8,7 @@ use mavlink::dialects::common::{
     ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
 };
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
-use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, Odometry, PLAN};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, Odometry, PLAN, VEHICLE_HOLD, VehicleHold};
 use troupe_actors::runtime::{
     Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, Time, TimerId,
 };
@@ -26,6 +26,8 @@ const SETPOINT_TICK: TimerId = TimerId(0);
 const OWN_HEARTBEAT_PERIOD_S: f64 = 1.0;
 /// Period of the status topic when nothing changes.
 const STATUS_PERIOD_S: f64 = 0.5;
+/// Period of the hold topic when nothing changes.
+const HOLD_PERIOD_S: f64 = 1.0;
 
 /// Builds the vehicle for [`RobotParts::vehicle`](crate::RobotParts::vehicle) from a
 /// `[mavlink]` section; a bad value is an error naming its key.
@@ -51,6 +53,8 @@ pub struct MavlinkVehicle {
     own_heartbeat_at: Option<Time>,
     status_at: Option<Time>,
     status_key: Option<(bool, String, bool, Option<crate::safety::HoldReason>)>,
+    /// What was last published on [`VEHICLE_HOLD`].
+    hold_published: Option<VehicleHold>,
 }
 
 impl MavlinkVehicle {
@@ -76,6 +80,7 @@ impl MavlinkVehicle {
             own_heartbeat_at: None,
             status_at: None,
             status_key: None,
+            hold_published: None,
         }
     }
 
@@ -207,6 +212,7 @@ impl MavlinkVehicle {
         for (input, change) in changes {
             log_change(input, Some(change));
         }
+        self.publish_hold(ctx)?;
         if let Some(link) = &self.link {
             if let (Some(setpoint), Some(target)) = (setpoint, self.target) {
                 let time_boot_ms = (now.as_nanos() / 1_000_000) as u32;
@@ -225,6 +231,22 @@ impl MavlinkVehicle {
             }
         }
         self.publish_status(ctx)
+    }
+
+    /// Says where the guard holds when that changes, and again every second (so that a
+    /// restarted collision actor learns it).
+    fn publish_hold(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        let at = self.guard()?.hold_point();
+        let due = self.hold_published.is_none_or(|last| {
+            last.at != at || now.saturating_since(last.stamp).as_secs_f64() >= HOLD_PERIOD_S
+        });
+        if due {
+            let hold = VehicleHold { stamp: now, at };
+            self.hold_published = Some(hold);
+            ctx.publish(&VEHICLE_HOLD, hold);
+        }
+        Ok(())
     }
 
     fn publish_status(&mut self, ctx: &mut Context<'_>) -> ActorResult {
@@ -298,7 +320,6 @@ impl Actor for MavlinkVehicle {
                 sensor_timeout_s: s.sensor_timeout_s,
                 odometry_timeout_s: s.odometry_timeout_s,
                 heartbeat_timeout_s: s.heartbeat_timeout_s,
-                acceleration_window_s: period_s,
                 geofence: s.geofence,
             },
             ctx.now(),

@@ -4,8 +4,8 @@ use std::sync::Arc;
 
 use nalgebra::{Point3, Vector3};
 use troupe_actors::msgs::Plan;
+use troupe_actors::planner::committed::Committed;
 use troupe_actors::runtime::Time;
-use troupe_actors::trajectory::Trajectory;
 
 use super::{Geofence, GeofenceViolation, Watchdog, WatchdogChange};
 
@@ -16,31 +16,55 @@ pub struct Reference {
     pub position_m: Point3<f64>,
     /// Velocity, m/s.
     pub velocity_mps: Vector3<f64>,
-    /// Acceleration, m/s².
-    pub acceleration_mps2: Vector3<f64>,
+    /// Acceleration, m/s² (the feed-forward); `None` when the plan has no primitive
+    /// to take it from (a route's knots): then it is not sent as used.
+    pub acceleration_mps2: Option<Vector3<f64>>,
     /// Heading about world z (from east, counter-clockwise), radians.
     pub yaw_rad: f64,
 }
 
-/// Samples a trajectory's reference at `t`. The trajectory is linear between knots,
-/// so its acceleration is the central difference of the velocity over
-/// `[t − window_s, t + window_s]` (a smoothed version of the impulses at the knots).
-#[must_use]
-pub fn reference_at(trajectory: &Trajectory, t: Time, window_s: f64) -> Option<Reference> {
-    let state = trajectory.state_at(t)?;
-    let h_s = window_s.max(1e-3);
-    let before = Time::from_secs_f64((t.as_secs_f64() - h_s).max(0.0));
-    let after = Time::from_secs_f64(t.as_secs_f64() + h_s);
-    let v0 = trajectory.state_at(before)?.velocity_mps;
-    let v1 = trajectory.state_at(after)?.velocity_mps;
-    let span_s = (after.as_secs_f64() - before.as_secs_f64()).max(1e-6);
-    Some(Reference {
-        position_m: state.position_m,
-        velocity_mps: state.velocity_mps,
-        acceleration_mps2: (v1 - v0) / span_s,
-        yaw_rad: state.yaw_rad,
-    })
+impl Reference {
+    fn of_primitive(committed: &Committed, t: Time) -> Self {
+        let state = committed.state_at(t);
+        Reference {
+            position_m: Point3::from(state.position_m()),
+            velocity_mps: state.velocity_mps(),
+            acceleration_mps2: Some(state.acceleration_mps2()),
+            yaw_rad: state.yaw_rad(),
+        }
+    }
 }
+
+/// Samples a committed plan at `t`. Once its primitive has taken over (thesis §4.1.2:
+/// polynomials continuous up to snap, each starting from the state of the one before),
+/// from the primitive itself, with its exact velocity and acceleration; before that,
+/// from `previous` (the plan committed before it, whose flight leads there); for a plan
+/// without a primitive (a route), from its knots — linear between them, so velocity
+/// steps at the knots and no acceleration is given.
+#[must_use]
+pub fn reference_at(plan: &Plan, previous: Option<&Plan>, t: Time) -> Option<Reference> {
+    let primitive = |p: &Plan| {
+        p.reference
+            .as_deref()
+            .filter(|c| t >= c.start)
+            .map(|c| Reference::of_primitive(c, t))
+    };
+    primitive(plan)
+        .or_else(|| previous.and_then(primitive))
+        .or_else(|| {
+            let state = plan.trajectory.state_at(t)?;
+            Some(Reference {
+                position_m: state.position_m,
+                velocity_mps: state.velocity_mps,
+                acceleration_mps2: None,
+                yaw_rad: state.yaw_rad,
+            })
+        })
+}
+
+/// How close to where the vehicle holds a plan's reference must be for tracking to
+/// resume, metres (the largest setpoint step a resume may make).
+pub const RESUME_TOLERANCE_M: f64 = 0.05;
 
 /// What to stream at one tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -66,8 +90,9 @@ pub enum HoldReason {
     SensorTimeout,
     /// No odometry within the odometry timeout.
     OdometryTimeout,
-    /// The heartbeat came back after a loss; waiting for a plan committed since.
-    AwaitingPlanAfterLinkLoss,
+    /// A hold is over (or the autopilot's heartbeat came back after a loss): waiting
+    /// for a plan that starts where the vehicle holds.
+    AwaitingPlanFromHold,
     /// No plan committed yet.
     NoPlan,
     /// The plan's reference is outside the geofence.
@@ -81,7 +106,7 @@ impl HoldReason {
         match self {
             HoldReason::SensorTimeout => "sensor timeout",
             HoldReason::OdometryTimeout => "odometry timeout",
-            HoldReason::AwaitingPlanAfterLinkLoss => "awaiting a new plan after link loss",
+            HoldReason::AwaitingPlanFromHold => "awaiting a plan from where it holds",
             HoldReason::NoPlan => "no plan",
             HoldReason::Geofence => "reference outside the geofence",
         }
@@ -108,8 +133,6 @@ pub struct GuardConfig {
     pub odometry_timeout_s: f64,
     /// Longest gap between autopilot heartbeats.
     pub heartbeat_timeout_s: f64,
-    /// Half-width of the window of the acceleration's central difference.
-    pub acceleration_window_s: f64,
     /// The box no setpoint may leave.
     pub geofence: Geofence,
 }
@@ -140,12 +163,19 @@ pub struct GuardCounters {
 ///   autopilot's own failsafe is in charge);
 /// - a **hold** at the current position (clamped into the fence) with zero velocity —
 ///   the stopping reference — while a sensor or the odometry is stale, before the
-///   first plan, after a heartbeat loss until a fresh plan arrives, or when the plan's
-///   reference lies outside the fence;
-/// - otherwise the plan's **reference** (position, velocity, acceleration, yaw).
+///   first plan, or when the plan's reference lies outside the fence;
+/// - otherwise the plan's **reference** (position, velocity, acceleration, yaw;
+///   [`reference_at`]).
 ///
 /// The hold position is latched when the hold begins, so a drifting estimate does not
-/// drag the vehicle along; it is released when tracking resumes.
+/// drag the vehicle along. A hold ends only on a plan whose reference is within
+/// [`RESUME_TOLERANCE_M`] of it ([`HoldReason::AwaitingPlanFromHold`] until then): the
+/// planner kept committing while the vehicle held, from a reference that moved on, and
+/// tracking such a plan would jump to where it leads. The driver says where it holds
+/// ([`SetpointGuard::hold_point`], published as `troupe_actors::msgs::VEHICLE_HOLD`),
+/// and the collision actor then commits hovering there, which resumes in place. After
+/// the heartbeat returns from a loss the guard holds where the vehicle is then (the
+/// autopilot's failsafe may have moved it) and resumes the same way.
 #[derive(Clone, Debug)]
 pub struct SetpointGuard {
     config: GuardConfig,
@@ -153,7 +183,8 @@ pub struct SetpointGuard {
     odometry: Watchdog,
     heartbeat: Watchdog,
     plan: Option<Arc<Plan>>,
-    awaiting_plan: bool,
+    /// The plan committed before `plan` (its flight leads to `plan`'s primitive).
+    previous: Option<Arc<Plan>>,
     position_m: Option<Point3<f64>>,
     yaw_rad: Option<f64>,
     hold: Option<(HoldReason, Option<Point3<f64>>, Option<f64>)>,
@@ -170,7 +201,7 @@ impl SetpointGuard {
             heartbeat: Watchdog::new(config.heartbeat_timeout_s, now),
             config,
             plan: None,
-            awaiting_plan: false,
+            previous: None,
             position_m: None,
             yaw_rad: None,
             hold: None,
@@ -211,8 +242,7 @@ impl SetpointGuard {
         if check.is_err() {
             self.counters.plans_leaving_fence += 1;
         }
-        self.plan = Some(plan);
-        self.awaiting_plan = false;
+        self.previous = self.plan.replace(plan);
         check
     }
 
@@ -231,9 +261,9 @@ impl SetpointGuard {
             if let Some(change) = dog.check(now) {
                 changes.push((input, change));
                 if (input, change) == (GuardInput::Heartbeat, WatchdogChange::Lost) {
-                    // Whatever the plan says once the link is back, it was made for a
-                    // vehicle that kept moving; hold until a plan committed since.
-                    self.awaiting_plan = true;
+                    // The autopilot's failsafe flies the vehicle meanwhile: once the
+                    // heartbeat is back, hold where it is then, until a plan from there.
+                    self.hold = Some((HoldReason::AwaitingPlanFromHold, None, None));
                 }
             }
         }
@@ -245,24 +275,21 @@ impl SetpointGuard {
             Some(HoldReason::SensorTimeout)
         } else if self.odometry.is_stale() {
             Some(HoldReason::OdometryTimeout)
-        } else if self.awaiting_plan {
-            Some(HoldReason::AwaitingPlanAfterLinkLoss)
         } else {
             None
         };
         let reference = match (reason, &self.plan) {
             (Some(reason), _) => Err(reason),
             (None, None) => Err(HoldReason::NoPlan),
-            (None, Some(plan)) => {
-                match reference_at(&plan.trajectory, now, self.config.acceleration_window_s) {
-                    Some(r) if self.config.geofence.contains(&r.position_m) => Ok(r),
-                    Some(_) => {
-                        self.counters.fence_holds += 1;
-                        Err(HoldReason::Geofence)
-                    }
-                    None => Err(HoldReason::NoPlan),
+            (None, Some(plan)) => match reference_at(plan, self.previous.as_deref(), now) {
+                None => Err(HoldReason::NoPlan),
+                Some(r) if !self.config.geofence.contains(&r.position_m) => {
+                    self.counters.fence_holds += 1;
+                    Err(HoldReason::Geofence)
                 }
-            }
+                Some(r) if !self.resumes_on(&r) => Err(HoldReason::AwaitingPlanFromHold),
+                Some(r) => Ok(r),
+            },
         };
         match reference {
             Ok(r) => {
@@ -289,6 +316,26 @@ impl SetpointGuard {
                     reason,
                 })
             }
+        }
+    }
+
+    /// Whether tracking `reference` may begin: not holding, or holding where it starts.
+    fn resumes_on(&self, reference: &Reference) -> bool {
+        match self.hold {
+            None => true,
+            Some((_, at, _)) => {
+                at.is_some_and(|at| (reference.position_m - at).norm() <= RESUME_TOLERANCE_M)
+            }
+        }
+    }
+
+    /// Where it holds (latched, inside the fence) and its heading, as of the last tick;
+    /// `None` while it tracks, is silent, or holds without a known position.
+    #[must_use]
+    pub fn hold_point(&self) -> Option<(Point3<f64>, f64)> {
+        match self.hold {
+            Some((_, Some(at), yaw)) if !self.heartbeat_missing() => Some((at, yaw.unwrap_or(0.0))),
+            _ => None,
         }
     }
 
@@ -320,7 +367,9 @@ impl SetpointGuard {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use troupe_actors::trajectory::Knot;
+    use nalgebra::Vector3;
+    use troupe_actors::planner::primitives::{Action, DynamicLimits, FlatState};
+    use troupe_actors::trajectory::{Knot, Trajectory};
 
     fn t(s: f64) -> Time {
         Time::from_secs_f64(s)
@@ -337,7 +386,6 @@ mod tests {
                 sensor_timeout_s: 0.5,
                 odometry_timeout_s: 0.3,
                 heartbeat_timeout_s: 1.0,
-                acceleration_window_s: 0.05,
                 geofence: Geofence::new(
                     Point3::new(-5.0, -5.0, 0.0),
                     Point3::new(max_x_m, 5.0, 3.0),
@@ -359,6 +407,16 @@ mod tests {
             t(0.0),
             Trajectory::new(vec![knot(0.0), knot(10.0)]).unwrap(),
         ))
+    }
+
+    /// Hovering at `at` from `from` (one knot, held after it).
+    fn hover_plan(at: Point3<f64>, from: Time) -> Arc<Plan> {
+        let knot = Knot {
+            time: from,
+            position_m: at,
+            yaw_rad: 0.0,
+        };
+        Arc::new(Plan::new(from, Trajectory::new(vec![knot]).unwrap()))
     }
 
     /// Feeds every input at `now` with the vehicle at `x` m east.
@@ -387,7 +445,7 @@ mod tests {
     }
 
     #[test]
-    fn tracks_the_plan_with_velocity_and_acceleration() {
+    fn tracks_a_route_plan_with_no_acceleration_to_give() {
         let mut g = guard();
         let mut changes = Vec::new();
         feed_all(&mut g, t(1.0), 1.0);
@@ -397,28 +455,106 @@ mod tests {
         };
         assert!((r.position_m.x - 1.0).abs() < 1e-9);
         assert!((r.velocity_mps.x - 1.0).abs() < 1e-9);
-        assert!(r.acceleration_mps2.norm() < 1e-9, "constant velocity");
+        assert_eq!(r.acceleration_mps2, None, "knots carry no acceleration");
         assert_eq!(g.counters().tracked, 1);
     }
 
-    #[test]
-    fn acceleration_is_the_smoothed_change_of_velocity() {
-        // At rest until t = 1, then 2 m/s east.
-        let knot = |s: f64, x: f64| Knot {
-            time: t(s),
-            position_m: Point3::new(x, 0.0, 0.0),
-            yaw_rad: 0.0,
+    /// A planner's plan: `action` from `root` at `start` for one 1 s period, then its
+    /// stopping primitive, continuing `before` (the flight that leads to it) from
+    /// `decided`.
+    fn primitive_plan(
+        root: &FlatState,
+        action: Action,
+        start: Time,
+        decided: Time,
+        before: Option<&Plan>,
+    ) -> Arc<Plan> {
+        let limits = DynamicLimits::default();
+        let primitive = limits.shortest(root, action).expect("feasible");
+        let switch_s = 1.0f64.min(primitive.duration_s());
+        let stopping = limits
+            .stopping(&primitive.state_at(switch_s))
+            .expect("a stop");
+        let committed = Committed {
+            start,
+            primitive,
+            switch_s,
+            stopping,
         };
-        let traj = Trajectory::new(vec![knot(0.0, 0.0), knot(1.0, 0.0), knot(3.0, 4.0)]).unwrap();
-        let r = reference_at(&traj, t(1.0), 0.1).unwrap();
-        // Velocity steps 0 → 2 m/s across the 0.2 s window.
+        let planned = committed.trajectory(0.1);
+        let trajectory = match before {
+            Some(p) => p.trajectory.continued_by(decided, &planned),
+            None => planned,
+        };
+        Arc::new(Plan {
+            stamp: decided,
+            trajectory,
+            reference: Some(Box::new(committed)),
+            stopping: false,
+        })
+    }
+
+    /// Issue 40, item 3: the feed-forward is the primitives' own acceleration, so from
+    /// one tick to the next it changes by at most the jerk limit times the period,
+    /// across plan switches too (the knots' finite differences spiked to 14–23 m/s²).
+    #[test]
+    fn acceleration_is_the_primitives_own_and_continuous_across_plans() {
+        let mut g = guard();
+        let mut changes = Vec::new();
+        let limits = DynamicLimits::default();
+        let forward = Action {
+            vx_mps: 1.5,
+            ..Action::STOP
+        };
+        let turn = Action {
+            vx_mps: 1.0,
+            vz_mps: 0.3,
+            yaw_rate_rad_s: 0.4,
+            ..Action::STOP
+        };
+        let rest = FlatState::at_rest(Vector3::new(0.0, 0.0, 1.0), 0.0);
+        let first = primitive_plan(&rest, forward, t(0.11), t(0.0), None);
+        g.plan(first.clone()).unwrap();
+        let period_s = 1.0 / 30.0;
+        let mut last: Option<Reference> = None;
+        let mut largest_step = 0.0f64;
+        let mut second_sent = false;
+        for i in 0..90 {
+            let now = t(0.2 + period_s * f64::from(i));
+            if !second_sent && now >= t(1.0) {
+                // The next round, decided at 1.0 s, takes over at 1.11 s.
+                let root = first
+                    .reference
+                    .as_ref()
+                    .expect("a primitive")
+                    .state_at(t(1.11));
+                g.plan(primitive_plan(&root, turn, t(1.11), t(1.0), Some(&first)))
+                    .unwrap();
+                second_sent = true;
+            }
+            let x = now.as_secs_f64();
+            feed_all(&mut g, now, x);
+            let Some(Setpoint::Track(r)) = g.tick(now, &mut changes) else {
+                panic!("expected tracking at {now}");
+            };
+            let a = r
+                .acceleration_mps2
+                .expect("a primitive gives its acceleration");
+            if let Some(before) = last {
+                let step = (a - before.acceleration_mps2.expect("given")).norm();
+                largest_step = largest_step.max(step);
+                assert!(
+                    (r.position_m - before.position_m).norm() < 0.1,
+                    "position jumped at {now}"
+                );
+            }
+            last = Some(r);
+        }
         assert!(
-            (r.acceleration_mps2.x - 10.0).abs() < 1e-6,
-            "{}",
-            r.acceleration_mps2
+            largest_step <= limits.max_jerk_mps3 * period_s + 1e-6,
+            "acceleration stepped {largest_step:.3} m/s² in one tick"
         );
-        let r = reference_at(&traj, t(2.0), 0.1).unwrap();
-        assert!(r.acceleration_mps2.norm() < 1e-9);
+        assert!(largest_step > 0.0, "the plans accelerate");
     }
 
     #[test]
@@ -451,14 +587,28 @@ mod tests {
         let (since, _) = held_at.expect("held");
         assert!(since.as_secs_f64() > 1.5 && since.as_secs_f64() <= 1.55 + 1e-9);
         assert_eq!(changes, vec![(GuardInput::Sensor, WatchdogChange::Lost)]);
-        // Frames return: tracking resumes and the recovery is not a "change" of check.
+        // Frames return; the plan moved on while the vehicle held (x = 2.1 by now): it
+        // is not tracked, which would step the setpoint 0.55 m.
         assert_eq!(g.depth_frame(t(2.1)), Some(WatchdogChange::Restored));
-        g.odometry(t(2.1), Point3::new(2.1, 0.0, 1.0), 0.0);
+        g.odometry(t(2.1), Point3::new(1.55, 0.0, 1.0), 0.0);
         assert!(matches!(
             g.tick(t(2.1), &mut changes),
-            Some(Setpoint::Track(_))
+            Some(Setpoint::Hold {
+                reason: HoldReason::AwaitingPlanFromHold,
+                ..
+            })
         ));
+        let (at, _) = g.hold_point().expect("holding at a known place");
+        assert_eq!(at, held_at.expect("held").1);
+        // A plan from where it holds (the collision actor's hover there): tracked, in
+        // place.
+        g.plan(hover_plan(at, t(2.1))).unwrap();
+        let Some(Setpoint::Track(r)) = g.tick(t(2.15), &mut changes) else {
+            panic!("expected tracking");
+        };
+        assert!((r.position_m - at).norm() < 1e-9);
         assert_eq!(g.hold_reason(), None);
+        assert_eq!(g.hold_point(), None);
     }
 
     #[test]
@@ -481,7 +631,7 @@ mod tests {
     }
 
     #[test]
-    fn heartbeat_loss_silences_then_holds_until_a_new_plan() {
+    fn heartbeat_loss_silences_then_holds_until_a_plan_from_where_it_is() {
         let mut g = guard();
         let mut changes = Vec::new();
         g.plan(eastward_plan()).unwrap();
@@ -494,16 +644,22 @@ mod tests {
         assert_eq!(changes, vec![(GuardInput::Heartbeat, WatchdogChange::Lost)]);
         assert_eq!(g.heartbeat(t(2.2)), Some(WatchdogChange::Restored));
         g.depth_frame(t(2.2));
-        g.odometry(t(2.2), Point3::new(2.0, 0.0, 1.0), 0.0);
+        // The autopilot's failsafe left the vehicle at x = 1.6.
+        g.odometry(t(2.2), Point3::new(1.6, 0.0, 1.0), 0.0);
         assert!(matches!(
             g.tick(t(2.2), &mut changes),
             Some(Setpoint::Hold {
-                reason: HoldReason::AwaitingPlanAfterLinkLoss,
+                reason: HoldReason::AwaitingPlanFromHold,
+                position_m: Some(p),
                 ..
-            })
+            }) if (p.x - 1.6).abs() < 1e-9
         ));
-        g.plan(eastward_plan()).unwrap();
+        // The plan from before the loss (at x = 2.25 now) does not resume it.
         let sp = g.tick(t(2.25), &mut changes);
+        assert!(matches!(sp, Some(Setpoint::Hold { .. })), "{sp:?}");
+        g.plan(hover_plan(Point3::new(1.6, 0.0, 1.0), t(2.25)))
+            .unwrap();
+        let sp = g.tick(t(2.3), &mut changes);
         assert!(matches!(sp, Some(Setpoint::Track(_))), "{sp:?}");
         assert_eq!(g.counters().silent, 1);
     }

@@ -48,12 +48,13 @@ use super::operator::{OPERATOR_HOLD, OperatorHold};
 use super::peers::{PeerAvoidance, PeerTable, PeerTrack, must_yield};
 use crate::msgs::{
     GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
-    PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection,
+    PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection, VEHICLE_HOLD,
+    VehicleHold,
 };
 use crate::planner::committed::Committed;
-use crate::planner::primitives::DynamicLimits;
+use crate::planner::primitives::{DynamicLimits, FlatState};
 use crate::planner::round::clear_path;
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Knot, Trajectory};
 use troupe_runtime::{
     Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, RobotId, Time, Topic,
 };
@@ -129,6 +130,10 @@ pub struct CollisionStatus {
     /// planned from a reference replaced since (a brake). The robot kept the flight
     /// committed, which ends in its stop.
     pub stale_rounds: u64,
+    /// Rounds that committed hovering where the vehicle driver holds the robot
+    /// ([`VEHICLE_HOLD`]: a hardware robot's sensor or odometry timeout, an autopilot
+    /// heartbeat lost and back, the geofence), their candidates not judged.
+    pub vehicle_holds: u64,
 }
 impl Message for CollisionStatus {}
 
@@ -192,6 +197,8 @@ pub struct CollisionActor<P> {
     braking: Option<(DynamicLimits, f64)>,
     /// The plan committed last.
     committed: Option<Plan>,
+    /// Where the vehicle driver holds the robot, if it does ([`VEHICLE_HOLD`]).
+    vehicle_hold: Option<(Point3<f64>, f64)>,
 }
 
 impl<P: PeerAvoidance> CollisionActor<P> {
@@ -219,6 +226,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
             status: CollisionStatus::default(),
             braking: None,
             committed: None,
+            vehicle_hold: None,
         }
     }
 
@@ -281,6 +289,42 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         ctx.publish(&PLAN, brake);
         ctx.publish(&COLLISION_STATUS, self.status.clone());
         true
+    }
+
+    /// Commits hovering where the vehicle holds (`at`, heading `yaw_rad`) from `now`: what
+    /// the robot does, whatever the flight committed before would have done, so that
+    /// the next rounds plan from there.
+    fn commit_hover(&mut self, (at, yaw_rad): (Point3<f64>, f64), ctx: &mut Context<'_>) {
+        let now = ctx.now();
+        let rest = FlatState::at_rest(at.coords, yaw_rad);
+        let hover = self.braking.and_then(|(limits, knot_step_s)| {
+            let hover = Committed::braking(&limits, &rest, now)?;
+            Some((hover.trajectory(knot_step_s), hover))
+        });
+        let plan = match hover {
+            Some((trajectory, reference)) => Plan {
+                stamp: now,
+                trajectory,
+                reference: Some(Box::new(reference)),
+                stopping: true,
+            },
+            // One knot: held after its end.
+            None => Plan {
+                stamp: now,
+                trajectory: Trajectory::new(vec![Knot {
+                    time: now,
+                    position_m: at,
+                    yaw_rad,
+                }])
+                .unwrap_or_default(),
+                reference: None,
+                stopping: true,
+            },
+        };
+        self.status.vehicle_holds += 1;
+        self.committed = Some(plan.clone());
+        ctx.publish(&PLAN, plan);
+        ctx.publish(&COLLISION_STATUS, self.status.clone());
     }
 
     fn judge(
@@ -371,6 +415,11 @@ impl<P: PeerAvoidance> CollisionActor<P> {
 
     fn decide(&mut self, round: &PlanCandidates, ctx: &mut Context<'_>) {
         let now = ctx.now();
+        if let Some(at) = self.vehicle_hold {
+            self.status.rounds += 1;
+            self.commit_hover(at, ctx);
+            return;
+        }
         if !self.held && !self.continues_committed(round, now) {
             self.status.stale_rounds += 1;
             tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, "round would not continue the committed flight: kept it");
@@ -463,6 +512,7 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
         if self.operator {
             ctx.subscribe(&OPERATOR_HOLD, QueuePolicy::LATEST);
         }
+        ctx.subscribe(&VEHICLE_HOLD, QueuePolicy::LATEST);
         Ok(())
     }
 
@@ -474,9 +524,18 @@ impl<P: PeerAvoidance> Actor for CollisionActor<P> {
             }
             if let Some(plan) = m.get_arc(&PEER_PLAN) {
                 self.peers.update_plan(&plan);
-                if self.brake_if_in_the_way_of(plan.robot, ctx) {
+                if self.vehicle_hold.is_none() && self.brake_if_in_the_way_of(plan.robot, ctx) {
                     return Ok(());
                 }
+            }
+            if let Some(&VehicleHold { at, .. }) = m.get(&VEHICLE_HOLD) {
+                let began = at.is_some() && at != self.vehicle_hold;
+                self.vehicle_hold = at;
+                if let (true, Some(at)) = (began, at) {
+                    tracing::info!(robot = ctx.robot_name(), position = ?at.0.coords.as_slice(), "the vehicle holds: hovering there until it follows plans again");
+                    self.commit_hover(at, ctx);
+                }
+                return Ok(());
             }
             // Everything else is stored for the next decision.
             ctx.bookkeeping_only();
@@ -506,7 +565,6 @@ mod tests {
     use super::*;
     use crate::collision::peers::PeerConflict;
     use crate::msgs::CandidatePlan;
-    use crate::trajectory::Knot;
     use troupe_runtime::{ActorSpec, Publication, RobotId, RobotSpec, SimExecutor, TimerId};
 
     /// Rejects every trajectory that ends beyond `x_max` (as if a peer were there).
@@ -800,5 +858,77 @@ mod tests {
                 .all(|p| p.trajectory.knots().last().unwrap().position_m.x == 0.0)
         );
         assert_eq!(status.unwrap().stopped, 3);
+    }
+
+    /// The vehicle driver holds at (5, 5, 1) from 1.5 s to 2.5 s.
+    struct Holder;
+
+    impl Actor for Holder {
+        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+            ctx.set_timer(TimerId(1), Duration::from_millis(500));
+            Ok(())
+        }
+        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+            let now = ctx.now();
+            let at = if now.as_secs_f64() < 1.4 || now.as_secs_f64() > 2.4 {
+                None
+            } else {
+                Some((Point3::new(5.0, 5.0, 1.0), 0.5))
+            };
+            ctx.publish(&VEHICLE_HOLD, VehicleHold { stamp: now, at });
+            Ok(())
+        }
+    }
+
+    /// Issue 40, item 3: while the vehicle holds, the collision actor commits hovering
+    /// where it holds — at once, and in every round — whatever the candidates; planning
+    /// resumes from there when it stops holding.
+    #[test]
+    fn a_vehicle_hold_commits_hovering_where_it_holds() {
+        let robot = RobotSpec::new("r0")
+            .with(ActorSpec::new("rounds", || Rounds(0)))
+            .with(ActorSpec::new("holder", || Holder))
+            .with(ActorSpec::new("collision", move || {
+                CollisionActor::new(CollisionActorConfig::default(), Wall { x_max: 10.0 })
+                    .braking_for_peers(DynamicLimits::default(), 0.1)
+            }));
+        let plans: Arc<Mutex<Vec<Plan>>> = Arc::default();
+        let status: Arc<Mutex<Option<CollisionStatus>>> = Arc::default();
+        let (tap_plans, tap_status) = (plans.clone(), status.clone());
+        let mut exec = SimExecutor::new(vec![robot], 1);
+        exec.add_tap(move |p: &Publication<'_>| {
+            if let Some(plan) = p.get(&PLAN) {
+                tap_plans.lock().unwrap().push(plan.clone());
+            } else if let Some(s) = p.get(&COLLISION_STATUS) {
+                *tap_status.lock().unwrap() = Some(s.clone());
+            }
+        });
+        exec.run_until(Time::from_secs_f64(3.5));
+        let _ = exec.finish();
+        let plans = plans.lock().unwrap();
+        let at = |plan: &Plan, s: f64| plan.trajectory.state_at(Time::from_secs_f64(s));
+        let hovers: Vec<&Plan> = plans
+            .iter()
+            .filter(|p| p.stamp.as_secs_f64() > 1.4 && p.stamp.as_secs_f64() < 2.4)
+            .collect();
+        // The hold at 1.5 s, and the round at 2 s.
+        assert_eq!(hovers.len(), 2, "{plans:?}");
+        for hover in &hovers {
+            let t = hover.stamp.as_secs_f64();
+            for s in [t, t + 0.5, t + 5.0] {
+                let state = at(hover, s).expect("a state");
+                assert!((state.position_m - Point3::new(5.0, 5.0, 1.0)).norm() < 1e-9);
+                assert!(state.velocity_mps.norm() < 1e-9);
+            }
+            let reference = hover.reference.as_ref().expect("a primitive");
+            assert!((reference.state_at(hover.stamp).yaw_rad() - 0.5).abs() < 1e-9);
+            assert!(hover.stopping);
+        }
+        // Rounds before and after the hold commit their candidates.
+        let after = plans.last().expect("plans");
+        assert!(after.stamp.as_secs_f64() > 2.9 && !after.stopping);
+        let status = status.lock().unwrap().clone().expect("a status");
+        assert_eq!(status.vehicle_holds, 2);
+        assert_eq!(status.rounds, 3);
     }
 }
