@@ -123,7 +123,12 @@ pub fn assemble(
         ..options(latency_s)
     };
     let mut frame_source = parts.frame_source;
-    let sensor_rate_hz = config.sensor_rate_hz;
+    let (sensor_rate_hz, max_width_px) = (config.sensor_rate_hz, config.sensor_max_width_px);
+    // The planner scores views with the frames the sensor publishes.
+    let camera = parts.camera.decimated(PinholeIntrinsics::decimation(
+        parts.camera.width,
+        max_width_px,
+    ));
     let mut link = config.link.clone();
     let collision = config.collision.enabled;
     if collision {
@@ -143,6 +148,7 @@ pub fn assemble(
     robot.add(parts.vehicle).add(
         ActorSpec::new("sensor", move || {
             SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
+                .decimating_to(max_width_px)
         })
         .with_options(heavy(config.latency_s.sensor)),
     );
@@ -175,7 +181,6 @@ pub fn assemble(
     } else if config.behaviour == PLANNER {
         let selection = selection_by_name(&config.selection)?;
         let planner = config.planner;
-        let camera = parts.camera;
         let peer_frames: Vec<(RobotId, Isometry3<f64>)> = config
             .link
             .peer_frames

@@ -19,8 +19,8 @@ use troupe_actors::msgs::{
     DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan, VEHICLE_HOLD,
 };
 use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec,
-    Time, TimerId,
+    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec, Time,
+    TimerId,
 };
 use troupe_actors::trajectory::{Knot, Trajectory};
 use troupe_robot::frames::{enu_to_ned, yaw_enu_to_ned};
@@ -305,7 +305,9 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let (off_from_s, off_until_s) = scenario.frames_off_s;
     let robot = RobotSpec::new("r0")
         .with(vehicle)
-        .with(ActorSpec::new("mission", move || Mission::new(plan.clone())))
+        .with(ActorSpec::new("mission", move || {
+            Mission::new(plan.clone())
+        }))
         .with(ActorSpec::new("camera", move || Camera {
             off_from_s,
             off_until_s,
@@ -423,7 +425,11 @@ async fn streams_the_plan_in_ned_at_rate_and_publishes_odometry() {
             (&1.into(), &191.into())
         );
         // A plan of knots (no primitive) has no acceleration to give: ignored too.
-        assert_eq!(sp["type_mask"], 0x800 | 0x1c0, "yaw rate and acceleration ignored");
+        assert_eq!(
+            sp["type_mask"],
+            0x800 | 0x1c0,
+            "yaw rate and acceleration ignored"
+        );
     }
     // Each setpoint is the plan's ENU reference at its time, converted to NED.
     let mut compared = 0;
@@ -565,7 +571,10 @@ async fn a_sensor_timeout_holds_then_resumes() {
         .map(|w| (position_ned(&w[1]) - position_ned(&w[0])).norm())
         .fold(0.0, f64::max);
     println!("largest setpoint step after the hold began: {largest_step_m:.4} m");
-    assert!(largest_step_m <= 0.05, "a setpoint stepped {largest_step_m:.3} m");
+    assert!(
+        largest_step_m <= 0.05,
+        "a setpoint stepped {largest_step_m:.3} m"
+    );
     assert!(
         outcome
             .status

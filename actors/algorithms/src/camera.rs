@@ -54,6 +54,52 @@ impl PinholeIntrinsics {
         self.unit_depth_ray(u, v)
     }
 
+    /// The factor that brings an image `width` wide to at most `max_width_px` pixels
+    /// ([`PinholeIntrinsics::decimated`]); 1 when it fits or `max_width_px` is 0.
+    ///
+    /// ```
+    /// use troupe_algorithms::camera::PinholeIntrinsics;
+    /// assert_eq!(PinholeIntrinsics::decimation(640, 160), 4);
+    /// assert_eq!(PinholeIntrinsics::decimation(848, 160), 6);
+    /// assert_eq!(PinholeIntrinsics::decimation(160, 160), 1);
+    /// assert_eq!(PinholeIntrinsics::decimation(640, 0), 1);
+    /// ```
+    #[must_use]
+    pub fn decimation(width: u32, max_width_px: u32) -> u32 {
+        if max_width_px == 0 {
+            1
+        } else {
+            width.div_ceil(max_width_px).max(1)
+        }
+    }
+
+    /// The intrinsics of the image whose pixels are the `factor × factor` blocks of
+    /// this one (a block's centre is its pixel's centre; partial blocks at the right
+    /// and bottom edges are dropped).
+    ///
+    /// ```
+    /// use troupe_algorithms::camera::PinholeIntrinsics;
+    /// let k = PinholeIntrinsics { width: 640, height: 480, fx: 382.0, fy: 382.0, cx: 320.0, cy: 240.0, max_depth_m: 5.0 };
+    /// let small = k.decimated(4);
+    /// assert_eq!((small.width, small.height, small.fx, small.cx), (160, 120, 95.5, 80.0));
+    /// // The same ray through a block's centre.
+    /// assert_eq!(small.pixel_ray(10, 7), k.unit_depth_ray(42.0, 30.0));
+    /// ```
+    #[must_use]
+    pub fn decimated(&self, factor: u32) -> PinholeIntrinsics {
+        let k = factor.max(1);
+        let scale = f64::from(k);
+        PinholeIntrinsics {
+            width: self.width / k,
+            height: self.height / k,
+            fx: self.fx / scale,
+            fy: self.fy / scale,
+            cx: self.cx / scale,
+            cy: self.cy / scale,
+            max_depth_m: self.max_depth_m,
+        }
+    }
+
     /// The body-frame point that pixel `(col, row)` sees at z-depth `depth_m`.
     ///
     /// ```

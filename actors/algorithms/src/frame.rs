@@ -129,4 +129,66 @@ impl DepthFrame {
     pub fn valid_pixels(&self) -> usize {
         self.depth_m.iter().filter(|d| **d > 0.0).count()
     }
+
+    /// The frame with one pixel per `factor × factor` block
+    /// ([`PinholeIntrinsics::decimated`]): the block's nearest return and its
+    /// intensity (no return where the block has none), so an obstacle a block sees
+    /// is kept, and no depth between two surfaces is made up at their edge. `factor`
+    /// 1 (or 0) returns a copy. The buffers must match the intrinsics
+    /// ([`DepthFrame::validate`]).
+    ///
+    /// ```
+    /// use nalgebra::Isometry3;
+    /// use troupe_algorithms::camera::PinholeIntrinsics;
+    /// use troupe_algorithms::frame::DepthFrame;
+    /// use troupe_core::Time;
+    ///
+    /// let intrinsics = PinholeIntrinsics { width: 4, height: 2, fx: 4.0, fy: 4.0, cx: 2.0, cy: 1.0, max_depth_m: 5.0 };
+    /// let frame = DepthFrame {
+    ///     stamp: Time::ZERO,
+    ///     pose: Isometry3::identity(),
+    ///     intrinsics,
+    ///     depth_m: vec![2.0, 0.0, 0.0, 0.0, 1.5, 3.0, 0.0, 0.0],
+    ///     intensity: vec![0.2, 0.0, 0.0, 0.0, 0.6, 0.9, 0.0, 0.0],
+    /// };
+    /// let small = frame.decimated(2);
+    /// assert_eq!(small.depth_m, vec![1.5, 0.0]);
+    /// assert_eq!(small.intensity, vec![0.6, 0.0]);
+    /// assert_eq!(small.intrinsics.width, 2);
+    /// ```
+    #[must_use]
+    pub fn decimated(&self, factor: u32) -> DepthFrame {
+        let k = factor.max(1);
+        if k == 1 {
+            return self.clone();
+        }
+        let intrinsics = self.intrinsics.decimated(k);
+        let (width, k) = (self.intrinsics.width as usize, k as usize);
+        let pixels = intrinsics.pixels();
+        let mut depth_m = vec![0.0; pixels];
+        let mut intensity = vec![0.0; pixels];
+        for row in 0..intrinsics.height as usize {
+            for col in 0..intrinsics.width as usize {
+                let block = (0..k).flat_map(|dv| {
+                    let start = (row * k + dv) * width + col * k;
+                    start..start + k
+                });
+                let nearest = block
+                    .filter(|&i| self.depth_m.get(i).is_some_and(|d| *d > 0.0))
+                    .min_by(|&a, &b| self.depth_m[a].total_cmp(&self.depth_m[b]));
+                if let Some(i) = nearest {
+                    let out = row * intrinsics.width as usize + col;
+                    depth_m[out] = self.depth_m[i];
+                    intensity[out] = self.intensity.get(i).copied().unwrap_or(0.0);
+                }
+            }
+        }
+        DepthFrame {
+            stamp: self.stamp,
+            pose: self.pose,
+            intrinsics,
+            depth_m,
+            intensity,
+        }
+    }
 }

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry};
+use crate::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PinholeIntrinsics};
 use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
 
 /// Where frames come from.
@@ -24,11 +24,13 @@ pub trait FrameSource: Send + 'static {
 const CAPTURE: TimerId = TimerId(0);
 
 /// Captures a frame every `period` and publishes it on [`DEPTH_FRAME`]; invalid
-/// frames are rejected (counted as actor errors) and never published.
+/// frames are rejected (counted as actor errors) and never published. Frames wider
+/// than [`SensorActor::decimating_to`]'s width are decimated first.
 pub struct SensorActor<S> {
     source: S,
     period: Duration,
     latest: Option<Arc<Odometry>>,
+    max_width_px: u32,
 }
 
 impl<S: FrameSource> SensorActor<S> {
@@ -39,7 +41,18 @@ impl<S: FrameSource> SensorActor<S> {
             source,
             period: Duration::from_secs_f64(1.0 / rate_hz.max(1e-3)),
             latest: None,
+            max_width_px: 0,
         }
+    }
+
+    /// The same sensor, publishing frames at most `max_width_px` wide: a wider frame
+    /// becomes one pixel per block ([`DepthFrame::decimated`]: the block's nearest
+    /// return), so the mapper, grid and planner cost what the authors' 160 × 120
+    /// frames cost whatever the camera delivers (0: frames as they come).
+    #[must_use]
+    pub fn decimating_to(mut self, max_width_px: u32) -> Self {
+        self.max_width_px = max_width_px;
+        self
     }
 }
 
@@ -63,6 +76,13 @@ impl<S: FrameSource> Actor for SensorActor<S> {
                     frame
                         .validate()
                         .map_err(|e| ActorError::with_source("rejected a frame", e))?;
+                    let factor =
+                        PinholeIntrinsics::decimation(frame.intrinsics.width, self.max_width_px);
+                    let frame = if factor > 1 {
+                        frame.decimated(factor)
+                    } else {
+                        frame
+                    };
                     ctx.publish(&DEPTH_FRAME, frame);
                 }
             }
