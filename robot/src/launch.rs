@@ -1,13 +1,20 @@
-//! `troupe launch SCENARIO.toml`: the scenario's team as separate `troupe robot`
-//! processes on this machine, talking over zenoh on loopback, peer to peer or (with
-//! `--router`) through one zenoh router ([`crate::router`]) that this process runs;
-//! the same robot files work across hosts with other addresses ([`crate::process`]).
+//! Launching a team as separate robot processes on this machine (`troupe launch
+//! SCENARIO.toml` for simulated robots), talking over zenoh on loopback, peer to peer
+//! or (with `router`) through one zenoh router ([`crate::router`]) that this process
+//! runs; the same robot files work across hosts with other addresses.
+//!
+//! The launcher is not tied to one kind of robot file: [`TeamFiles`] writes robot
+//! `i`'s file with the `[zenoh]` session the launcher chose for it and names the
+//! command that runs it (the simulator's `troupe robot --config FILE`,
+//! `troupe_sims::process::SimulatedTeam`). Each robot writes its outputs into
+//! `robot<i>/` of the launch directory; their `trajectory.csv`
+//! ([`crate::harness::write_trajectory`]) gives the closest approach.
 //!
 //! While the robots run, the launcher samples each process's CPU time and peak
 //! resident memory from `/proc` (Linux; elsewhere the usage is absent), and its own,
-//! which with `--router` is the router's (the launcher itself only waits).
+//! which with a router is the router's (the launcher itself only waits).
 //!
-//! With `--tls` the team is the secure one of `docs/security.md` in one command: the
+//! With `tls` the team is the secure one of `docs/security.md` in one command: the
 //! launcher writes a CA and a certificate per member with `troupe keys`
 //! ([`crate::keys`], into `keys/` of the launch directory) and robot files whose
 //! `tls/` endpoints use them under mutual TLS, with zenoh's access control
@@ -21,15 +28,24 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use troupe_comms::zenoh::security::identity_name;
-use troupe_comms::zenoh::{ZenohAccess, ZenohConfig, ZenohTls};
+use troupe_comms::zenoh::{ZenohAccess, ZenohConfig, ZenohMode, ZenohTls};
 
+use crate::harness::read_trajectory;
 use crate::keys::{ROUTER_NAME, write_team_keys};
-use crate::process::{
-    ProcessConfig, loopback_endpoints, min_distance_between, read_trajectory, write_client_team,
-    write_team,
-};
 use crate::router::{Router, RouterError, settings};
-use crate::scenario::Scenario;
+
+/// The robot files of a team, in the format of the processes that run them.
+pub trait TeamFiles {
+    /// Robots in the team (ids `0..robots`).
+    fn robots(&self) -> u32;
+
+    /// Writes robot `robot`'s file into `dir`, with `zenoh` as its session and its
+    /// outputs in `dir/robot<robot>/`; returns the file.
+    fn write(&self, dir: &Path, robot: u32, zenoh: ZenohConfig) -> std::io::Result<PathBuf>;
+
+    /// The command that runs one robot from its `file`.
+    fn command(&self, file: &Path) -> Command;
+}
 
 /// How to launch a team.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,9 +130,6 @@ fn usage(sample: Option<(f64, f64)>, wall_s: f64) -> Option<ProcessUsage> {
 /// Why a launch failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LaunchError {
-    /// The scenario could not be read.
-    #[error(transparent)]
-    Scenario(#[from] crate::scenario::ScenarioError),
     /// Files could not be written or read, or a process not started.
     #[error("{0}")]
     Io(String),
@@ -128,7 +141,7 @@ pub enum LaunchError {
     Keys(#[source] crate::keys::KeysError),
 }
 
-/// The directory, in the launch directory, that `--tls` writes the keys into.
+/// The directory, in the launch directory, that `tls` writes the keys into.
 pub const KEYS_DIR: &str = "keys";
 
 /// The secure form of `zenoh` for the member `name` (`robot<i>`, `router`) of a
@@ -159,61 +172,100 @@ fn with_team_keys(mut zenoh: ZenohConfig, keys: &Path, name: &str, robots: u32) 
     zenoh
 }
 
-/// Rewrites each robot file's `[zenoh]` table in its secure form
-/// ([`with_team_keys`], keys in `KEYS_DIR` next to the files).
-fn secure_robot_files(files: &[PathBuf], robots: u32) -> Result<(), LaunchError> {
-    let io = |file: &Path, e: String| LaunchError::Io(format!("{}: {e}", file.display()));
-    for file in files {
-        let text = std::fs::read_to_string(file).map_err(|e| io(file, e.to_string()))?;
-        let mut config: ProcessConfig =
-            toml::from_str(&text).map_err(|e| io(file, e.to_string()))?;
-        let name = identity_name(config.robot);
-        config.zenoh = with_team_keys(config.zenoh, Path::new(KEYS_DIR), &name, robots);
-        let text = toml::to_string(&config).map_err(|e| io(file, e.to_string()))?;
-        std::fs::write(file, text).map_err(|e| io(file, e.to_string()))?;
-    }
-    Ok(())
+/// Every robot's session peer to peer: robot `i` listens on `endpoints[i]` (e.g.
+/// `tcp/127.0.0.1:7447`) and connects to every other robot's endpoint (zenoh peers do
+/// not forward).
+#[must_use]
+pub fn peer_sessions(endpoints: &[String]) -> Vec<ZenohConfig> {
+    (0..endpoints.len())
+        .map(|i| ZenohConfig {
+            listen: vec![endpoints[i].clone()],
+            connect: endpoints
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, e)| e.clone())
+                .collect(),
+            ..ZenohConfig::default()
+        })
+        .collect()
 }
 
-/// Writes robot files for `scenario_path`'s team into `dir` (see [`LaunchOptions`]),
-/// starts the router if asked, starts one `troupe robot` (`troupe_exe`) per robot,
-/// waits for all of them, and writes `dir/launch.json`.
-pub fn launch(
-    scenario_path: &Path,
+/// A robot's session as a zenoh client that connects only to the router(s)
+/// `routers` (e.g. `tcp/10.0.0.1:7447`, started with `troupe router`).
+#[must_use]
+pub fn client_session(routers: &[String]) -> ZenohConfig {
+    ZenohConfig {
+        mode: ZenohMode::Client,
+        connect: routers.to_vec(),
+        ..ZenohConfig::default()
+    }
+}
+
+/// TCP endpoints on this machine's loopback, one per port.
+#[must_use]
+pub fn loopback_endpoints(ports: &[u16]) -> Vec<String> {
+    ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect()
+}
+
+/// Smallest distance between the robots of several trajectories at common times
+/// (each sample against the other robot's position interpolated at that time), metres;
+/// `None` with fewer than two overlapping trajectories.
+#[must_use]
+pub fn min_distance_between(trajectories: &[Vec<[f64; 4]>]) -> Option<f64> {
+    let at = |samples: &[[f64; 4]], t: f64| -> Option<[f64; 3]> {
+        let i = samples.partition_point(|s| s[0] <= t);
+        if i == 0 || i == samples.len() {
+            return None;
+        }
+        let (a, b) = (samples[i - 1], samples[i]);
+        let f = if b[0] > a[0] {
+            (t - a[0]) / (b[0] - a[0])
+        } else {
+            0.0
+        };
+        Some([0, 1, 2].map(|k| a[k + 1] + f * (b[k + 1] - a[k + 1])))
+    };
+    let mut best: Option<f64> = None;
+    for (i, mine) in trajectories.iter().enumerate() {
+        for (j, theirs) in trajectories.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            for s in mine {
+                if let Some(q) = at(theirs, s[0]) {
+                    let d = ((s[1] - q[0]).powi(2) + (s[2] - q[1]).powi(2) + (s[3] - q[2]).powi(2))
+                        .sqrt();
+                    best = Some(best.map_or(d, |b: f64| b.min(d)));
+                }
+            }
+        }
+    }
+    best
+}
+
+/// A router this process runs for its robots, and its endpoint.
+type RunningRouter = (Router, String);
+
+/// The sessions of the team's robots (see [`LaunchOptions`]), and the router this
+/// process runs for them.
+fn sessions(
+    robots: u32,
     dir: &Path,
     options: &LaunchOptions,
-    troupe_exe: &Path,
-) -> Result<LaunchReport, LaunchError> {
-    let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
-    let scenario = Scenario::load(scenario_path)?;
-    let scenario_abs = std::fs::canonicalize(scenario_path)
-        .map_err(|e| io(&scenario_path.display().to_string(), e))?;
-    if options.tls {
-        write_team_keys(&dir.join(KEYS_DIR), scenario.robots).map_err(LaunchError::Keys)?;
-    }
-    let (files, router) = if options.router {
+) -> Result<(Vec<ZenohConfig>, Option<RunningRouter>), LaunchError> {
+    let mut sessions = if options.router {
         let mut router_settings = settings(loopback_endpoints(&[options.base_port]), Vec::new());
         if options.tls {
-            router_settings = with_team_keys(
-                router_settings,
-                &dir.join(KEYS_DIR),
-                ROUTER_NAME,
-                scenario.robots,
-            );
+            router_settings =
+                with_team_keys(router_settings, &dir.join(KEYS_DIR), ROUTER_NAME, robots);
         }
         let endpoint = router_settings.listen.clone();
         let router = Router::open(&router_settings).map_err(LaunchError::Router)?;
-        let files = write_client_team(
-            dir,
-            &scenario_abs,
-            scenario.robots,
-            &endpoint,
-            options.duration_s,
-        )
-        .map_err(|e| io(&dir.display().to_string(), e))?;
-        (files, Some((router, endpoint[0].clone())))
+        let sessions = vec![client_session(&endpoint); robots as usize];
+        (sessions, Some((router, endpoint[0].clone())))
     } else {
-        let ports: Vec<u16> = (0..scenario.robots)
+        let ports: Vec<u16> = (0..robots)
             .map(|i| {
                 u16::try_from(i)
                     .ok()
@@ -221,35 +273,50 @@ pub fn launch(
                     .ok_or_else(|| LaunchError::Io("ports beyond 65535".into()))
             })
             .collect::<Result<_, _>>()?;
-        let files = write_team(
-            dir,
-            &scenario_abs,
-            &loopback_endpoints(&ports),
-            options.duration_s,
-        )
-        .map_err(|e| io(&dir.display().to_string(), e))?;
-        (files, None)
+        (peer_sessions(&loopback_endpoints(&ports)), None)
     };
     if options.tls {
-        secure_robot_files(&files, scenario.robots)?;
+        for (i, zenoh) in (0..robots).zip(&mut sessions.0) {
+            let secure = with_team_keys(
+                std::mem::take(zenoh),
+                Path::new(KEYS_DIR),
+                &identity_name(i),
+                robots,
+            );
+            *zenoh = secure;
+        }
     }
+    Ok(sessions)
+}
+
+/// What the robot processes did, sampled every half second until each exited.
+struct Watched {
+    exit_codes: Vec<Option<i32>>,
+    usage: Vec<Option<ProcessUsage>>,
+    wall_s: f64,
+}
+
+/// Starts one process per robot file; on a failure, kills those already started.
+fn spawn_all(team: &impl TeamFiles, files: &[PathBuf]) -> Result<Vec<Child>, LaunchError> {
     let mut children: Vec<Child> = Vec::new();
-    for file in &files {
-        match Command::new(troupe_exe)
-            .arg("robot")
-            .arg("--config")
-            .arg(file)
-            .spawn()
-        {
+    for file in files {
+        let mut command = team.command(file);
+        match command.spawn() {
             Ok(child) => children.push(child),
             Err(e) => {
                 for mut c in children {
                     let _ = c.kill();
                 }
-                return Err(io(&troupe_exe.display().to_string(), e));
+                let program = command.get_program().to_string_lossy().into_owned();
+                return Err(LaunchError::Io(format!("{program}: {e}")));
             }
         }
     }
+    Ok(children)
+}
+
+/// Waits for every child, sampling what each uses.
+fn watch(mut children: Vec<Child>) -> Result<Watched, LaunchError> {
     // Ctrl-C in the terminal reaches the whole process group: each robot writes its
     // outputs and exits, and this waits for them, sampling what they use.
     let started = Instant::now();
@@ -264,7 +331,7 @@ pub fn launch(
             }
             if let Some(status) = child
                 .try_wait()
-                .map_err(|e| io("waiting for troupe robot", e))?
+                .map_err(|e| LaunchError::Io(format!("waiting for a robot process: {e}")))?
             {
                 exit_codes[i] = status.code();
                 running[i] = false;
@@ -275,8 +342,39 @@ pub fn launch(
         }
         std::thread::sleep(Duration::from_millis(500));
     }
-    let wall_s = started.elapsed().as_secs_f64();
-    let launcher_usage = usage(read_usage("self"), wall_s);
+    Ok(Watched {
+        exit_codes,
+        usage: samples
+            .iter()
+            .zip(&walls)
+            .map(|(s, w)| usage(*s, *w))
+            .collect(),
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Writes `team`'s robot files into `dir` (see [`LaunchOptions`]), starts the router
+/// if asked, starts one process per robot, waits for all of them, and writes
+/// `dir/launch.json`.
+pub fn launch(
+    team: &impl TeamFiles,
+    dir: &Path,
+    options: &LaunchOptions,
+) -> Result<LaunchReport, LaunchError> {
+    let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
+    let robots = team.robots();
+    if options.tls {
+        write_team_keys(&dir.join(KEYS_DIR), robots).map_err(LaunchError::Keys)?;
+    }
+    let (sessions, router) = sessions(robots, dir, options)?;
+    std::fs::create_dir_all(dir).map_err(|e| io(&dir.display().to_string(), e))?;
+    let files = (0..robots)
+        .zip(sessions)
+        .map(|(i, zenoh)| team.write(dir, i, zenoh))
+        .collect::<std::io::Result<Vec<PathBuf>>>()
+        .map_err(|e| io(&dir.display().to_string(), e))?;
+    let watched = watch(spawn_all(team, &files)?)?;
+    let launcher_usage = usage(read_usage("self"), watched.wall_s);
     let router = router.map(|(router, endpoint)| {
         if let Err(e) = router.close() {
             tracing::warn!("{e}");
@@ -289,14 +387,10 @@ pub fn launch(
     let report = LaunchReport {
         robot_files: files,
         router,
-        exit_codes,
+        exit_codes: watched.exit_codes,
         min_inter_robot_distance_m: min_distance_between(&trajectories),
-        wall_s,
-        robot_usage: samples
-            .iter()
-            .zip(&walls)
-            .map(|(s, w)| usage(*s, *w))
-            .collect(),
+        wall_s: watched.wall_s,
+        robot_usage: watched.usage,
         launcher_usage,
     };
     let mut json = serde_json::to_string_pretty(&report)

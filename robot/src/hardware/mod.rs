@@ -26,4 +26,4 @@ mod file;
 mod run;
 
 pub use file::{HardwareError, HardwareFile, HardwareRobot};
-pub use run::{HardwareSummary, finish_recording, run, run_for, run_until_signal, shutdown_signal};
+pub use run::{HardwareSummary, run, run_until_signal};
