@@ -2,7 +2,10 @@
 //! scenario's team with its own simulated vehicle and camera in the scenario's world
 //! (the same world seed gives the same world in every process), or with a recorded
 //! sequence as its sensor (`sequence`, see [`crate::replay`]), the standard actors on
-//! the real-time executor, and the link over zenoh.
+//! the real-time executor, and the link over zenoh. What needs the simulator — the
+//! world, the simulated camera and vehicle, a recorded sequence — is built here; the
+//! rest of the process (journal, team link, executor, signals, duration, recording,
+//! `summary.json`) is the robot-process harness, [`troupe_robot::harness`].
 //!
 //! A robot file names the scenario and which robot of its team this process is:
 //!
@@ -24,7 +27,7 @@
 //!                                                       # peers do not forward
 //! ```
 //!
-//! Beyond a handful of robots, a zenoh router (`troupe router`, [`crate::router`])
+//! Beyond a handful of robots, a zenoh router (`troupe router`, [`troupe_robot::router`])
 //! forwards between them and each robot names only the router:
 //!
 //! ```toml
@@ -43,6 +46,9 @@
 //! truth at every odometry message) into `out`, and while it runs it records what the
 //! robot publishes into `out/run.mcap` in wall time (`record = false` turns it off;
 //! `docs/recordings.md`).
+//!
+//! `troupe launch` writes these files for a scenario's team ([`SimulatedTeam`], the
+//! simulator's [`TeamFiles`] for [`troupe_robot::launch`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -42,7 +42,8 @@
 //!
 //! An operator types commands on the base's standard input, one per line —
 //! `robot1 hold`, `all hold`, `robot1 resume`, `robot1 velocity 0.5 0 0.1` — which
-//! go to the robots as [`BaseCommand`]s on the shared topic [`BASE_COMMAND`]
+//! go to the robots as [`BaseCommand`]s on the shared topic
+//! [`BASE_COMMAND`](troupe_actors::collision::BASE_COMMAND)
 //! (store-and-forward, highest priority; robots with `[robot.collision]
 //! operator_commands = true` apply them, see docs/base-station.md).
 //!
