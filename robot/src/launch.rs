@@ -399,3 +399,56 @@ pub fn launch(
     std::fs::write(dir.join("launch.json"), json).map_err(|e| io("launch.json", e))?;
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peers_connect_to_every_other_robot_and_clients_only_to_the_router() {
+        let endpoints = loopback_endpoints(&[7447, 7448, 7449]);
+        assert_eq!(endpoints[1], "tcp/127.0.0.1:7448");
+        let peers = peer_sessions(&endpoints);
+        assert_eq!(peers.len(), 3);
+        assert_eq!(peers[1].listen, [endpoints[1].clone()]);
+        assert_eq!(
+            peers[1].connect,
+            [endpoints[0].clone(), endpoints[2].clone()]
+        );
+        assert_eq!(peers[1].mode, ZenohMode::default());
+        let client = client_session(&endpoints[..1]);
+        assert_eq!(client.mode, ZenohMode::Client);
+        assert!(client.listen.is_empty());
+        assert_eq!(client.connect, [endpoints[0].clone()]);
+    }
+
+    #[test]
+    fn secure_sessions_use_tls_endpoints_and_the_member_keys() {
+        let zenoh = with_team_keys(
+            peer_sessions(&loopback_endpoints(&[9000, 9001])).remove(0),
+            Path::new(KEYS_DIR),
+            "robot0",
+            2,
+        );
+        assert_eq!(zenoh.listen, ["tls/127.0.0.1:9000"]);
+        assert_eq!(zenoh.connect, ["tls/127.0.0.1:9001"]);
+        let tls = zenoh.tls.expect("tls");
+        assert_eq!(tls.cert_path, Path::new("keys/robot0.pem"));
+        assert!(tls.mutual);
+        assert_eq!(zenoh.access.expect("access").ids, [0, 1, 2]);
+    }
+
+    #[test]
+    fn the_closest_approach_interpolates_between_samples() {
+        // `a` passes under `b`, which hovers at (1, 3, 0) from t = 0 to t = 2 s.
+        let a = vec![
+            [0.0, 0.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0, 0.0],
+            [2.0, 2.0, 0.0, 0.0],
+        ];
+        let b = vec![[0.0, 1.0, 3.0, 0.0], [2.0, 1.0, 3.0, 0.0]];
+        let d = min_distance_between(&[a.clone(), b]).expect("overlap");
+        assert!((d - 3.0).abs() < 1e-12, "{d}");
+        assert_eq!(min_distance_between(&[a]), None);
+    }
+}
