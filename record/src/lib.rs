@@ -36,3 +36,7 @@ pub use recorder::{
     period_of_hz,
 };
 pub use writer::{Compression, RecordError, Recording};
+
+/// File name of a recording in its output directory: a run's report directory
+/// (`troupe run`), a robot process's or the base station's `out`.
+pub const RUN_RECORDING: &str = "run.mcap";

@@ -1,4 +1,15 @@
-//! troupe-robot: assembles one robot's actors from configuration.
+//! troupe-robot: running robots — assembling one robot's actors from configuration,
+//! the hardware drivers, and the deployment layer every troupe process stands on.
+//!
+//! - [`assemble`]: one robot from a [`RobotConfig`] and the parts the caller provides.
+//! - [`ros2`], [`mavlink`], [`safety`]: the hardware drivers and their guards;
+//!   [`hardware`]: a hardware robot in one process (the `troupe-robot` binary).
+//! - [`harness`]: the robot-process harness (journal, team link, executor, signals,
+//!   duration, recording, `summary.json`, exit codes) that a simulated robot process
+//!   (`troupe robot`), a hardware robot and the base station share.
+//! - [`base`]: the base station (`troupe base`); [`router`]: a zenoh router
+//!   (`troupe router`); [`keys`]: a team's TLS credentials (`troupe keys`);
+//!   [`launch`]: a team as separate processes on one machine (`troupe launch`).
 //!
 //! [`assemble`] wires the actors a [`RobotConfig`] names around a vehicle and a frame
 //! source that the caller provides (a simulator provides simulated ones; hardware
@@ -27,11 +38,16 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod base;
 mod config;
 pub mod frames;
 pub mod hardware;
+pub mod harness;
+pub mod keys;
+pub mod launch;
 pub mod mavlink;
 pub mod ros2;
+pub mod router;
 pub mod safety;
 pub mod toml_file;
 

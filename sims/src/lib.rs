@@ -1,5 +1,7 @@
 //! troupe-sims: worlds, the simulated camera and vehicle, in-process teams,
-//! ground-truth metrics and reports; home of the `troupe` command.
+//! ground-truth metrics and reports; home of the `troupe` command (one module per
+//! subcommand in `src/cli/`). Running processes — the harness, the base station, the
+//! router, keys and the launcher — is `troupe_robot`'s.
 //!
 //! - [`world`]: procedural worlds with a signed distance function as ground truth.
 //! - [`camera`]: the pinhole depth + intensity camera, rendered on the CPU.
@@ -8,9 +10,10 @@
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
-//! - [`process`], [`launch`]: one robot per process over zenoh (`troupe robot`,
-//!   `troupe launch`); [`router`]: a zenoh router (`troupe router`); [`replay`]: a
-//!   robot process replaying a recorded sequence.
+//! - [`process`]: one simulated robot per process over zenoh (`troupe robot`, on
+//!   [`troupe_robot::harness`]) and its robot files for `troupe launch`
+//!   ([`troupe_robot::launch`]); [`replay`]: a robot process replaying a recorded
+//!   sequence.
 //!
 //! A team in one process, deterministic in sim time (what `troupe run` does):
 //!
@@ -28,12 +31,9 @@
 #![deny(missing_docs)]
 
 pub mod artifact_score;
-pub mod base;
 pub mod camera;
 pub mod coverage;
 pub mod faults;
-pub mod keys;
-pub mod launch;
 pub mod maps;
 pub mod monitor;
 pub mod network;
@@ -43,7 +43,6 @@ pub mod process;
 pub mod recording;
 pub mod replay;
 pub mod report;
-pub mod router;
 pub mod scenario;
 pub mod sequence;
 pub mod sim_sensor;
@@ -51,14 +50,3 @@ pub mod study;
 pub mod team;
 pub mod vehicle;
 pub mod world;
-
-/// Logs to stderr, filtered by `RUST_LOG` (default `warn`); for the `troupe` binary.
-pub fn init_logging() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-}

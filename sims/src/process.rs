@@ -2,7 +2,10 @@
 //! scenario's team with its own simulated vehicle and camera in the scenario's world
 //! (the same world seed gives the same world in every process), or with a recorded
 //! sequence as its sensor (`sequence`, see [`crate::replay`]), the standard actors on
-//! the real-time executor, and the link over zenoh.
+//! the real-time executor, and the link over zenoh. What needs the simulator — the
+//! world, the simulated camera and vehicle, a recorded sequence — is built here; the
+//! rest of the process (journal, team link, executor, signals, duration, recording,
+//! `summary.json`) is the robot-process harness, [`troupe_robot::harness`].
 //!
 //! A robot file names the scenario and which robot of its team this process is:
 //!
@@ -24,7 +27,7 @@
 //!                                                       # peers do not forward
 //! ```
 //!
-//! Beyond a handful of robots, a zenoh router (`troupe router`, [`crate::router`])
+//! Beyond a handful of robots, a zenoh router (`troupe router`, [`troupe_robot::router`])
 //! forwards between them and each robot names only the router:
 //!
 //! ```toml
@@ -43,37 +46,36 @@
 //! truth at every odometry message) into `out`, and while it runs it records what the
 //! robot publishes into `out/run.mcap` in wall time (`record = false` turns it off;
 //! `docs/recordings.md`).
+//!
+//! `troupe launch` writes these files for a scenario's team ([`SimulatedTeam`], the
+//! simulator's [`TeamFiles`] for [`troupe_robot::launch`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::process::Command;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact};
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
-use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
-use troupe_actors::msgs::{ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
-use troupe_actors::runtime::{
-    ConfigError, Publication, RealtimeExecutor, RobotId, RobotIdsError, TopicStats,
-};
-use troupe_comms::transport::TransportError;
-use troupe_comms::zenoh::{ZenohConfig, ZenohMode, ZenohStats, ZenohTransport};
+use troupe_actors::link::{LINK_STATUS, LinkStatus};
+use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
+use troupe_actors::runtime::{ConfigError, Publication, RobotId, RobotSpec, TopicStats};
+use troupe_comms::zenoh::{ZenohConfig, ZenohStats};
+use troupe_record::{Compression, RecordOptions, RecordingStats, check_rate_hz, period_of_hz};
 use troupe_robot::AssembleError;
-pub use troupe_robot::hardware::shutdown_signal;
-use troupe_robot::hardware::{finish_recording, run_for};
+use troupe_robot::harness::{
+    self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, write_trajectory,
+};
+use troupe_robot::launch::{TeamFiles, client_session, peer_sessions};
 use troupe_robot::toml_file::{SettingsFileError, read_toml};
 
-use troupe_record::{
-    Clock, Compression, RecordOptions, Recorder, RecordingStats, SharedRecorder, check_rate_hz,
-    period_of_hz,
-};
-
-use crate::recording::{RUN_RECORDING, record_options, record_world};
+use crate::recording::{record_options, record_world};
 use crate::replay::replaying_robot;
 use crate::scenario::{Scenario, ScenarioError};
 use crate::sequence::{Sequence, SequenceError};
 use crate::team::simulated_robot;
+use crate::world::Site;
 use crate::world::mesh::MeshError;
 
 /// A robot file as written (see the module docs).
@@ -164,40 +166,10 @@ pub enum ProcessError {
         /// Why.
         source: AssembleError,
     },
-    /// The executor did not accept the robot's id.
-    #[error("starting the executor")]
-    RobotId(#[source] RobotIdsError),
-    /// The team link could not be opened or started.
-    #[error("{context}")]
-    Transport {
-        /// What we were doing.
-        context: &'static str,
-        /// The transport's error.
-        source: TransportError,
-    },
-    /// The executor ended without a report of the robot.
-    #[error("the executor reported no robot")]
-    NoReport,
-    /// The outputs could not be written.
-    #[error("writing {}", path.display())]
-    Output {
-        /// The directory.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The recording could not be created.
-    #[error("creating the recording")]
-    Recording(#[source] troupe_record::RecordError),
-    /// The tokio runtime could not start.
-    #[error("starting the tokio runtime")]
-    Runtime(#[source] std::io::Error),
-    /// The link's journal could not be opened.
-    #[error("opening the link journal")]
-    Journal {
-        /// Why (names the file).
-        source: troupe_comms::journal::JournalError,
-    },
+    /// The harness could not open the link's journal, the team link or the
+    /// recording, or could not write the outputs.
+    #[error(transparent)]
+    Harness(#[from] HarnessError),
 }
 
 impl RobotProcess {
@@ -278,7 +250,7 @@ pub struct ProcessSummary {
     /// Messages and bytes per topic (`peer/*` counts what arrived from the others).
     pub topics: BTreeMap<String, TopicStats>,
     /// Per actor: errors, panics, restarts.
-    pub actors: Vec<ProcessActor>,
+    pub actors: Vec<ActorHealth>,
     /// The link's last counters.
     pub link: Option<LinkStatus>,
     /// The collision actor's last counters (`stopped`: rounds that committed the
@@ -312,47 +284,16 @@ pub struct PeerCounts {
     pub keyframes: u64,
 }
 
-/// One actor's health.
-#[derive(Clone, Debug, Serialize)]
-pub struct ProcessActor {
-    /// Name.
-    pub name: String,
-    /// Events handled.
-    pub handled: u64,
-    /// Hooks that returned an error.
-    pub errors: u64,
-    /// Panics.
-    pub panics: u64,
-}
-
-/// Runs the robot until its duration is over or `stop` resolves, then writes the
-/// outputs; must be called inside a multi-threaded tokio runtime.
-pub async fn run(
+/// The robot of `process` (a scenario with the team as its roster), and its world
+/// unless it replays a recorded sequence.
+fn build_robot(
     process: &RobotProcess,
-    stop: impl std::future::Future<Output = ()>,
-) -> Result<ProcessSummary, ProcessError> {
-    // Every team member, the base station included, is a store-and-forward
-    // recipient from the start: one that starts late or restarts still gets what
-    // was sent before it was heard.
-    let mut scenario = process.scenario.clone();
-    scenario.robot.link = scenario
-        .robot
-        .link
-        .with_team(scenario.robots)
-        .with_roster_as_peers();
-    let scenario = &scenario;
+    scenario: &Scenario,
+) -> Result<(RobotSpec, Option<Arc<dyn Site>>), ProcessError> {
     let id = process.config.robot;
     // The link's journal outlives the process (`kill -9` included): what it
-    // accepted and what it acknowledged, and its message ids, which a new journal
-    // starts somewhere new, so that peers who remember ids of an earlier run (their
-    // duplicate filter) do not drop this run's first messages as repeats.
-    let first_id = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as u32);
-    let journal_dir = scenario.robot.link.journal_dir_in(&process.out);
-    let journal = LinkJournal::on_disk(&journal_dir, first_id)
-        .map_err(|source| ProcessError::Journal { source })?;
-    // A simulated robot keeps its world: the rock surface goes into the recording.
+    // accepted and what it acknowledged, and its message ids.
+    let journal = harness::open_journal(&scenario.robot.link.journal_dir_in(&process.out), None)?;
     let (robot, world) = match &process.sequence {
         Some(sequence) => {
             tracing::info!(
@@ -373,6 +314,7 @@ pub async fn run(
             (robot, None)
         }
         None => {
+            // A simulated robot keeps its world: the rock surface goes into the recording.
             let world = scenario.world.build().map_err(ProcessError::World)?;
             (
                 simulated_robot(scenario, &world, id as usize, journal),
@@ -381,168 +323,119 @@ pub async fn run(
         }
     };
     let robot = robot.map_err(|source| ProcessError::Assemble { id, source })?;
-    let transport = Arc::new(
-        ZenohTransport::open(&process.config.zenoh, scenario.robot.link.team, vec![id])
-            .map_err(|source| ProcessError::Transport {
-                context: "opening the zenoh session",
-                source,
-            })?
-            .with_subscription(scenario.robot.link.subscribe),
-    );
-    let trajectory: Arc<Mutex<Vec<[f64; 4]>>> = Arc::default();
-    let link: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    Ok((robot, world))
+}
+
+/// Counts what arrives from each peer ([`ProcessSummary::peers`]).
+fn count_peers(harness: &mut Harness) -> Arc<Mutex<BTreeMap<u32, PeerCounts>>> {
     let peers: Arc<Mutex<BTreeMap<u32, PeerCounts>>> = Arc::default();
-    let artifacts: Arc<Mutex<Vec<Artifact>>> = Arc::default();
-    let collision: Arc<Mutex<Option<CollisionStatus>>> = Arc::default();
-    let (trajectory_tap, link_tap, peers_tap, artifacts_tap, collision_tap) = (
-        trajectory.clone(),
-        link.clone(),
-        peers.clone(),
-        artifacts.clone(),
-        collision.clone(),
-    );
-    let position_tap = transport.clone();
-    let mut executor = RealtimeExecutor::new(vec![robot], scenario.seed ^ u64::from(id))
-        .with_robot_ids(vec![RobotId(id)])
-        .map_err(ProcessError::RobotId)?;
-    executor.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&ODOMETRY) {
-            let t = SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .map_or(0.0, |d| d.as_secs_f64());
-            let v = o.pose.translation.vector;
-            // Where the robot is picks its keyframes' cell and, under a
-            // neighbourhood scope, the cells it hears (troupe_comms::scope).
-            position_tap.set_position(id, [v.x, v.y, v.z]);
-            if let Ok(mut samples) = trajectory_tap.lock() {
-                samples.push([t, v.x, v.y, v.z]);
-            }
-        } else if let Some(status) = p.get(&LINK_STATUS)
-            && let Ok(mut last) = link_tap.lock()
-        {
-            *last = Some(status.clone());
-        } else if let Some(status) = p.get(&COLLISION_STATUS)
-            && let Ok(mut last) = collision_tap.lock()
-        {
-            *last = Some(status.clone());
-        } else if let Some(list) = p.get(&ARTIFACT_LIST)
-            && let Ok(mut last) = artifacts_tap.lock()
-        {
-            last.clone_from(&list.artifacts);
-        } else {
-            let count = |robot: RobotId, field: fn(&mut PeerCounts) -> &mut u64| {
-                if let Ok(mut peers) = peers_tap.lock() {
-                    *field(peers.entry(robot.0).or_default()) += 1;
-                }
-            };
-            if let Some(o) = p.get(&PEER_ODOMETRY) {
-                count(o.robot, |c| &mut c.odometry);
-            } else if let Some(k) = p.get(&PEER_KEYFRAME) {
-                count(k.robot, |c| &mut c.keyframes);
-            } else if let Some(plan) = p.get(&PEER_PLAN) {
-                count(plan.robot, |c| &mut c.plans);
-            }
+    let tap = peers.clone();
+    harness.add_tap(move |p: &Publication<'_>| {
+        let count = |robot: RobotId, field: fn(&mut PeerCounts) -> &mut u64| {
+            let mut peers = tap.lock().unwrap_or_else(PoisonError::into_inner);
+            *field(peers.entry(robot.0).or_default()) += 1;
+        };
+        if let Some(o) = p.get(&PEER_ODOMETRY) {
+            count(o.robot, |c| &mut c.odometry);
+        } else if let Some(k) = p.get(&PEER_KEYFRAME) {
+            count(k.robot, |c| &mut c.keyframes);
+        } else if let Some(plan) = p.get(&PEER_PLAN) {
+            count(plan.robot, |c| &mut c.plans);
         }
     });
-    let recorder = if process.config.record {
-        std::fs::create_dir_all(&process.out).map_err(|source| ProcessError::Output {
-            path: process.out.clone(),
-            source,
-        })?;
-        let path = process.out.join(RUN_RECORDING);
-        let options = process.record_options();
-        let mut recorder = Recorder::create_with(&path, Clock::wall_from_now(), options)
-            .map_err(ProcessError::Recording)?;
-        if let Some(world) = &world {
-            record_world(&mut recorder, world.as_ref());
-        }
-        let recorder = SharedRecorder::new(recorder);
-        executor.add_tap(recorder.clone());
-        Some(recorder)
-    } else {
-        None
+    peers
+}
+
+/// Runs the robot until its duration is over or `stop` resolves, then writes the
+/// outputs; must be called inside a multi-threaded tokio runtime.
+pub async fn run(
+    process: &RobotProcess,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<ProcessSummary, ProcessError> {
+    // Every team member, the base station included, is a store-and-forward
+    // recipient from the start: one that starts late or restarts still gets what
+    // was sent before it was heard.
+    let mut scenario = process.scenario.clone();
+    scenario.robot.link = scenario
+        .robot
+        .link
+        .with_team(scenario.robots)
+        .with_roster_as_peers();
+    let id = process.config.robot;
+    let (robot, world) = build_robot(process, &scenario)?;
+    let member = Member {
+        name: format!("robot{id}"),
+        id,
+        seed: scenario.seed ^ u64::from(id),
+        team: scenario.robot.link.team,
+        zenoh: &process.config.zenoh,
+        subscription: scenario.robot.link.subscribe,
+        out: process.out.clone(),
     };
-    let started = Instant::now();
-    let handle = executor
-        .spawn_with_transport(transport.clone())
-        .map_err(|source| ProcessError::Transport {
-            context: "starting the team link",
-            source,
+    let mut harness = Harness::open(member, robot)?;
+    harness.track_trajectory();
+    let link = harness.latest(LINK_STATUS);
+    let collision = harness.latest(COLLISION_STATUS);
+    let artifacts = harness.latest(ARTIFACT_LIST);
+    let peers = count_peers(&mut harness);
+    if process.config.record {
+        harness.record(process.record_options(), |mut recorder| {
+            if let Some(world) = &world {
+                record_world(&mut recorder, world.as_ref());
+            }
+            recorder
         })?;
-    tracing::info!(robot = id, "running");
-    run_for(process.config.duration_s, stop).await;
-    let transport_errors = handle.transport_errors();
-    let reports = handle.shutdown().await;
-    let zenoh = transport.stats();
-    if let Err(e) = transport.close() {
-        tracing::warn!(robot = id, "closing zenoh: {e}");
     }
-    let report = reports.into_iter().next().ok_or(ProcessError::NoReport)?;
-    let recording = finish_recording(recorder.as_ref(), &format!("robot{id}"));
-    let trajectory = std::mem::take(
-        &mut *trajectory
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner),
-    );
+    let finished = harness.run(process.config.duration_s, stop).await?;
     let summary = ProcessSummary {
         robot: id,
-        wall_s: started.elapsed().as_secs_f64(),
-        topics: report.topics.clone(),
-        actors: report
-            .actors
-            .iter()
-            .map(|a| ProcessActor {
-                name: a.name.clone(),
-                handled: a.stats.handled,
-                errors: a.stats.errors,
-                panics: a.stats.panics,
-            })
-            .collect(),
-        link: link
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone(),
-        collision: collision
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone(),
-        zenoh,
-        transport_errors,
-        trajectory_samples: trajectory.len(),
-        peers: std::mem::take(
-            &mut *peers
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner),
-        ),
-        recording,
-        artifacts: std::mem::take(
-            &mut *artifacts
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner),
-        ),
+        wall_s: finished.wall_s,
+        topics: finished.report.topics.clone(),
+        actors: finished.actors(),
+        link: link.take(),
+        collision: collision.take(),
+        zenoh: finished.zenoh,
+        transport_errors: finished.transport_errors,
+        trajectory_samples: finished.trajectory.len(),
+        peers: std::mem::take(&mut *peers.lock().unwrap_or_else(PoisonError::into_inner)),
+        recording: finished.recording,
+        artifacts: artifacts.take().map(|a| a.artifacts).unwrap_or_default(),
     };
-    write_outputs(&process.out, &summary, &trajectory).map_err(|source| ProcessError::Output {
-        path: process.out.clone(),
-        source,
-    })?;
+    harness::write_summary(&process.out, &summary)?;
+    write_trajectory(&process.out, &finished.trajectory)?;
     Ok(summary)
 }
 
-fn write_outputs(
-    dir: &Path,
-    summary: &ProcessSummary,
-    trajectory: &[[f64; 4]],
-) -> std::io::Result<()> {
-    use std::fmt::Write as _;
-    std::fs::create_dir_all(dir)?;
-    let mut json = serde_json::to_string_pretty(summary).map_err(std::io::Error::other)?;
-    json.push('\n');
-    std::fs::write(dir.join("summary.json"), json)?;
-    let mut csv = String::from("unix_time_s,x_m,y_m,z_m\n");
-    for [t, x, y, z] in trajectory {
-        let _ = writeln!(csv, "{t:.6},{x},{y},{z}");
+/// The simulated robots of a scenario's team as robot files (`troupe launch`): each
+/// names `scenario` (write it absolute, or relative to the launch directory), runs
+/// `duration_s` and is started as `troupe robot --config FILE` (`troupe`: the path
+/// of the `troupe` binary).
+#[derive(Clone, Debug)]
+pub struct SimulatedTeam {
+    /// The scenario file the robot files name.
+    pub scenario: PathBuf,
+    /// Robots in the team.
+    pub robots: u32,
+    /// Wall seconds each robot runs; `None`: until interrupted.
+    pub duration_s: Option<f64>,
+    /// The `troupe` binary.
+    pub troupe: PathBuf,
+}
+
+impl TeamFiles for SimulatedTeam {
+    fn robots(&self) -> u32 {
+        self.robots
     }
-    std::fs::write(dir.join("trajectory.csv"), csv)
+
+    fn write(&self, dir: &Path, robot: u32, zenoh: ZenohConfig) -> std::io::Result<PathBuf> {
+        write_robot_file(dir, &self.scenario, robot, self.duration_s, zenoh)
+    }
+
+    fn command(&self, file: &Path) -> Command {
+        let mut command = Command::new(&self.troupe);
+        command.arg("robot").arg("--config").arg(file);
+        command
+    }
 }
 
 /// Writes one robot file per robot into `dir`: robot `i` listens on `endpoints[i]`
@@ -557,18 +450,11 @@ pub fn write_team(
     endpoints: &[String],
     duration_s: Option<f64>,
 ) -> std::io::Result<Vec<PathBuf>> {
-    write_robot_files(dir, scenario, endpoints.len(), duration_s, |i| {
-        ZenohConfig {
-            listen: vec![endpoints[i].clone()],
-            connect: endpoints
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, e)| e.clone())
-                .collect(),
-            ..ZenohConfig::default()
-        }
-    })
+    std::fs::create_dir_all(dir)?;
+    (0..)
+        .zip(peer_sessions(endpoints))
+        .map(|(i, zenoh)| write_robot_file(dir, scenario, i, duration_s, zenoh))
+        .collect()
 }
 
 /// Writes one robot file per robot (`robots` of them) into `dir`, each a zenoh
@@ -581,114 +467,42 @@ pub fn write_client_team(
     routers: &[String],
     duration_s: Option<f64>,
 ) -> std::io::Result<Vec<PathBuf>> {
-    write_robot_files(dir, scenario, robots as usize, duration_s, |_| {
-        ZenohConfig {
-            mode: ZenohMode::Client,
-            connect: routers.to_vec(),
-            ..ZenohConfig::default()
-        }
-    })
-}
-
-/// Writes `robot<i>.toml` for `i` below `robots`, with `zenoh(i)` as its session.
-fn write_robot_files(
-    dir: &Path,
-    scenario: &Path,
-    robots: usize,
-    duration_s: Option<f64>,
-    zenoh: impl Fn(usize) -> ZenohConfig,
-) -> std::io::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
     (0..robots)
-        .map(|i| {
-            let config = ProcessConfig {
-                robot: u32::try_from(i).map_err(std::io::Error::other)?,
-                scenario: scenario.to_path_buf(),
-                duration_s,
-                out: Some(PathBuf::from(format!("robot{i}"))),
-                sequence: None,
-                zenoh: zenoh(i),
-                record: true,
-                record_depth_hz: None,
-                record_compression: None,
-            };
-            let file = dir.join(format!("robot{i}.toml"));
-            let text = toml::to_string(&config).map_err(std::io::Error::other)?;
-            std::fs::write(&file, text)?;
-            Ok(file)
-        })
+        .map(|i| write_robot_file(dir, scenario, i, duration_s, client_session(routers)))
         .collect()
 }
 
-/// TCP endpoints on this machine's loopback, one per port.
-#[must_use]
-pub fn loopback_endpoints(ports: &[u16]) -> Vec<String> {
-    ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect()
-}
-
-/// Reads a `trajectory.csv` written by [`run`].
-pub fn read_trajectory(path: &Path) -> std::io::Result<Vec<[f64; 4]>> {
-    let text = std::fs::read_to_string(path)?;
-    text.lines()
-        .skip(1)
-        .map(|line| {
-            let v: Vec<f64> = line
-                .split(',')
-                .map(str::parse)
-                .collect::<Result<_, _>>()
-                .map_err(std::io::Error::other)?;
-            match v.as_slice() {
-                [t, x, y, z] => Ok([*t, *x, *y, *z]),
-                _ => Err(std::io::Error::other(format!("bad line `{line}`"))),
-            }
-        })
-        .collect()
-}
-
-/// Smallest distance between the robots of several trajectories at common times
-/// (each sample against the other robot's position interpolated at that time), metres;
-/// `None` with fewer than two overlapping trajectories.
-#[must_use]
-pub fn min_distance_between(trajectories: &[Vec<[f64; 4]>]) -> Option<f64> {
-    let at = |samples: &[[f64; 4]], t: f64| -> Option<[f64; 3]> {
-        let i = samples.partition_point(|s| s[0] <= t);
-        if i == 0 || i == samples.len() {
-            return None;
-        }
-        let (a, b) = (samples[i - 1], samples[i]);
-        let f = if b[0] > a[0] {
-            (t - a[0]) / (b[0] - a[0])
-        } else {
-            0.0
-        };
-        Some([0, 1, 2].map(|k| a[k + 1] + f * (b[k + 1] - a[k + 1])))
+/// Writes `robot<robot>.toml` into `dir` with `zenoh` as its session and its outputs
+/// in `robot<robot>/`.
+fn write_robot_file(
+    dir: &Path,
+    scenario: &Path,
+    robot: u32,
+    duration_s: Option<f64>,
+    zenoh: ZenohConfig,
+) -> std::io::Result<PathBuf> {
+    let config = ProcessConfig {
+        robot,
+        scenario: scenario.to_path_buf(),
+        duration_s,
+        out: Some(PathBuf::from(format!("robot{robot}"))),
+        sequence: None,
+        zenoh,
+        record: true,
+        record_depth_hz: None,
+        record_compression: None,
     };
-    let mut best: Option<f64> = None;
-    for (i, mine) in trajectories.iter().enumerate() {
-        for (j, theirs) in trajectories.iter().enumerate() {
-            if i == j {
-                continue;
-            }
-            for s in mine {
-                if let Some(q) = at(theirs, s[0]) {
-                    let d = ((s[1] - q[0]).powi(2) + (s[2] - q[1]).powi(2) + (s[3] - q[2]).powi(2))
-                        .sqrt();
-                    best = Some(best.map_or(d, |b: f64| b.min(d)));
-                }
-            }
-        }
-    }
-    best
+    let file = dir.join(format!("robot{robot}.toml"));
+    let text = toml::to_string(&config).map_err(std::io::Error::other)?;
+    std::fs::write(&file, text)?;
+    Ok(file)
 }
 
 /// Runs the robot on a new multi-threaded tokio runtime until its duration is over,
 /// Ctrl-C or SIGTERM (`troupe robot`), then writes the outputs.
 pub fn run_until_signal(process: &RobotProcess) -> Result<ProcessSummary, ProcessError> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(ProcessError::Runtime)?;
-    runtime.block_on(run(process, shutdown_signal()))
+    harness::block_on(run(process, shutdown_signal()))?
 }
 
 #[cfg(test)]

@@ -18,9 +18,6 @@ use crate::scenario::{MetricsConfig, Scenario};
 use crate::team::{RunOutput, SeriesRow};
 use crate::world::World;
 
-/// File name of a run's recording in its report directory.
-pub const RUN_RECORDING: &str = "run.mcap";
-
 /// Channel of robot `i`'s samples (its rows of `timeseries.csv`).
 #[must_use]
 pub fn sample_topic(robot: usize) -> String {

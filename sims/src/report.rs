@@ -12,8 +12,8 @@ use std::io;
 use std::path::{Path, PathBuf};
 
 use troupe_actors::mapper::mapfile::write_ply_with_source;
+use troupe_robot::base::merged_points;
 
-use crate::maps::merged_points;
 use crate::plot::{Chart, Series, write_chart};
 use crate::team::{RunOutput, SeriesRow};
 

@@ -11,6 +11,7 @@ use troupe_comms::simnet::SimNetConfig;
 use troupe_core::ConfigError;
 use troupe_record::Compression;
 use troupe_robot::RobotConfig;
+use troupe_robot::base::TeamSettings;
 use troupe_robot::toml_file::{TomlFileError, parse_toml};
 
 use crate::camera::{CameraBackend, CameraParams};
@@ -152,6 +153,17 @@ impl Scenario {
         }
         scenario.validate(path)?;
         Ok(scenario)
+    }
+
+    /// The team as a base station sees it: name, robots, seed and `[robot]`.
+    #[must_use]
+    pub fn team(&self) -> TeamSettings {
+        TeamSettings {
+            name: self.name.clone(),
+            robots: self.robots,
+            seed: self.seed,
+            robot: self.robot.clone(),
+        }
     }
 
     /// Checks that every reader of the camera's frames stays on the pixels it renders
@@ -300,6 +312,12 @@ impl Scenario {
         }
         Ok(())
     }
+}
+
+/// Reads and validates a scenario file for its team (`troupe base`'s team reader,
+/// [`troupe_robot::base::BaseStation::load`]).
+pub fn load_team(path: &Path) -> Result<TeamSettings, ScenarioError> {
+    Scenario::load(path).map(|s| s.team())
 }
 
 #[cfg(test)]

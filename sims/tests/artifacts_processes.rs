@@ -17,7 +17,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use troupe_comms::zenoh::ZenohConfig;
-use troupe_sims::process::{ProcessConfig, loopback_endpoints};
+use troupe_robot::launch::loopback_endpoints;
+use troupe_sims::process::ProcessConfig;
 
 /// Reports within this distance are one artifact (the artifact actor's default
 /// merge radius).

@@ -11,7 +11,8 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use troupe_actors::mapper::mapfile::GmmMap;
-use troupe_sims::process::{loopback_endpoints, write_team};
+use troupe_robot::launch::loopback_endpoints;
+use troupe_sims::process::write_team;
 
 fn troupe() -> Command {
     Command::new(env!("CARGO_BIN_EXE_troupe"))
@@ -266,10 +267,11 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
 #[test]
 fn the_example_base_file_loads() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/base.toml");
-    let station = troupe_sims::base::BaseStation::load(&file).expect("sims/robots/base.toml");
-    assert_eq!(station.base_id, station.scenario.robots);
+    let station = troupe_robot::base::BaseStation::load(&file, troupe_sims::scenario::load_team)
+        .expect("sims/robots/base.toml");
+    assert_eq!(station.base_id, station.team.robots);
     assert_eq!(
         station.config.zenoh.connect.len(),
-        station.scenario.robots as usize
+        station.team.robots as usize
     );
 }

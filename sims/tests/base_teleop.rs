@@ -13,7 +13,8 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use troupe_sims::process::{loopback_endpoints, write_team};
+use troupe_robot::launch::loopback_endpoints;
+use troupe_sims::process::write_team;
 
 fn troupe() -> Command {
     Command::new(env!("CARGO_BIN_EXE_troupe"))

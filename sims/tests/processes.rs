@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use troupe_sims::process::{
-    loopback_endpoints, min_distance_between, read_trajectory, write_client_team, write_team,
-};
+use troupe_robot::harness::read_trajectory;
+use troupe_robot::launch::{loopback_endpoints, min_distance_between};
+use troupe_sims::process::{write_client_team, write_team};
 
 /// `n` consecutive free TCP ports on loopback, in this binary's range; each call
 /// starts 100 ports further, so tests picking ports at the same time (before their

@@ -150,7 +150,7 @@ fn attack_two_robots(
     let ports = free_ports(3);
     let router = router.then(|| {
         let table = tables(2, &ports);
-        let router = troupe_sims::router::Router::open(&zenoh_table(&table, dir)).expect("router");
+        let router = troupe_robot::router::Router::open(&zenoh_table(&table, dir)).expect("router");
         (router, listen_endpoint(&table))
     });
     let robots: Vec<ZenohTransport> = (0..2)

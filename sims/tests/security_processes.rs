@@ -21,7 +21,8 @@ use troupe_comms::wire::{
     self, Class, Component3, Envelope, Keyframe, Mixture, Odometry, Payload, Plan, PlanKnot,
     SensorPose,
 };
-use troupe_sims::process::{loopback_endpoints, write_team};
+use troupe_robot::launch::loopback_endpoints;
+use troupe_sims::process::write_team;
 use troupe_sims::scenario::Scenario;
 
 /// `n` consecutive free loopback ports; the tests of this binary run in parallel

@@ -24,9 +24,9 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use serde_json::Value;
+use troupe_robot::base::BaseStation;
 use troupe_robot::hardware::HardwareRobot;
 use troupe_runtime::TopicStats;
-use troupe_sims::base::BaseStation;
 use troupe_sims::process::RobotProcess;
 
 const FLY_S: f64 = 22.0;
@@ -178,7 +178,8 @@ max_m = {FENCE_MAX:?}
     .unwrap();
     let hardware = HardwareRobot::load(&dir.join("robot0.toml")).expect("robot0.toml");
     let peer = RobotProcess::load(&dir.join("robot1.toml")).expect("robot1.toml");
-    let station = BaseStation::load(&dir.join("base.toml")).expect("base.toml");
+    let station = BaseStation::load(&dir.join("base.toml"), troupe_sims::scenario::load_team)
+        .expect("base.toml");
 
     // The Python ends run past the robot's flight (it starts once their topics appear).
     let peers_s = (FLY_S + 15.0).to_string();
@@ -217,7 +218,7 @@ max_m = {FENCE_MAX:?}
     let base_thread = std::thread::spawn(move || {
         let runtime = tokio::runtime::Runtime::new().expect("runtime");
         let (_commands, from_operator) = std::sync::mpsc::channel();
-        runtime.block_on(troupe_sims::base::run(
+        runtime.block_on(troupe_robot::base::run(
             &station,
             stopped(base_rx),
             from_operator,

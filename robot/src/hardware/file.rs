@@ -4,10 +4,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use troupe_actors::msgs::PinholeIntrinsics;
-use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::ZenohConfig;
 use troupe_record::{Compression, check_rate_hz};
 
+use crate::harness::HarnessError;
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
 use crate::toml_file::{SettingsFileError, TomlFileError, parse_toml};
@@ -80,9 +80,6 @@ pub enum HardwareError {
     /// `robot.speed_mps`, `mavlink.setpoint_rate_hz`, `ros2.topics.depth`).
     #[error(transparent)]
     File(#[from] SettingsFileError),
-    /// The team link's zenoh session did not open.
-    #[error("opening the team link's zenoh session")]
-    Session(#[source] TransportError),
     /// The ROS 2 drivers could not start (a silent topic names itself here).
     #[error("starting the ROS 2 drivers")]
     Ros2(#[from] Ros2Error),
@@ -99,35 +96,10 @@ pub enum HardwareError {
     /// The robot could not be assembled.
     #[error("assembling the robot")]
     Assemble(#[from] AssembleError),
-    /// The executor did not accept the robot's id.
-    #[error("starting the executor")]
-    RobotId(#[from] troupe_actors::runtime::RobotIdsError),
-    /// The executor could not start receiving from the team link.
-    #[error("starting the team link")]
-    Transport(#[source] TransportError),
-    /// The executor ended without a report of the robot.
-    #[error("the executor reported no robot")]
-    NoReport,
-    /// The runtime could not start.
-    #[error("starting the tokio runtime")]
-    Runtime(#[source] std::io::Error),
-    /// The recording could not be created.
-    #[error("creating the recording")]
-    Recording(#[source] troupe_record::RecordError),
-    /// The outputs could not be written.
-    #[error("writing {}", path.display())]
-    Output {
-        /// The file or directory.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The link's journal could not be opened.
-    #[error("opening the link journal")]
-    Journal {
-        /// Why (names the file).
-        source: troupe_comms::journal::JournalError,
-    },
+    /// The harness could not open the link's journal, the team link or the
+    /// recording, or could not write the outputs.
+    #[error(transparent)]
+    Harness(#[from] HarnessError),
 }
 
 impl HardwareRobot {

@@ -20,10 +20,12 @@
 //! `docs/hardware.md` says how to fly one. [`HardwareRobot::load`] checks every table;
 //! [`run`] then opens the ROS 2 session, waits for its topics, takes the camera's
 //! calibration and opens the team link before the MAVLink vehicle starts, so a robot
-//! that cannot start never sends a setpoint.
+//! that cannot start never sends a setpoint. Around the actors it is a process like
+//! any other: [`crate::harness`] runs it (signals, duration, recording,
+//! `summary.json`).
 
 mod file;
 mod run;
 
 pub use file::{HardwareError, HardwareFile, HardwareRobot};
-pub use run::{HardwareSummary, finish_recording, run, run_for, run_until_signal, shutdown_signal};
+pub use run::{HardwareSummary, run, run_until_signal};

@@ -2,23 +2,25 @@
 //! the real-time executor with the team link over zenoh, and its outputs.
 
 use std::collections::BTreeMap;
+use std::fmt::Write as _;
 use std::future::Future;
 use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
-use troupe_actors::link::{LINK_STATUS, LinkJournal, LinkStatus};
-use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, ODOMETRY, PLAN, PinholeIntrinsics};
-use troupe_actors::runtime::{
-    ActorSpec, Publication, RealtimeExecutor, RobotId, RobotSpec, Time, TopicStats,
-};
+use troupe_actors::link::{LINK_STATUS, LinkStatus};
+use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN, PinholeIntrinsics};
+use troupe_actors::runtime::{ActorSpec, Publication, Time, TopicStats};
 use troupe_actors::sensor::FrameSource;
-use troupe_comms::zenoh::{ZenohStats, ZenohTransport};
-use troupe_record::{Clock, RecordOptions, Recorder, RecordingStats, SharedRecorder, period_of_hz};
+use troupe_comms::zenoh::ZenohStats;
+use troupe_record::{RecordOptions, RecordingStats, period_of_hz};
 
 use super::file::{HardwareError, HardwareRobot};
+use crate::harness::{
+    self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, unix_now_s,
+};
 use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
 use crate::ros2::{InputStats, OutputStats, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
 use crate::toml_file::SettingsFileError;
@@ -104,43 +106,13 @@ impl From<&AutopilotStatus> for VehicleSummary {
     }
 }
 
-/// One actor's health.
-#[derive(Clone, Debug, Serialize)]
-pub struct ActorHealth {
-    /// Name.
-    pub name: String,
-    /// Events handled.
-    pub handled: u64,
-    /// Hooks that returned an error.
-    pub errors: u64,
-    /// Panics.
-    pub panics: u64,
-}
-
-/// What the taps collect during a run.
-#[derive(Default)]
-struct Collected {
-    /// `(unix_time_s, event)` for every depth frame and committed plan.
-    events: Vec<(f64, &'static str)>,
-    vehicle: Option<VehicleSummary>,
-    collision: Option<CollisionStatus>,
-    link: Option<LinkStatus>,
-}
-
 /// A robot that passed every startup check; nothing has been sent to the vehicle.
 struct Started {
-    spec: RobotSpec,
-    transport: Arc<ZenohTransport>,
+    harness: Harness,
     inputs: Ros2Inputs,
     publisher: Ros2Publisher,
     // Kept open for the run: the ROS inputs and outputs live on it.
     _ros_session: zenoh::Session,
-}
-
-fn unix_now_s() -> f64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0.0, |d| d.as_secs_f64())
 }
 
 /// The camera's intrinsics: the file's `[camera]`, or those of the first depth frame.
@@ -179,15 +151,8 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
     let publisher = Ros2Publisher::open(&ros_session, &file.ros2)?;
     let vehicle = mavlink_vehicle(&file.mavlink)
         .map_err(|e| SettingsFileError::config(&robot.path, e.within("mavlink")))?;
-    // The link's journal outlives the process (docs/link-durability.md); a new
-    // one starts its message ids somewhere new, as a simulated robot process does,
-    // so peers do not drop them as repeats.
-    let first_id = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as u32);
-    let journal_dir = file.robot.link.journal_dir_in(&robot.out);
-    let link_journal = LinkJournal::on_disk(&journal_dir, first_id)
-        .map_err(|source| HardwareError::Journal { source })?;
+    // The link's journal outlives the process (docs/link-durability.md).
+    let link_journal = harness::open_journal(&file.robot.link.journal_dir_in(&robot.out), None)?;
     let source_inputs = inputs.clone();
     let parts = RobotParts {
         frame_source: Box::new(move || Box::new(source_inputs.frame_source())),
@@ -210,12 +175,17 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
     spec.add(ActorSpec::new("ros2_outputs", move || {
         Ros2Outputs::new(out_publisher.clone(), Some(out_inputs.clone()))
     }));
-    let transport = ZenohTransport::open(&file.zenoh, file.robot.link.team, vec![file.id])
-        .map_err(HardwareError::Session)?
-        .with_subscription(file.robot.link.subscribe);
+    let member = Member {
+        name: format!("robot{}", file.id),
+        id: file.id,
+        seed: u64::from(file.id),
+        team: file.robot.link.team,
+        zenoh: &file.zenoh,
+        subscription: file.robot.link.subscribe,
+        out: robot.out.clone(),
+    };
     Ok(Started {
-        spec,
-        transport: Arc::new(transport),
+        harness: Harness::open(member, spec)?,
         inputs,
         publisher,
         _ros_session: ros_session,
@@ -231,12 +201,9 @@ pub fn run(
     stop: impl Future<Output = ()>,
 ) -> Result<HardwareSummary, HardwareError> {
     let started = start(robot)?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(HardwareError::Runtime)?;
-    let (summary, events) = runtime.block_on(fly(robot, started, stop))?;
-    write_outputs(&robot.out, &summary, &events)?;
+    let (summary, events) = harness::block_on(fly(robot, started, stop))??;
+    harness::write_summary(&robot.out, &summary)?;
+    write_events(&robot.out, &events)?;
     Ok(summary)
 }
 
@@ -245,167 +212,72 @@ pub fn run_until_signal(robot: &HardwareRobot) -> Result<HardwareSummary, Hardwa
     run(robot, shutdown_signal())
 }
 
+/// The run between the startup checks and the outputs: the harness's taps, its
+/// recording, the flight, and the summary from what the taps saw.
 async fn fly(
     robot: &HardwareRobot,
     started: Started,
     stop: impl Future<Output = ()>,
 ) -> Result<(HardwareSummary, Vec<(f64, &'static str)>), HardwareError> {
-    let id = robot.file.id;
-    let collected: Arc<Mutex<Collected>> = Arc::default();
-    let tap = collected.clone();
-    let mut executor = RealtimeExecutor::new(vec![started.spec], u64::from(id))
-        .with_robot_ids(vec![RobotId(id)])?;
-    let transport = started.transport.clone();
-    executor.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&ODOMETRY) {
-            // Where the robot is picks its keyframes' cell and, under a
-            // neighbourhood scope, the cells it hears (troupe_comms::scope).
-            let v = o.pose.translation.vector;
-            transport.set_position(id, [v.x, v.y, v.z]);
-            return;
-        }
-        let mut c = tap.lock().unwrap_or_else(PoisonError::into_inner);
-        if p.get(&DEPTH_FRAME).is_some() {
-            c.events.push((unix_now_s(), "frame"));
+    let Started {
+        mut harness,
+        inputs,
+        publisher,
+        _ros_session,
+    } = started;
+    let events: Arc<Mutex<Vec<(f64, &'static str)>>> = Arc::default();
+    let tap = events.clone();
+    harness.add_tap(move |p: &Publication<'_>| {
+        let event = if p.get(&DEPTH_FRAME).is_some() {
+            "frame"
         } else if p.get(&PLAN).is_some() {
-            c.events.push((unix_now_s(), "plan"));
-        } else if let Some(status) = p.get(&AUTOPILOT_STATUS) {
-            c.vehicle = Some(status.into());
-        } else if let Some(status) = p.get(&LINK_STATUS) {
-            c.link = Some(status.clone());
-        } else if let Some(status) = p.get(&COLLISION_STATUS) {
-            c.collision = Some(status.clone());
-        }
+            "plan"
+        } else {
+            return;
+        };
+        tap.lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push((unix_now_s(), event));
     });
-    let recorder = if robot.file.record {
-        std::fs::create_dir_all(&robot.out).map_err(|source| HardwareError::Output {
-            path: robot.out.clone(),
-            source,
-        })?;
-        let path = robot.out.join("run.mcap");
+    let vehicle = harness.latest(AUTOPILOT_STATUS);
+    let link = harness.latest(LINK_STATUS);
+    let collision = harness.latest(COLLISION_STATUS);
+    if robot.file.record {
         let options = RecordOptions {
             depth_period_s: period_of_hz(robot.file.record_depth_hz),
             compression: robot.file.record_compression,
             ..RecordOptions::default()
         };
-        let recorder = Recorder::create_with(&path, Clock::wall_from_now(), options)
-            .map_err(HardwareError::Recording)?;
-        let recorder = SharedRecorder::new(recorder);
-        executor.add_tap(recorder.clone());
-        Some(recorder)
-    } else {
-        None
-    };
-    let started_at = Instant::now();
-    let handle = executor
-        .spawn_with_transport(started.transport.clone())
-        .map_err(HardwareError::Transport)?;
-    tracing::info!(robot = id, "running");
-    run_for(robot.file.duration_s, stop).await;
-    let transport_errors = handle.transport_errors();
-    let reports = handle.shutdown().await;
-    let zenoh = started.transport.stats();
-    if let Err(e) = started.transport.close() {
-        tracing::warn!(robot = id, "closing zenoh: {e}");
+        harness.record(options, |recorder| recorder)?;
     }
-    let report = reports.into_iter().next().ok_or(HardwareError::NoReport)?;
-    let recording = finish_recording(recorder.as_ref(), &format!("robot{id}"));
-    let collected = std::mem::take(&mut *collected.lock().unwrap_or_else(PoisonError::into_inner));
-    let count = |name: &str| report.topics.get(name).map_or(0, |t| t.messages);
+    let finished = harness.run(robot.file.duration_s, stop).await?;
     let summary = HardwareSummary {
-        robot: id,
-        wall_s: started_at.elapsed().as_secs_f64(),
-        frames: count(DEPTH_FRAME.name()),
-        keyframes: count(KEYFRAME.name()),
-        plans: count(PLAN.name()),
-        vehicle: collected.vehicle,
-        collision: collected.collision,
-        link: collected.link,
-        zenoh,
-        transport_errors,
-        ros2_inputs: started.inputs.stats(),
-        ros2_outputs: started.publisher.stats(),
-        topics: report.topics.clone(),
-        actors: report
-            .actors
-            .iter()
-            .map(|a| ActorHealth {
-                name: a.name.clone(),
-                handled: a.stats.handled,
-                errors: a.stats.errors,
-                panics: a.stats.panics,
-            })
-            .collect(),
-        recording,
+        robot: robot.file.id,
+        wall_s: finished.wall_s,
+        frames: finished.messages(DEPTH_FRAME.name()),
+        keyframes: finished.messages(KEYFRAME.name()),
+        plans: finished.messages(PLAN.name()),
+        vehicle: vehicle.take().as_ref().map(VehicleSummary::from),
+        collision: collision.take(),
+        link: link.take(),
+        zenoh: finished.zenoh,
+        transport_errors: finished.transport_errors,
+        ros2_inputs: inputs.stats(),
+        ros2_outputs: publisher.stats(),
+        topics: finished.report.topics.clone(),
+        actors: finished.actors(),
+        recording: finished.recording,
     };
-    Ok((summary, collected.events))
+    let events = std::mem::take(&mut *events.lock().unwrap_or_else(PoisonError::into_inner));
+    Ok((summary, events))
 }
 
-fn write_outputs(
-    dir: &Path,
-    summary: &HardwareSummary,
-    events: &[(f64, &'static str)],
-) -> Result<(), HardwareError> {
-    use std::fmt::Write as _;
-    let err = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| HardwareError::Output { path, source }
-    };
-    std::fs::create_dir_all(dir).map_err(err(dir))?;
-    let mut json =
-        serde_json::to_string_pretty(summary).map_err(|e| err(dir)(std::io::Error::other(e)))?;
-    json.push('\n');
-    let path = dir.join("summary.json");
-    std::fs::write(&path, json).map_err(err(&path))?;
+/// Writes `events.csv` (`unix_time_s,event`) into `dir`.
+fn write_events(dir: &Path, events: &[(f64, &'static str)]) -> Result<(), HarnessError> {
     let mut csv = String::from("unix_time_s,event\n");
     for (t, event) in events {
         let _ = writeln!(csv, "{t:.6},{event}");
     }
     let path = dir.join("events.csv");
-    std::fs::write(&path, csv).map_err(err(&path))
-}
-
-/// Finishes a process's `run.mcap` (`None`: recording was off); a failed recording
-/// is logged as a warning naming `who` and gives `None`, since the run itself succeeded.
-pub fn finish_recording(recorder: Option<&SharedRecorder>, who: &str) -> Option<RecordingStats> {
-    match recorder?.finish()? {
-        Ok(stats) => Some(stats),
-        Err(e) => {
-            tracing::warn!(
-                "{who}: recording: {}",
-                troupe_actors::runtime::ErrorChain(&e)
-            );
-            None
-        }
-    }
-}
-
-/// Resolves after `duration_s` seconds (never, when `None`) or when `stop` resolves,
-/// whichever comes first: how long a robot or base process runs.
-pub async fn run_for(duration_s: Option<f64>, stop: impl std::future::Future<Output = ()>) {
-    match duration_s {
-        Some(d) => {
-            tokio::select! {
-                () = tokio::time::sleep(Duration::from_secs_f64(d)) => {}
-                () = stop => {}
-            }
-        }
-        None => stop.await,
-    }
-}
-
-/// Resolves on SIGINT (Ctrl-C) or SIGTERM.
-pub async fn shutdown_signal() {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        if let Ok(mut term) = signal(SignalKind::terminate()) {
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => {}
-                _ = term.recv() => {}
-            }
-            return;
-        }
-    }
-    let _ = tokio::signal::ctrl_c().await;
+    std::fs::write(&path, csv).map_err(|source| HarnessError::Output { path, source })
 }

@@ -26,7 +26,7 @@ use zenoh::Wait as _;
 pub enum RouterError {
     /// The settings file cannot be read or does not have the expected shape.
     #[error(transparent)]
-    File(#[from] troupe_robot::toml_file::TomlFileError),
+    File(#[from] crate::toml_file::TomlFileError),
     /// The settings are invalid (an endpoint's syntax, a missing TLS file).
     #[error("router settings")]
     Config(#[source] TransportError),
@@ -107,7 +107,7 @@ struct RouterFile {
 /// Reads the `[zenoh]` table of the router file `path`, its TLS and dictionary
 /// paths made relative to the file.
 pub fn read_settings(path: &Path) -> Result<ZenohConfig, RouterError> {
-    let file: RouterFile = troupe_robot::toml_file::read_toml(path)?;
+    let file: RouterFile = crate::toml_file::read_toml(path)?;
     let mut zenoh = file.zenoh;
     zenoh.resolve_paths(path.parent().unwrap_or(Path::new(".")));
     Ok(zenoh)
