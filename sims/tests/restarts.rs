@@ -21,7 +21,8 @@ use common::{root, seconds_of_day, strip_ansi, zenoh_python};
 use serde_json::Value;
 use troupe_comms::wire::{self, Envelope, Odometry, Payload, Plan, PlanKnot};
 use troupe_comms::zenoh::key_expr;
-use troupe_sims::process::{loopback_endpoints, write_team};
+use troupe_robot::launch::loopback_endpoints;
+use troupe_sims::process::write_team;
 
 const TEAM: u32 = 45;
 /// Where robot 0 restarts on robot 1's line (x = 0, from y = −6 to 6).
