@@ -538,9 +538,11 @@ impl Recorder {
         entity
             .metadata
             .push(KeyValuePair::new("round", round.round));
-        let chosen = decision
-            .chosen
-            .map_or("stop".to_string(), |k| k.to_string());
+        let chosen = match decision.chosen {
+            Some(k) => k.to_string(),
+            None if decision.stale => "stale: the committed flight kept".to_string(),
+            None => "stop".to_string(),
+        };
         entity.metadata.push(KeyValuePair::new("chosen", chosen));
         for (k, candidate) in round.candidates.iter().enumerate() {
             let rejection = decision
@@ -562,7 +564,7 @@ impl Recorder {
                 format!("{verdict}, reward {:.3}", candidate.reward),
             ));
         }
-        if decision.chosen.is_none() {
+        if decision.chosen.is_none() && !decision.stale {
             entity.lines.push(trajectory_line(&round.stop, CHOSEN));
         }
         entity

@@ -123,7 +123,8 @@ pub enum MapFileError {
 /// One keyframe of a map: its mixtures, the sensor pose and the support sizes.
 #[derive(Clone, Debug)]
 pub struct MapKeyframe {
-    /// Observation time, seconds.
+    /// Observation time, seconds: run time in a simulated team's maps, the team clock
+    /// (Unix time) in a base station's.
     pub stamp_s: f64,
     /// Sensor (body) pose in the map frame.
     pub pose: Isometry3<f64>,

@@ -29,8 +29,14 @@ pub struct PeerKeyframe {
     /// The peer.
     pub robot: RobotId,
     /// Its keyframe (in the peer's world frame: robots of one team share a frame
-    /// in simulation; the Eq. 8.1 frame change comes with multi-frame teams).
+    /// in simulation; the Eq. 8.1 frame change comes with multi-frame teams), stamped
+    /// in this robot's run time: a keyframe made before this run began (resent from a
+    /// journal) is stamped with the run's start.
     pub keyframe: Keyframe,
+    /// When the peer made it, on the team clock (run time in simulation, Unix time
+    /// between processes), nanoseconds: its time whenever it was made, for what
+    /// outlives this run (a base station's map files).
+    pub made_ns: u64,
     /// When it arrived here.
     pub received_at: Time,
 }

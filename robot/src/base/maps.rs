@@ -24,7 +24,8 @@ use super::{BaseError, BaseRobotSummary};
 pub struct RobotRecord {
     /// The robot's keyframes, in arrival order.
     pub map: GmmMap,
-    /// (keyframe id, stamp ns) of every keyframe kept: a repeat is not kept twice.
+    /// (keyframe id, team-clock stamp ns) of every keyframe kept: a repeat is not kept
+    /// twice.
     seen: BTreeSet<(u32, u64)>,
     /// Link frames received from it.
     pub frames: u64,
@@ -71,11 +72,13 @@ impl BaseMaps {
     pub fn add_keyframe(&mut self, peer: &PeerKeyframe) -> bool {
         let k = &peer.keyframe;
         let record = self.robots.entry(peer.robot.0).or_default();
-        if !record.seen.insert((k.id, k.stamp.as_nanos())) {
+        if !record.seen.insert((k.id, peer.made_ns)) {
             return false;
         }
         record.map.keyframes.push(MapKeyframe {
-            stamp_s: k.stamp.as_secs_f64(),
+            // On the team clock, so that a restarted base's map keeps the times of
+            // what it had received before.
+            stamp_s: peer.made_ns as f64 * 1e-9,
             pose: k.pose,
             support: u64::from(k.support_size),
             occupied: k.gmm.clone(),

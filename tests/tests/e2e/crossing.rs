@@ -25,6 +25,7 @@ impl Actor for StopCounter {
         if let Event::Message(m) = event
             && let Some(d) = m.get(&PLAN_DECISION)
             && d.chosen.is_none()
+            && !d.stale
         {
             self.0.lock().unwrap()[self.1] += 1;
         }

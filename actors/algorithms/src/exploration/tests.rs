@@ -124,6 +124,7 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
             Point3::new(-2.5, 0.0, 0.0),
             [0.2, 1.0, 0.6],
         ),
+        made_ns: 0,
         received_at: Time::ZERO,
     };
     assert_eq!(guide.observe_peer_keyframe(&behind).retired, 0);
@@ -137,6 +138,7 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
             Point3::new(9.0, 0.0, 0.0),
             [1.0, 1.2, 0.7],
         ),
+        made_ns: 0,
         received_at: Time::ZERO,
     };
     let update = guide.observe_peer_keyframe(&ahead);

@@ -97,5 +97,9 @@ pub struct PlanDecision {
     pub chosen: Option<usize>,
     /// Candidates rejected before the chosen one, with the reason for each.
     pub rejected: Vec<(usize, Rejection)>,
+    /// The round was refused whole: it came too late to continue the committed flight
+    /// (or planned from a reference replaced since), which was kept; `chosen` and
+    /// `rejected` are then empty.
+    pub stale: bool,
 }
 impl Message for PlanDecision {}

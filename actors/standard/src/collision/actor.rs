@@ -423,6 +423,15 @@ impl<P: PeerAvoidance> CollisionActor<P> {
         if !self.held && !self.continues_committed(round, now) {
             self.status.stale_rounds += 1;
             tracing::debug!(robot = ctx.robot_name(), time = %now, round = round.round, "round would not continue the committed flight: kept it");
+            ctx.publish(
+                &PLAN_DECISION,
+                PlanDecision {
+                    round: round.round,
+                    chosen: None,
+                    rejected: Vec::new(),
+                    stale: true,
+                },
+            );
             ctx.publish(&COLLISION_STATUS, self.status.clone());
             return;
         }
@@ -496,6 +505,7 @@ impl<P: PeerAvoidance> CollisionActor<P> {
                 round: round.round,
                 chosen,
                 rejected,
+                stale: false,
             },
         );
         ctx.publish(&COLLISION_STATUS, self.status.clone());

@@ -930,6 +930,7 @@ impl LinkActor {
                 PeerKeyframe {
                     robot: from,
                     keyframe,
+                    made_ns: envelope.stamp_ns,
                     received_at: ctx.now(),
                 },
             );

@@ -17,7 +17,7 @@
 //! rounds score the frontier reward over the route distance to the remembered
 //! frontiers (beyond the window), avoiding those peers are heading to.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -34,7 +34,8 @@ use crate::grid::changeset::cell_centres;
 use crate::link::Peer;
 use crate::msgs::{
     CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
-    PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PinholeIntrinsics, Plan, PlanCandidates,
+    PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PLAN_DECISION, PinholeIntrinsics, Plan,
+    PlanCandidates, PlanDecision,
 };
 use troupe_algorithms::exploration::{GuidanceConfig, GuidanceField, Guide};
 use troupe_runtime::{
@@ -94,7 +95,9 @@ pub struct PlannerConfig {
     /// over there; until then the robot keeps flying what it had committed, so a plan
     /// decided within this time joins the flight without a jump. It should exceed a
     /// round's compute time plus the collision decision (0.1 s + 0.005 s modelled in
-    /// simulation), seconds, below the replanning period.
+    /// simulation), seconds, below the replanning period. When the decisions of the
+    /// last rounds came later (a busy real-time robot), the planner leads by the
+    /// slowest of them with 25 % headroom instead, up to 0.8 of the period.
     pub lead_s: f64,
     /// Team frontier memory, global guidance and implicit coordination.
     pub guidance: GuidanceConfig,
@@ -191,7 +194,16 @@ pub struct PlannerActor<S> {
     peer_memory: Topic<Peer<MemoryCells>>,
     /// Each peer's world frame in ours, for peers without a frame in common with us.
     peer_frames: BTreeMap<RobotId, Isometry3<f64>>,
+    /// The latest rounds sent to the collision actor and their times.
+    sent_rounds: VecDeque<(u64, Time)>,
+    /// Seconds from the latest rounds to their decisions ([`PlanDecision`]).
+    decision_delays_s: VecDeque<f64>,
 }
+
+/// Rounds whose decision delays [`PlannerActor`] keeps to size its lead.
+const LEAD_WINDOW: usize = 8;
+/// Headroom of the lead over the slowest recent decision.
+const LEAD_HEADROOM: f64 = 1.25;
 
 impl<S: ActionSelection> PlannerActor<S> {
     /// Time between planning rounds (`1 / rate_hz`).
@@ -214,6 +226,47 @@ impl<S: ActionSelection> PlannerActor<S> {
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
             peer_memory: MEMORY_CELLS.peer_topic(),
             peer_frames: BTreeMap::new(),
+            sent_rounds: VecDeque::new(),
+            decision_delays_s: VecDeque::new(),
+        }
+    }
+
+    /// How far ahead of a round its plans take over (thesis §4.1.3: replanning from a
+    /// future reference point): [`PlannerConfig::lead_s`], or, when the collision
+    /// actor's decisions of the last rounds came later than that (a real-time robot
+    /// on a busy computer), the slowest of them with 25 % headroom — at most 0.8 of
+    /// the period. A round decided after its plans should have taken over is refused
+    /// as stale, and its robot flies on to its stop.
+    fn lead_s(&self) -> f64 {
+        let configured = self.config.lead_s;
+        let slowest = self.decision_delays_s.iter().copied().fold(0.0, f64::max);
+        if slowest <= configured {
+            return configured;
+        }
+        let cap = 0.8 * self.replan_period().as_secs_f64();
+        (slowest * LEAD_HEADROOM).min(cap).max(configured)
+    }
+
+    /// A decision arrived: how long after its round.
+    fn decided(&mut self, decision: &PlanDecision, now: Time, ctx: &Context<'_>) {
+        let Some(&(_, at)) = self.sent_rounds.iter().find(|(r, _)| *r == decision.round) else {
+            return;
+        };
+        let before = self.lead_s();
+        if self.decision_delays_s.len() == LEAD_WINDOW {
+            self.decision_delays_s.pop_front();
+        }
+        self.decision_delays_s
+            .push_back(now.saturating_since(at).as_secs_f64());
+        let after = self.lead_s();
+        if (after - before).abs() > 0.02 {
+            tracing::info!(
+                robot = ctx.robot_name(),
+                lead_s = after,
+                "planning rounds are decided up to {:.3} s after they begin: plans take over \
+                 {after:.3} s ahead",
+                self.decision_delays_s.iter().copied().fold(0.0, f64::max)
+            );
         }
     }
 
@@ -271,6 +324,10 @@ impl<S: ActionSelection> PlannerActor<S> {
             })
             .collect();
         self.round += 1;
+        if self.sent_rounds.len() == LEAD_WINDOW {
+            self.sent_rounds.pop_front();
+        }
+        self.sent_rounds.push_back((self.round, now));
         let step = self.config.knot_step_s;
         ctx.publish(
             &PLAN_CANDIDATES,
@@ -299,7 +356,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             return;
         };
         let now = ctx.now();
-        let start = now + Duration::from_secs_f64(self.config.lead_s);
+        let start = now + Duration::from_secs_f64(self.lead_s());
         let root = replanning_root(self.committed.as_ref(), start, &odometry.pose);
         let round = &self.config.round;
         let here = nalgebra::Point3::from(root.position_m());
@@ -438,6 +495,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
         ctx.subscribe(&GRID_SNAPSHOT, QueuePolicy::LATEST);
         if self.deferred {
             ctx.subscribe(&PLAN, QueuePolicy::LATEST);
+            ctx.subscribe(&PLAN_DECISION, QueuePolicy::fifo(LEAD_WINDOW));
         }
         if self.guide.is_some() && self.config.guidance.share_memory {
             MEMORY_CELLS.share(ctx);
@@ -512,6 +570,8 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                     && let Some(reference) = &plan.reference
                 {
                     self.committed = Some(Committed::clone(reference));
+                } else if let Some(decision) = m.get(&PLAN_DECISION) {
+                    self.decided(decision, ctx.now(), ctx);
                 }
                 // Stored for the next round (the frontier memory's update included):
                 // the modelled planning latency is charged to rounds only.
