@@ -39,8 +39,13 @@ fn main() -> ExitCode {
     });
     match result {
         Ok((robot, s)) => {
+            let (setpoints, holds) = s
+                .vehicle
+                .as_ref()
+                .map_or((0, 0), |v| (v.setpoints, v.holds));
             println!(
-                "robot{}: {:.1} wall s, {} frames, {} keyframes, {} plans; report: {}",
+                "robot{}: {:.1} wall s, {} frames, {} keyframes, {} plans, {setpoints} setpoints \
+                 sent ({holds} holds); report: {}",
                 s.robot,
                 s.wall_s,
                 s.frames,

@@ -100,6 +100,15 @@ pub enum HardwareError {
     /// recording, or could not write the outputs.
     #[error(transparent)]
     Harness(#[from] HarnessError),
+    /// The MAVLink vehicle gave up waiting for the autopilot (`[mavlink]
+    /// autopilot_wait_s`, `control_wait_s`); the outputs were written.
+    #[error("{source}; {setpoints} setpoints sent")]
+    Vehicle {
+        /// Why.
+        source: crate::mavlink::GaveUp,
+        /// Setpoints sent before it gave up.
+        setpoints: u64,
+    },
 }
 
 impl HardwareRobot {

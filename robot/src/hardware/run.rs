@@ -21,7 +21,7 @@ use super::file::{HardwareError, HardwareRobot};
 use crate::harness::{
     self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, unix_now_s,
 };
-use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, OdometrySource, mavlink_vehicle};
+use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, GaveUp, OdometrySource, mavlink_vehicle};
 use crate::ros2::{InputStats, OutputStats, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
 use crate::toml_file::SettingsFileError;
 use crate::{RobotParts, assemble};
@@ -84,6 +84,11 @@ pub struct VehicleSummary {
     pub armed: bool,
     /// Its flight mode.
     pub mode: String,
+    /// Whether the pilot had handed control over (armed, OFFBOARD or GUIDED).
+    pub in_control: bool,
+    /// Why the vehicle gave up waiting for the autopilot, if it did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gave_up: Option<String>,
     /// Messages written to the autopilot (setpoints and heartbeats).
     pub mavlink_sent: u64,
     /// Bytes from the autopilot that did not decode.
@@ -100,6 +105,8 @@ impl From<&AutopilotStatus> for VehicleSummary {
             silent: s.guard.silent,
             armed: s.armed,
             mode: s.mode.clone(),
+            in_control: s.in_control,
+            gave_up: s.gave_up.as_ref().map(ToString::to_string),
             mavlink_sent: s.link.sent,
             mavlink_decode_errors: s.link.decode_errors,
         }
@@ -193,18 +200,26 @@ fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
 }
 
 /// Starts the robot (every check first; see the [module docs](crate::hardware)), runs
-/// it until its duration is over or `stop` resolves, then writes `summary.json` and
-/// `events.csv` (`unix_time_s,event`: every `frame` the sensor published and every
-/// `plan` committed) into its `out` directory.
+/// it until its duration is over, `stop` resolves or the vehicle gives up waiting for
+/// the autopilot, then writes `summary.json` and `events.csv` (`unix_time_s,event`:
+/// every `frame` the sensor published and every `plan` committed) into its `out`
+/// directory. A vehicle that gave up is an error ([`HardwareError::Vehicle`]), after
+/// the outputs are written.
 pub fn run(
     robot: &HardwareRobot,
     stop: impl Future<Output = ()>,
 ) -> Result<HardwareSummary, HardwareError> {
     let started = start(robot)?;
-    let (summary, events) = harness::block_on(fly(robot, started, stop))??;
+    let (summary, events, gave_up) = harness::block_on(fly(robot, started, stop))??;
     harness::write_summary(&robot.out, &summary)?;
     write_events(&robot.out, &events)?;
-    Ok(summary)
+    match gave_up {
+        Some(source) => Err(HardwareError::Vehicle {
+            source,
+            setpoints: summary.vehicle.as_ref().map_or(0, |v| v.setpoints),
+        }),
+        None => Ok(summary),
+    }
 }
 
 /// [`run`] until SIGINT or SIGTERM (or the file's duration).
@@ -218,7 +233,7 @@ async fn fly(
     robot: &HardwareRobot,
     started: Started,
     stop: impl Future<Output = ()>,
-) -> Result<(HardwareSummary, Vec<(f64, &'static str)>), HardwareError> {
+) -> Result<(HardwareSummary, Vec<(f64, &'static str)>, Option<GaveUp>), HardwareError> {
     let Started {
         mut harness,
         inputs,
@@ -240,6 +255,22 @@ async fn fly(
             .push((unix_now_s(), event));
     });
     let vehicle = harness.latest(AUTOPILOT_STATUS);
+    // The vehicle gave up waiting for the autopilot: the run ends.
+    let gave_up = Arc::new(tokio::sync::Notify::new());
+    let notify = gave_up.clone();
+    harness.add_tap(move |p: &Publication<'_>| {
+        if p.get(&AUTOPILOT_STATUS)
+            .is_some_and(|s| s.gave_up.is_some())
+        {
+            notify.notify_one();
+        }
+    });
+    let stop = async move {
+        tokio::select! {
+            () = stop => {}
+            () = gave_up.notified() => {}
+        }
+    };
     let link = harness.latest(LINK_STATUS);
     let collision = harness.latest(COLLISION_STATUS);
     if robot.file.record {
@@ -251,13 +282,15 @@ async fn fly(
         harness.record(options, |recorder| recorder)?;
     }
     let finished = harness.run(robot.file.duration_s, stop).await?;
+    let vehicle = vehicle.take();
+    let gave_up = vehicle.as_ref().and_then(|s| s.gave_up.clone());
     let summary = HardwareSummary {
         robot: robot.file.id,
         wall_s: finished.wall_s,
         frames: finished.messages(DEPTH_FRAME.name()),
         keyframes: finished.messages(KEYFRAME.name()),
         plans: finished.messages(PLAN.name()),
-        vehicle: vehicle.take().as_ref().map(VehicleSummary::from),
+        vehicle: vehicle.as_ref().map(VehicleSummary::from),
         collision: collision.take(),
         link: link.take(),
         zenoh: finished.zenoh,
@@ -269,7 +302,7 @@ async fn fly(
         recording: finished.recording,
     };
     let events = std::mem::take(&mut *events.lock().unwrap_or_else(PoisonError::into_inner));
-    Ok((summary, events))
+    Ok((summary, events, gave_up))
 }
 
 /// Writes `events.csv` (`unix_time_s,event`) into `dir`.

@@ -55,6 +55,17 @@ pub struct MavlinkConfig {
     /// Where odometry comes from.
     #[serde(default)]
     pub odometry_source: OdometrySource,
+    /// No autopilot heartbeat within this long after the start: the robot stops with
+    /// an error (exit status 1), seconds; 0: it waits for ever.
+    #[serde(default = "default_autopilot_wait_s")]
+    pub autopilot_wait_s: f64,
+    /// The autopilot not armed and in OFFBOARD (PX4) or GUIDED (ArduPilot) within this
+    /// long after the start: the robot stops with an error, seconds; 0: it waits for
+    /// ever. Until the pilot hands control over the robot holds where the vehicle is
+    /// and plans nothing (after the first hand-over, it waits for as long as the pilot
+    /// flies, whatever this says).
+    #[serde(default = "default_control_wait_s")]
+    pub control_wait_s: f64,
     /// The box no setpoint may leave (required).
     pub geofence: GeofenceConfig,
 }
@@ -76,6 +87,12 @@ fn default_sensor_timeout_s() -> f64 {
 }
 fn default_odometry_timeout_s() -> f64 {
     0.5
+}
+fn default_autopilot_wait_s() -> f64 {
+    10.0
+}
+fn default_control_wait_s() -> f64 {
+    120.0
 }
 
 /// A checked [`MavlinkConfig`].
@@ -101,6 +118,10 @@ pub struct MavlinkSettings {
     pub odometry_timeout_s: f64,
     /// Where odometry comes from.
     pub odometry_source: OdometrySource,
+    /// How long to wait for the autopilot's first heartbeat, seconds (0: for ever).
+    pub autopilot_wait_s: f64,
+    /// How long to wait for the pilot's first hand-over, seconds (0: for ever).
+    pub control_wait_s: f64,
     /// The fence.
     pub geofence: Geofence,
 }
@@ -151,6 +172,8 @@ impl MavlinkConfig {
             sensor_timeout_s: default_sensor_timeout_s(),
             odometry_timeout_s: default_odometry_timeout_s(),
             odometry_source: OdometrySource::default(),
+            autopilot_wait_s: default_autopilot_wait_s(),
+            control_wait_s: default_control_wait_s(),
             geofence,
         }
     }
@@ -213,6 +236,18 @@ impl MavlinkConfig {
             60.0,
             "must be in [0.05, 60] s",
         )?;
+        for (key, value) in [
+            ("autopilot_wait_s", self.autopilot_wait_s),
+            ("control_wait_s", self.control_wait_s),
+        ] {
+            in_range(
+                key,
+                value,
+                0.0,
+                3600.0,
+                "must be in [0, 3600] s (0: for ever)",
+            )?;
+        }
         let geofence = self.geofence.fence().map_err(|e| e.within("geofence"))?;
         Ok(MavlinkSettings {
             connection: self.connection.clone(),
@@ -225,6 +260,8 @@ impl MavlinkConfig {
             sensor_timeout_s: self.sensor_timeout_s,
             odometry_timeout_s: self.odometry_timeout_s,
             odometry_source: self.odometry_source,
+            autopilot_wait_s: self.autopilot_wait_s,
+            control_wait_s: self.control_wait_s,
             geofence,
         })
     }

@@ -36,5 +36,7 @@ pub use link::{
     RECONNECT_PERIOD,
 };
 pub use setpoint::{Target, full_state_mask, position_target};
-pub use status::{AUTOPILOT_STATUS, AutopilotStatus, flight_mode, is_armed};
+pub use status::{
+    AUTOPILOT_STATUS, AutopilotStatus, GaveUp, VehicleState, flight_mode, in_control, is_armed,
+};
 pub use vehicle::{MavlinkVehicle, mavlink_vehicle};

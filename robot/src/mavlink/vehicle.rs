@@ -2,6 +2,7 @@
 //! ArduPilot autopilot, publishes the autopilot's odometry and status, and never arms
 //! or changes mode.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{
@@ -16,10 +17,12 @@ use troupe_actors::runtime::{
 use super::config::{MavlinkConfig, MavlinkSettings, OdometrySource};
 use super::link::{INBOUND_CAPACITY, Inbound, MavlinkLink, Outbound};
 use super::setpoint::{Target, position_target};
-use super::status::{AUTOPILOT_STATUS, AutopilotStatus, flight_mode, is_armed};
+use super::status::{AUTOPILOT_STATUS, AutopilotStatus, GaveUp, flight_mode, in_control, is_armed};
 use crate::ConfigError;
 use crate::frames::{ned_frd_from_euler, ned_frd_to_enu_flu, ned_to_enu};
-use crate::safety::{GuardConfig, GuardInput, SetpointGuard, WatchdogChange};
+use crate::safety::{
+    GuardConfig, GuardInput, HoldReason, RESUME_TOLERANCE_M, SetpointGuard, WatchdogChange,
+};
 
 const SETPOINT_TICK: TimerId = TimerId(0);
 /// Period of this program's own heartbeat.
@@ -52,9 +55,17 @@ pub struct MavlinkVehicle {
     fresh_position: bool,
     own_heartbeat_at: Option<Time>,
     status_at: Option<Time>,
-    status_key: Option<(bool, String, bool, Option<crate::safety::HoldReason>)>,
-    /// What was last published on [`VEHICLE_HOLD`].
-    hold_published: Option<VehicleHold>,
+    status_key: Option<(bool, String, bool, Option<HoldReason>)>,
+    /// What was last published on [`VEHICLE_HOLD`], and the hold reason then.
+    hold_published: Option<(VehicleHold, Option<HoldReason>)>,
+    /// When the actor started (the waits count from it).
+    started_at: Time,
+    /// Whether the pilot has ever handed control over.
+    ever_in_control: bool,
+    /// Why it gave up waiting, once it did: it sends nothing more.
+    gave_up: Option<GaveUp>,
+    /// When the setpoints of the last second were sent.
+    sent_at: VecDeque<Time>,
 }
 
 impl MavlinkVehicle {
@@ -81,6 +92,10 @@ impl MavlinkVehicle {
             status_at: None,
             status_key: None,
             hold_published: None,
+            started_at: Time::ZERO,
+            ever_in_control: false,
+            gave_up: None,
+            sent_at: VecDeque::new(),
         }
     }
 
@@ -136,8 +151,16 @@ impl MavlinkVehicle {
                     .target
                     .is_some_and(|t| t.component_id == inbound.component_id)
                 {
+                    let control = in_control(&hb);
+                    let was = self.heartbeat.as_ref().map(in_control);
+                    if was != Some(control) {
+                        log_control(control, &hb, self.ever_in_control, &self.settings);
+                    }
+                    self.ever_in_control |= control;
                     self.heartbeat = Some(hb);
-                    let change = self.guard()?.heartbeat(now);
+                    let guard = self.guard()?;
+                    guard.control(control);
+                    let change = guard.heartbeat(now);
                     log_change(GuardInput::Heartbeat, change);
                 }
             }
@@ -212,7 +235,18 @@ impl MavlinkVehicle {
         for (input, change) in changes {
             log_change(input, Some(change));
         }
+        self.check_waits(now);
         self.publish_hold(ctx)?;
+        while self
+            .sent_at
+            .front()
+            .is_some_and(|at| now.saturating_since(*at) > Duration::from_secs(1))
+        {
+            self.sent_at.pop_front();
+        }
+        if self.gave_up.is_some() {
+            return self.publish_status(ctx);
+        }
         if let Some(link) = &self.link {
             if let (Some(setpoint), Some(target)) = (setpoint, self.target) {
                 let time_boot_ms = (now.as_nanos() / 1_000_000) as u32;
@@ -221,6 +255,7 @@ impl MavlinkVehicle {
                     target,
                     time_boot_ms,
                 )));
+                self.sent_at.push_back(now);
             }
             if self
                 .own_heartbeat_at
@@ -233,17 +268,54 @@ impl MavlinkVehicle {
         self.publish_status(ctx)
     }
 
-    /// Says where the guard holds when that changes, and again every second (so that a
-    /// restarted collision actor learns it).
+    /// Gives up when the autopilot stays silent, or the pilot never hands control over,
+    /// for longer than the settings allow (0: for ever).
+    fn check_waits(&mut self, now: Time) {
+        if self.gave_up.is_some() {
+            return;
+        }
+        let waited_s = now.saturating_since(self.started_at).as_secs_f64();
+        let over = |wait_s: f64| wait_s > 0.0 && waited_s >= wait_s;
+        let s = &self.settings;
+        self.gave_up = match &self.heartbeat {
+            None if over(s.autopilot_wait_s) => Some(GaveUp::NoAutopilot {
+                connection: s.connection.clone(),
+                wait_s: s.autopilot_wait_s,
+            }),
+            Some(hb) if !self.ever_in_control && over(s.control_wait_s) => {
+                Some(GaveUp::NoControl {
+                    wait_s: s.control_wait_s,
+                    armed: is_armed(hb),
+                    mode: flight_mode(hb),
+                })
+            }
+            _ => None,
+        };
+        if let Some(why) = &self.gave_up {
+            tracing::error!("{why}");
+        }
+    }
+
+    /// Says where the vehicle stands instead of following the plan when that changes —
+    /// at once when it begins, ends or changes reason, at most every 0.2 s while it
+    /// follows a pilot — and again every second (so that a restarted collision actor
+    /// learns it).
     fn publish_hold(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         let now = ctx.now();
-        let at = self.guard()?.hold_point();
-        let due = self.hold_published.is_none_or(|last| {
-            last.at != at || now.saturating_since(last.stamp).as_secs_f64() >= HOLD_PERIOD_S
+        let guard = self.guard()?;
+        let (at, reason) = (guard.hold_point(), guard.hold_reason());
+        let due = self.hold_published.is_none_or(|(last, last_reason)| {
+            let since_s = now.saturating_since(last.stamp).as_secs_f64();
+            let moved = match (last.at, at) {
+                (Some((a, _)), Some((b, _))) => (a - b).norm() > RESUME_TOLERANCE_M,
+                (None, None) => false,
+                _ => return true,
+            };
+            last_reason != reason || (moved && since_s >= 0.2) || since_s >= HOLD_PERIOD_S
         });
         if due {
             let hold = VehicleHold { stamp: now, at };
-            self.hold_published = Some(hold);
+            self.hold_published = Some((hold, reason));
             ctx.publish(&VEHICLE_HOLD, hold);
         }
         Ok(())
@@ -281,12 +353,38 @@ impl MavlinkVehicle {
                 mode,
                 heartbeat_age_s,
                 heartbeat_lost: lost,
+                in_control: self.heartbeat.as_ref().is_some_and(in_control),
                 hold,
+                setpoint_rate_hz: self.sent_at.len() as f64,
+                gave_up: self.gave_up.clone(),
                 guard: counters,
                 link,
             },
         );
         Ok(())
+    }
+}
+
+/// Says once per change whether the pilot handed control over.
+fn log_control(control: bool, hb: &HEARTBEAT_DATA, before: bool, s: &MavlinkSettings) {
+    let (armed, mode) = (
+        if is_armed(hb) { "armed" } else { "disarmed" },
+        flight_mode(hb),
+    );
+    if control {
+        tracing::info!("the pilot handed control over ({armed}, {mode}): following plans");
+    } else if before {
+        tracing::warn!(
+            "the pilot took control back ({armed}, {mode}): holding where the vehicle is until \
+             it is armed and in OFFBOARD or GUIDED again"
+        );
+    } else {
+        tracing::info!(
+            "waiting for the pilot to arm and switch to OFFBOARD (PX4) or GUIDED (ArduPilot) \
+             ({armed}, {mode} now; up to {} s, [mavlink] control_wait_s): holding, planning \
+             nothing",
+            s.control_wait_s
+        );
     }
 }
 
@@ -315,6 +413,7 @@ impl Actor for MavlinkVehicle {
             ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         }
         let period_s = 1.0 / s.setpoint_rate_hz;
+        self.started_at = ctx.now();
         self.guard = Some(SetpointGuard::new(
             GuardConfig {
                 sensor_timeout_s: s.sensor_timeout_s,

@@ -30,6 +30,10 @@ pub struct Ros2Topics {
     pub map: Option<String>,
     /// Where status goes (`std_msgs/String`, JSON); none: not published.
     pub status: Option<String>,
+    /// Where the vehicle's state goes (`diagnostic_msgs/DiagnosticArray`: armed, mode,
+    /// whether it holds and why, setpoint rate, heartbeat age; ROS's convention is
+    /// `/diagnostics`); none: not published.
+    pub diagnostics: Option<String>,
 }
 
 /// The camera extrinsics: the pose of the depth camera's optical frame (z forward,
@@ -188,6 +192,7 @@ impl Ros2Config {
             ("topics.plan", &t.plan),
             ("topics.map", &t.map),
             ("topics.status", &t.status),
+            ("topics.diagnostics", &t.diagnostics),
         ];
         for (key, topic) in named
             .iter()

@@ -3,8 +3,8 @@
 //!
 //! The RIHS01 hashes are copied from the type description files that the ROS 2
 //! Kilted wheels ship (`share/<package>/msg/<Type>.json`, entry `type_hashes`;
-//! packages `ros-sensor-msgs` 5.5.1, `ros-nav-msgs` 5.5.1, `ros-std-msgs` 5.5.1 on
-//! PyPI). A hash changes only when the message definition changes; subscribers may
+//! packages `ros-sensor-msgs` 5.5.1, `ros-nav-msgs` 5.5.1, `ros-std-msgs` 5.5.1 and
+//! `ros-diagnostic-msgs` 5.5.1 on PyPI). A hash changes only when the message definition changes; subscribers may
 //! wildcard it ([`KeyFormat::subscribe_key`](super::KeyFormat::subscribe_key)).
 
 use serde::de::{self, SeqAccess, Visitor};
@@ -306,6 +306,45 @@ pub struct Path {
 pub struct RosString {
     /// Text.
     pub data: String,
+}
+
+/// `diagnostic_msgs/msg/KeyValue`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KeyValue {
+    /// What the value is.
+    pub key: String,
+    /// The value, as text.
+    pub value: String,
+}
+
+/// `diagnostic_msgs/msg/DiagnosticStatus`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DiagnosticStatus {
+    /// `OK` (0), `WARN` (1), `ERROR` (2) or `STALE` (3).
+    pub level: u8,
+    /// What is described (`troupe/robot0/vehicle`).
+    pub name: String,
+    /// Its state in a few words.
+    pub message: String,
+    /// The hardware (the autopilot's MAVLink ids).
+    pub hardware_id: String,
+    /// The figures.
+    pub values: Vec<KeyValue>,
+}
+
+/// `diagnostic_msgs/msg/DiagnosticArray`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosticArray {
+    /// Stamp (and an empty frame).
+    pub header: Header,
+    /// One status per component.
+    pub status: Vec<DiagnosticStatus>,
+}
+
+impl RosMessage for DiagnosticArray {
+    const TYPE_NAME: &'static str = "diagnostic_msgs/msg/DiagnosticArray";
+    const TYPE_HASH: &'static str =
+        "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e";
 }
 
 impl RosMessage for Image {

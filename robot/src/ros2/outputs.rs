@@ -1,6 +1,6 @@
 //! ROS 2 outputs: the committed plan as `nav_msgs/Path`, keyframe maps as
-//! `sensor_msgs/PointCloud2` and a JSON status as `std_msgs/String`, on the key
-//! format of the inputs.
+//! `sensor_msgs/PointCloud2`, a JSON status as `std_msgs/String` and the vehicle's
+//! state as `diagnostic_msgs/DiagnosticArray`, on the key format of the inputs.
 //!
 //! [`Ros2Outputs`] (an actor) encodes in its handler and hands the bytes to the
 //! publishing thread of a [`Ros2Publisher`] through a bounded channel: it never
@@ -28,7 +28,10 @@ use super::config::Ros2Config;
 use super::convert::{StampMap, cloud_from_gmm, path_from_plan};
 use super::inputs::{InputStats, Ros2Inputs, unix_now_ns};
 use super::keyexpr::WireFormat;
-use super::msgs::{Header, Path, PointCloud2, RosString};
+use super::msgs::{
+    DiagnosticArray, DiagnosticStatus, Header, KeyValue, Path, PointCloud2, RosString,
+};
+use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus};
 
 /// What goes out.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -36,7 +39,11 @@ enum Output {
     Plan = 0,
     Map = 1,
     Status = 2,
+    Diagnostics = 3,
 }
+
+/// Number of [`Output`]s.
+const OUTPUTS: usize = 4;
 
 /// Counters of the publishing side.
 #[derive(Debug, Default)]
@@ -75,7 +82,7 @@ pub struct Ros2Publisher {
     queue: SyncSender<(Output, Vec<u8>)>,
     counters: Arc<Counters>,
     config: Arc<Ros2Config>,
-    enabled: [bool; 3],
+    enabled: [bool; OUTPUTS],
 }
 
 impl Ros2Publisher {
@@ -87,11 +94,12 @@ impl Ros2Publisher {
         let zid = session.zid().to_string();
         let zid_bytes = session.zid().to_le_bytes();
         let t = &config.topics;
-        let mut lanes: [Option<Lane>; 3] = [None, None, None];
+        let mut lanes: [Option<Lane>; OUTPUTS] = [None, None, None, None];
         let outputs = [
             (Output::Plan, t.plan.as_deref()),
             (Output::Map, t.map.as_deref()),
             (Output::Status, t.status.as_deref()),
+            (Output::Diagnostics, t.diagnostics.as_deref()),
         ];
         for (output, topic) in outputs {
             let Some(topic) = topic else { continue };
@@ -103,6 +111,9 @@ impl Ros2Publisher {
                 }
                 Output::Status => {
                     keys::<RosString>(&format, &zid, entity, &config.node_name, topic)?
+                }
+                Output::Diagnostics => {
+                    keys::<DiagnosticArray>(&format, &zid, entity, &config.node_name, topic)?
                 }
             };
             let zenoh_error = |context: String| move |source| Ros2Error::Zenoh { context, source };
@@ -130,7 +141,7 @@ impl Ros2Publisher {
                 sequence: 0,
             });
         }
-        let enabled = [lanes[0].is_some(), lanes[1].is_some(), lanes[2].is_some()];
+        let enabled = lanes.each_ref().map(Option::is_some);
         let (queue, rx) = sync_channel(config.send_queue);
         let counters = Arc::new(Counters::default());
         let thread_counters = counters.clone();
@@ -201,7 +212,7 @@ fn keys<T: RosMessage>(
 
 fn send_loop(
     rx: &Receiver<(Output, Vec<u8>)>,
-    mut lanes: [Option<Lane>; 3],
+    mut lanes: [Option<Lane>; OUTPUTS],
     attach: bool,
     counters: &Counters,
 ) {
@@ -228,6 +239,49 @@ fn send_loop(
                 counters.send_errors.fetch_add(1, Ordering::Relaxed)
             }
         };
+    }
+}
+
+/// The vehicle's state as one `diagnostic_msgs/DiagnosticStatus` named
+/// `troupe/<robot>/vehicle` ([`AutopilotStatus::level`], [`AutopilotStatus::state`]).
+#[must_use]
+pub fn vehicle_diagnostics(
+    status: &AutopilotStatus,
+    robot: &str,
+    header: Header,
+) -> DiagnosticArray {
+    let (level, message) = status.level();
+    let state = status.state();
+    let value = |key: &str, value: String| KeyValue {
+        key: key.to_owned(),
+        value,
+    };
+    DiagnosticArray {
+        header,
+        status: vec![DiagnosticStatus {
+            level,
+            name: format!("troupe/{robot}/vehicle"),
+            message,
+            hardware_id: status.autopilot.map_or_else(
+                || "no autopilot heard".to_owned(),
+                |(system, component)| format!("MAVLink system {system} component {component}"),
+            ),
+            values: vec![
+                value("armed", state.armed.to_string()),
+                value("mode", state.mode),
+                value("in_control", state.in_control.to_string()),
+                value("hold", state.hold),
+                value("setpoint_rate_hz", format!("{:.1}", state.setpoint_rate_hz)),
+                value(
+                    "heartbeat_age_s",
+                    state
+                        .heartbeat_age_s
+                        .map_or_else(|| "never".to_owned(), |a| format!("{a:.2}")),
+                ),
+                value("setpoints", state.setpoints.to_string()),
+                value("holds", state.holds.to_string()),
+            ],
+        }],
     }
 }
 
@@ -282,6 +336,9 @@ impl Actor for Ros2Outputs {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         ctx.subscribe(&KEYFRAME, QueuePolicy::Fifo { capacity: 8 });
+        if self.publisher.enabled(Output::Diagnostics) {
+            ctx.subscribe(&AUTOPILOT_STATUS, QueuePolicy::LATEST);
+        }
         if !self.status_period.is_zero() {
             ctx.set_timer(STATUS, self.status_period);
         }
@@ -310,6 +367,14 @@ impl Actor for Ros2Outputs {
                     let cloud =
                         cloud_from_gmm(&keyframe.gmm, config.map_points, header, &mut self.rng);
                     self.publisher.offer(Output::Map, &cloud)?;
+                }
+                if let Some(status) = m.get(&AUTOPILOT_STATUS) {
+                    let header = Header {
+                        stamp: Self::stamps(ctx).to_ros(status.stamp),
+                        frame_id: String::new(),
+                    };
+                    let diagnostics = vehicle_diagnostics(status, ctx.robot_name(), header);
+                    self.publisher.offer(Output::Diagnostics, &diagnostics)?;
                 }
             }
             Event::Timer(_) => {

@@ -95,6 +95,9 @@ pub enum HoldReason {
     AwaitingPlanFromHold,
     /// No plan committed yet.
     NoPlan,
+    /// The pilot has not handed control over (the autopilot is not armed and in
+    /// OFFBOARD or GUIDED): the hold follows the vehicle wherever the pilot flies it.
+    NotInControl,
     /// The plan's reference is outside the geofence.
     Geofence,
 }
@@ -108,6 +111,7 @@ impl HoldReason {
             HoldReason::OdometryTimeout => "odometry timeout",
             HoldReason::AwaitingPlanFromHold => "awaiting a plan from where it holds",
             HoldReason::NoPlan => "no plan",
+            HoldReason::NotInControl => "waiting for the pilot to hand control over",
             HoldReason::Geofence => "reference outside the geofence",
         }
     }
@@ -187,6 +191,8 @@ pub struct SetpointGuard {
     previous: Option<Arc<Plan>>,
     position_m: Option<Point3<f64>>,
     yaw_rad: Option<f64>,
+    /// Whether the pilot has handed control over ([`SetpointGuard::control`]).
+    in_control: bool,
     hold: Option<(HoldReason, Option<Point3<f64>>, Option<f64>)>,
     counters: GuardCounters,
 }
@@ -204,6 +210,7 @@ impl SetpointGuard {
             previous: None,
             position_m: None,
             yaw_rad: None,
+            in_control: false,
             hold: None,
             counters: GuardCounters::default(),
         }
@@ -233,6 +240,13 @@ impl SetpointGuard {
     /// The autopilot's heartbeat arrived.
     pub fn heartbeat(&mut self, now: Time) -> Option<WatchdogChange> {
         self.heartbeat.feed(now)
+    }
+
+    /// Whether the pilot has handed control over (the autopilot armed and in
+    /// OFFBOARD or GUIDED, `crate::mavlink::in_control`); until then, and whenever the
+    /// pilot takes it back, the guard holds where the vehicle is.
+    pub fn control(&mut self, in_control: bool) {
+        self.in_control = in_control;
     }
 
     /// A plan was committed. It is followed as far as the fence allows; the error says
@@ -271,7 +285,9 @@ impl SetpointGuard {
             self.counters.silent += 1;
             return None;
         }
-        let reason = if self.sensor.is_stale() {
+        let reason = if !self.in_control {
+            Some(HoldReason::NotInControl)
+        } else if self.sensor.is_stale() {
             Some(HoldReason::SensorTimeout)
         } else if self.odometry.is_stale() {
             Some(HoldReason::OdometryTimeout)
@@ -301,6 +317,11 @@ impl SetpointGuard {
                 self.counters.held += 1;
                 let fence = self.config.geofence;
                 let here = self.position_m.map(|p| fence.clamp(&p));
+                if reason == HoldReason::NotInControl {
+                    // The pilot flies: hold wherever the vehicle is, so that the hand-over
+                    // holds it in place.
+                    self.hold = Some((reason, here, self.yaw_rad));
+                }
                 let (_, position_m, yaw_rad) =
                     self.hold.get_or_insert((reason, here, self.yaw_rad));
                 // Latched where the hold began; filled in if no position was known then.
@@ -329,12 +350,17 @@ impl SetpointGuard {
         }
     }
 
-    /// Where it holds (latched, inside the fence) and its heading, as of the last tick;
-    /// `None` while it tracks, is silent, or holds without a known position.
+    /// Where the vehicle stands instead of following the plan, and its heading, as of
+    /// the last tick: where it holds (inside the fence), or, while the heartbeat is
+    /// missing (nobody listens to setpoints), where it is; `None` while it tracks or
+    /// no position is known.
     #[must_use]
     pub fn hold_point(&self) -> Option<(Point3<f64>, f64)> {
+        if self.heartbeat_missing() {
+            return self.position_m.zip(self.yaw_rad);
+        }
         match self.hold {
-            Some((_, Some(at), yaw)) if !self.heartbeat_missing() => Some((at, yaw.unwrap_or(0.0))),
+            Some((_, Some(at), yaw)) => Some((at, yaw.unwrap_or(0.0))),
             _ => None,
         }
     }
@@ -379,9 +405,9 @@ mod tests {
         fenced_guard(20.0)
     }
 
-    /// A guard whose fence ends `max_x_m` east.
+    /// A guard whose fence ends `max_x_m` east, the pilot having handed control over.
     fn fenced_guard(max_x_m: f64) -> SetpointGuard {
-        SetpointGuard::new(
+        let mut g = SetpointGuard::new(
             GuardConfig {
                 sensor_timeout_s: 0.5,
                 odometry_timeout_s: 0.3,
@@ -393,7 +419,9 @@ mod tests {
                 .unwrap(),
             },
             t(0.0),
-        )
+        );
+        g.control(true);
+        g
     }
 
     /// East at 1 m/s from x = 0 at t = 0 to x = 10 at t = 10, 1 m up, facing east.
@@ -715,5 +743,57 @@ mod tests {
             g.odometry(t(0.5), Point3::new(f64::NAN, 0.0, 0.0), 0.0),
             None
         );
+    }
+
+    /// Issue 40, item 5: until the pilot hands control over (and whenever it takes it
+    /// back) the guard holds wherever the vehicle is — the pilot flies it — and says
+    /// so; the hand-over holds the vehicle in place until a plan from there.
+    #[test]
+    fn holds_where_the_pilot_flies_until_control_is_handed_over() {
+        let mut g = guard();
+        g.control(false);
+        let mut changes = Vec::new();
+        g.plan(eastward_plan()).unwrap();
+        for i in 0..10 {
+            let now = t(0.1 * f64::from(i));
+            feed_all(&mut g, now, 3.0 + 0.1 * f64::from(i));
+            let Some(Setpoint::Hold {
+                position_m, reason, ..
+            }) = g.tick(now, &mut changes)
+            else {
+                panic!("expected a hold");
+            };
+            assert_eq!(reason, HoldReason::NotInControl);
+            assert_eq!(position_m.map(|p| p.x), Some(3.0 + 0.1 * f64::from(i)));
+            assert_eq!(g.hold_point().map(|(p, _)| p.x), position_m.map(|p| p.x));
+        }
+        // Handed over at x = 4: held there (the plan is at x = 1), then a plan from
+        // there is tracked.
+        g.control(true);
+        feed_all(&mut g, t(1.0), 4.0);
+        assert!(matches!(
+            g.tick(t(1.0), &mut changes),
+            Some(Setpoint::Hold {
+                reason: HoldReason::AwaitingPlanFromHold,
+                position_m: Some(p),
+                ..
+            }) if (p.x - 3.9).abs() < 1e-9
+        ));
+        g.plan(hover_plan(Point3::new(3.9, 0.0, 1.0), t(1.0)))
+            .unwrap();
+        feed_all(&mut g, t(1.05), 3.9);
+        assert!(matches!(
+            g.tick(t(1.05), &mut changes),
+            Some(Setpoint::Track(_))
+        ));
+    }
+
+    #[test]
+    fn without_a_heartbeat_the_vehicle_stands_where_it_is() {
+        let mut g = guard();
+        let mut changes = Vec::new();
+        g.odometry(t(0.1), Point3::new(2.0, 1.0, 1.5), 0.3);
+        assert_eq!(g.tick(t(0.1), &mut changes), None, "nobody listens");
+        assert_eq!(g.hold_point(), Some((Point3::new(2.0, 1.0, 1.5), 0.3)));
     }
 }

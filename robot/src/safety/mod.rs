@@ -17,8 +17,8 @@ mod guard;
 mod watchdog;
 
 pub use guard::{
-    GuardConfig, GuardCounters, GuardInput, HoldReason, Reference, Setpoint, SetpointGuard,
-    reference_at,
+    GuardConfig, GuardCounters, GuardInput, HoldReason, RESUME_TOLERANCE_M, Reference, Setpoint,
+    SetpointGuard, reference_at,
 };
 pub use troupe_actors::collision::geofence::{
     Geofence, GeofenceConfig, GeofenceError, GeofenceViolation,
