@@ -3,7 +3,7 @@
 //! of a simulated 300-frame flight through the synthetic corridor (80×60 frames,
 //! σ = 0.03): through the spatial hash (§6.1.4.3) against the same test over all
 //! components. Building the map takes a while (setup, not timed). Single-threaded:
-//! `RAYON_NUM_THREADS=1 cargo bench -p troupe-actors --bench global_map`.
+//! `RAYON_NUM_THREADS=1 cargo bench -p troupe-algorithms --bench global_map`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;

@@ -3,7 +3,7 @@
 //! (room corner), the paper's 10 windows × 10 components, with the Mahalanobis gate
 //! λ = 3 and without it (plain EM per window), and with one window of 100 components
 //! (the windowless fit the paper compares against, Fig. 6). Single-threaded:
-//! `RAYON_NUM_THREADS=1 cargo bench -p troupe-actors --bench windowed`.
+//! `RAYON_NUM_THREADS=1 cargo bench -p troupe-algorithms --bench windowed`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;

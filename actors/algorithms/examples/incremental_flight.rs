@@ -4,7 +4,7 @@
 //! same step over all components.
 //!
 //! ```sh
-//! cargo run --release -p troupe-actors --example incremental_flight -- \
+//! cargo run --release -p troupe-algorithms --example incremental_flight -- \
 //!     [frames=300] [width=80] [height=60] [sigma=0.03] [length_m=40]
 //! ```
 //! Set `RAYON_NUM_THREADS=1` for single-threaded numbers.

@@ -6,7 +6,7 @@
 //!   message around a ring of six actors (six hops per lap); reports the median and
 //!   95th percentile per-hop latency measured on every lap.
 //!
-//! Run: `cargo bench -p troupe-actors --bench message_passing`
+//! Run: `cargo bench -p troupe-runtime --bench message_passing`
 
 #![allow(missing_docs)]
 

@@ -2,19 +2,19 @@
 //!
 //! | topic | type | from → to |
 //! |---|---|---|
-//! | `odometry` | [`Odometry`] | vehicle → sensor, explorer, link |
-//! | `sensor/frame` | [`DepthFrame`] | sensor → mapper |
-//! | `plan/committed` | [`Plan`] | explorer/planner → vehicle, link |
-//! | `mapper/keyframe` | [`Keyframe`] | mapper → link |
-//! | `peer/keyframe` | [`PeerKeyframe`] | link → local grid |
-//! | `grid/snapshot` | [`GridSnapshot`] | local grid → planner, collision |
-//! | `peer/odometry` | [`PeerOdometry`] | link → planner, collision |
-//! | `peer/plan` | [`PeerPlan`] | link → collision |
-//! | `plan/candidates` | [`PlanCandidates`] | planner → collision |
+//! | `odometry` | [`Odometry`] | vehicle → sensor, grid, planner, collision, explorer, teleop, link |
+//! | `sensor/frame` | [`DepthFrame`] | sensor → mapper, grid |
+//! | `plan/committed` | [`Plan`] | collision (planner, explorer or teleop without it) → vehicle, link, planner, explorer |
+//! | `mapper/keyframe` | [`Keyframe`] | mapper → grid, link |
+//! | `peer/keyframe` | [`PeerKeyframe`] | link → grid, planner |
+//! | `grid/snapshot` | [`GridSnapshot`] | grid → planner, collision, teleop |
+//! | `peer/odometry` | [`PeerOdometry`] | link → collision |
+//! | `peer/plan` | [`PeerPlan`] | link → collision, planner |
+//! | `plan/candidates` | [`PlanCandidates`] | planner or explorer → collision |
 //! | `plan/decision` | [`PlanDecision`] | collision → planner |
-//! | `grid/changes` | [`GridChanges`] | local grid → link (occupancy-grid map sharing) |
-//! | `peer/grid_changes` | [`PeerGridChanges`] | link → local grid |
-//! | `vehicle/hold` | [`VehicleHold`] | vehicle driver → collision |
+//! | `grid/changes` | [`GridChanges`] | grid → link (occupancy-grid map sharing) |
+//! | `peer/grid_changes` | [`PeerGridChanges`] | link → grid, planner |
+//! | `vehicle/hold` | [`VehicleHold`] | vehicle driver (MAVLink) → collision |
 //! | `link/tx`, `link/rx` | [`LinkTx`](troupe_runtime::LinkTx), [`LinkRx`](troupe_runtime::LinkRx) | link ↔ network |
 
 use nalgebra::Isometry3;
