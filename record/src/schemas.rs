@@ -223,8 +223,29 @@ pub const COVERAGE: Schema = Schema {
     },
 };
 
+/// `troupe.VehicleStatus`: a hardware robot's vehicle driver at each of its status
+/// messages (2 Hz and on every change): armed, mode, whether the pilot handed control
+/// over, why it holds, the setpoint rate and the heartbeat's age.
+pub const VEHICLE_STATUS: Schema = Schema {
+    name: "troupe.VehicleStatus",
+    document: || {
+        let count = json!({"type": "integer", "minimum": 0});
+        object(json!({
+            "armed": {"type": "boolean"},
+            "mode": {"type": "string"},
+            "in_control": {"type": "boolean"},
+            "hold": {"type": "string"},
+            "setpoint_rate_hz": {"type": "number", "minimum": 0},
+            "heartbeat_age_s": {"type": ["number", "null"]},
+            "heartbeat_lost": {"type": "boolean"},
+            "setpoints": count,
+            "holds": count,
+        }))
+    },
+};
+
 /// Every schema a recording may use.
-pub const ALL: [Schema; 8] = [
+pub const ALL: [Schema; 9] = [
     FRAME_TRANSFORM,
     POSE_IN_FRAME,
     SCENE_UPDATE,
@@ -233,6 +254,7 @@ pub const ALL: [Schema; 8] = [
     LINK_STATUS,
     SAMPLE,
     COVERAGE,
+    VEHICLE_STATUS,
 ];
 
 #[cfg(test)]

@@ -312,6 +312,13 @@ impl Harness {
         Ok(())
     }
 
+    /// The recording, once [`Harness::record`] made one: to write a process's own
+    /// channels beside what the robot publishes.
+    #[must_use]
+    pub fn recorder(&self) -> Option<SharedRecorder> {
+        self.recorder.clone()
+    }
+
     /// Starts the actors and the team link, runs until `duration_s` is over (never,
     /// when `None`) or `stop` resolves, then shuts the actors down, closes the
     /// session and finishes the recording. Must be called inside a multi-threaded

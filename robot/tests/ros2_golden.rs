@@ -13,7 +13,8 @@ use troupe_robot::ros2::convert::{
     DepthInputs, depth_frame_from_image, depth_frame_from_points, odometry_from_ros,
 };
 use troupe_robot::ros2::msgs::{
-    CameraInfo, Header, Image, Odometry, Path, PointCloud2, PointField, RosString, RosTime,
+    CameraInfo, DiagnosticArray, DiagnosticStatus, Header, Image, KeyValue, Odometry, Path,
+    PointCloud2, PointField, RosString, RosTime,
 };
 use troupe_robot::ros2::{CdrError, RosMessage};
 
@@ -282,6 +283,33 @@ fn path_and_status_decode() {
             data: r#"{"robot":"r0","state":"exploring"}"#.into(),
         },
     );
+}
+
+/// The vehicle's state as rclpy writes a `diagnostic_msgs/DiagnosticArray`, and ours the
+/// same: issue 40's status message in a standard type.
+#[test]
+fn diagnostics_decode_and_ours_have_the_same_layout() {
+    let expected = DiagnosticArray {
+        header: header(""),
+        status: vec![DiagnosticStatus {
+            level: 1,
+            name: "troupe/robot0/vehicle".into(),
+            message: "holding: sensor timeout".into(),
+            hardware_id: "MAVLink system 1 component 1".into(),
+            values: vec![
+                KeyValue {
+                    key: "armed".into(),
+                    value: "true".into(),
+                },
+                KeyValue {
+                    key: "mode".into(),
+                    value: "OFFBOARD".into(),
+                },
+            ],
+        }],
+    };
+    check("diagnostics", &expected);
+    fails_when_cut::<DiagnosticArray>("diagnostics");
 }
 
 /// Every proper prefix of a golden payload is an error for its type, never a panic.

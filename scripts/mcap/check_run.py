@@ -57,6 +57,7 @@ SCHEMAS = [
     (r"/robot\d+/pose", "foxglove.PoseInFrame"),
     (r"/robot\d+/(plan|candidates|keyframes|peer_keyframes|peer_plans|route)", "foxglove.SceneUpdate"),
     (r"/robot\d+/link", "troupe.LinkStatus"),
+    (r"/robot\d+/vehicle", "troupe.VehicleStatus"),
     (r"/robot\d+/sample", "troupe.Sample"),
     (r"/team/coverage", "troupe.Coverage"),
     (r"/robot\d+/peers/robot\d+/pose", "foxglove.PoseInFrame"),

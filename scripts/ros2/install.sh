@@ -7,10 +7,10 @@ cd "$(dirname "$0")/../.."
 VENV=.venv-ros2
 PY=${PYTHON:-python3}
 if [ -x "$VENV/bin/python" ] && "$VENV/bin/python" -c \
-    "import rclpy.serialization, sensor_msgs.msg, nav_msgs.msg, zenoh" 2>/dev/null; then
+    "import rclpy.serialization, sensor_msgs.msg, nav_msgs.msg, diagnostic_msgs.msg, zenoh" 2>/dev/null; then
     exit 0
 fi
 "$PY" -m venv "$VENV"
 "$VENV/bin/pip" install --quiet --disable-pip-version-check \
-    ros-rclpy ros-sensor-msgs ros-nav-msgs ros-geometry-msgs ros-std-msgs \
+    ros-rclpy ros-sensor-msgs ros-nav-msgs ros-geometry-msgs ros-std-msgs ros-diagnostic-msgs \
     ros-rmw-fastrtps-cpp "eclipse-zenoh==1.10.2"

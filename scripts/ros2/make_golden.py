@@ -12,6 +12,7 @@ import struct
 import sys
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3
 from nav_msgs.msg import Odometry, Path
 from rclpy.serialization import serialize_message
@@ -87,11 +88,21 @@ def status():
     return String(data='{"robot":"r0","state":"exploring"}')
 
 
+def diagnostics():
+    status = DiagnosticStatus(level=DiagnosticStatus.WARN, name="troupe/robot0/vehicle",
+                              message="holding: sensor timeout",
+                              hardware_id="MAVLink system 1 component 1",
+                              values=[KeyValue(key="armed", value="true"),
+                                      KeyValue(key="mode", value="OFFBOARD")])
+    return DiagnosticArray(header=header(""), status=[status])
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
     for name, make in [("depth_16uc1", depth_16uc1), ("depth_32fc1", depth_32fc1),
                        ("camera_info", camera_info), ("points", points),
-                       ("odometry", odometry), ("path", path), ("status", status)]:
+                       ("odometry", odometry), ("path", path), ("status", status),
+                       ("diagnostics", diagnostics)]:
         (OUT / f"{name}.cdr").write_bytes(serialize_message(make()))
         print(f"wrote {OUT / name}.cdr", file=sys.stderr)
 

@@ -15,7 +15,7 @@ use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN, PinholeIntrinsics};
 use troupe_actors::runtime::{ActorSpec, Publication, Time, TopicStats};
 use troupe_actors::sensor::FrameSource;
 use troupe_comms::zenoh::ZenohStats;
-use troupe_record::{RecordOptions, RecordingStats, period_of_hz};
+use troupe_record::{RecordOptions, RecordingStats, period_of_hz, schemas};
 
 use super::file::{HardwareError, HardwareRobot};
 use crate::harness::{
@@ -280,6 +280,16 @@ async fn fly(
             ..RecordOptions::default()
         };
         harness.record(options, |recorder| recorder)?;
+        if let Some(recorder) = harness.recorder() {
+            let channel = format!("/robot{}/vehicle", robot.file.id);
+            harness.add_tap(move |p: &Publication<'_>| {
+                if let Some(status) = p.get(&AUTOPILOT_STATUS) {
+                    recorder.with(|r| {
+                        r.write(&channel, &schemas::VEHICLE_STATUS, p.time, &status.state());
+                    });
+                }
+            });
+        }
     }
     let finished = harness.run(robot.file.duration_s, stop).await?;
     let vehicle = vehicle.take();
