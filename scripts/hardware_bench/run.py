@@ -413,6 +413,7 @@ def setpoint_stats(setpoints, t0, duration_s):
             last_sign, anchor = sign, z
     steps = [math.dist((a["x"], a["y"], a["z"]), (b["x"], b["y"], b["z"]))
              for a, b in zip(inside, inside[1:])]
+    gaps = [b["t"] - a["t"] for a, b in zip(inside, inside[1:])]
     return {
         "setpoints": len(inside),
         "moving_fraction": len(moving) / len(inside) if inside else None,
@@ -421,6 +422,8 @@ def setpoint_stats(setpoints, t0, duration_s):
         "z_range_m": (max(zs) - min(zs)) if zs else None,
         "z_reversals": reversals,
         "max_setpoint_step_m": max(steps) if steps else None,
+        "max_setpoint_gap_s": max(gaps) if gaps else None,
+        "setpoint_gaps_over_60ms": sum(g > 0.06 for g in gaps),
     }
 
 
@@ -563,7 +566,7 @@ def main():
             r = fly()
             r.update(path=path, start=start, lag_s=args.lag_s, sensor_hz=args.sensor_hz,
                      size=args.size, odometry=args.odometry, lead_s=args.lead_s,
-                     robot_extra=args.robot_extra, tag=args.tag, load1_start=load_start,
+                     robot_extra=args.robot_extra, pause_depth=args.pause_depth, tag=args.tag, load1_start=load_start,
                      uptime_before=before, uptime_after=uptime())
             with open(os.path.join(flight_dir, "result.json"), "w", encoding="utf-8") as f:
                 json.dump(r, f, indent=1)
