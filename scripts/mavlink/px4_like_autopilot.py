@@ -6,15 +6,22 @@ heartbeats (armed, OFFBOARD), LOCAL_POSITION_NED and ATTITUDE at 30 Hz. It flies
 point mass that follows the SET_POSITION_TARGET_LOCAL_NED setpoints it receives
 (feed-forward acceleration plus a PD loop on position and velocity, honouring the
 type mask), and after --duration-s writes a JSON report of everything it received.
+With --lag-s TAU the achieved acceleration follows the commanded one through a
+first-order lag of time constant TAU (a real multirotor's attitude and thrust loops
+make it lag its setpoints; 0, the default, applies the command at once).
 
 Usage: px4_like_autopilot.py --connection udpout:127.0.0.1:14540 --report out.json
        [--duration-s 8] [--heartbeat-hz 2] [--heartbeat-stop-after-s 4.5]
-       [--start-ned 0,0,-1] [--state-to 127.0.0.1:PORT]
+       [--start-ned 0,0,-1] [--start-yaw-ned-deg 0] [--lag-s 0]
+       [--state-to 127.0.0.1:PORT] [--track-hz 10]
 
 With --state-to it also sends its state as one JSON datagram per LOCAL_POSITION_NED
 ({"t": unix s, "ned": [x, y, z], "vel_ned": [...], "yaw_ned": rad}) to that UDP
 address, for a camera stand-in that renders what the vehicle sees
 (scripts/ros2/box_room_camera.py).
+
+The report's "track" is the vehicle's state at --track-hz: [unix s, x, y, z (NED, m),
+yaw (NED, rad)].
 
 It prints "ready <unix time>" on stdout once its link is open; times in the report
 are Unix seconds.
@@ -51,8 +58,19 @@ def parse_args():
     p.add_argument("--start-ned", default="0,0,-1")
     p.add_argument("--system-id", type=int, default=1)
     p.add_argument("--component-id", type=int, default=1)
+    p.add_argument("--start-yaw-ned-deg", type=float, default=0.0,
+                   help="initial heading, NED (degrees from north towards east)")
+    p.add_argument("--lag-s", type=float, default=0.0,
+                   help="time constant of the lag from commanded to achieved acceleration")
+    p.add_argument("--track-hz", type=float, default=10.0,
+                   help="rate of the report's track of the vehicle's state")
     p.add_argument("--state-to", default=None)
-    return p.parse_args()
+    args = p.parse_args()
+    if not (math.isfinite(args.lag_s) and args.lag_s >= 0.0):
+        p.error(f"--lag-s must be a number of seconds >= 0, got {args.lag_s}")
+    if not args.track_hz > 0.0:
+        p.error(f"--track-hz must be positive, got {args.track_hz}")
+    return args
 
 
 def main():
@@ -69,7 +87,8 @@ def main():
         host, port = args.state_to.rsplit(":", 1)
         state_sock, state_to = socket.socket(socket.AF_INET, socket.SOCK_DGRAM), (host, int(port))
     vel = [0.0, 0.0, 0.0]
-    yaw = 0.0
+    achieved = [0.0, 0.0, 0.0]  # acceleration after the lag
+    yaw = math.radians(args.start_yaw_ned_deg)
     setpoint = None  # (message, receive time)
     received_types = {}
     setpoints = []
@@ -138,8 +157,10 @@ def main():
                 acc[i] = a
             if not mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE:
                 yaw = m.yaw
+        keep = math.exp(-dt / args.lag_s) if args.lag_s > 0.0 else 0.0
         for i in range(3):
             a = max(-MAX_ACCEL, min(MAX_ACCEL, acc[i]))
+            a = achieved[i] = keep * achieved[i] + (1.0 - keep) * a
             pos[i] += vel[i] * dt + 0.5 * a * dt * dt
             vel[i] += a * dt
 
@@ -168,7 +189,7 @@ def main():
             next_state += 1.0 / 30.0
         if now >= next_track:
             track.append([now, *pos, yaw])
-            next_track += 0.1
+            next_track += 1.0 / args.track_hz
         time.sleep(0.002)
 
     report = {
@@ -181,6 +202,7 @@ def main():
         "track": track,
         "final_position_ned": pos,
         "final_yaw_ned": yaw,
+        "lag_s": args.lag_s,
     }
     with open(args.report, "w", encoding="utf-8") as f:
         json.dump(report, f)

@@ -1,11 +1,16 @@
 #!/usr/bin/env python3
-"""A depth camera and VIO stand-in for troupe's hardware loop test (robot/tests/hardware_loop.rs).
+"""A depth camera and VIO stand-in for troupe's hardware loop test (robot/tests/hardware_loop.rs)
+and the hardware benchmark (scripts/hardware_bench/run.py).
 
 It receives the vehicle's state from the pymavlink autopilot (px4_like_autopilot.py
 --state-to, JSON datagrams on --state-port), publishes nav_msgs/Odometry (ENU world,
 FLU body) for every state, and at --rate-hz a 16UC1 depth image (with its CameraInfo)
 of an axis-aligned box room rendered with numpy from the newest state, stamped with
-that state's time. Messages are serialised with rclpy and put on zenoh with rmw_zenoh
+that state's time. With --scenario FILE the room is that troupe scenario's
+`[world.room]` (walls, floor, ceiling and solid boxes, hit by slab intersection;
+scripts/hardware_bench/room.py reads it), the room `troupe run FILE` flies.
+--pause-depth-at-s/--pause-depth-s stop the depth images (odometry goes on) for a
+while, to test what the robot does when its camera stops and comes back. Messages are serialised with rclpy and put on zenoh with rmw_zenoh
 keys and attachments (the helpers of ros_peer.py). It deserialises every nav_msgs/Path
 troupe publishes back with rclpy. After --duration-s it prints one JSON report: frame
 publish times, the paths received (time and poses), the last status and, with
@@ -30,7 +35,11 @@ from builtin_interfaces.msg import Time
 
 from ros_peer import key
 
-# The room, ENU metres: [x0, x1], [y0, y1], [z0, z1].
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..",
+                                "hardware_bench"))
+from room import load_room  # noqa: E402
+
+# The room without --scenario, ENU metres: [x0, x1], [y0, y1], [z0, z1].
 ROOM = ((-3.0, 5.0), (-3.0, 3.0), (0.0, 3.0))
 
 
@@ -39,20 +48,44 @@ def stamp(t):
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def render_mm(args, pos, yaw):
-    """z-depth in millimetres of the room's walls, floor and ceiling (camera body
-    frame looks along +x; image x is -y, image y is -z; pixel centres at +0.5)."""
+def slab(lo, hi, origin, d):
+    """Entry and exit ray parameters of the slab lo..hi along one axis (d: the rays'
+    components on that axis; a ray parallel to the slab is inside it for all t or none)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (lo - origin) / d, (hi - origin) / d
+    inside = (lo <= origin) & (origin <= hi)
+    near = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1))
+    far = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1))
+    return near, far
+
+
+def render_mm(args, pos, yaw, room=ROOM, boxes=()):
+    """z-depth in millimetres of the room's walls, floor and ceiling and of the solid
+    `boxes` ((min_xyz, max_xyz) each) in it (camera body frame looks along +x; image x
+    is -y, image y is -z; pixel centres at +0.5). A level camera's rays have x and y
+    components that depend on the column only and z on the row only, so every slab is
+    computed per column or per row and only the combination is per pixel."""
     u = (np.arange(args.width) + 0.5 - args.width / 2) / args.f
     v = (np.arange(args.height) + 0.5 - args.height / 2) / args.f
-    a, b = -u[None, :], -v[:, None]  # body y, z per unit depth
     c, s = math.cos(yaw), math.sin(yaw)
-    rays = (c - s * a, s + c * a, b + 0.0 * a)
-    t = np.full((args.height, args.width), np.inf)
-    for k, (lo, hi) in enumerate(ROOM):
-        d = np.broadcast_to(rays[k], t.shape)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            hit = np.where(d > 0, (hi - pos[k]) / d, np.where(d < 0, (lo - pos[k]) / d, np.inf))
-        t = np.minimum(t, hit)
+    dx, dy = c + s * u, s - c * u  # per column (body y = -u)
+    dz = -v  # per row (body z = -v); the forward component is 1: t is the z-depth
+    t_col = np.full(args.width, np.inf)
+    for k, d in ((0, dx), (1, dy)):
+        t_col = np.minimum(t_col, slab(room[k][0], room[k][1], pos[k], d)[1])
+    t_row = slab(room[2][0], room[2][1], pos[2], dz)[1]
+    t = np.minimum(t_row[:, None], t_col[None, :])
+    for lo, hi in boxes:
+        nx, fx = slab(lo[0], hi[0], pos[0], dx)
+        ny, fy = slab(lo[1], hi[1], pos[1], dy)
+        nz, fz = slab(lo[2], hi[2], pos[2], dz)
+        near_col, far_col = np.maximum(nx, ny), np.minimum(fx, fy)
+        if not np.any(near_col <= far_col):
+            continue
+        near = np.maximum(near_col[None, :], nz[:, None])
+        far = np.minimum(far_col[None, :], fz[:, None])
+        hit = (near <= far) & (near > 0)
+        t = np.where(hit, np.minimum(t, near), t)
     return np.clip(np.rint(t * 1000.0), 0, 65535).astype("<u2")
 
 
@@ -66,7 +99,17 @@ def main():
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--f", type=float, default=382.0)
     p.add_argument("--team-connect", default=None, help="the robot's team-link endpoint")
+    p.add_argument("--scenario", default=None,
+                   help="a troupe scenario with [world] kind = \"room\": render its room")
+    p.add_argument("--pause-depth-at-s", type=float, default=None,
+                   help="stop publishing depth images this long after the start")
+    p.add_argument("--pause-depth-s", type=float, default=0.0,
+                   help="for this long (odometry goes on)")
     args = p.parse_args()
+    room, boxes = ROOM, ()
+    if args.scenario:
+        scenario_room = load_room(args.scenario)
+        room, boxes = scenario_room.boxes, scenario_room.pillars
     args.format, args.domain = "rmw_zenoh", 0
 
     state_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -140,10 +183,14 @@ def main():
             odom.twist.twist.linear.z = -vd
             put("/odom", "nav_msgs/msg/Odometry", odom)
         now = time.time()
+        paused = (args.pause_depth_at_s is not None
+                  and 0.0 <= now - start - args.pause_depth_at_s < args.pause_depth_s)
         if state is not None and now >= next_frame:
             next_frame += 1.0 / args.rate_hz
+            if paused:
+                continue
             header = Header(stamp=stamp(state["t"]), frame_id="camera_depth_optical_frame")
-            depth = render_mm(args, state["enu"], state["yaw"])
+            depth = render_mm(args, state["enu"], state["yaw"], room, boxes)
             info.header = header
             put("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo", info)
             put("/camera/depth/image_rect_raw", "sensor_msgs/msg/Image",

@@ -9,7 +9,8 @@ use super::artifacts::{ArtifactParams, WithArtifacts, place};
 use super::mesh::MeshError;
 use super::{
     CaveParams, CaveWorld, DoorParams, MeshParams, MeshWorld, OpenField, OpenFieldParams,
-    OpeningScene, Site, TunnelParams, Warehouse, WarehouseParams, WindowParams, tunnels,
+    OpeningScene, Room, RoomParams, Site, TunnelParams, Warehouse, WarehouseParams, WindowParams,
+    tunnels,
 };
 
 /// A built world and where its artifacts are ([`WorldConfig::build_with_artifacts`]).
@@ -36,6 +37,9 @@ pub enum WorldKind {
     /// A blind tunnel with a side tunnel behind the start (`[world.tunnel]`,
     /// [`tunnels::dead_end`]).
     DeadEnd,
+    /// A rectangular room with solid boxes (pillars) in it (`[world.room]`), the room
+    /// the hardware robot's benchmark flies (`scripts/hardware_bench/`).
+    Room,
 }
 
 /// The world to explore.
@@ -63,12 +67,20 @@ pub struct WorldConfig {
     /// earlier runs still compare equal).
     #[serde(skip_serializing_if = "is_default_tunnel")]
     pub tunnel: TunnelParams,
+    /// Room parameters (not written when default, so that records of earlier runs
+    /// still compare equal).
+    #[serde(skip_serializing_if = "is_default_room")]
+    pub room: RoomParams,
     /// Artifacts placed in the world by its seed (`count = 0`: none).
     pub artifacts: ArtifactParams,
 }
 
 fn is_default_tunnel(p: &TunnelParams) -> bool {
     *p == TunnelParams::default()
+}
+
+fn is_default_room(p: &RoomParams) -> bool {
+    *p == RoomParams::default()
 }
 
 impl Default for WorldConfig {
@@ -83,6 +95,7 @@ impl Default for WorldConfig {
             mesh: MeshParams::default(),
             open_field: OpenFieldParams::default(),
             tunnel: TunnelParams::default(),
+            room: RoomParams::default(),
             artifacts: ArtifactParams::default(),
         }
     }
@@ -107,6 +120,7 @@ impl WorldConfig {
             WorldKind::Mesh => ("mesh", self.mesh.validate()),
             WorldKind::OpenField => ("open_field", self.open_field.validate()),
             WorldKind::TJunction | WorldKind::DeadEnd => ("tunnel", self.tunnel.validate()),
+            WorldKind::Room => ("room", self.room.validate()),
         };
         checked.map_err(|e| e.within(table))
     }
@@ -150,6 +164,7 @@ impl WorldConfig {
             WorldKind::Mesh => Arc::new(MeshWorld::load(&self.mesh, self.seed)?),
             WorldKind::TJunction => Arc::new(tunnels::t_junction(&self.tunnel, self.seed)),
             WorldKind::DeadEnd => Arc::new(tunnels::dead_end(&self.tunnel, self.seed)),
+            WorldKind::Room => Arc::new(Room::generate(&self.room)),
         })
     }
 }

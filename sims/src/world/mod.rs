@@ -12,7 +12,8 @@
 //! Implementations: [`CaveWorld`] (procedural tunnel network from a seed), [`Warehouse`]
 //! (rows of shelves, thesis §4.2.2), [`OpeningScene`] (the window and door scenes of
 //! §5.2), [`OpenField`] (flat ground and a few boxes, for crossing missions), the scripted
-//! [`tunnels`] (a T-junction and a dead end, for exploration tests) and [`BoxRoom`] (one
+//! [`tunnels`] (a T-junction and a dead end, for exploration tests), [`Room`] (a room
+//! with pillars, shared with the hardware robot's closed loop) and [`BoxRoom`] (one
 //! analytic box, for tests). [`WorldConfig`] picks one.
 
 pub mod artifacts;
@@ -24,6 +25,7 @@ pub mod mesh;
 mod mesh_io;
 pub mod noise;
 pub mod open_field;
+pub mod room;
 pub mod scenes;
 pub mod solids;
 mod triangle_mesh;
@@ -36,6 +38,7 @@ pub use config::{WorldConfig, WorldKind};
 pub use gpu_scene::{GpuAlbedo, GpuCaveField, GpuGeometry, GpuNoise, GpuPrimitive, GpuScene};
 pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use open_field::{OpenField, OpenFieldParams};
+pub use room::{Room, RoomBox, RoomParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
 pub use troupe_actors::geometry::Aabb;
 pub use tunnels::TunnelParams;
