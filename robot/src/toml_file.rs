@@ -132,6 +132,30 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, Tom
     })
 }
 
+/// The key of a robot's keyframe policy in a robot or scenario file: robot
+/// processes make keyframes store-and-forward unless it is named
+/// ([`LinkConfig::with_process_keyframes`](troupe_actors::link::LinkConfig::with_process_keyframes)).
+pub const KEYFRAME_POLICY_KEY: &str = "robot.link.shaper.keyframe.policy";
+
+/// Whether TOML `text` names the dotted `key` (`robot.link.shaper.keyframe.policy`),
+/// for a default that depends on whether the user chose the value; `false` when the
+/// text is not TOML (its parse reports that).
+#[must_use]
+pub fn names_key(text: &str, key: &str) -> bool {
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return false;
+    };
+    let mut parts = key.split('.');
+    let Some(first) = parts.next() else {
+        return false;
+    };
+    let mut value = table.get(first);
+    for part in parts {
+        value = value.and_then(|v| v.as_table()).and_then(|t| t.get(part));
+    }
+    value.is_some()
+}
+
 /// The 1-based line and column of byte `offset` in `text`.
 fn line_column(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
@@ -190,5 +214,24 @@ mod tests {
         assert!(!e.contains('\n'));
         let missing = read_toml::<File>(Path::new("/nonexistent/f.toml")).unwrap_err();
         assert_eq!(missing.to_string(), "cannot read /nonexistent/f.toml");
+    }
+
+    #[test]
+    fn names_key_finds_dotted_keys_in_tables_and_inline_tables() {
+        let key = "robot.link.shaper.keyframe.policy";
+        assert!(names_key(
+            "[robot.link.shaper.keyframe]\npolicy = \"drop_oldest\"\n",
+            key
+        ));
+        assert!(names_key(
+            "[robot.link]\nshaper = { keyframe = { policy = \"keep_latest\" } }\n",
+            key
+        ));
+        assert!(!names_key(
+            "[robot.link.shaper.keyframe]\ncapacity_messages = 8\n",
+            key
+        ));
+        assert!(!names_key("[robot]\nspeed_mps = 1.0\n", key));
+        assert!(!names_key("[robot\n", key));
     }
 }

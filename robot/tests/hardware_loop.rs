@@ -82,6 +82,7 @@ camera_info = "/camera/depth/camera_info"
 odometry = "/odom"
 plan = "/troupe/plan"
 status = "/troupe/status"
+diagnostics = "/diagnostics"
 [mavlink]
 connection = "udpin:127.0.0.1:{mavlink_port}"
 odometry_source = "external"
@@ -239,6 +240,37 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
     );
     assert_eq!(paths[0]["frame_id"], "odom");
 
+    // The vehicle's state reached the ROS side as diagnostic_msgs/DiagnosticArray,
+    // decoded by rclpy: in control while flying, at the setpoint rate.
+    if python(".venv-ros2", "diagnostic_msgs.msg").is_ok() {
+        let arrays = camera["diagnostics"].as_array().unwrap();
+        println!("{} diagnostic arrays; last {:?}", arrays.len(), arrays.last());
+        assert!(arrays.len() >= 5, "{} diagnostic arrays", arrays.len());
+        let vehicle: Vec<&Value> = arrays
+            .iter()
+            .flat_map(|a| a["status"].as_array().unwrap())
+            .collect();
+        assert!(
+            vehicle
+                .iter()
+                .all(|v| v["name"] == "troupe/robot0/vehicle"),
+            "{vehicle:?}"
+        );
+        assert!(
+            vehicle.iter().any(|v| v["level"] == 0
+                && v["values"]["armed"] == "true"
+                && v["values"]["in_control"] == "true"
+                && v["values"]["setpoint_rate_hz"]
+                    .as_str()
+                    .and_then(|r| r.parse::<f64>().ok())
+                    .is_some_and(|r| r >= 20.0)),
+            "never in control at the setpoint rate: {:?}",
+            vehicle.last()
+        );
+    } else {
+        eprintln!("SKIPPED the /diagnostics check: .venv-ros2 has no diagnostic_msgs");
+    }
+
     // Setpoints at ≥ 20 Hz while the robot ran, none outside the geofence.
     let setpoints = autopilot["setpoints"].as_array().unwrap();
     let times: Vec<f64> = setpoints.iter().map(|s| s["t"].as_f64().unwrap()).collect();
@@ -362,5 +394,76 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
     assert!(
         !dir.join("out").exists(),
         "no outputs from a robot that never started"
+    );
+}
+
+/// Issue 40, item 5: a camera and odometry but nothing on the MAVLink port. The
+/// robot gives up after `[mavlink] autopilot_wait_s`: exit status 1, one error line
+/// saying why and that no setpoint was sent, its outputs written (0 setpoints,
+/// `gave_up` in the summary).
+#[test]
+fn no_autopilot_is_one_error_after_the_wait() {
+    let ros_python = match python(".venv-ros2", "rclpy.serialization, nav_msgs.msg, zenoh, numpy")
+    {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED no-autopilot test: {e}");
+            return;
+        }
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_no_autopilot");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let ros_port = free_port(false);
+    let config = dir.join("robot.toml");
+    let text = robot_file(ros_port, free_port(false), free_port(true)).replace(
+        "odometry_source = \"external\"\n",
+        "odometry_source = \"external\"\nautopilot_wait_s = 4.0\n",
+    );
+    std::fs::write(&config, text).unwrap();
+    // A vehicle standing 1.2 m up: odometry and depth, no autopilot.
+    let camera = Command::new(ros_python)
+        .arg(root().join("scripts/ros2/box_room_camera.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
+        .args(["--state-port", &free_port(true).to_string()])
+        .args(["--static-ned", "0,0,-1.2", "--duration-s", "25"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the camera");
+    let started = Instant::now();
+    let robot = Command::new(env!("CARGO_BIN_EXE_troupe-robot"))
+        .args(["--config", config.to_str().unwrap(), "--duration-s", "60"])
+        .output()
+        .expect("run troupe-robot");
+    let wall_s = started.elapsed().as_secs_f64();
+    let _ = camera.wait_with_output();
+    let stderr = String::from_utf8_lossy(&robot.stderr);
+    println!("troupe-robot exited {} after {wall_s:.1} s:\n{stderr}", robot.status);
+    assert_eq!(robot.status.code(), Some(1), "{stderr}");
+    assert!(wall_s < 20.0, "it waited {wall_s:.1} s");
+    let errors: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("ERROR") || l.starts_with("troupe-robot:"))
+        .collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(
+        errors[0].contains("no autopilot heartbeat")
+            && errors[0].contains("within 4 s")
+            && errors[0].contains("No setpoint was sent"),
+        "{}",
+        errors[0]
+    );
+    assert!(!stderr.contains("autopilot heartbeat lost"), "{stderr}");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap())
+            .unwrap();
+    let vehicle = &summary["vehicle"];
+    assert_eq!(vehicle["setpoints"], 0, "{vehicle}");
+    assert!(
+        vehicle["gave_up"]
+            .as_str()
+            .is_some_and(|g| g.contains("no autopilot heartbeat")),
+        "{vehicle}"
     );
 }

@@ -414,6 +414,12 @@ def setpoint_stats(setpoints, t0, duration_s):
     steps = [math.dist((a["x"], a["y"], a["z"]), (b["x"], b["y"], b["z"]))
              for a, b in zip(inside, inside[1:])]
     gaps = [b["t"] - a["t"] for a, b in zip(inside, inside[1:])]
+    # Acceleration feed-forward steps between setpoints that both carry one (type
+    # mask bits 0x1C0 clear); a knot plan's setpoints mark it ignored.
+    with_acc = [(a, b) for a, b in zip(inside, inside[1:])
+                if not (a["type_mask"] & 0x1C0 or b["type_mask"] & 0x1C0)]
+    acc_steps = [math.dist((a["afx"], a["afy"], a["afz"]), (b["afx"], b["afy"], b["afz"]))
+                 for a, b in with_acc]
     return {
         "setpoints": len(inside),
         "moving_fraction": len(moving) / len(inside) if inside else None,
@@ -423,6 +429,7 @@ def setpoint_stats(setpoints, t0, duration_s):
         "z_reversals": reversals,
         "max_setpoint_step_m": max(steps) if steps else None,
         "max_setpoint_gap_s": max(gaps) if gaps else None,
+        "max_accel_step_mps2": max(acc_steps) if acc_steps else None,
         "setpoint_gaps_over_60ms": sum(g > 0.06 for g in gaps),
     }
 

@@ -9,11 +9,14 @@ of an axis-aligned box room rendered with numpy from the newest state, stamped w
 that state's time. With --scenario FILE the room is that troupe scenario's
 `[world.room]` (walls, floor, ceiling and solid boxes, hit by slab intersection;
 scripts/hardware_bench/room.py reads it), the room `troupe run FILE` flies.
+--static-ned stands in for the autopilot's state (a vehicle that does not move).
 --pause-depth-at-s/--pause-depth-s stop the depth images (odometry goes on) for a
 while, to test what the robot does when its camera stops and comes back. Messages are serialised with rclpy and put on zenoh with rmw_zenoh
 keys and attachments (the helpers of ros_peer.py). It deserialises every nav_msgs/Path
-troupe publishes back with rclpy. After --duration-s it prints one JSON report: frame
-publish times, the paths received (time and poses), the last status and, with
+troupe publishes back with rclpy, and every diagnostic_msgs/DiagnosticArray on
+/diagnostics (the vehicle's state) when the venv has diagnostic_msgs. After --duration-s it prints one JSON report: frame
+publish times, the paths received (time and poses), the last status, the diagnostics
+received and, with
 --team-connect, the samples of troupe's team link by key.
 """
 import argparse
@@ -28,6 +31,10 @@ import time
 import numpy as np
 import zenoh
 from nav_msgs.msg import Odometry, Path
+try:  # ros-diagnostic-msgs: the robot's /diagnostics, when the venv has it
+    from diagnostic_msgs.msg import DiagnosticArray
+except ImportError:
+    DiagnosticArray = None
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, String
@@ -98,6 +105,10 @@ def main():
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--f", type=float, default=382.0)
+    p.add_argument("--static-ned", default=None,
+                   type=lambda v: [float(x) for x in v.split(",")],
+                   help="N,E,D: a vehicle that stays there (odometry at 30 Hz) when no "
+                        "autopilot sends its state")
     p.add_argument("--team-connect", default=None, help="the robot's team-link endpoint")
     p.add_argument("--scenario", default=None,
                    help="a troupe scenario with [world] kind = \"room\": render its room")
@@ -122,7 +133,7 @@ def main():
     conf.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(conf)
 
-    paths, status, team = [], {}, {}
+    paths, status, team, diagnostics = [], {}, {}, []
 
     def on_path(sample):
         path = deserialize_message(bytes(sample.payload.to_bytes()), Path)
@@ -134,6 +145,14 @@ def main():
         status.update(json.loads(deserialize_message(bytes(sample.payload.to_bytes()),
                                                      String).data))
 
+    def on_diagnostics(sample):  # the vehicle's state, decoded by rclpy
+        array = deserialize_message(bytes(sample.payload.to_bytes()), DiagnosticArray)
+        diagnostics.append({"t": time.time(), "status": [
+            {"level": int.from_bytes(d.level, "little") if isinstance(d.level, bytes)
+             else int(d.level), "name": d.name, "message": d.message,
+             "hardware_id": d.hardware_id, "values": {v.key: v.value for v in d.values}}
+            for d in array.status]})
+
     def on_team(sample):  # troupe/<team>/<robot>/<class>: count what the link sends
         k = str(sample.key_expr)
         team[k] = team.get(k, 0) + 1
@@ -143,6 +162,10 @@ def main():
                                        on_path),
             session.declare_subscriber(key(args, "/troupe/status", "std_msgs/msg/String", "*"),
                                        on_status)]
+    if DiagnosticArray is not None:
+        subs.append(session.declare_subscriber(
+            key(args, "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "*"),
+            on_diagnostics))
     gid, sequence = os.urandom(16), {}
 
     def put(topic, ros_type, message):
@@ -163,10 +186,15 @@ def main():
     print(f"ready {start:.6f}", flush=True)
     while time.time() - start < args.duration_s:
         try:
-            state = json.loads(state_sock.recv(4096))
+            received = json.loads(state_sock.recv(4096))
         except socket.timeout:
-            pass
-        else:
+            received = None
+            if args.static_ned is not None and (state is None or
+                                                time.time() - state["t"] >= 1.0 / 30):
+                received = {"t": time.time(), "ned": args.static_ned, "yaw_ned": 0.0,
+                            "vel_ned": [0.0, 0.0, 0.0]}
+        if received is not None:
+            state = received
             n, e, d = state["ned"]
             yaw = math.pi / 2 - state["yaw_ned"]
             state["enu"], state["yaw"] = (e, n, -d), yaw
@@ -200,7 +228,8 @@ def main():
     for sub in subs:
         sub.undeclare()
     session.close()
-    print(json.dumps({"frames": frames, "paths": paths, "status": status, "team": team}))
+    print(json.dumps({"frames": frames, "paths": paths, "status": status, "team": team,
+                      "diagnostics": diagnostics}))
     return 0
 
 

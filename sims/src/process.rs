@@ -68,7 +68,7 @@ use troupe_robot::harness::{
     self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, write_trajectory,
 };
 use troupe_robot::launch::{TeamFiles, client_session, peer_sessions};
-use troupe_robot::toml_file::{SettingsFileError, read_toml};
+use troupe_robot::toml_file::{KEYFRAME_POLICY_KEY, SettingsFileError, names_key, read_toml};
 
 use crate::recording::{record_options, record_world};
 use crate::replay::replaying_robot;
@@ -178,12 +178,15 @@ impl RobotProcess {
         let mut config: ProcessConfig = read_toml(path).map_err(SettingsFileError::from)?;
         let invalid = |e: ConfigError| ProcessError::from(SettingsFileError::config(path, e));
         let base = path.parent().unwrap_or(Path::new("."));
-        let scenario = Scenario::load(&base.join(&config.scenario)).map_err(|source| {
-            ProcessError::Scenario {
+        let scenario_path = base.join(&config.scenario);
+        let mut scenario =
+            Scenario::load(&scenario_path).map_err(|source| ProcessError::Scenario {
                 path: path.to_path_buf(),
                 source,
-            }
-        })?;
+            })?;
+        let policy_named = std::fs::read_to_string(&scenario_path)
+            .is_ok_and(|text| names_key(&text, KEYFRAME_POLICY_KEY));
+        scenario.robot.link = scenario.robot.link.with_process_keyframes(policy_named);
         if config.robot >= scenario.robots {
             return Err(invalid(ConfigError::new(
                 "robot",

@@ -10,7 +10,7 @@ use troupe_record::{Compression, check_rate_hz};
 use crate::harness::HarnessError;
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
-use crate::toml_file::{SettingsFileError, TomlFileError, parse_toml};
+use crate::toml_file::{KEYFRAME_POLICY_KEY, SettingsFileError, TomlFileError, names_key, parse_toml};
 use crate::{AssembleError, ConfigError, RobotConfig};
 
 /// A hardware robot file as written (see the [module docs](crate::hardware) and
@@ -128,6 +128,10 @@ impl HardwareRobot {
     /// paths are resolved against `base`.
     pub fn from_toml(text: &str, path: &Path, base: &Path) -> Result<Self, HardwareError> {
         let mut file: HardwareFile = parse_toml(text, path).map_err(SettingsFileError::from)?;
+        file.robot.link = file
+            .robot
+            .link
+            .with_process_keyframes(names_key(text, KEYFRAME_POLICY_KEY));
         share_geofence(&mut file).map_err(|e| SettingsFileError::config(path, e))?;
         resolve_zenoh(&mut file.zenoh, base);
         resolve_zenoh(&mut file.ros2.zenoh, base);

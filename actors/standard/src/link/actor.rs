@@ -121,6 +121,12 @@ const STATUS: TimerId = TimerId(2);
 const SEND_PLAN: TimerId = TimerId(3);
 const REPLAY: TimerId = TimerId(4);
 
+/// A link that has sent nothing for this long sends a [`wire::Heartbeat`] (checked
+/// on the one-second status timer): a member with nothing else to say (the base
+/// station, a robot whose odometry stopped) stays a store-and-forward recipient of
+/// its peers instead of being suspended as silent after `peer_timeout_s`.
+pub const HEARTBEAT_AFTER: Duration = Duration::from_secs(1);
+
 /// See the [module docs](crate::link).
 pub struct LinkActor {
     config: LinkConfig,
@@ -162,6 +168,8 @@ pub struct LinkActor {
     replay: Vec<ReceivedMessage>,
     /// Per peer, the latest of its runs heard (its start on the team clock).
     peer_runs: BTreeMap<u32, u64>,
+    /// When this link last offered a message of its own (for the heartbeat).
+    last_offered: Option<Time>,
 }
 
 impl LinkActor {
@@ -197,6 +205,7 @@ impl LinkActor {
             lanes_changed: false,
             replay: Vec::new(),
             peer_runs: BTreeMap::new(),
+            last_offered: None,
         })
     }
 
@@ -336,6 +345,7 @@ impl LinkActor {
         let bytes = wire::encode(&envelope)
             .map_err(|e| ActorError::with_source("encoding a message", e))?;
         self.sequence += 1;
+        self.last_offered = Some(ctx.now());
         let now = ctx.now().as_nanos();
         let offered = match lane {
             None => self.shaper.offer(now, class, bytes),
@@ -389,6 +399,20 @@ impl LinkActor {
         });
         self.sent_stamp = Some(odometry.stamp);
         self.send(payload, odometry.stamp, ctx)
+    }
+
+    /// Sends a heartbeat when this link has offered nothing for [`HEARTBEAT_AFTER`]
+    /// and has a team to tell.
+    fn send_heartbeat_if_idle(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        let idle = self
+            .last_offered
+            .is_none_or(|at| now.saturating_since(at) >= HEARTBEAT_AFTER);
+        if !idle || (self.roster.is_empty() && self.config.peers.is_empty()) {
+            return Ok(());
+        }
+        let uptime_s = now.as_secs_f64();
+        self.send(Payload::Heartbeat(wire::Heartbeat { uptime_s }), now, ctx)
     }
 
     /// Minimum time between two plans; `None` when plans are not shared.
@@ -474,15 +498,29 @@ impl LinkActor {
             if self.shaper.suspend_peer(peer) {
                 self.peer_timeouts += 1;
                 let (pending, pending_bytes) = self.shaper.pending_for(Class::Keyframe, peer);
-                tracing::warn!(
-                    robot = ctx.robot_name(),
-                    peer,
-                    pending,
-                    pending_bytes,
-                    "peer silent for more than {} s: suspended as a store-and-forward \
-                     recipient until heard again",
-                    self.config.peer_timeout_s
-                );
+                if self.config.base_id == Some(peer) {
+                    // A team may fly without its base (or before it starts): one
+                    // line per silence, not a warning.
+                    tracing::info!(
+                        robot = ctx.robot_name(),
+                        base = peer,
+                        pending,
+                        pending_bytes,
+                        "base station not heard for {} s: what it misses is kept for it \
+                         and sent when it is heard",
+                        self.config.peer_timeout_s
+                    );
+                } else {
+                    tracing::warn!(
+                        robot = ctx.robot_name(),
+                        peer,
+                        pending,
+                        pending_bytes,
+                        "peer silent for more than {} s: suspended as a store-and-forward \
+                         recipient until heard again",
+                        self.config.peer_timeout_s
+                    );
+                }
             }
         }
         self.pump(ctx);
@@ -1061,6 +1099,7 @@ impl LinkActor {
                 Ok(())
             }
             Event::Timer(_) => {
+                self.send_heartbeat_if_idle(ctx)?;
                 self.expire_peers(ctx);
                 self.flush_rejection_log(ctx);
                 ctx.publish(

@@ -211,6 +211,30 @@ impl LinkConfig {
         self
     }
 
+    /// What robot processes (and the base station) do with keyframes unless their
+    /// file names `[robot.link.shaper.keyframe] policy` (`policy_named`): keep each
+    /// until every member acknowledged it (store-and-forward, in the journal on
+    /// disk, at most the class's `capacity_messages` and `capacity_bytes` per
+    /// member). A robot restarted after `kill -9`, or a base station that joins
+    /// late, then gets every keyframe its peers made before; simulated teams keep
+    /// the class's own default (drop-oldest), the setting the link studies fly.
+    ///
+    /// ```
+    /// use troupe_actors::link::LinkConfig;
+    /// use troupe_comms::shaping::QueuePolicy;
+    /// let config = LinkConfig::default().with_process_keyframes(false);
+    /// assert_eq!(config.shaper.keyframe.policy, QueuePolicy::StoreAndForward);
+    /// let named = LinkConfig::default().with_process_keyframes(true);
+    /// assert_eq!(named.shaper.keyframe.policy, QueuePolicy::DropOldest);
+    /// ```
+    #[must_use]
+    pub fn with_process_keyframes(mut self, policy_named: bool) -> Self {
+        if !policy_named {
+            self.shaper.keyframe.policy = QueuePolicy::StoreAndForward;
+        }
+        self
+    }
+
     /// The journal directory of a robot process whose outputs go to `out`.
     #[must_use]
     pub fn journal_dir_in(&self, out: &std::path::Path) -> PathBuf {

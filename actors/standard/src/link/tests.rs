@@ -9,6 +9,7 @@ use nalgebra::Point3;
 use super::*;
 use crate::msgs::Keyframe;
 use crate::trajectory::{Knot, Trajectory};
+use troupe_comms::shaping::ReassemblyConfig;
 use troupe_runtime::{ActorSpec, LinkRx, Publication, RobotSpec, SimExecutor};
 
 const TICK: TimerId = TimerId(0);
@@ -837,4 +838,65 @@ fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
     let status = status.lock().unwrap().clone().expect("a status");
     assert_eq!(status.rejections.from_the_future, 1);
     assert_eq!(status.rejections.total(), 1);
+}
+
+/// Issue 40, item 4: members with nothing of their own to say (no odometry: a
+/// base station, a robot whose odometry stopped) send heartbeats, so the robot
+/// storing keyframes for them never suspends them as silent once its keyframes
+/// stop coming (acknowledgements alone would have kept them only while there
+/// were keyframes to acknowledge), and every keyframe reaches each of them.
+#[test]
+fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
+    let mut config = LinkConfig::default().with_team(2).with_roster_as_peers();
+    config.shaper.keyframe = troupe_comms::shaping::ClassConfig::store_and_forward();
+    assert_eq!(config.peer_timeout_s, 10.0);
+    let team = vec![
+        RobotSpec::new("r0")
+            .with(link(&config))
+            .with(ActorSpec::new("keyframes", || KeyframeSource {
+                next: 0,
+                count: 5,
+            })),
+        RobotSpec::new("r1").with(link(&config)),
+        RobotSpec::new("base").with(link(&config)),
+    ];
+    type Log = Vec<(RobotId, u32)>;
+    let log: Arc<Mutex<Log>> = Arc::default();
+    let heartbeats = Arc::new(Mutex::new([0u32; 3]));
+    let status: Arc<Mutex<BTreeMap<RobotId, LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 5);
+    let (tap_log, tap_beats, tap_status) = (log.clone(), heartbeats.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(k) = p.get(&PEER_KEYFRAME) {
+            tap_log.lock().unwrap().push((p.robot, k.keyframe.id));
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            tap_status.lock().unwrap().insert(p.robot, s.clone());
+        } else if let Some(tx) = p.get(&LINK_TX)
+            && let Ok(Some(Incoming::Message(m))) =
+                Reassembler::new(ReassemblyConfig::default())
+                    .unwrap()
+                    .push(0, p.robot.0, &tx.bytes)
+            && let Ok(envelope) = wire::decode(&m.bytes)
+            && matches!(envelope.payload, Payload::Heartbeat(_))
+        {
+            tap_beats.lock().unwrap()[p.robot.0 as usize] += 1;
+        }
+    });
+    exec.run_until(Time::from_secs_f64(40.0));
+    exec.finish();
+    let status = status.lock().unwrap();
+    for robot in [RobotId(0), RobotId(1), RobotId(2)] {
+        assert_eq!(status[&robot].peer_timeouts, 0, "{robot}: {:?}", status[&robot]);
+        assert!(status[&robot].silent_peers.is_empty(), "{robot}");
+    }
+    let log = log.lock().unwrap();
+    for robot in [RobotId(1), RobotId(2)] {
+        let ids: Vec<u32> = log.iter().filter(|(r, _)| *r == robot).map(|(_, id)| *id).collect();
+        assert_eq!(ids, (0..5).collect::<Vec<_>>(), "{robot}");
+    }
+    // About one a second each once idle (none of them has odometry to send).
+    let beats = *heartbeats.lock().unwrap();
+    for (robot, n) in beats.iter().enumerate() {
+        assert!((30..=41).contains(n), "robot {robot} sent {n} heartbeats");
+    }
 }

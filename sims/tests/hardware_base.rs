@@ -1,0 +1,230 @@
+//! Issue 40, item 4: a hardware robot and a base station that joins late, both as
+//! the processes a team runs — `troupe-robot` (ROS 2 depth and odometry in over
+//! zenoh from `scripts/ros2/box_room_camera.py`, MAVLink setpoints out to
+//! `scripts/mavlink/px4_like_autopilot.py`) and `troupe base` started 18 s after it.
+//!
+//! Checks: the robot keeps its keyframes for the absent base (store-and-forward,
+//! the robot-process default) and says once that the base is not heard; the base,
+//! once it connects, gets every keyframe the robot made, those made before it
+//! started included, and acknowledges them; its heartbeats keep it a recipient (no
+//! "peer silent" line, nothing pending for it at the end). Skips, saying why,
+//! without the Python venvs (`.ci/run` installs them) or the `troupe-robot` binary
+//! (`cargo test --workspace` builds it).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The robot's flight (after its topics appeared), wall seconds.
+const FLY_S: f64 = 30.0;
+/// When the base starts, seconds after the robot process.
+const BASE_LATE_S: f64 = 18.0;
+
+/// The venv's Python if it imports `modules`, or why not.
+fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
+    let python = common::root().join(venv).join("bin/python");
+    let ok = Command::new(&python)
+        .args(["-c", &format!("import {modules}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        Ok(python)
+    } else {
+        Err(format!(
+            "{} cannot import {modules} (run .ci/run)",
+            python.display()
+        ))
+    }
+}
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free loopback port")
+        .port()
+}
+
+fn finish(child: Child, name: &str) -> Output {
+    let output = child.wait_with_output().expect("wait");
+    assert!(
+        output.status.success(),
+        "{name} failed: {}\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn read_json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).expect("json")
+}
+
+#[test]
+fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
+    let troupe_robot = Path::new(env!("CARGO_BIN_EXE_troupe")).with_file_name("troupe-robot");
+    let pythons = (
+        python(".venv-ros2", "rclpy.serialization, nav_msgs.msg, zenoh, numpy"),
+        python(".venv-pymavlink", "pymavlink"),
+    );
+    let (ros_python, mav_python) = match pythons {
+        (Ok(r), Ok(m)) if troupe_robot.exists() => (r, m),
+        (r, m) => {
+            let built = (!troupe_robot.exists())
+                .then(|| format!("{} is not built", troupe_robot.display()));
+            let why: Vec<String> = [r.err(), m.err(), built].into_iter().flatten().collect();
+            eprintln!("SKIPPED hardware robot + base test: {}", why.join("; "));
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dir = dir.path();
+    let [ros_port, robot_port, base_port] = common::free_ports_from(26_000, 3)[..] else {
+        unreachable!()
+    };
+    let (mavlink_port, state_port) = (free_udp_port(), free_udp_port());
+
+    // The team as the base reads it: one robot, the base as id 1.
+    std::fs::write(
+        dir.join("team.toml"),
+        "name = \"hwbase\"\nrobots = 1\n\n[robot.link]\nteam = 5\n",
+    )
+    .unwrap();
+    // A robot file as docs/hardware.md writes it; no keyframe policy named.
+    std::fs::write(
+        dir.join("robot0.toml"),
+        format!(
+            r#"id = 0
+team_size = 1
+out = "hw0"
+record = false
+[robot]
+sensor_rate_hz = 15.0
+[robot.link]
+team = 5
+[ros2]
+format = "rmw_zenoh"
+startup_timeout_s = 20.0
+zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
+[ros2.topics]
+depth = "/camera/depth/image_rect_raw"
+camera_info = "/camera/depth/camera_info"
+odometry = "/odom"
+[mavlink]
+connection = "udpin:127.0.0.1:{mavlink_port}"
+odometry_source = "external"
+[mavlink.geofence]
+min_m = [-2.5, -2.5, 0.5]
+max_m = [4.5, 2.5, 2.5]
+[zenoh]
+listen = ["tcp/127.0.0.1:{robot_port}"]
+"#
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("base.toml"),
+        format!(
+            "scenario = \"team.toml\"\nout = \"station\"\nply_points = 500\nrecord = false\n\n\
+             [zenoh]\nlisten = [\"tcp/127.0.0.1:{base_port}\"]\n\
+             connect = [\"tcp/127.0.0.1:{robot_port}\"]\n"
+        ),
+    )
+    .unwrap();
+
+    let peers_s = (FLY_S + 30.0).to_string();
+    let autopilot = Command::new(mav_python)
+        .arg(common::root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
+        .args(["--report", dir.join("autopilot.json").to_str().unwrap()])
+        .args(["--duration-s", &peers_s, "--start-ned", "0,0,-1.2"])
+        .args(["--state-to", &format!("127.0.0.1:{state_port}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the autopilot");
+    let camera = Command::new(ros_python)
+        .arg(common::root().join("scripts/ros2/box_room_camera.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
+        .args(["--state-port", &state_port.to_string()])
+        .args(["--duration-s", &peers_s])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the camera");
+    let started = Instant::now();
+    let robot = Command::new(&troupe_robot)
+        .args(["--config", dir.join("robot0.toml").to_str().unwrap()])
+        .args(["--duration-s", &FLY_S.to_string()])
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start troupe-robot");
+
+    std::thread::sleep(Duration::from_secs_f64(BASE_LATE_S));
+    let base = Command::new(env!("CARGO_BIN_EXE_troupe"))
+        .args(["base", "--config", dir.join("base.toml").to_str().unwrap()])
+        .args(["--duration-s", &(FLY_S + 30.0).to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start troupe base");
+    let base_started_s = started.elapsed().as_secs_f64();
+
+    let robot_out = finish(robot, "troupe-robot");
+    // The base hears the last keyframes, then stops as an operator stops it.
+    std::thread::sleep(Duration::from_secs(3));
+    let stopped = Command::new("kill")
+        .args(["-TERM", &base.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(stopped.success());
+    let base_out = finish(base, "troupe base");
+    let _ = (camera.wait_with_output(), autopilot.wait_with_output());
+
+    let log = common::strip_ansi(&String::from_utf8_lossy(&robot_out.stderr));
+    let summary = read_json(&dir.join("hw0/summary.json"));
+    let keyframes = summary["keyframes"].as_u64().unwrap();
+    let link = &summary["link"];
+    println!(
+        "robot: {keyframes} keyframes; base started {base_started_s:.1} s after it; link {}",
+        serde_json::json!({
+            "silent_peers": link["silent_peers"],
+            "peer_timeouts": link["peer_timeouts"],
+        })
+    );
+    let lines = |needle: &str| log.lines().filter(|l| l.contains(needle)).count();
+    // The absent base was reported once (it stayed silent past peer_timeout_s
+    // before it started), never as a silent peer, and heard from then on.
+    assert_eq!(lines("base station not heard"), 1, "{log}");
+    let pending = log
+        .lines()
+        .find(|l| l.contains("base station not heard"))
+        .and_then(|l| l.split("pending=").nth(1))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse::<u64>().ok());
+    assert!(
+        pending.is_some_and(|n| n > 0),
+        "no keyframe kept for the absent base: {pending:?}"
+    );
+    assert_eq!(lines("peer silent"), 0, "{log}");
+    assert_eq!(link["peer_timeouts"], 1, "{link}");
+    assert_eq!(link["silent_peers"], serde_json::json!([]), "{link}");
+
+    // Keyframes made before the base started: the robot's journal kept them for it.
+    let base_log = common::strip_ansi(&String::from_utf8_lossy(&base_out.stderr));
+    let station = read_json(&dir.join("station/summary.json"));
+    let got = station["robots"]["0"]["keyframes"].as_u64().unwrap_or(0);
+    println!("base: {got} of the robot's {keyframes} keyframes");
+    assert!(keyframes >= 10, "the robot made only {keyframes} keyframes");
+    assert_eq!(got, keyframes, "the base missed keyframes\n{base_log}");
+}
