@@ -384,6 +384,7 @@ fn a_silent_topic_is_one_clear_error_after_the_startup_timeout() {
         err,
         "ROS 2 topic `/camera/depth/image_rect_raw` (zenoh key \
          `0/camera/depth/image_rect_raw/sensor_msgs::msg::dds_::Image_/*`) sent nothing \
-         within 0.3 s: check the topic name, `format`, `domain_id` and the zenoh endpoints"
+         within 0.3 s: check the topic name, `format`, `domain_id`, `bridge_namespace` and \
+         the zenoh endpoints"
     );
 }

@@ -436,3 +436,45 @@ pub fn run_until_signal(station: &BaseStation) -> Result<BaseSummary, BaseError>
     std::thread::spawn(move || read_commands(std::io::stdin().lock(), std::io::stdout(), &to));
     harness::block_on(run(station, shutdown_signal(), commands))?
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The keys of a scenario file the base uses (`troupe_sims::scenario::load_team`
+    /// reads the whole scenario; this crate cannot depend on it).
+    #[derive(Deserialize)]
+    struct TeamFile {
+        name: String,
+        seed: u64,
+        robots: u32,
+        robot: RobotConfig,
+    }
+
+    fn read_team(path: &Path) -> Result<TeamSettings, SettingsFileError> {
+        let team: TeamFile = read_toml(path)?;
+        team.robot
+            .validate()
+            .map_err(|e| SettingsFileError::config(path, e.within("robot")))?;
+        Ok(TeamSettings {
+            name: team.name,
+            robots: team.robots,
+            seed: team.seed,
+            robot: team.robot,
+        })
+    }
+
+    #[test]
+    fn the_hardware_base_file_serves_the_example_hardware_team() {
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+        let base = BaseStation::load(&examples.join("hardware_base.toml"), read_team).unwrap();
+        let robot = crate::hardware::HardwareRobot::load(&examples.join("hardware_robot.toml"))
+            .unwrap()
+            .file;
+        assert_eq!(base.team.robots, robot.team_size);
+        assert_eq!(base.team.robot.link.team, robot.robot.link.team);
+        // The base's id is the one the robots accept: their team size.
+        assert_eq!(base.base_id, robot.team_size);
+        assert_eq!(base.config.zenoh.connect.len(), robot.team_size as usize);
+    }
+}

@@ -102,7 +102,7 @@ pub enum HardwareError {
     Harness(#[from] HarnessError),
     /// The MAVLink vehicle gave up waiting for the autopilot (`[mavlink]
     /// autopilot_wait_s`, `control_wait_s`); the outputs were written.
-    #[error("{source}; {setpoints} setpoints sent")]
+    #[error("the MAVLink vehicle gave up after {setpoints} setpoints")]
     Vehicle {
         /// Why.
         source: crate::mavlink::GaveUp,
@@ -353,5 +353,25 @@ mod tests {
                 chain(&e)
             );
         }
+    }
+
+    #[test]
+    fn a_vehicle_that_gave_up_is_one_line_saying_why_once() {
+        let e = HardwareError::Vehicle {
+            source: crate::mavlink::GaveUp::NoAutopilot {
+                connection: "udpin:0.0.0.0:14540".into(),
+                wait_s: 10.0,
+            },
+            setpoints: 0,
+        };
+        let line = chain(&e);
+        assert!(
+            line.starts_with(
+                "the MAVLink vehicle gave up after 0 setpoints: no autopilot heartbeat on \
+                 `udpin:0.0.0.0:14540` within 10 s of the start"
+            ),
+            "{line}"
+        );
+        assert_eq!(line.matches("no autopilot heartbeat").count(), 1, "{line}");
     }
 }

@@ -7,7 +7,7 @@ use troupe_comms::zenoh::ZenohConfig;
 
 use crate::ConfigError;
 
-use super::keyexpr::{KeyFormat, WireFormat, strip_topic};
+use super::keyexpr::{BridgeNamespace, KeyFormat, NAMESPACE_RULE, WireFormat, strip_topic};
 
 /// ROS topic names (absolute, e.g. `/camera/depth/image_rect_raw`). Depth comes
 /// either from `depth` + `camera_info` (+ optional `intensity`) or from `points`.
@@ -84,6 +84,14 @@ pub struct Ros2Config {
     /// `ROS_DOMAIN_ID` (rmw_zenoh keys start with it).
     #[serde(default)]
     pub domain_id: u32,
+    /// With `format = "bridge"` only: the namespace zenoh-bridge-ros2dds runs with
+    /// (`-n`/`--namespace`). The bridge puts it in front of every key, so every topic
+    /// is read and written at `<namespace>/<topic without its leading />`
+    /// (`"/drone1"` + `/camera/depth/image` → `drone1/camera/depth/image`). Leading
+    /// `/` optional; `"/"` (the bridge's default) and absent mean none. Refused with
+    /// `format = "rmw_zenoh"`, where a namespace is part of each topic name.
+    #[serde(default)]
+    pub bridge_namespace: Option<String>,
     /// Topic names.
     pub topics: Ros2Topics,
     /// Depth encodings accepted (subset of `16UC1`, `32FC1`).
@@ -171,18 +179,34 @@ fn default_node_name() -> String {
 }
 
 impl Ros2Config {
-    /// The key format of these settings.
-    #[must_use]
-    pub fn key_format(&self) -> KeyFormat {
-        KeyFormat {
+    /// The key format of these settings; an error names `bridge_namespace` if it is
+    /// invalid or set with rmw_zenoh.
+    pub fn key_format(&self) -> Result<KeyFormat, ConfigError> {
+        let namespace = match (self.format, &self.bridge_namespace) {
+            (_, None) => BridgeNamespace::ROOT,
+            (WireFormat::Bridge, Some(ns)) => BridgeNamespace::new(ns).map_err(|_| {
+                ConfigError::new("bridge_namespace", NAMESPACE_RULE, format!("{ns:?}"))
+            })?,
+            (WireFormat::RmwZenoh, Some(ns)) => {
+                return Err(ConfigError::new(
+                    "bridge_namespace",
+                    "applies to `format = \"bridge\"` only: under rmw_zenoh a namespace is \
+                     part of each topic name (e.g. `/drone1/odom`)",
+                    format!("{ns:?}"),
+                ));
+            }
+        };
+        Ok(KeyFormat {
             format: self.format,
             domain_id: self.domain_id,
-        }
+            namespace,
+        })
     }
 
     /// Checks every setting except the zenoh table (its own `validate`); the error
     /// names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.key_format()?;
         let t = &self.topics;
         let named = [
             ("topics.depth", &t.depth),
@@ -335,6 +359,8 @@ mod tests {
         c.validate().unwrap();
         assert_eq!(c.format, WireFormat::RmwZenoh);
         assert_eq!(c.domain_id, 0);
+        assert_eq!(c.bridge_namespace, None);
+        assert_eq!(c.key_format().unwrap().namespace, BridgeNamespace::ROOT);
         assert_eq!(c.max_depth_m, 5.0);
         assert_eq!(c.depth_encodings, ["16UC1", "32FC1"]);
         // The default extrinsics put the camera body frame on the body frame.
@@ -406,5 +432,76 @@ mod tests {
              cy = 3.0, max_depth_m = 5.0 }}\n{points}"
         );
         parse(&with_k).unwrap().validate().unwrap();
+    }
+
+    #[test]
+    fn the_bridge_namespace_prefixes_every_bridge_key() {
+        let bridge = MINIMAL.replace("\"rmw_zenoh\"", "\"bridge\"");
+        let text = bridge.replacen("[topics]", "bridge_namespace = \"/drone1\"\n[topics]", 1);
+        let c = parse(&text).unwrap();
+        c.validate().unwrap();
+        let format = c.key_format().unwrap();
+        assert_eq!(
+            format
+                .topic_key::<crate::ros2::msgs::Image>("/camera/depth/image")
+                .unwrap(),
+            "drone1/camera/depth/image"
+        );
+        assert_eq!(
+            format
+                .subscribe_key::<crate::ros2::msgs::Odometry>(&c.topics.odometry)
+                .unwrap(),
+            "drone1/odom"
+        );
+        // "/" is the bridge's default: no prefix.
+        let root = bridge.replacen("[topics]", "bridge_namespace = \"/\"\n[topics]", 1);
+        let c = parse(&root).unwrap();
+        assert_eq!(
+            c.key_format()
+                .unwrap()
+                .subscribe_key::<crate::ros2::msgs::Odometry>("/odom")
+                .unwrap(),
+            "odom"
+        );
+    }
+
+    #[test]
+    fn a_bad_or_misplaced_bridge_namespace_is_refused_by_name() {
+        let bridge = MINIMAL.replace("\"rmw_zenoh\"", "\"bridge\"");
+        for bad in ["", "/drone1/", "//drone1", "/drone*", "/a/$b", "/a#", "/a?"] {
+            let text = bridge.replacen(
+                "[topics]",
+                &format!("bridge_namespace = {bad:?}\n[topics]"),
+                1,
+            );
+            let err = parse(&text).unwrap().validate().unwrap_err();
+            assert_eq!(err.key, "bridge_namespace", "{bad:?}: {err}");
+            assert_eq!(err.rule, NAMESPACE_RULE);
+            assert_eq!(err.value, format!("{bad:?}"));
+        }
+        let text = MINIMAL.replacen("[topics]", "bridge_namespace = \"/drone1\"\n[topics]", 1);
+        let c = parse(&text).unwrap();
+        let err = c.validate().unwrap_err();
+        assert_eq!(err.key, "bridge_namespace");
+        assert!(
+            err.to_string().starts_with(
+                "`bridge_namespace` applies to `format = \"bridge\"` only: under rmw_zenoh"
+            ),
+            "{err}"
+        );
+        assert_eq!(c.key_format().unwrap_err(), err);
+    }
+
+    #[test]
+    fn the_documented_table_is_valid() {
+        let page = include_str!("../../../docs/hardware-ros2.md");
+        let mut blocks = page.split("```toml\n").skip(1);
+        for block in blocks.by_ref() {
+            let end = block.find("```").expect("the block ends");
+            let table: toml::Table = toml::from_str(&block[..end]).unwrap();
+            let config: Ros2Config = table["ros2"].clone().try_into().unwrap();
+            config.validate().unwrap();
+            config.zenoh.validate().unwrap();
+        }
     }
 }

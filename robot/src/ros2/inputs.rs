@@ -348,7 +348,7 @@ impl Ros2Inputs {
     /// Validates `config` and subscribes to its input topics on `session`.
     pub fn subscribe(session: &zenoh::Session, config: &Ros2Config) -> Result<Self, Ros2Error> {
         let shared = Arc::new(Shared::new(config)?);
-        let format = config.key_format();
+        let format = config.key_format()?;
         let t = &config.topics;
         let entries = [
             (Input::Depth, t.depth.as_ref()),

@@ -8,7 +8,9 @@
 //!   different: there a name is one chunk, its slashes *mangled* to `%`
 //!   ([`mangle_name`]); an empty namespace or enclave is a lone `%`.
 //! - **bridge** (`zenoh-bridge-ros2dds` in front of a DDS robot): the topic name
-//!   without its leading slash, e.g. `camera/depth/image_rect_raw`.
+//!   without its leading slash, e.g. `camera/depth/image_rect_raw`, behind the
+//!   bridge's namespace if it runs with one ([`BridgeNamespace`]: `-n /drone1` →
+//!   `drone1/camera/depth/image_rect_raw`).
 //!
 //! Both carry the CDR payload with its encapsulation header. rmw_zenoh adds an
 //! attachment ([`Attachment`](super::Attachment)).
@@ -27,13 +29,63 @@ pub enum WireFormat {
     Bridge,
 }
 
-/// A key format with its ROS domain.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A key format with its ROS domain and, for the bridge, its namespace.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct KeyFormat {
     /// The wire format.
     pub format: WireFormat,
     /// `ROS_DOMAIN_ID` (the first key chunk under rmw_zenoh; the bridge leaves it out).
     pub domain_id: u32,
+    /// The bridge's namespace, in front of every bridge key. rmw_zenoh keys leave it
+    /// out: there a namespace is part of each topic name (the `[ros2]` table refuses
+    /// one with `format = "rmw_zenoh"`).
+    pub namespace: BridgeNamespace,
+}
+
+/// What a bridge namespace must be, as a [`ConfigError`](crate::ConfigError) rule.
+pub const NAMESPACE_RULE: &str = "must be a namespace to put in front of zenoh keys: \
+     `/name` or `/a/b` (leading `/` optional; `/` alone for none), no empty level, \
+     no `*`, `$`, `#` or `?`";
+
+/// The namespace `zenoh-bridge-ros2dds` runs with (`-n`/`--namespace`, or `namespace`
+/// in its configuration file). The bridge puts it in front of the zenoh key of every
+/// ROS topic it routes: under `/drone1`, `/camera/depth/image` is
+/// `drone1/camera/depth/image`. The root namespace `/` (the bridge's default) adds
+/// nothing.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BridgeNamespace(String);
+
+/// A bridge namespace that cannot prefix a zenoh key.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("bridge namespace `{0}` {rule}", rule = NAMESPACE_RULE)]
+pub struct NamespaceError(pub String);
+
+impl BridgeNamespace {
+    /// The root namespace: bridge keys are the bare topic names.
+    pub const ROOT: BridgeNamespace = BridgeNamespace(String::new());
+
+    /// Checks a namespace as given to the bridge: its leading `/` is optional, `/`
+    /// alone is [`ROOT`](Self::ROOT); no level may be empty (`//a`, `/a/`, `""`) or
+    /// hold a zenoh wildcard or reserved character (`*`, `$`, `#`, `?`).
+    pub fn new(namespace: &str) -> Result<Self, NamespaceError> {
+        if namespace == "/" {
+            return Ok(Self::ROOT);
+        }
+        let stripped = namespace.strip_prefix('/').unwrap_or(namespace);
+        let level_ok = |level: &str| !level.is_empty() && !level.contains(['*', '$', '#', '?']);
+        if stripped.split('/').all(level_ok) {
+            Ok(BridgeNamespace(stripped.to_owned()))
+        } else {
+            Err(NamespaceError(namespace.to_owned()))
+        }
+    }
+
+    /// The key chunks it adds, without a leading or trailing `/` (`drone1`, `a/b`);
+    /// empty for the root namespace.
+    #[must_use]
+    pub fn as_key_prefix(&self) -> &str {
+        &self.0
+    }
 }
 
 /// A topic name that cannot be put on zenoh.
@@ -102,7 +154,10 @@ impl KeyFormat {
                 self.domain_id,
                 dds_type_name(T::TYPE_NAME)
             ),
-            WireFormat::Bridge => topic.to_owned(),
+            WireFormat::Bridge => match self.namespace.as_key_prefix() {
+                "" => topic.to_owned(),
+                namespace => format!("{namespace}/{topic}"),
+            },
         })
     }
 
@@ -142,7 +197,16 @@ mod tests {
     const RMW: KeyFormat = KeyFormat {
         format: WireFormat::RmwZenoh,
         domain_id: 0,
+        namespace: BridgeNamespace::ROOT,
     };
+
+    fn bridge(namespace: &str) -> KeyFormat {
+        KeyFormat {
+            format: WireFormat::Bridge,
+            domain_id: 3,
+            namespace: BridgeNamespace::new(namespace).unwrap(),
+        }
+    }
 
     #[test]
     fn rmw_zenoh_keys_keep_inner_slashes_and_carry_type_and_hash() {
@@ -164,10 +228,7 @@ mod tests {
 
     #[test]
     fn bridge_keys_are_the_topic_without_its_leading_slash() {
-        let bridge = KeyFormat {
-            format: WireFormat::Bridge,
-            domain_id: 3,
-        };
+        let bridge = bridge("/");
         assert_eq!(
             bridge.topic_key::<Image>("/camera/depth/image").unwrap(),
             "camera/depth/image"
@@ -179,6 +240,72 @@ mod tests {
                 .unwrap(),
             None
         );
+    }
+
+    #[test]
+    fn bridge_keys_carry_the_bridge_namespace_in_front() {
+        let drone1 = bridge("/drone1");
+        assert_eq!(
+            drone1.topic_key::<Image>("/camera/depth/image").unwrap(),
+            "drone1/camera/depth/image"
+        );
+        assert_eq!(
+            drone1.subscribe_key::<Odometry>("odom").unwrap(),
+            "drone1/odom"
+        );
+        // The leading slash is optional, and a namespace may have several levels.
+        assert_eq!(bridge("drone1"), drone1);
+        assert_eq!(
+            bridge("/team7/drone1")
+                .topic_key::<Image>("/troupe/plan")
+                .unwrap(),
+            "team7/drone1/troupe/plan"
+        );
+        assert_eq!(bridge("/").namespace, BridgeNamespace::ROOT);
+        for key in [
+            drone1.topic_key::<Image>("/camera/depth/image").unwrap(),
+            bridge("/team7/drone1")
+                .subscribe_key::<Image>("/a")
+                .unwrap(),
+        ] {
+            zenoh::key_expr::KeyExpr::try_from(key.as_str()).unwrap();
+        }
+        // Still no liveliness tokens: the bridge discovers DDS entities.
+        assert_eq!(
+            drone1
+                .publisher_liveliness_key::<Image>("abc", 1, "troupe", "/x")
+                .unwrap(),
+            None
+        );
+    }
+
+    #[test]
+    fn rmw_zenoh_keys_leave_a_namespace_out() {
+        let with_namespace = KeyFormat {
+            namespace: BridgeNamespace::new("/drone1").unwrap(),
+            ..RMW
+        };
+        for topic in ["/camera/depth/image", "odom"] {
+            assert_eq!(
+                with_namespace.topic_key::<Image>(topic).unwrap(),
+                RMW.topic_key::<Image>(topic).unwrap()
+            );
+            assert_eq!(
+                with_namespace.subscribe_key::<Image>(topic).unwrap(),
+                RMW.subscribe_key::<Image>(topic).unwrap()
+            );
+        }
+    }
+
+    #[test]
+    fn bad_bridge_namespaces_are_rejected_with_the_namespace() {
+        for bad in [
+            "", "//", "//a", "/a/", "a//b", "/a/*", "/**", "/a$b", "/$*", "/a#", "/a?b",
+        ] {
+            let err = BridgeNamespace::new(bad).unwrap_err();
+            assert_eq!(err, NamespaceError(bad.to_owned()));
+            assert!(err.to_string().contains(&format!("`{bad}`")), "{err}");
+        }
     }
 
     #[test]

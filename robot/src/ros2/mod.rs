@@ -34,7 +34,7 @@ pub use attachment::Attachment;
 pub use cdr::{CdrError, RosMessage};
 pub use config::{Extrinsics, Ros2Config, Ros2Topics};
 pub use inputs::{InputStats, OdometryInput, Ros2FrameSource, Ros2Inputs};
-pub use keyexpr::{KeyFormat, TopicNameError, WireFormat};
+pub use keyexpr::{BridgeNamespace, KeyFormat, NamespaceError, TopicNameError, WireFormat};
 pub use outputs::{OutputStats, Ros2Outputs, Ros2Publisher};
 
 /// Why the ROS 2 drivers could not start.
@@ -61,7 +61,7 @@ pub enum Ros2Error {
     /// A configured input topic delivered nothing in time.
     #[error(
         "ROS 2 topic `{topic}` (zenoh key `{key}`) sent nothing within {timeout_s} s: check the \
-         topic name, `format`, `domain_id` and the zenoh endpoints"
+         topic name, `format`, `domain_id`, `bridge_namespace` and the zenoh endpoints"
     )]
     TopicSilent {
         /// The topic.

@@ -90,7 +90,7 @@ impl Ros2Publisher {
     /// of its output topics on `session`, and starts the publishing thread.
     pub fn open(session: &zenoh::Session, config: &Ros2Config) -> Result<Self, Ros2Error> {
         config.validate()?;
-        let format = config.key_format();
+        let format = config.key_format()?;
         let zid = session.zid().to_string();
         let zid_bytes = session.zid().to_le_bytes();
         let t = &config.topics;
@@ -430,6 +430,7 @@ mod tests {
         let sink = received.clone();
         let key = config
             .key_format()
+            .unwrap()
             .topic_key::<Path>("/troupe/plan")
             .unwrap();
         let _subscriber = session
