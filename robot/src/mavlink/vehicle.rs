@@ -233,7 +233,10 @@ impl MavlinkVehicle {
         let mut changes = Vec::new();
         let setpoint = self.guard()?.tick(now, &mut changes);
         for (input, change) in changes {
-            log_change(input, Some(change));
+            // An autopilot never heard is not lost: `check_waits` gives up on it.
+            if input != GuardInput::Heartbeat || self.heartbeat.is_some() {
+                log_change(input, Some(change));
+            }
         }
         self.check_waits(now);
         self.publish_hold(ctx)?;
@@ -291,9 +294,6 @@ impl MavlinkVehicle {
             }
             _ => None,
         };
-        if let Some(why) = &self.gave_up {
-            tracing::error!("{why}");
-        }
     }
 
     /// Says where the vehicle stands instead of following the plan when that changes —
@@ -423,10 +423,19 @@ impl Actor for MavlinkVehicle {
             },
             ctx.now(),
         ));
+        // Ticks first: without a link they still give up after `autopilot_wait_s`.
+        ctx.set_timer(SETPOINT_TICK, Duration::from_secs_f64(period_s));
         let link = MavlinkLink::open(&s.connection, s.source_system_id, s.source_component_id)
             .map_err(|e| ActorError::with_source("cannot start the MAVLink link", e))?;
         self.link = Some(link);
-        ctx.set_timer(SETPOINT_TICK, Duration::from_secs_f64(period_s));
+        if s.autopilot_wait_s > 0.0 {
+            tracing::info!(
+                "waiting for the autopilot's heartbeat on `{}` (up to {} s, [mavlink] \
+                 autopilot_wait_s)",
+                s.connection,
+                s.autopilot_wait_s
+            );
+        }
         Ok(())
     }
 
