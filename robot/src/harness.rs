@@ -496,12 +496,28 @@ pub fn unix_now_s() -> f64 {
         .map_or(0.0, |d| d.as_secs_f64())
 }
 
-/// Logs to stderr, filtered by `RUST_LOG` (default `warn`): a binary's first line.
+/// The log filter of the `troupe` binary without `RUST_LOG`: warnings, less zenoh's
+/// notice that gossip is off (troupe turns it off: peers are named, not discovered).
+pub const DEFAULT_LOG_FILTER: &str = "warn,zenoh::net::routing::hat=error";
+
+/// The log filter of `troupe-robot` without `RUST_LOG`: [`DEFAULT_LOG_FILTER`] and
+/// the hardware driver's and the link's rare info lines (waiting for the autopilot,
+/// control handed over, a restarted peer, an absent base station; docs/hardware.md).
+pub const HARDWARE_LOG_FILTER: &str =
+    "warn,zenoh::net::routing::hat=error,troupe_robot=info,troupe_actors::link=info";
+
+/// Logs to stderr, filtered by `RUST_LOG` (default [`DEFAULT_LOG_FILTER`]): a
+/// binary's first line.
 pub fn init_logging() {
+    init_logging_with(DEFAULT_LOG_FILTER);
+}
+
+/// Logs to stderr, filtered by `RUST_LOG` (default `default_filter`).
+pub fn init_logging_with(default_filter: &str) {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
         )
         .with_writer(std::io::stderr)
         .init();

@@ -244,16 +244,18 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
     // decoded by rclpy: in control while flying, at the setpoint rate.
     if python(".venv-ros2", "diagnostic_msgs.msg").is_ok() {
         let arrays = camera["diagnostics"].as_array().unwrap();
-        println!("{} diagnostic arrays; last {:?}", arrays.len(), arrays.last());
+        println!(
+            "{} diagnostic arrays; last {:?}",
+            arrays.len(),
+            arrays.last()
+        );
         assert!(arrays.len() >= 5, "{} diagnostic arrays", arrays.len());
         let vehicle: Vec<&Value> = arrays
             .iter()
             .flat_map(|a| a["status"].as_array().unwrap())
             .collect();
         assert!(
-            vehicle
-                .iter()
-                .all(|v| v["name"] == "troupe/robot0/vehicle"),
+            vehicle.iter().all(|v| v["name"] == "troupe/robot0/vehicle"),
             "{vehicle:?}"
         );
         assert!(
@@ -403,8 +405,10 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
 /// `gave_up` in the summary).
 #[test]
 fn no_autopilot_is_one_error_after_the_wait() {
-    let ros_python = match python(".venv-ros2", "rclpy.serialization, nav_msgs.msg, zenoh, numpy")
-    {
+    let ros_python = match python(
+        ".venv-ros2",
+        "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
+    ) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("SKIPPED no-autopilot test: {e}");
@@ -439,7 +443,10 @@ fn no_autopilot_is_one_error_after_the_wait() {
     let wall_s = started.elapsed().as_secs_f64();
     let _ = camera.wait_with_output();
     let stderr = String::from_utf8_lossy(&robot.stderr);
-    println!("troupe-robot exited {} after {wall_s:.1} s:\n{stderr}", robot.status);
+    println!(
+        "troupe-robot exited {} after {wall_s:.1} s:\n{stderr}",
+        robot.status
+    );
     assert_eq!(robot.status.code(), Some(1), "{stderr}");
     assert!(wall_s < 20.0, "it waited {wall_s:.1} s");
     let errors: Vec<&str> = stderr

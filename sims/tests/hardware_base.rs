@@ -72,7 +72,10 @@ fn read_json(path: &Path) -> Value {
 fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
     let troupe_robot = Path::new(env!("CARGO_BIN_EXE_troupe")).with_file_name("troupe-robot");
     let pythons = (
-        python(".venv-ros2", "rclpy.serialization, nav_msgs.msg, zenoh, numpy"),
+        python(
+            ".venv-ros2",
+            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
+        ),
         python(".venv-pymavlink", "pymavlink"),
     );
     let (ros_python, mav_python) = match pythons {

@@ -39,8 +39,8 @@ fn two_robot_team(dir: &Path, name: &str) -> Scenario {
 }
 
 /// A two-robot team whose keyframes are store-and-forward (kept until each peer
-/// acknowledged them; the default drops the oldest), sent from the start to the
-/// robots `peers` (others once heard).
+/// acknowledged them), named in the file, sent from the start to the robots `peers`
+/// (others once heard).
 fn store_and_forward_team(dir: &Path, name: &str, peers: &[u32]) -> Scenario {
     team_scenario(
         dir,
@@ -738,11 +738,12 @@ fn spawn_robot(file: &Path, duration_s: Option<f64>) -> Child {
 /// keyframe accepted for robot 1 and no new message takes an id handed out before
 /// a crash; the restarted robot publishes robot 1's keyframes received before the
 /// crash again (its team map is whole); when robot 1 comes back, every keyframe
-/// robot 0 accepted for it arrives.
+/// robot 0 accepted for it arrives. The team names no keyframe policy: robot
+/// processes store and forward keyframes by default (issue 45, item 4).
 #[test]
 fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
     let dir = tempfile::tempdir().expect("tempdir");
-    store_and_forward_team(dir.path(), "killed", &[]);
+    two_robot_team(dir.path(), "killed");
     let files = write_team(
         dir.path(),
         Path::new("team.toml"),

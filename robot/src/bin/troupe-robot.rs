@@ -22,13 +22,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    troupe_robot::harness::init_logging_with(troupe_robot::harness::HARDWARE_LOG_FILTER);
     let args = Args::parse();
     let result = HardwareRobot::load(&args.config).and_then(|mut robot| {
         if args.duration_s.is_some() {

@@ -10,7 +10,9 @@ use troupe_record::{Compression, check_rate_hz};
 use crate::harness::HarnessError;
 use crate::mavlink::MavlinkConfig;
 use crate::ros2::{Ros2Config, Ros2Error};
-use crate::toml_file::{KEYFRAME_POLICY_KEY, SettingsFileError, TomlFileError, names_key, parse_toml};
+use crate::toml_file::{
+    KEYFRAME_POLICY_KEY, SettingsFileError, TomlFileError, names_key, parse_toml,
+};
 use crate::{AssembleError, ConfigError, RobotConfig};
 
 /// A hardware robot file as written (see the [module docs](crate::hardware) and

@@ -872,10 +872,9 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
         } else if let Some(s) = p.get(&LINK_STATUS) {
             tap_status.lock().unwrap().insert(p.robot, s.clone());
         } else if let Some(tx) = p.get(&LINK_TX)
-            && let Ok(Some(Incoming::Message(m))) =
-                Reassembler::new(ReassemblyConfig::default())
-                    .unwrap()
-                    .push(0, p.robot.0, &tx.bytes)
+            && let Ok(Some(Incoming::Message(m))) = Reassembler::new(ReassemblyConfig::default())
+                .unwrap()
+                .push(0, p.robot.0, &tx.bytes)
             && let Ok(envelope) = wire::decode(&m.bytes)
             && matches!(envelope.payload, Payload::Heartbeat(_))
         {
@@ -886,12 +885,20 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
     exec.finish();
     let status = status.lock().unwrap();
     for robot in [RobotId(0), RobotId(1), RobotId(2)] {
-        assert_eq!(status[&robot].peer_timeouts, 0, "{robot}: {:?}", status[&robot]);
+        assert_eq!(
+            status[&robot].peer_timeouts, 0,
+            "{robot}: {:?}",
+            status[&robot]
+        );
         assert!(status[&robot].silent_peers.is_empty(), "{robot}");
     }
     let log = log.lock().unwrap();
     for robot in [RobotId(1), RobotId(2)] {
-        let ids: Vec<u32> = log.iter().filter(|(r, _)| *r == robot).map(|(_, id)| *id).collect();
+        let ids: Vec<u32> = log
+            .iter()
+            .filter(|(r, _)| *r == robot)
+            .map(|(_, id)| *id)
+            .collect();
         assert_eq!(ids, (0..5).collect::<Vec<_>>(), "{robot}");
     }
     // About one a second each once idle (none of them has odometry to send).
