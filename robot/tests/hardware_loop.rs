@@ -240,6 +240,15 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
     );
     assert_eq!(paths[0]["frame_id"], "odom");
 
+    // The status names the absent base station (id 1 of a one-robot team), silent
+    // for longer than `peer_timeout_s` (10 s) of the 20 s flight.
+    assert_eq!(
+        camera["status"]["silent_peers"],
+        serde_json::json!([1]),
+        "status {}",
+        camera["status"]
+    );
+
     // The vehicle's state reached the ROS side as diagnostic_msgs/DiagnosticArray,
     // decoded by rclpy: in control while flying, at the setpoint rate.
     if python(".venv-ros2", "diagnostic_msgs.msg").is_ok() {

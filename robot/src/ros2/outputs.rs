@@ -17,6 +17,7 @@ use std::time::Duration;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use troupe_actors::link::LINK_STATUS;
 use troupe_actors::msgs::{KEYFRAME, PLAN};
 use troupe_actors::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId};
 use zenoh::Wait;
@@ -294,6 +295,9 @@ struct Status<'a> {
     keyframes: u64,
     outputs: OutputStats,
     inputs: Option<InputStats>,
+    /// Team members the link has not heard for `peer_timeout_s` (the base station
+    /// among them when it is absent); `None` before the link's first status.
+    silent_peers: Option<&'a [u32]>,
 }
 
 const STATUS: TimerId = TimerId(0);
@@ -307,6 +311,7 @@ pub struct Ros2Outputs {
     rng: ChaCha8Rng,
     plans: u64,
     keyframes: u64,
+    silent_peers: Option<Vec<u32>>,
 }
 
 impl Ros2Outputs {
@@ -321,6 +326,7 @@ impl Ros2Outputs {
             rng: ChaCha8Rng::seed_from_u64(0),
             plans: 0,
             keyframes: 0,
+            silent_peers: None,
         }
     }
 
@@ -340,6 +346,7 @@ impl Actor for Ros2Outputs {
             ctx.subscribe(&AUTOPILOT_STATUS, QueuePolicy::LATEST);
         }
         if !self.status_period.is_zero() {
+            ctx.subscribe(&LINK_STATUS, QueuePolicy::LATEST);
             ctx.set_timer(STATUS, self.status_period);
         }
         Ok(())
@@ -368,6 +375,9 @@ impl Actor for Ros2Outputs {
                         cloud_from_gmm(&keyframe.gmm, config.map_points, header, &mut self.rng);
                     self.publisher.offer(Output::Map, &cloud)?;
                 }
+                if let Some(link) = m.get(&LINK_STATUS) {
+                    self.silent_peers = Some(link.silent_peers.clone());
+                }
                 if let Some(status) = m.get(&AUTOPILOT_STATUS) {
                     let header = Header {
                         stamp: Self::stamps(ctx).to_ros(status.stamp),
@@ -385,6 +395,7 @@ impl Actor for Ros2Outputs {
                     keyframes: self.keyframes,
                     outputs: self.publisher.stats(),
                     inputs: self.inputs.as_ref().map(Ros2Inputs::stats),
+                    silent_peers: self.silent_peers.as_deref(),
                 };
                 let data = serde_json::to_string(&status).unwrap_or_default();
                 self.publisher.offer(Output::Status, &RosString { data })?;

@@ -50,6 +50,12 @@ pub(crate) fn run(args: LaunchArgs) -> anyhow::Result<()> {
         args.base_port,
         dir.display()
     );
+    if !args.tls {
+        println!(
+            "the team is open: any process on this machine can talk to it as any robot \
+             (--tls gives each robot its own certificate, docs/security.md)"
+        );
+    }
     let options = LaunchOptions {
         base_port: args.base_port,
         duration_s: args.duration_s,
