@@ -24,7 +24,10 @@
 //! **Size.** When the file grows past twice what is live (plus 1 MiB), it is
 //! rewritten with only the live records to a temporary file that is fsync'd and
 //! renamed over it (then the directory is fsync'd). Received messages are kept
-//! up to `max_received_bytes`, oldest dropped first.
+//! up to `max_received_bytes`; past it, the oldest message of the sender holding the
+//! most bytes is dropped (and counted, [`DiskJournal::received_evicted`]), so one
+//! member sending large messages evicts its own, never another member's, while it
+//! holds more than they do.
 //!
 //! Why not an embedded database: the journal's records are a handful of kinds,
 //! written in order by one writer; an append-only log with checksums is the
@@ -143,7 +146,11 @@ pub struct DiskJournal {
     stored_order: Vec<u32>,
     received: VecDeque<ReceivedMessage>,
     received_bytes: usize,
+    /// Bytes of `received` per sender.
+    received_bytes_by_source: BTreeMap<u32, usize>,
     max_received_bytes: usize,
+    /// Received messages dropped for room since the journal was opened.
+    received_evicted: u64,
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> JournalError + '_ {
@@ -196,7 +203,9 @@ impl DiskJournal {
             stored_order: Vec::new(),
             received: VecDeque::new(),
             received_bytes: 0,
+            received_bytes_by_source: BTreeMap::new(),
             max_received_bytes,
+            received_evicted: 0,
         };
         let discarded_bytes;
         if bytes.is_empty() {
@@ -298,13 +307,43 @@ impl DiskJournal {
 
     fn keep_received(&mut self, message: ReceivedMessage) {
         self.received_bytes += message.bytes.len();
+        *self
+            .received_bytes_by_source
+            .entry(message.source)
+            .or_default() += message.bytes.len();
         self.received.push_back(message);
         while self.received_bytes > self.max_received_bytes {
-            let Some(old) = self.received.pop_front() else {
+            // The sender holding the most bytes gives up its oldest message.
+            let Some((&largest, _)) = self
+                .received_bytes_by_source
+                .iter()
+                .max_by_key(|(source, bytes)| (**bytes, std::cmp::Reverse(**source)))
+            else {
+                break;
+            };
+            let Some(at) = self.received.iter().position(|m| m.source == largest) else {
+                break;
+            };
+            let Some(old) = self.received.remove(at) else {
                 break;
             };
             self.received_bytes -= old.bytes.len();
+            self.received_evicted += 1;
+            if let Some(bytes) = self.received_bytes_by_source.get_mut(&largest) {
+                *bytes -= old.bytes.len();
+                if *bytes == 0 {
+                    self.received_bytes_by_source.remove(&largest);
+                }
+            }
         }
+    }
+
+    /// Received messages dropped for room since the journal was opened (while
+    /// reading it back included): the sender holding the most bytes loses its
+    /// oldest first.
+    #[must_use]
+    pub fn received_evicted(&self) -> u64 {
+        self.received_evicted
     }
 
     /// The shaper state as journaled.

@@ -169,6 +169,42 @@ fn the_file_is_compacted_and_received_messages_are_bounded() {
     assert_eq!(recovered.received.last().map(|r| r.id), Some(1_999));
 }
 
+/// Issue 45, item 2: a member flooding the journal with large valid messages
+/// (nine 3.9 MB ones, as the issue's attacker sent) evicts its own messages, not the
+/// keyframes another member sent before, in memory and after reopening; each
+/// eviction is counted.
+#[test]
+fn a_flooding_sender_evicts_its_own_messages_not_another_members() {
+    let dir = tempfile::tempdir().unwrap();
+    let budget = 16 << 20;
+    let (mut j, _) = DiskJournal::open(dir.path(), 0, budget).unwrap();
+    for id in 0..8u32 {
+        j.record_received(0, id, &[id as u8; 60_000]).unwrap();
+    }
+    let big = vec![9u8; 3_900_000];
+    for id in 100..109u32 {
+        j.record_received(1, id, &big).unwrap();
+    }
+    // 8 × 60 kB of robot 0's and 9 × 3.9 MB of the flooder's: 5 of the flooder's go.
+    assert_eq!(j.received_evicted(), 5);
+    drop(j);
+    let (j, recovered) = DiskJournal::open(dir.path(), 0, budget).unwrap();
+    let kept = |source: u32| -> Vec<u32> {
+        recovered
+            .received
+            .iter()
+            .filter(|m| m.source == source)
+            .map(|m| m.id)
+            .collect()
+    };
+    assert_eq!(kept(0), (0..8).collect::<Vec<_>>());
+    assert_eq!(kept(1), (105..109).collect::<Vec<_>>());
+    assert!(
+        j.received_evicted() > 0,
+        "reading back replays the evictions"
+    );
+}
+
 /// The child half of the kill test: writes forever, printing each id after the
 /// change that handed it out was synced.
 #[test]

@@ -6,13 +6,13 @@
 //! - `ca.pem` (the team's certificate authority, which every member trusts) and
 //!   `ca.key` (its private key: keep it off the robots; it only signs new members);
 //! - `robot<i>.pem` / `robot<i>.key` for each robot, `base.pem` / `base.key` for the
-//!   base station (link id = team size) and `router.pem` / `router.key` for a
-//!   `troupe router`: ECDSA P-256 certificates signed by the CA whose common name is
+//!   base station (link id = team size) and, for a team with a `troupe router`,
+//!   `router.pem` / `router.key`: ECDSA P-256 certificates signed by the CA whose common name is
 //!   the member's name ([`identity_name`]: `robot<id>`; the router's is `router`),
 //!   usable as TLS server and client;
-//! - `robot<i>.zenoh.toml`, `base.zenoh.toml`, `router.zenoh.toml`: the `[zenoh]`
+//! - `robot<i>.zenoh.toml`, `base.zenoh.toml` (and `router.zenoh.toml`): the `[zenoh]`
 //!   tables that use them (`tls/` endpoints to fill in, `[zenoh.tls]` with
-//!   `mutual = true`, `[zenoh.access]` naming every id), with paths relative to the
+//!   `mutual = true`, `[zenoh.access]` naming every id and the router, if any), with paths relative to the
 //!   snippet itself (a router runs on `router.zenoh.toml` as it is; in a robot file
 //!   elsewhere, prefix the keys directory).
 //!
@@ -76,7 +76,7 @@ struct Member {
     name: String,
 }
 
-fn members(robots: u32) -> Vec<Member> {
+fn members(robots: u32, router: bool) -> Vec<Member> {
     let mut members: Vec<Member> = (0..robots)
         .map(|i| Member {
             stem: identity_name(i),
@@ -87,10 +87,12 @@ fn members(robots: u32) -> Vec<Member> {
         stem: "base".into(),
         name: identity_name(robots),
     });
-    members.push(Member {
-        stem: ROUTER_NAME.into(),
-        name: ROUTER_NAME.into(),
-    });
+    if router {
+        members.push(Member {
+            stem: ROUTER_NAME.into(),
+            name: ROUTER_NAME.into(),
+        });
+    }
     members
 }
 
@@ -115,9 +117,11 @@ fn params(name: &str, year: i32) -> Result<CertificateParams, rcgen::Error> {
 }
 
 /// Writes a new CA, one certificate per member and the `[zenoh]` snippets for a
-/// team of `robots` robots into `dir` (see the module docs). Existing files of the
-/// same names are replaced.
-pub fn write_team_keys(dir: &Path, robots: u32) -> Result<TeamKeys, KeysError> {
+/// team of `robots` robots into `dir` (see the module docs); the router's
+/// certificate, and the right of a router to forward every member's keys, only
+/// when the team has a `router`: an identity that may publish as every robot
+/// exists only where one is needed. Existing files of the same names are replaced.
+pub fn write_team_keys(dir: &Path, robots: u32, router: bool) -> Result<TeamKeys, KeysError> {
     if robots == 0 {
         return Err(KeysError::EmptyTeam);
     }
@@ -142,7 +146,12 @@ pub fn write_team_keys(dir: &Path, robots: u32) -> Result<TeamKeys, KeysError> {
     write(dir, "ca.key", &ca_key.serialize_pem(), true, &mut files)?;
     let issuer = Issuer::new(ca_params, ca_key);
     let ids: Vec<String> = (0..=robots).map(|i| i.to_string()).collect();
-    for member in members(robots) {
+    let routers = if router {
+        format!("routers = [\"{ROUTER_NAME}\"]  # may forward every member's keys\n")
+    } else {
+        String::new()
+    };
+    for member in members(robots, router) {
         let key = KeyPair::generate().map_err(cert_error(&member.name))?;
         let mut p = params(&member.name, year).map_err(cert_error(&member.name))?;
         p.key_usages = vec![KeyUsagePurpose::DigitalSignature];
@@ -178,7 +187,7 @@ pub fn write_team_keys(dir: &Path, robots: u32) -> Result<TeamKeys, KeysError> {
              \n\
              [zenoh.access]  # robot<id> may publish only as <id>\n\
              ids = [{ids}]\n\
-             routers = [\"{ROUTER_NAME}\"]\n",
+             {routers}",
             name = member.name,
             ids = ids.join(", "),
         );
@@ -234,7 +243,7 @@ mod tests {
     fn writes_a_ca_a_certificate_per_member_and_valid_snippets() {
         let dir = tempfile::tempdir().unwrap();
         let keys_dir = dir.path().join("keys");
-        let keys = write_team_keys(&keys_dir, 2).unwrap();
+        let keys = write_team_keys(&keys_dir, 2, true).unwrap();
         for name in [
             "ca.pem",
             "ca.key",
@@ -267,9 +276,31 @@ mod tests {
         let access = file.zenoh.access.as_ref().unwrap();
         assert_eq!(access.ids, vec![0, 1, 2]);
         assert!(file.zenoh.tls.as_ref().unwrap().mutual);
+        assert_eq!(access.routers, vec![ROUTER_NAME.to_owned()]);
         assert!(matches!(
-            write_team_keys(&keys_dir, 0),
+            write_team_keys(&keys_dir, 0, false),
             Err(KeysError::EmptyTeam)
         ));
+    }
+
+    /// Issue 45, item 2: without a router there is no router identity, and no
+    /// member's access control lets anyone forward (publish as every robot).
+    #[test]
+    fn a_team_without_a_router_gets_no_router_identity() {
+        #[derive(serde::Deserialize)]
+        struct File {
+            zenoh: troupe_comms::zenoh::ZenohConfig,
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let keys = write_team_keys(dir.path(), 2, false).unwrap();
+        assert_eq!(keys.files.len(), 2 + 3 * 3);
+        assert!(!dir.path().join("router.pem").exists());
+        for stem in ["robot0", "robot1", "base"] {
+            let text =
+                std::fs::read_to_string(dir.path().join(format!("{stem}.zenoh.toml"))).unwrap();
+            let file: File = toml::from_str(&text).unwrap();
+            let access = file.zenoh.access.unwrap();
+            assert!(access.routers.is_empty(), "{stem}: {:?}", access.routers);
+        }
     }
 }

@@ -149,7 +149,13 @@ pub const KEYS_DIR: &str = "keys";
 /// file the table is written in): `tls/` endpoints, mutual TLS with the member's
 /// certificate, and access control naming every id (the robots' and the base's)
 /// and the router.
-fn with_team_keys(mut zenoh: ZenohConfig, keys: &Path, name: &str, robots: u32) -> ZenohConfig {
+fn with_team_keys(
+    mut zenoh: ZenohConfig,
+    keys: &Path,
+    name: &str,
+    robots: u32,
+    router: bool,
+) -> ZenohConfig {
     let tls = |endpoints: &mut Vec<String>| {
         for e in endpoints {
             if let Some(rest) = e.strip_prefix("tcp/") {
@@ -167,7 +173,11 @@ fn with_team_keys(mut zenoh: ZenohConfig, keys: &Path, name: &str, robots: u32) 
     });
     zenoh.access = Some(ZenohAccess {
         ids: (0..=robots).collect(),
-        routers: vec![ROUTER_NAME.to_owned()],
+        routers: if router {
+            vec![ROUTER_NAME.to_owned()]
+        } else {
+            Vec::new()
+        },
     });
     zenoh
 }
@@ -257,8 +267,13 @@ fn sessions(
     let mut sessions = if options.router {
         let mut router_settings = settings(loopback_endpoints(&[options.base_port]), Vec::new());
         if options.tls {
-            router_settings =
-                with_team_keys(router_settings, &dir.join(KEYS_DIR), ROUTER_NAME, robots);
+            router_settings = with_team_keys(
+                router_settings,
+                &dir.join(KEYS_DIR),
+                ROUTER_NAME,
+                robots,
+                true,
+            );
         }
         let endpoint = router_settings.listen.clone();
         let router = Router::open(&router_settings).map_err(LaunchError::Router)?;
@@ -282,6 +297,7 @@ fn sessions(
                 Path::new(KEYS_DIR),
                 &identity_name(i),
                 robots,
+                options.router,
             );
             *zenoh = secure;
         }
@@ -364,7 +380,7 @@ pub fn launch(
     let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
     let robots = team.robots();
     if options.tls {
-        write_team_keys(&dir.join(KEYS_DIR), robots).map_err(LaunchError::Keys)?;
+        write_team_keys(&dir.join(KEYS_DIR), robots, options.router).map_err(LaunchError::Keys)?;
     }
     let (sessions, router) = sessions(robots, dir, options)?;
     std::fs::create_dir_all(dir).map_err(|e| io(&dir.display().to_string(), e))?;
@@ -429,13 +445,16 @@ mod tests {
             Path::new(KEYS_DIR),
             "robot0",
             2,
+            false,
         );
         assert_eq!(zenoh.listen, ["tls/127.0.0.1:9000"]);
         assert_eq!(zenoh.connect, ["tls/127.0.0.1:9001"]);
         let tls = zenoh.tls.expect("tls");
         assert_eq!(tls.cert_path, Path::new("keys/robot0.pem"));
         assert!(tls.mutual);
-        assert_eq!(zenoh.access.expect("access").ids, [0, 1, 2]);
+        let access = zenoh.access.expect("access");
+        assert_eq!(access.ids, [0, 1, 2]);
+        assert!(access.routers.is_empty(), "no router, no router identity");
     }
 
     #[test]

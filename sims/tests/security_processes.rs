@@ -249,7 +249,9 @@ fn finish_hostile(h: &Hostile, child: Child) -> String {
 /// their peer published), the team's keyframes all arrive and no robot stops,
 /// while the control — robot 2's certificate publishing a frame under its own id —
 /// does reach robot 0's link (which rejects it as another team's: proof that the
-/// path was open and the others were shut by zenoh's access control).
+/// path was open and the others were shut by zenoh's access control). The base's
+/// certificate sending a robot's messages under its own id gets through zenoh and is
+/// refused by the links by role (`base_as_robot`, issue 45 item 2).
 #[test]
 fn a_tls_team_launched_in_one_command_accepts_nothing_from_hostile_clients() {
     tls_team_under_attack(false);
@@ -396,8 +398,26 @@ fn tls_team_under_attack(router: bool) {
     std::fs::write(&control_file, data_frame(Class::Odometry, 7, false, &junk)).expect("frame");
     let control = Hostile {
         name: "control: robot 2 as itself".into(),
-        credentials: as_robot2,
+        credentials: as_robot2.clone(),
         puts: vec![(format!("troupe/{team}/2/odometry"), control_file)],
+    };
+    // The base station's certificate under its own id, sending a robot's messages
+    // (odometry, a keyframe, a plan parked on robot 0's start): zenoh lets them
+    // through (the key is its own), the robots' links refuse them by role.
+    let as_base: Vec<(String, PathBuf)> = forged_frames(team, 2, start(0))
+        .into_iter()
+        .take(3)
+        .enumerate()
+        .map(|(n, (class, bytes))| {
+            let file = dir.path().join(format!("base-as-robot-{n}.frame"));
+            std::fs::write(&file, bytes).expect("frame");
+            (format!("troupe/{team}/2/{class}"), file)
+        })
+        .collect();
+    let base_as_robot = Hostile {
+        name: "the base's certificate sending a robot's messages".into(),
+        credentials: as_robot2,
+        puts: as_base,
     };
     let children: Vec<Child> = attacks
         .iter()
@@ -409,12 +429,19 @@ fn tls_team_under_attack(router: bool) {
         &control,
         20,
     );
+    let base_child = spawn_hostile(
+        &python,
+        &format!("tls/127.0.0.1:{}", ports[0]),
+        &base_as_robot,
+        20,
+    );
     let mut reports: Vec<String> = attacks
         .iter()
         .zip(children)
         .map(|((_, h), c)| finish_hostile(h, c))
         .collect();
     reports.push(finish_hostile(&control, control_child));
+    reports.push(finish_hostile(&base_as_robot, base_child));
     let status = wait_exit(
         &mut launch,
         "troupe launch",
@@ -428,12 +455,19 @@ fn tls_team_under_attack(router: bool) {
     let context = format!("{reports:#?}\n{}\n{}", summaries[0], summaries[1]);
     for (i, s) in summaries.iter().enumerate() {
         let peer = &summaries[1 - i];
-        // Nothing hostile reached a link: the only rejections are the control's, at
-        // robot 0 (through a router, which forwards it to every robot, at both).
+        // Nothing hostile reached a link but the control (another team's frame) and
+        // the base's robot messages (refused by role), at robot 0 (through a router,
+        // which forwards them to every robot, at both).
         let control = if i == 0 || router {
-            let n = s["link"]["rejections"]["wrong_team"].as_u64().unwrap_or(0);
+            let rejections = &s["link"]["rejections"];
+            let n = rejections["wrong_team"].as_u64().unwrap_or(0);
             assert!(n > 0, "the control never reached robot {i}: {context}");
-            n
+            let by_role = rejections["base_as_robot"].as_u64().unwrap_or(0);
+            assert!(
+                by_role > 0,
+                "the base's robot messages never reached robot {i}: {context}"
+            );
+            n + by_role
         } else {
             0
         };
@@ -761,7 +795,9 @@ fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
     let mut robot1 = spawn_robot(&files[1], Some(10.0));
     let mut robot0 = spawn_robot(&files[0], None);
     assert!(wait_exit(&mut robot1, "robot 1", Duration::from_secs(60)).success());
-    std::thread::sleep(Duration::from_secs(8));
+    // Long enough alone to make a keyframe for robot 1 on a loaded machine (what it
+    // makes after robot 1 is suspended, at 10 s, is still kept for it).
+    std::thread::sleep(Duration::from_secs(15));
     let mut accepted = BTreeSet::new();
     let mut previous: Option<Recovered> = None;
     let mut team_keyframes = 0;

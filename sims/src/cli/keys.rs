@@ -13,6 +13,10 @@ pub(crate) struct KeysArgs {
     /// Robots in the team (ids 0..N; the base station is id N).
     #[arg(long, value_name = "N")]
     team_size: Option<u32>,
+    /// The team runs through a `troupe router`: also write the router's certificate
+    /// and let every member accept it forwarding the others' keys.
+    #[arg(long)]
+    router: bool,
     /// Directory that receives the files.
     #[arg(long, default_value = "keys")]
     out: PathBuf,
@@ -24,7 +28,7 @@ pub(crate) fn run(args: KeysArgs) -> anyhow::Result<()> {
         (None, Some(n)) => n,
         (None, None) => anyhow::bail!("give a scenario or --team-size"),
     };
-    let keys = write_team_keys(&args.out, robots)?;
+    let keys = write_team_keys(&args.out, robots, args.router)?;
     println!(
         "{} robots (ids 0..{}), base station id {}: {} files in {} (keep ca.key off the robots)",
         keys.robots,
@@ -50,6 +54,7 @@ mod tests {
             Command::Keys(a) => {
                 assert_eq!((a.scenario, a.team_size), (None, Some(3)));
                 assert_eq!(a.out, PathBuf::from("k"));
+                assert!(!a.router);
             }
             other => panic!("{other:?}"),
         }

@@ -51,6 +51,10 @@ pub struct LinkStatus {
     pub silent_peers: Vec<u32>,
     /// How many times a recipient was suspended for its silence.
     pub peer_timeouts: u64,
+    /// Received messages the journal on disk dropped for room: the sender holding
+    /// the most bytes loses its oldest first, so one member cannot push out what the
+    /// others sent (robot processes; 0 in simulation).
+    pub journal_evicted: u64,
     /// The process's network transport counters, when it has one (robot processes
     /// over zenoh; `None` in simulation), as last published on `link/transport`.
     pub transport: Option<TransportStats>,
@@ -594,7 +598,8 @@ impl LinkActor {
             Some(Incoming::Message(message)) => {
                 let opened = self
                     .open_envelope(from, &message.bytes)
-                    .and_then(|envelope| self.not_ahead(from, envelope, ctx));
+                    .and_then(|envelope| self.not_ahead(from, envelope, ctx))
+                    .and_then(|envelope| self.in_role(from, envelope));
                 let envelope = match opened {
                     Ok(envelope) => envelope,
                     Err((reason, e)) => {
@@ -904,6 +909,33 @@ impl LinkActor {
         Ok(envelope)
     }
 
+    /// Passes an envelope its sender's role may send: the base station sends no
+    /// odometry, plans, keyframes or grid changes (its certificate may publish under
+    /// its own id only, so this is what keeps it from acting as a robot).
+    fn in_role(
+        &self,
+        from: RobotId,
+        envelope: Envelope,
+    ) -> Result<Envelope, (Rejection, ActorError)> {
+        let robot_payload = matches!(
+            envelope.payload,
+            Payload::Odometry(_)
+                | Payload::Plan(_)
+                | Payload::Keyframe(_)
+                | Payload::GridChanges(_)
+        );
+        if robot_payload && self.config.base_id == Some(from.0) {
+            return Err((
+                Rejection::BaseAsRobot,
+                ActorError::msg(format!(
+                    "rejected a robot's message ({:?}) from the base station's id {from}",
+                    envelope.payload.class()
+                )),
+            ));
+        }
+        Ok(envelope)
+    }
+
     /// Passes an envelope made no later than `max_clock_ahead_s` from now on the team
     /// clock. (Messages replayed from the journal were checked when they arrived.)
     fn not_ahead(
@@ -1112,6 +1144,7 @@ impl LinkActor {
                         rejections: self.rejections,
                         silent_peers: self.shaper.suspended_peers(),
                         peer_timeouts: self.peer_timeouts,
+                        journal_evicted: self.journal.received_evicted(),
                         transport: self.transport,
                         shared: self.shared_stats(),
                     },

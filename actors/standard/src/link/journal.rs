@@ -148,7 +148,7 @@ impl LinkJournal {
     }
 
     /// Like [`on_disk`](Self::on_disk), keeping up to `max_received_bytes` of
-    /// received messages (oldest dropped first) instead of [`MAX_RECEIVED_BYTES`]:
+    /// received messages (past it, the largest sender's oldest first) instead of [`MAX_RECEIVED_BYTES`]:
     /// a base station keeps the team's whole map this way.
     pub fn on_disk_keeping(
         dir: &Path,
@@ -206,6 +206,16 @@ impl LinkJournal {
     /// The messages received before the process restarted, once.
     pub(super) fn take_received(&self) -> Vec<ReceivedMessage> {
         std::mem::take(&mut self.entry().received)
+    }
+
+    /// Received messages the journal on disk dropped for room (the sender holding the
+    /// most bytes loses its oldest first); 0 in memory.
+    #[must_use]
+    pub fn received_evicted(&self) -> u64 {
+        self.entry()
+            .disk
+            .as_ref()
+            .map_or(0, DiskJournal::received_evicted)
     }
 
     /// Store-and-forward messages kept (accepted, not acknowledged by every recipient).

@@ -37,6 +37,10 @@ pub enum Rejection {
     /// [`LinkConfig::max_clock_ahead_s`](super::LinkConfig::max_clock_ahead_s): the
     /// sender's clock runs ahead, or the stamp is forged.
     FromTheFuture,
+    /// Odometry, a plan, a keyframe or grid changes from the base station's id
+    /// ([`LinkConfig::base_id`](super::LinkConfig::base_id)): the base sends
+    /// operator commands, acknowledgements and heartbeats, never a robot's messages.
+    BaseAsRobot,
 }
 
 impl Rejection {
@@ -54,6 +58,7 @@ impl Rejection {
             Rejection::UnheldAck => "unheld_ack",
             Rejection::NotFromBase => "not_from_base",
             Rejection::FromTheFuture => "from_the_future",
+            Rejection::BaseAsRobot => "base_as_robot",
         }
     }
 }
@@ -81,6 +86,8 @@ pub struct RejectionCounts {
     pub not_from_base: u64,
     /// See [`Rejection::FromTheFuture`].
     pub from_the_future: u64,
+    /// See [`Rejection::BaseAsRobot`].
+    pub base_as_robot: u64,
 }
 
 impl RejectionCounts {
@@ -108,6 +115,7 @@ impl RejectionCounts {
             Rejection::UnheldAck => &mut self.unheld_ack,
             Rejection::NotFromBase => &mut self.not_from_base,
             Rejection::FromTheFuture => &mut self.from_the_future,
+            Rejection::BaseAsRobot => &mut self.base_as_robot,
         }
     }
 
@@ -124,6 +132,7 @@ impl RejectionCounts {
             + self.unheld_ack
             + self.not_from_base
             + self.from_the_future
+            + self.base_as_robot
     }
 }
 

@@ -731,8 +731,8 @@ fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
     );
 }
 
-/// Plays robot 0 on robot 1's network input: each `(at_s, envelope)` arrives as a
-/// one-fragment frame at `at_s`.
+/// Plays the envelopes' senders on robot 1's network input: each `(at_s, envelope)`
+/// arrives as a one-fragment frame at `at_s`.
 struct Forger {
     frames: Vec<(f64, Envelope)>,
     next_id: u32,
@@ -761,7 +761,7 @@ impl Actor for Forger {
             ctx.publish(
                 &LINK_RX,
                 LinkRx {
-                    from: RobotId(0),
+                    from: RobotId(envelope.sender),
                     bytes: Arc::from(frame),
                 },
             );
@@ -906,4 +906,65 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
     for (robot, n) in beats.iter().enumerate() {
         assert!((30..=41).contains(n), "robot {robot} sent {n} heartbeats");
     }
+}
+
+/// Issue 45, item 2: the base station's id may send commands, acknowledgements and
+/// heartbeats, never a robot's messages: odometry under the base's id is rejected
+/// and counted (`base_as_robot`), while its heartbeat is heard and robot 0's
+/// odometry is delivered.
+#[test]
+fn the_base_station_cannot_send_a_robots_messages() {
+    let odometry = |sender: u32, stamp_ms: u64| {
+        Envelope::new(
+            0,
+            sender,
+            stamp_ms,
+            stamp_ms * 1_000_000,
+            Payload::Odometry(wire::Odometry {
+                position_m: [1.0, 0.0, 1.0],
+                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                velocity_mps: [0.0; 3],
+            }),
+        )
+    };
+    let heartbeat = Envelope::new(
+        0,
+        2,
+        9,
+        900_000_000,
+        Payload::Heartbeat(wire::Heartbeat { uptime_s: 0.9 }),
+    );
+    let frames = vec![
+        (0.5, odometry(2, 450)),
+        (1.0, heartbeat),
+        (1.5, odometry(0, 1_450)),
+    ];
+    let config = LinkConfig::default().with_team(2);
+    assert_eq!(config.base_id, Some(2));
+    let team = vec![
+        RobotSpec::new("r0"),
+        RobotSpec::new("r1")
+            .with(link(&config))
+            .with(ActorSpec::new("forger", move || Forger {
+                frames: frames.clone(),
+                next_id: 0,
+            })),
+    ];
+    let heard: Arc<Mutex<Vec<RobotId>>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 5);
+    let (tap_heard, tap_status) = (heard.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&PEER_ODOMETRY) {
+            tap_heard.lock().unwrap().push(o.robot);
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            *tap_status.lock().unwrap() = Some(s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(2.5));
+    exec.finish();
+    assert_eq!(*heard.lock().unwrap(), vec![RobotId(0)]);
+    let status = status.lock().unwrap().clone().expect("a status");
+    assert_eq!(status.rejections.base_as_robot, 1);
+    assert_eq!(status.rejections.total(), 1);
 }
