@@ -29,6 +29,7 @@ use super::convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_
 use super::frames::{PeerFrame, transform_keyframe, transform_plan};
 use super::journal::{JournaledLane, LinkJournal};
 use super::rejections::{RateLimitedLog, Rejection, RejectionCounts};
+use super::replay::{ReplayWindow, Verdict};
 use super::shared::{SHARE_REQUESTS, ShareFrom, ShareRequest, ShareTo, SharedCodec};
 /// The link's counters, published every second.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -174,6 +175,8 @@ pub struct LinkActor {
     peer_runs: BTreeMap<u32, u64>,
     /// When this link last offered a message of its own (for the heartbeat).
     last_offered: Option<Time>,
+    /// Per peer, the envelope sequence numbers its latest run has used.
+    replay_windows: BTreeMap<u32, ReplayWindow>,
 }
 
 impl LinkActor {
@@ -210,6 +213,7 @@ impl LinkActor {
             replay: Vec::new(),
             peer_runs: BTreeMap::new(),
             last_offered: None,
+            replay_windows: BTreeMap::new(),
         })
     }
 
@@ -599,7 +603,8 @@ impl LinkActor {
                 let opened = self
                     .open_envelope(from, &message.bytes)
                     .and_then(|envelope| self.not_ahead(from, envelope, ctx))
-                    .and_then(|envelope| self.in_role(from, envelope));
+                    .and_then(|envelope| self.in_role(from, envelope))
+                    .and_then(|envelope| self.fresh(from, envelope));
                 let envelope = match opened {
                     Ok(envelope) => envelope,
                     Err((reason, e)) => {
@@ -930,6 +935,35 @@ impl LinkActor {
                 ActorError::msg(format!(
                     "rejected a robot's message ({:?}) from the base station's id {from}",
                     envelope.payload.class()
+                )),
+            ));
+        }
+        Ok(envelope)
+    }
+
+    /// Passes an envelope whose sequence number its sender's run has not used
+    /// before ([`ReplayWindow`]); the last check, so that only a message otherwise
+    /// accepted takes its number.
+    fn fresh(
+        &mut self,
+        from: RobotId,
+        envelope: Envelope,
+    ) -> Result<Envelope, (Rejection, ActorError)> {
+        let (run, sequence) = (envelope.run_start_ns, envelope.sequence);
+        let verdict = match self.replay_windows.get_mut(&from.0) {
+            Some(window) => window.check(run, sequence),
+            None => {
+                self.replay_windows
+                    .insert(from.0, ReplayWindow::new(run, sequence));
+                Verdict::Fresh
+            }
+        };
+        if verdict == Verdict::Replayed {
+            return Err((
+                Rejection::Replayed,
+                ActorError::msg(format!(
+                    "rejected a message from {from}: its sequence number {sequence} was \
+                     used before (a replay under a fresh message id)"
                 )),
             ));
         }

@@ -24,6 +24,7 @@ mod convert;
 mod frames;
 mod journal;
 mod rejections;
+mod replay;
 mod shared;
 
 pub use actor::{
@@ -35,6 +36,7 @@ pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_
 pub use frames::{PeerFrame, transform_gmm, transform_keyframe, transform_plan};
 pub use journal::{LANES_FILE, LinkJournal, MAX_RECEIVED_BYTES};
 pub use rejections::{RateLimitedLog, Rejection, RejectionCounts};
+pub use replay::{REPLAY_WINDOW, ReplayWindow, Verdict};
 pub use shared::{
     Peer, SHARE_REQUESTS, ShareClass, ShareFrom, SharePolicy, ShareRequest, ShareTo, SharedTopic,
 };

@@ -41,6 +41,10 @@ pub enum Rejection {
     /// ([`LinkConfig::base_id`](super::LinkConfig::base_id)): the base sends
     /// operator commands, acknowledgements and heartbeats, never a robot's messages.
     BaseAsRobot,
+    /// An envelope whose sequence number its sender's run already used (a
+    /// captured message sent again under a fresh message id), or one too far below
+    /// the highest to tell ([`ReplayWindow`](super::ReplayWindow)).
+    Replayed,
 }
 
 impl Rejection {
@@ -59,6 +63,7 @@ impl Rejection {
             Rejection::NotFromBase => "not_from_base",
             Rejection::FromTheFuture => "from_the_future",
             Rejection::BaseAsRobot => "base_as_robot",
+            Rejection::Replayed => "replayed",
         }
     }
 }
@@ -88,6 +93,8 @@ pub struct RejectionCounts {
     pub from_the_future: u64,
     /// See [`Rejection::BaseAsRobot`].
     pub base_as_robot: u64,
+    /// See [`Rejection::Replayed`].
+    pub replayed: u64,
 }
 
 impl RejectionCounts {
@@ -116,6 +123,7 @@ impl RejectionCounts {
             Rejection::NotFromBase => &mut self.not_from_base,
             Rejection::FromTheFuture => &mut self.from_the_future,
             Rejection::BaseAsRobot => &mut self.base_as_robot,
+            Rejection::Replayed => &mut self.replayed,
         }
     }
 
@@ -133,6 +141,7 @@ impl RejectionCounts {
             + self.not_from_base
             + self.from_the_future
             + self.base_as_robot
+            + self.replayed
     }
 }
 

@@ -780,7 +780,7 @@ fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
         Envelope::new(
             0,
             0,
-            0,
+            stamp_ms,
             ns(stamp_ms),
             Payload::Odometry(wire::Odometry {
                 position_m: [x, 0.0, 1.0],
@@ -967,4 +967,65 @@ fn the_base_station_cannot_send_a_robots_messages() {
     let status = status.lock().unwrap().clone().expect("a status");
     assert_eq!(status.rejections.base_as_robot, 1);
     assert_eq!(status.rejections.total(), 1);
+}
+
+/// Issue 45, item 5: a captured message sent again under a fresh message id passes
+/// the reassembler's duplicate filter but not the envelope's sequence check: it is
+/// rejected and counted (`replayed`); a number not seen yet (sent out of order) is
+/// accepted, and a restarted peer's new run numbers afresh.
+#[test]
+fn a_message_replayed_under_a_fresh_id_is_rejected() {
+    let odometry = |run_start_ms: u64, sequence: u64, stamp_ms: u64, x: f64| {
+        Envelope::new(
+            0,
+            0,
+            sequence,
+            stamp_ms * 1_000_000,
+            Payload::Odometry(wire::Odometry {
+                position_m: [x, 0.0, 1.0],
+                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                velocity_mps: [0.0; 3],
+            }),
+        )
+        .from_run(run_start_ms * 1_000_000)
+    };
+    let frames = vec![
+        (0.5, odometry(0, 10, 450, 1.0)),
+        // The same envelope again (the Forger gives every frame a fresh id).
+        (1.0, odometry(0, 10, 450, 1.0)),
+        // An earlier number not seen yet: sent out of order, accepted.
+        (1.5, odometry(0, 9, 1_400, 2.0)),
+        // Robot 0 restarted without its journal: its new run numbers from 0.
+        (2.0, odometry(1_800, 0, 1_900, 3.0)),
+        (2.5, odometry(1_800, 0, 1_900, 3.0)),
+    ];
+    let team = vec![
+        RobotSpec::new("r0"),
+        RobotSpec::new("r1")
+            .with(link(&LinkConfig::default()))
+            .with(ActorSpec::new("forger", move || Forger {
+                frames: frames.clone(),
+                next_id: 0,
+            })),
+    ];
+    let heard: Arc<Mutex<Vec<f64>>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 5);
+    let (tap_heard, tap_status) = (heard.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&PEER_ODOMETRY) {
+            tap_heard
+                .lock()
+                .unwrap()
+                .push(o.odometry.pose.translation.x);
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            *tap_status.lock().unwrap() = Some(s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(3.5));
+    exec.finish();
+    assert_eq!(*heard.lock().unwrap(), vec![1.0, 2.0, 3.0]);
+    let status = status.lock().unwrap().clone().expect("a status");
+    assert_eq!(status.rejections.replayed, 2);
+    assert_eq!(status.rejections.total(), 2);
 }
