@@ -218,6 +218,32 @@ impl ZenohConfig {
         }
     }
 
+    /// What `insecure = true` leaves open off this machine: each listening or
+    /// connecting endpoint off loopback that authenticates no one, and multicast
+    /// scouting without credentials. Empty when the settings are not insecure or
+    /// nothing is open; a session that opens with something here logs it once.
+    #[must_use]
+    pub fn open_to_network(&self) -> Vec<String> {
+        if !self.insecure {
+            return Vec::new();
+        }
+        let credentials = self.tls.is_some() || self.auth.is_some();
+        let mut open: Vec<String> = self
+            .listen
+            .iter()
+            .chain(&self.connect)
+            .filter(|e| {
+                let address = e.split_once('/').map_or(e.as_str(), |(_, a)| a);
+                !security::is_loopback(address) && !credentials
+            })
+            .cloned()
+            .collect();
+        if self.multicast_scouting && !credentials {
+            open.push("multicast scouting".to_owned());
+        }
+        open
+    }
+
     /// Checks the settings (endpoint syntax, TLS files present when needed,
     /// client mode has a router to connect to) and the secure defaults
     /// ([`security`]: authentication off loopback, a usable password dictionary,
@@ -581,6 +607,14 @@ impl ZenohTransport {
     /// Opens a session for the robots `local` (indices in team `team`).
     pub fn open(config: &ZenohConfig, team: u32, local: Vec<u32>) -> Result<Self, TransportError> {
         let zc = config.to_zenoh()?;
+        let open = config.open_to_network();
+        if !open.is_empty() {
+            tracing::warn!(
+                "insecure = true: {} accept(s) anyone on the network, who can pose as any \
+                 robot of team {team} (docs/security.md)",
+                open.join(", ")
+            );
+        }
         let session = ::zenoh::open(zc)
             .wait()
             .map_err(|e| TransportError::Network {

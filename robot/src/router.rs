@@ -64,6 +64,14 @@ impl Router {
             }));
         }
         let mut config = settings.to_zenoh().map_err(RouterError::Config)?;
+        let open = settings.open_to_network();
+        if !open.is_empty() {
+            tracing::warn!(
+                "insecure = true: {} accept(s) anyone on the network, who can pose as any \
+                 robot (docs/security.md)",
+                open.join(", ")
+            );
+        }
         config
             .insert_json5("mode", "\"router\"")
             .map_err(|source| RouterError::Open {

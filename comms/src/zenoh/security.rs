@@ -2,8 +2,11 @@
 //!
 //! - **Secure defaults** (checked by [`ZenohConfig::validate`]): a listening endpoint off loopback must
 //!   authenticate its peers (mutual TLS on a `tls/` endpoint, or a user/password
-//!   dictionary) and bind identities to ids (`[zenoh.access]`), unless the settings
-//!   say `insecure = true`; `auth` on a listening session needs a usable dictionary;
+//!   dictionary) and bind identities to ids (`[zenoh.access]`), a `connect` endpoint
+//!   off loopback must be `tls/` with `[zenoh.tls]` or carry `[zenoh.auth]`, and
+//!   multicast scouting needs TLS or users, unless the settings say
+//!   `insecure = true` (a session that says so logs one warning naming what is
+//!   open, [`ZenohConfig::open_to_network`]); `auth` on a listening session needs a usable dictionary;
 //!   `access` needs a name for every session (mutual TLS; or users on a session
 //!   that only listens, such as a router: zenoh's user/password check names only
 //!   the side that connects).
@@ -111,6 +114,29 @@ pub(super) fn check(config: &ZenohConfig) -> Result<(), TransportError> {
     }
     if config.insecure {
         return Ok(());
+    }
+    if config.multicast_scouting && !(config.tls.is_some() || config.auth.is_some()) {
+        return Err(config_error(
+            "multicast_scouting",
+            "multicast scouting lets any host on the LAN find the team and join it: \
+             add `[zenoh.tls]` or `[zenoh.auth]` and `[zenoh.access]` (`troupe keys` \
+             writes them), or `insecure = true`",
+        ));
+    }
+    for endpoint in &config.connect {
+        let (protocol, address) = endpoint.split_once('/').unwrap_or(("", endpoint));
+        let proven = (protocol == "tls" && config.tls.is_some()) || config.auth.is_some();
+        if !is_loopback(address) && !proven {
+            return Err(config_error(
+                "connect",
+                format!(
+                    "`{endpoint}` is a link off this machine that proves nothing: whoever \
+                     answers there can pose as the team and read what it says: use tls/ \
+                     endpoints with `[zenoh.tls]`, or `[zenoh.auth]` (`troupe keys`, \
+                     docs/security.md), or `insecure = true` on a closed network"
+                ),
+            ));
+        }
     }
     for endpoint in &config.listen {
         let (protocol, address) = endpoint.split_once('/').unwrap_or(("", endpoint));

@@ -251,9 +251,23 @@ fn secure_defaults_refuse_open_doors_and_unusable_credentials() {
         }
         other => panic!("{other:?}"),
     };
-    // Loopback, and connect-only sessions, need nothing.
+    // Loopback needs nothing; a plain link off this machine, connecting or
+    // listening, and multicast scouting without credentials are refused unless
+    // insecure (which then names what is open).
     with(r#"listen = ["tcp/127.0.0.1:7447"]"#).unwrap();
-    with(r#"connect = ["tcp/10.0.0.1:7447"]"#).unwrap();
+    with(r#"connect = ["tcp/127.0.0.1:7447"]"#).unwrap();
+    assert_eq!(key(with(r#"connect = ["tcp/10.0.0.1:7447"]"#)), "connect");
+    assert_eq!(key(with("multicast_scouting = true")), "multicast_scouting");
+    let open: ZenohConfig = toml::from_str(
+        "listen = [\"tcp/127.0.0.1:1\"]\nconnect = [\"tcp/10.0.0.1:7447\"]\n\
+         multicast_scouting = true\ninsecure = true",
+    )
+    .unwrap();
+    open.validate().unwrap();
+    assert_eq!(
+        open.open_to_network(),
+        ["tcp/10.0.0.1:7447", "multicast scouting"]
+    );
     // Off loopback without authentication: refused unless insecure.
     assert_eq!(key(with(r#"listen = ["tcp/0.0.0.0:7447"]"#)), "listen");
     with("listen = [\"tcp/0.0.0.0:7447\"]\ninsecure = true").unwrap();
