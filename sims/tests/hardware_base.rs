@@ -1,7 +1,8 @@
 //! Issue 40, item 4: a hardware robot and a base station that joins late, both as
 //! the processes a team runs — `troupe-robot` (ROS 2 depth and odometry in over
 //! zenoh from `scripts/ros2/box_room_camera.py`, MAVLink setpoints out to
-//! `scripts/mavlink/px4_like_autopilot.py`) and `troupe base` started 18 s after it.
+//! `scripts/mavlink/px4_like_autopilot.py`) and `troupe base`, started once the robot
+//! has said that its base is absent.
 //!
 //! Checks: the robot keeps its keyframes for the absent base (store-and-forward,
 //! the robot-process default) and says once that the base is not heard; the base,
@@ -15,6 +16,7 @@
 
 mod common;
 
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -23,8 +25,10 @@ use serde_json::Value;
 
 /// The robot's flight (after its topics appeared), wall seconds.
 const FLY_S: f64 = 30.0;
-/// When the base starts, seconds after the robot process.
-const BASE_LATE_S: f64 = 18.0;
+/// How long the test waits for the robot to say that its base is absent (its ROS 2
+/// topics appear, then its link runs `peer_timeout_s` without the base) before it
+/// starts the base anyway, seconds.
+const ABSENT_WITHIN_S: f64 = 60.0;
 
 /// The venv's Python if it imports `modules`, or why not.
 fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
@@ -164,16 +168,32 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
         .spawn()
         .expect("start the camera");
     let started = Instant::now();
-    let robot = Command::new(&troupe_robot)
+    let mut robot = Command::new(&troupe_robot)
         .args(["--config", dir.join("robot0.toml").to_str().unwrap()])
         .args(["--duration-s", &FLY_S.to_string()])
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::piped())
+        .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .expect("start troupe-robot");
-
-    std::thread::sleep(Duration::from_secs_f64(BASE_LATE_S));
+    // The robot's log, line by line as it comes.
+    let (lines_tx, lines_rx) = std::sync::mpsc::channel::<String>();
+    let stderr = robot.stderr.take().expect("stderr");
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = lines_tx.send(common::strip_ansi(&line));
+        }
+    });
+    // The base starts once the robot has said that it is absent.
+    let mut log = Vec::new();
+    while started.elapsed().as_secs_f64() < ABSENT_WITHIN_S {
+        if let Ok(line) = lines_rx.recv_timeout(Duration::from_millis(200)) {
+            let absent = line.contains("base station not heard");
+            log.push(line);
+            if absent {
+                break;
+            }
+        }
+    }
     let base = Command::new(env!("CARGO_BIN_EXE_troupe"))
         .args(["base", "--config", dir.join("base.toml").to_str().unwrap()])
         .args(["--duration-s", &(FLY_S + 30.0).to_string()])
@@ -183,7 +203,11 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
         .expect("start troupe base");
     let base_started_s = started.elapsed().as_secs_f64();
 
-    let robot_out = finish(robot, "troupe-robot");
+    let status = robot.wait().expect("wait");
+    reader.join().expect("the log reader");
+    log.extend(lines_rx.try_iter());
+    let log = log.join("\n");
+    assert!(status.success(), "troupe-robot failed: {status}\n{log}");
     // The base hears the last keyframes, then stops as an operator stops it.
     std::thread::sleep(Duration::from_secs(3));
     let stopped = Command::new("kill")
@@ -194,7 +218,6 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
     let base_out = finish(base, "troupe base");
     let _ = (camera.wait_with_output(), autopilot.wait_with_output());
 
-    let log = common::strip_ansi(&String::from_utf8_lossy(&robot_out.stderr));
     let summary = read_json(&dir.join("hw0/summary.json"));
     let keyframes = summary["keyframes"].as_u64().unwrap();
     let link = &summary["link"];
