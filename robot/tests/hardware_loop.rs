@@ -62,6 +62,15 @@ fn free_port(udp: bool) -> u16 {
     .port()
 }
 
+/// An empty directory `name` under the test's target directory (a previous run's
+/// files removed), kept after the test to look at.
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("the test directory");
+    dir
+}
+
 fn robot_file(ros_port: u16, team_port: u16, mavlink_port: u16) -> String {
     format!(
         r#"
@@ -141,9 +150,7 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
             return;
         }
     };
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_loop");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("hardware_loop");
     let (ros_port, team_port) = (free_port(false), free_port(false));
     let (mavlink_port, state_port) = (free_port(true), free_port(true));
     let config = dir.join("robot.toml");
@@ -365,9 +372,7 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
             return;
         }
     };
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_silent");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("hardware_silent");
     let mavlink_port = free_port(true);
     let config = dir.join("robot.toml");
     let text = robot_file(free_port(false), free_port(false), mavlink_port)
@@ -424,9 +429,7 @@ fn no_autopilot_is_one_error_after_the_wait() {
             return;
         }
     };
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hardware_no_autopilot");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("hardware_no_autopilot");
     let ros_port = free_port(false);
     let config = dir.join("robot.toml");
     let text = robot_file(ros_port, free_port(false), free_port(true)).replace(

@@ -26,6 +26,8 @@ import statistics
 import sys
 from datetime import datetime
 
+from run import z_reversals  # run.py, beside this file
+
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 TS = re.compile(r"^(\d{4}-\d\d-\d\dT[\d:.]+)Z")
 
@@ -109,13 +111,6 @@ def main():
                   and r["time_s"] <= s["time_s"]]
         s["delay_s"] = s["time_s"] - max(before) if before else None
     zs = [r["position"][2] for r in rounds if len(r["position"]) == 3]
-    reversals, last, anchor = 0, 0, zs[0] if zs else 0.0
-    for z in zs:
-        if abs(z - anchor) >= 0.05:
-            sign = 1 if z > anchor else -1
-            if last and sign != last:
-                reversals += 1
-            last, anchor = sign, z
     delays = [s["delay_s"] for s in stale if s["delay_s"] is not None]
     out = {
         "rounds": len(rounds),
@@ -128,7 +123,7 @@ def main():
         "stops": stops,
         "no_candidates": sum(r["candidates"] == 0 for r in rounds),
         "z_range_m": (max(zs) - min(zs)) if zs else None,
-        "z_reversals_5cm": reversals,
+        "z_reversals_5cm": z_reversals(zs, 0.05),
         "actions": {},
         "round_list": rounds,
         "stale_list": stale,

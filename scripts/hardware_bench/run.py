@@ -396,6 +396,19 @@ def fly_hardware(args, room, start, flight_dir):
     return result
 
 
+def z_reversals(zs, step_m):
+    """Reversals of direction of a sequence of heights, counted over steps of at
+    least step_m (smaller moves neither reverse nor move the anchor): dithering."""
+    reversals, last_sign, anchor = 0, 0, zs[0] if zs else 0.0
+    for z in zs:
+        if abs(z - anchor) >= step_m:
+            sign = 1 if z > anchor else -1
+            if last_sign and sign != last_sign:
+                reversals += 1
+            last_sign, anchor = sign, z
+    return reversals
+
+
 def setpoint_stats(setpoints, t0, duration_s):
     """What the autopilot received: speed, z reversals, acceleration feed-forward."""
     inside = [s for s in setpoints if s["t"] - t0 <= duration_s]
@@ -403,14 +416,6 @@ def setpoint_stats(setpoints, t0, duration_s):
     moving = [s for s, v in zip(inside, speeds) if v > 0.3]
     acc = [math.sqrt(s["afx"] ** 2 + s["afy"] ** 2 + s["afz"] ** 2) for s in moving]
     zs = [s["z"] for s in inside]
-    # Reversals of the z setpoint's direction (dithering), by steps over 1 cm.
-    reversals, last_sign, anchor = 0, 0, zs[0] if zs else 0.0
-    for z in zs:
-        if abs(z - anchor) >= 0.01:
-            sign = 1 if z > anchor else -1
-            if last_sign and sign != last_sign:
-                reversals += 1
-            last_sign, anchor = sign, z
     steps = [math.dist((a["x"], a["y"], a["z"]), (b["x"], b["y"], b["z"]))
              for a, b in zip(inside, inside[1:])]
     gaps = [b["t"] - a["t"] for a, b in zip(inside, inside[1:])]
@@ -426,7 +431,7 @@ def setpoint_stats(setpoints, t0, duration_s):
         "accel_zero_fraction_moving": (sum(a < 1e-6 for a in acc) / len(acc)) if acc else None,
         "accel_max_mps2": max(acc) if acc else None,
         "z_range_m": (max(zs) - min(zs)) if zs else None,
-        "z_reversals": reversals,
+        "z_reversals": z_reversals(zs, 0.01),  # of the z setpoint, by steps over 1 cm
         "max_setpoint_step_m": max(steps) if steps else None,
         "max_setpoint_gap_s": max(gaps) if gaps else None,
         "max_accel_step_mps2": max(acc_steps) if acc_steps else None,

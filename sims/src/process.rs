@@ -178,14 +178,14 @@ impl RobotProcess {
         let mut config: ProcessConfig = read_toml(path).map_err(SettingsFileError::from)?;
         let invalid = |e: ConfigError| ProcessError::from(SettingsFileError::config(path, e));
         let base = path.parent().unwrap_or(Path::new("."));
-        let scenario_path = base.join(&config.scenario);
-        let mut scenario =
-            Scenario::load(&scenario_path).map_err(|source| ProcessError::Scenario {
-                path: path.to_path_buf(),
-                source,
+        let (mut scenario, text) =
+            Scenario::load_with_text(&base.join(&config.scenario)).map_err(|source| {
+                ProcessError::Scenario {
+                    path: path.to_path_buf(),
+                    source,
+                }
             })?;
-        let policy_named = std::fs::read_to_string(&scenario_path)
-            .is_ok_and(|text| names_key(&text, KEYFRAME_POLICY_KEY));
+        let policy_named = names_key(&text, KEYFRAME_POLICY_KEY);
         scenario.robot.link = scenario.robot.link.with_process_keyframes(policy_named);
         if config.robot >= scenario.robots {
             return Err(invalid(ConfigError::new(

@@ -133,11 +133,18 @@ pub enum ScenarioError {
 impl Scenario {
     /// Reads and validates a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+        Scenario::load_with_text(path).map(|(scenario, _)| scenario)
+    }
+
+    /// Reads and validates a scenario file, and returns its text too (for what
+    /// depends on which keys the file names, such as a robot process's keyframe
+    /// policy).
+    pub fn load_with_text(path: &Path) -> Result<(Scenario, String), ScenarioError> {
         let text = std::fs::read_to_string(path).map_err(|source| TomlFileError::Read {
             path: path.to_owned(),
             source,
         })?;
-        Scenario::from_toml(&text, path)
+        Ok((Scenario::from_toml(&text, path)?, text))
     }
 
     /// Parses and validates scenario text; `path` is only used in messages.

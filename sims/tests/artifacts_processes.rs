@@ -16,8 +16,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use troupe_comms::zenoh::ZenohConfig;
-use troupe_robot::launch::loopback_endpoints;
+use troupe_robot::launch::{loopback_endpoints, peer_sessions};
 use troupe_sims::process::ProcessConfig;
 
 /// Reports within this distance are one artifact (the artifact actor's default
@@ -37,16 +36,7 @@ fn robot_file(dir: &Path, i: usize, endpoints: &[String], duration_s: Option<f64
         duration_s,
         out: Some(PathBuf::from(format!("robot{i}"))),
         sequence: None,
-        zenoh: ZenohConfig {
-            listen: vec![endpoints[i].clone()],
-            connect: endpoints
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, e)| e.clone())
-                .collect(),
-            ..ZenohConfig::default()
-        },
+        zenoh: peer_sessions(endpoints).swap_remove(i),
         record: false,
         record_depth_hz: None,
         record_compression: None,

@@ -17,11 +17,9 @@
 mod common;
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-use serde_json::Value;
 
 /// The robot's flight (after its topics appeared), wall seconds.
 const FLY_S: f64 = 30.0;
@@ -29,25 +27,6 @@ const FLY_S: f64 = 30.0;
 /// topics appear, then its link runs `peer_timeout_s` without the base) before it
 /// starts the base anyway, seconds.
 const ABSENT_WITHIN_S: f64 = 60.0;
-
-/// The venv's Python if it imports `modules`, or why not.
-fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
-    let python = common::root().join(venv).join("bin/python");
-    let ok = Command::new(&python)
-        .args(["-c", &format!("import {modules}")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(python)
-    } else {
-        Err(format!(
-            "{} cannot import {modules} (run .ci/run)",
-            python.display()
-        ))
-    }
-}
 
 fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
@@ -67,20 +46,15 @@ fn finish(child: Child, name: &str) -> Output {
     output
 }
 
-fn read_json(path: &Path) -> Value {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).expect("json")
-}
-
 #[test]
 fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
     let troupe_robot = Path::new(env!("CARGO_BIN_EXE_troupe")).with_file_name("troupe-robot");
     let pythons = (
-        python(
+        common::venv_python(
             ".venv-ros2",
             "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
         ),
-        python(".venv-pymavlink", "pymavlink"),
+        common::venv_python(".venv-pymavlink", "pymavlink"),
     );
     let (ros_python, mav_python) = match pythons {
         (Ok(r), Ok(m)) if troupe_robot.exists() => (r, m),
@@ -218,7 +192,7 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
     let base_out = finish(base, "troupe base");
     let _ = (camera.wait_with_output(), autopilot.wait_with_output());
 
-    let summary = read_json(&dir.join("hw0/summary.json"));
+    let summary = common::read_json(&dir.join("hw0/summary.json"));
     let keyframes = summary["keyframes"].as_u64().unwrap();
     let link = &summary["link"];
     println!(
@@ -248,7 +222,7 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
 
     // Keyframes made before the base started: the robot's journal kept them for it.
     let base_log = common::strip_ansi(&String::from_utf8_lossy(&base_out.stderr));
-    let station = read_json(&dir.join("station/summary.json"));
+    let station = common::read_json(&dir.join("station/summary.json"));
     let got = station["robots"]["0"]["keyframes"].as_u64().unwrap_or(0);
     println!("base: {got} of the robot's {keyframes} keyframes");
     assert!(keyframes >= 4, "the robot made only {keyframes} keyframes");

@@ -40,19 +40,34 @@ pub fn root() -> std::path::PathBuf {
 /// `sims/tests/zenoh_hostile.py`), or why there is none.
 #[allow(dead_code)] // not every test binary that shares this module uses it
 pub fn zenoh_python() -> Result<std::path::PathBuf, String> {
-    let python = root().join(".venv-ros2/bin/python");
+    venv_python(".venv-ros2", "zenoh")
+}
+
+/// The Python of the workspace's venv `venv` (e.g. `.venv-ros2`) if it imports
+/// `modules` (e.g. `"rclpy.serialization, zenoh"`), or why not: `.ci/run` installs
+/// them.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn venv_python(venv: &str, modules: &str) -> Result<std::path::PathBuf, String> {
+    let python = root().join(venv).join("bin/python");
     let ok = std::process::Command::new(&python)
-        .args(["-c", "import zenoh"])
+        .args(["-c", &format!("import {modules}")])
         .output()
         .is_ok_and(|o| o.status.success());
     if ok {
         Ok(python)
     } else {
         Err(format!(
-            "{} cannot import zenoh (.ci/run installs eclipse-zenoh)",
+            "{} cannot import {modules} (.ci/run installs it)",
             python.display()
         ))
     }
+}
+
+/// The JSON file at `path` (a summary, a report); panics naming the file.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn read_json(path: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// `text` without its terminal colour sequences (`ESC [ … m`).

@@ -770,25 +770,70 @@ impl Actor for Forger {
     }
 }
 
+/// Robot `sender`'s odometry at `x`, numbered `sequence`, stamped `stamp_ms` in the
+/// run that started at `run_start_ms` (team clock, ms).
+fn odometry_envelope(
+    sender: u32,
+    run_start_ms: u64,
+    sequence: u64,
+    stamp_ms: u64,
+    x: f64,
+) -> Envelope {
+    Envelope::new(
+        0,
+        sender,
+        sequence,
+        stamp_ms * 1_000_000,
+        Payload::Odometry(wire::Odometry {
+            position_m: [x, 0.0, 1.0],
+            orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            velocity_mps: [0.0; 3],
+        }),
+    )
+    .from_run(run_start_ms * 1_000_000)
+}
+
+/// Runs robot 1's link (`config`) until `until_s` with a [`Forger`] playing `frames`
+/// on its network input: the peer odometry it published and its last status.
+fn forged_run(
+    config: &LinkConfig,
+    frames: Vec<(f64, Envelope)>,
+    until_s: f64,
+) -> (Vec<PeerOdometry>, LinkStatus) {
+    let team = vec![
+        RobotSpec::new("r0"),
+        RobotSpec::new("r1")
+            .with(link(config))
+            .with(ActorSpec::new("forger", move || Forger {
+                frames: frames.clone(),
+                next_id: 0,
+            })),
+    ];
+    let heard: Arc<Mutex<Vec<PeerOdometry>>> = Arc::default();
+    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
+    let mut exec = SimExecutor::new(team, 5);
+    let (tap_heard, tap_status) = (heard.clone(), status.clone());
+    exec.add_tap(move |p: &Publication<'_>| {
+        if let Some(o) = p.get(&PEER_ODOMETRY) {
+            tap_heard.lock().unwrap().push(o.clone());
+        } else if let Some(s) = p.get(&LINK_STATUS) {
+            *tap_status.lock().unwrap() = Some(s.clone());
+        }
+    });
+    exec.run_until(Time::from_secs_f64(until_s));
+    exec.finish();
+    let heard = heard.lock().unwrap().clone();
+    let status = status.lock().unwrap().clone().expect("a status");
+    (heard, status)
+}
+
 /// Issue 45, item 1: stamps are on the team clock and every message names its
 /// sender's run, so a restarted peer is heard at once (and announced), while a stamp
 /// too far ahead of this robot's clock is rejected and counted.
 #[test]
 fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
     let odometry = |run_start_ms: u64, stamp_ms: u64, x: f64| {
-        let ns = |ms: u64| ms * 1_000_000;
-        Envelope::new(
-            0,
-            0,
-            stamp_ms,
-            ns(stamp_ms),
-            Payload::Odometry(wire::Odometry {
-                position_m: [x, 0.0, 1.0],
-                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
-                velocity_mps: [0.0; 3],
-            }),
-        )
-        .from_run(ns(run_start_ms))
+        odometry_envelope(0, run_start_ms, stamp_ms, stamp_ms, x)
     };
     let frames = vec![
         (0.5, odometry(0, 450, 1.0)),
@@ -799,34 +844,17 @@ fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
         // 0.4 s ahead is within the bound (clocks a little apart).
         (2.0, odometry(1_200, 2_400, 4.0)),
     ];
-    let team = vec![
-        RobotSpec::new("r0"),
-        RobotSpec::new("r1")
-            .with(link(&LinkConfig::default()))
-            .with(ActorSpec::new("forger", move || Forger {
-                frames: frames.clone(),
-                next_id: 0,
-            })),
-    ];
-    type Heard = Vec<(u64, u64, f64)>;
-    let heard: Arc<Mutex<Heard>> = Arc::default();
-    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let mut exec = SimExecutor::new(team, 5);
-    let (tap_heard, tap_status) = (heard.clone(), status.clone());
-    exec.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&PEER_ODOMETRY) {
-            tap_heard.lock().unwrap().push((
+    let (heard, status) = forged_run(&LinkConfig::default(), frames, 3.5);
+    let heard: Vec<(u64, u64, f64)> = heard
+        .iter()
+        .map(|o| {
+            (
                 o.run_start_ns,
                 o.odometry.stamp.as_nanos() / 1_000_000,
                 o.odometry.pose.translation.x,
-            ));
-        } else if let Some(s) = p.get(&LINK_STATUS) {
-            *tap_status.lock().unwrap() = Some(s.clone());
-        }
-    });
-    exec.run_until(Time::from_secs_f64(3.5));
-    exec.finish();
-    let heard = heard.lock().unwrap().clone();
+            )
+        })
+        .collect();
     assert_eq!(
         heard,
         vec![
@@ -835,7 +863,6 @@ fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
             (1_200_000_000, 2_400, 4.0)
         ]
     );
-    let status = status.lock().unwrap().clone().expect("a status");
     assert_eq!(status.rejections.from_the_future, 1);
     assert_eq!(status.rejections.total(), 1);
 }
@@ -914,19 +941,6 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
 /// odometry is delivered.
 #[test]
 fn the_base_station_cannot_send_a_robots_messages() {
-    let odometry = |sender: u32, stamp_ms: u64| {
-        Envelope::new(
-            0,
-            sender,
-            stamp_ms,
-            stamp_ms * 1_000_000,
-            Payload::Odometry(wire::Odometry {
-                position_m: [1.0, 0.0, 1.0],
-                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
-                velocity_mps: [0.0; 3],
-            }),
-        )
-    };
     let heartbeat = Envelope::new(
         0,
         2,
@@ -935,36 +949,15 @@ fn the_base_station_cannot_send_a_robots_messages() {
         Payload::Heartbeat(wire::Heartbeat { uptime_s: 0.9 }),
     );
     let frames = vec![
-        (0.5, odometry(2, 450)),
+        (0.5, odometry_envelope(2, 0, 450, 450, 1.0)),
         (1.0, heartbeat),
-        (1.5, odometry(0, 1_450)),
+        (1.5, odometry_envelope(0, 0, 1_450, 1_450, 1.0)),
     ];
     let config = LinkConfig::default().with_team(2);
     assert_eq!(config.base_id, Some(2));
-    let team = vec![
-        RobotSpec::new("r0"),
-        RobotSpec::new("r1")
-            .with(link(&config))
-            .with(ActorSpec::new("forger", move || Forger {
-                frames: frames.clone(),
-                next_id: 0,
-            })),
-    ];
-    let heard: Arc<Mutex<Vec<RobotId>>> = Arc::default();
-    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let mut exec = SimExecutor::new(team, 5);
-    let (tap_heard, tap_status) = (heard.clone(), status.clone());
-    exec.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&PEER_ODOMETRY) {
-            tap_heard.lock().unwrap().push(o.robot);
-        } else if let Some(s) = p.get(&LINK_STATUS) {
-            *tap_status.lock().unwrap() = Some(s.clone());
-        }
-    });
-    exec.run_until(Time::from_secs_f64(2.5));
-    exec.finish();
-    assert_eq!(*heard.lock().unwrap(), vec![RobotId(0)]);
-    let status = status.lock().unwrap().clone().expect("a status");
+    let (heard, status) = forged_run(&config, frames, 2.5);
+    let senders: Vec<RobotId> = heard.iter().map(|o| o.robot).collect();
+    assert_eq!(senders, vec![RobotId(0)]);
     assert_eq!(status.rejections.base_as_robot, 1);
     assert_eq!(status.rejections.total(), 1);
 }
@@ -976,18 +969,7 @@ fn the_base_station_cannot_send_a_robots_messages() {
 #[test]
 fn a_message_replayed_under_a_fresh_id_is_rejected() {
     let odometry = |run_start_ms: u64, sequence: u64, stamp_ms: u64, x: f64| {
-        Envelope::new(
-            0,
-            0,
-            sequence,
-            stamp_ms * 1_000_000,
-            Payload::Odometry(wire::Odometry {
-                position_m: [x, 0.0, 1.0],
-                orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
-                velocity_mps: [0.0; 3],
-            }),
-        )
-        .from_run(run_start_ms * 1_000_000)
+        odometry_envelope(0, run_start_ms, sequence, stamp_ms, x)
     };
     let frames = vec![
         (0.5, odometry(0, 10, 450, 1.0)),
@@ -999,33 +981,12 @@ fn a_message_replayed_under_a_fresh_id_is_rejected() {
         (2.0, odometry(1_800, 0, 1_900, 3.0)),
         (2.5, odometry(1_800, 0, 1_900, 3.0)),
     ];
-    let team = vec![
-        RobotSpec::new("r0"),
-        RobotSpec::new("r1")
-            .with(link(&LinkConfig::default()))
-            .with(ActorSpec::new("forger", move || Forger {
-                frames: frames.clone(),
-                next_id: 0,
-            })),
-    ];
-    let heard: Arc<Mutex<Vec<f64>>> = Arc::default();
-    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let mut exec = SimExecutor::new(team, 5);
-    let (tap_heard, tap_status) = (heard.clone(), status.clone());
-    exec.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&PEER_ODOMETRY) {
-            tap_heard
-                .lock()
-                .unwrap()
-                .push(o.odometry.pose.translation.x);
-        } else if let Some(s) = p.get(&LINK_STATUS) {
-            *tap_status.lock().unwrap() = Some(s.clone());
-        }
-    });
-    exec.run_until(Time::from_secs_f64(3.5));
-    exec.finish();
-    assert_eq!(*heard.lock().unwrap(), vec![1.0, 2.0, 3.0]);
-    let status = status.lock().unwrap().clone().expect("a status");
+    let (heard, status) = forged_run(&LinkConfig::default(), frames, 3.5);
+    let xs: Vec<f64> = heard
+        .iter()
+        .map(|o| o.odometry.pose.translation.x)
+        .collect();
+    assert_eq!(xs, vec![1.0, 2.0, 3.0]);
     assert_eq!(status.rejections.replayed, 2);
     assert_eq!(status.rejections.total(), 2);
 }
