@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{root, seconds_of_day, strip_ansi, zenoh_python};
+use common::{read_json, root, seconds_of_day, strip_ansi, zenoh_python};
 use serde_json::Value;
 use troupe_actors::link::MAX_RECEIVED_BYTES;
 use troupe_comms::journal::{DiskJournal, Recovered};
@@ -55,11 +55,6 @@ fn team_scenario(dir: &Path, text: &str) -> Scenario {
     let file = dir.join("team.toml");
     std::fs::write(&file, text).expect("scenario");
     Scenario::load(&file).expect("scenario")
-}
-
-fn read_json(path: &Path) -> Value {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).expect("json")
 }
 
 /// Messages a robot's summary counts on `topic`.
@@ -730,6 +725,31 @@ fn a_flood_and_a_200_mb_message_leave_a_robot_process_as_it_was() {
     );
 }
 
+/// Waits until the running robot whose outputs are in `out` has journaled a message
+/// for `peer` (read from a copy of its journal, which opening would otherwise cut at
+/// a record being written); panics after `within`.
+fn wait_stored_for(out: &Path, peer: u32, within: Duration) {
+    let started = Instant::now();
+    let copy = tempfile::tempdir().expect("tempdir");
+    loop {
+        for entry in std::fs::read_dir(out.join("state")).expect("the journal directory") {
+            // A compaction's temporary file may be gone by the time it is copied.
+            let entry = entry.expect("entry");
+            let _ = std::fs::copy(entry.path(), copy.path().join(entry.file_name()));
+        }
+        let (_, recovered) =
+            DiskJournal::open(copy.path(), 0, MAX_RECEIVED_BYTES).expect("journal copy");
+        if !stored_keyframes_for(&recovered, peer).is_empty() {
+            return;
+        }
+        assert!(
+            started.elapsed() < within,
+            "no keyframe journaled for robot {peer} within {within:?}"
+        );
+        std::thread::sleep(Duration::from_secs(1));
+    }
+}
+
 /// A robot's journal as a restart would find it.
 fn journal(out: &Path) -> Recovered {
     DiskJournal::open(&out.join("state"), 0, MAX_RECEIVED_BYTES)
@@ -795,9 +815,9 @@ fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
     let mut robot1 = spawn_robot(&files[1], Some(10.0));
     let mut robot0 = spawn_robot(&files[0], None);
     assert!(wait_exit(&mut robot1, "robot 1", Duration::from_secs(60)).success());
-    // Long enough alone to make a keyframe for robot 1 on a loaded machine (what it
-    // makes after robot 1 is suspended, at 10 s, is still kept for it).
-    std::thread::sleep(Duration::from_secs(15));
+    // Alone until it has made a keyframe robot 1 has not acknowledged (how long that
+    // takes depends on where it flies and on the machine's load).
+    wait_stored_for(&out0, 1, Duration::from_secs(90));
     let mut accepted = BTreeSet::new();
     let mut previous: Option<Recovered> = None;
     let mut team_keyframes = 0;
