@@ -57,6 +57,7 @@ use crate::transport::{
 };
 use crate::wire::Class;
 
+pub mod refusals;
 pub mod security;
 
 /// Session mode.
@@ -174,6 +175,14 @@ pub struct ZenohConfig {
     pub max_message_bytes: usize,
     /// Frames waiting for the sender thread before new ones are dropped.
     pub send_queue_frames: usize,
+    /// Seconds an accepted connection has to open its zenoh session before it is
+    /// closed (zenoh's `transport/unicast/accept_timeout`). 0:
+    /// [`DEFAULT_ACCEPT_TIMEOUT_S`].
+    pub accept_timeout_s: f64,
+    /// Connections that may be opening a session at once; more are closed as they
+    /// arrive (zenoh's `transport/unicast/accept_pending`). 0:
+    /// [`DEFAULT_ACCEPT_PENDING`].
+    pub accept_pending: usize,
 }
 
 const DEFAULT_SEND_QUEUE_FRAMES: usize = 4096;
@@ -186,6 +195,18 @@ const MIN_MAX_MESSAGE_BYTES: usize = 64 * 1024;
 /// incomplete message of one connection, so many hostile connections at once cost
 /// little (each could hold 4 MiB with troupe's message limit as the bound).
 pub const DEFAULT_MAX_MESSAGE_BYTES: usize = 128 * 1024;
+
+/// The default `accept_timeout_s`: half zenoh's 10 s, still many round trips of a
+/// slow radio link. With [`DEFAULT_ACCEPT_PENDING`], a stranger's idle or junk
+/// connections keep a listener from taking new sessions only at 200 a second or
+/// more (zenoh's 100 and 10 s: at 10 a second; `docs/security.md`).
+pub const DEFAULT_ACCEPT_TIMEOUT_S: f64 = 5.0;
+
+/// The default `accept_pending` (zenoh's: 100); [`DEFAULT_ACCEPT_TIMEOUT_S`].
+pub const DEFAULT_ACCEPT_PENDING: usize = 1000;
+
+/// The longest `accept_timeout_s` accepted, seconds.
+const MAX_ACCEPT_TIMEOUT_S: f64 = 60.0;
 
 fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
     TransportError::Config {
@@ -215,6 +236,26 @@ impl ZenohConfig {
             DEFAULT_MAX_MESSAGE_BYTES
         } else {
             self.max_message_bytes
+        }
+    }
+
+    /// `accept_timeout_s`, with 0 meaning [`DEFAULT_ACCEPT_TIMEOUT_S`].
+    #[must_use]
+    pub fn accept_timeout_s(&self) -> f64 {
+        if self.accept_timeout_s == 0.0 {
+            DEFAULT_ACCEPT_TIMEOUT_S
+        } else {
+            self.accept_timeout_s
+        }
+    }
+
+    /// `accept_pending`, with 0 meaning [`DEFAULT_ACCEPT_PENDING`].
+    #[must_use]
+    pub fn accept_pending(&self) -> usize {
+        if self.accept_pending == 0 {
+            DEFAULT_ACCEPT_PENDING
+        } else {
+            self.accept_pending
         }
     }
 
@@ -313,6 +354,12 @@ impl ZenohConfig {
                 format!("must be at least {MIN_MAX_MESSAGE_BYTES} (one frame), or 0"),
             ));
         }
+        if !(self.accept_timeout_s >= 0.0 && self.accept_timeout_s <= MAX_ACCEPT_TIMEOUT_S) {
+            return Err(config_error(
+                "accept_timeout_s",
+                format!("must be between 0 and {MAX_ACCEPT_TIMEOUT_S} s (0: the default)"),
+            ));
+        }
         security::check(self)
     }
 
@@ -343,6 +390,14 @@ impl ZenohConfig {
         set(
             "transport/link/rx/max_message_size",
             self.max_message_bytes().to_string(),
+        )?;
+        set(
+            "transport/unicast/accept_timeout",
+            format!("{:.0}", self.accept_timeout_s() * 1000.0),
+        )?;
+        set(
+            "transport/unicast/accept_pending",
+            self.accept_pending().to_string(),
         )?;
         if let Some(tls) = &self.tls {
             let path = |p: &PathBuf| json(&p.display().to_string());
@@ -495,7 +550,7 @@ pub fn frame_class(bytes: &[u8]) -> Result<Class, TransportError> {
 }
 
 /// Counters of a [`ZenohTransport`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct ZenohStats {
     /// Frames handed to zenoh.
     pub sent_frames: u64,
@@ -525,6 +580,10 @@ pub struct ZenohStats {
     pub subscribed_cells: u64,
     /// Times the cell subscriptions changed because a local robot moved.
     pub resubscriptions: u64,
+    /// Connections zenoh refused before they became sessions, by kind
+    /// ([`refusals::Refusal::name`]; every session of this process, since it
+    /// started).
+    pub refused_connections: std::collections::BTreeMap<String, u64>,
 }
 
 #[derive(Default)]
@@ -565,6 +624,7 @@ impl Counters {
             rejected_sender: l(&self.rejected_sender),
             subscribed_cells: l(&self.subscribed_cells),
             resubscriptions: l(&self.resubscriptions),
+            refused_connections: refusals::refused_connections(),
         }
     }
 }

@@ -497,14 +497,17 @@ pub fn unix_now_s() -> f64 {
 }
 
 /// The log filter of the `troupe` binary without `RUST_LOG`: warnings, less zenoh's
-/// notice that gossip is off (troupe turns it off: peers are named, not discovered).
-pub const DEFAULT_LOG_FILTER: &str = "warn,zenoh::net::routing::hat=error";
+/// notice that gossip is off (troupe turns it off: peers are named, not discovered)
+/// and its notice at every TLS connection that the server's name is not checked
+/// (certificates name robots, not hosts: the access control checks the name).
+pub const DEFAULT_LOG_FILTER: &str =
+    "warn,zenoh::net::routing::hat=error,zenoh_link_tls::utils=error";
 
 /// The log filter of `troupe-robot` without `RUST_LOG`: [`DEFAULT_LOG_FILTER`] and
 /// the hardware driver's and the link's rare info lines (waiting for the autopilot,
 /// control handed over, a restarted peer, an absent base station; docs/hardware.md).
-pub const HARDWARE_LOG_FILTER: &str =
-    "warn,zenoh::net::routing::hat=error,troupe_robot=info,troupe_actors::link=info";
+pub const HARDWARE_LOG_FILTER: &str = "warn,zenoh::net::routing::hat=error,zenoh_link_tls::utils=error,troupe_robot=info,\
+     troupe_actors::link=info";
 
 /// Logs to stderr, filtered by `RUST_LOG` (default [`DEFAULT_LOG_FILTER`]): a
 /// binary's first line.
@@ -512,14 +515,24 @@ pub fn init_logging() {
     init_logging_with(DEFAULT_LOG_FILTER);
 }
 
-/// Logs to stderr, filtered by `RUST_LOG` (default `default_filter`).
+/// Logs to stderr, filtered by `RUST_LOG` (default `default_filter`); zenoh's
+/// line per refused connection becomes one line per kind every 10 s
+/// ([`troupe_comms::zenoh::refusals`]).
 pub fn init_logging_with(default_filter: &str) {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
-        )
+    use tracing_subscriber::layer::{Layer, SubscriberExt};
+    use tracing_subscriber::util::SubscriberInitExt;
+    use troupe_comms::zenoh::refusals;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter));
+    let log = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
+        .with_filter(tracing_subscriber::filter::FilterExt::and(
+            filter,
+            refusals::hide_refusals(),
+        ));
+    tracing_subscriber::registry()
+        .with(log)
+        .with(refusals::refusal_layer())
         .init();
 }
 

@@ -303,7 +303,7 @@ async fn fly(
         vehicle: vehicle.as_ref().map(VehicleSummary::from),
         collision: collision.take(),
         link: link.take(),
-        zenoh: finished.zenoh,
+        zenoh: finished.zenoh.clone(),
         transport_errors: finished.transport_errors,
         ros2_inputs: inputs.stats(),
         ros2_outputs: publisher.stats(),
