@@ -26,10 +26,7 @@ use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::SimCameraSource;
 use crate::vehicle::{SimVehicle, new_body};
-use crate::world::{Site, World};
-
-/// Seconds between the departures of consecutive robots.
-pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
+use crate::world::{DEPARTURE_INTERVAL_S, Site, World};
 
 /// A team ready to run.
 pub struct Team {

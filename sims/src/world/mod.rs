@@ -144,6 +144,10 @@ pub trait World: Send + Sync {
     }
 }
 
+/// Seconds between the departures of consecutive robots (a team leaves one robot
+/// after another; a [`Site`] may place later robots by it).
+pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
+
 /// A world with places for robots: start positions and waypoint routes.
 pub trait Site: World {
     /// Start position of robot `robot_index` of `robot_count`, in free space.
