@@ -40,7 +40,7 @@ pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use open_field::{OpenField, OpenFieldParams};
 pub use room::{Room, RoomBox, RoomParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
-pub use troupe_actors::geometry::Aabb;
+pub use troupe_algorithms::geometry::Aabb;
 pub use tunnels::TunnelParams;
 pub use warehouse::{Warehouse, WarehouseParams};
 

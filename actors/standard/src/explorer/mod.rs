@@ -16,8 +16,11 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::msgs::{CandidatePlan, ODOMETRY, Odometry, PLAN, PLAN_CANDIDATES, Plan, PlanCandidates};
-use crate::trajectory::{Knot, Trajectory};
+use crate::msgs::{ODOMETRY, PLAN, PLAN_CANDIDATES};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{CandidatePlan, PlanCandidates};
+use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_runtime::{Actor, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
 
 /// Decides where the robot goes next.

@@ -25,19 +25,23 @@ use nalgebra::Isometry3;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::committed::{Committed, replanning_root};
 use super::memory_share::{MEMORY_CELLS, MemoryCells};
-use super::primitives::FlatState;
-use super::problem::PlanningProblem;
-use super::round::{Candidate, RoundConfig};
 use crate::grid::changeset::cell_centres;
 use crate::link::Peer;
 use crate::msgs::{
-    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
-    PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PLAN_DECISION, PinholeIntrinsics, Plan,
-    PlanCandidates, PlanDecision,
+    GRID_SNAPSHOT, ODOMETRY, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES,
+    PLAN_DECISION,
 };
+use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_algorithms::exploration::{GuidanceConfig, GuidanceField, Guide};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{CandidatePlan, PlanCandidates, PlanDecision};
+use troupe_algorithms::planner::committed::{Committed, replanning_root};
+use troupe_algorithms::planner::primitives::FlatState;
+use troupe_algorithms::planner::problem::PlanningProblem;
+use troupe_algorithms::planner::round::{Candidate, RoundConfig};
 use troupe_runtime::{
     Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, RobotId, Time, TimerId,
     Topic,

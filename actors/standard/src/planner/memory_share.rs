@@ -106,8 +106,8 @@ mod tests {
 
     use super::*;
     use crate::link::Peer;
-    use crate::planner::round::Candidate;
     use crate::planner::{ActionSelection, PlannerActor, PlannerConfig};
+    use troupe_algorithms::planner::round::Candidate;
 
     fn record(frontier: bool) -> CellRecord {
         CellRecord {

@@ -1,5 +1,5 @@
 //! The planning actors (thesis §4.1, §5.1.2); the planning cores are
-//! [`troupe_algorithms::planner`], re-exported here.
+//! [`troupe_algorithms::planner`].
 //!
 //! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
 //!   primitives; the choice among candidates is an [`ActionSelection`] policy.
@@ -18,4 +18,3 @@ pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsE
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
 };
-pub use troupe_algorithms::planner::*;
