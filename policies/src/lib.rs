@@ -46,8 +46,8 @@ pub mod route;
 pub mod selection;
 
 use nalgebra::Point3;
-use troupe_actors::explorer::ExplorationBehaviour;
-use troupe_actors::planner::ActionSelection;
+use troupe_algorithms::exploration::ExplorationBehaviour;
+use troupe_algorithms::planner::selection::ActionSelection;
 use troupe_core::Time;
 
 /// Inputs a behaviour may need besides its own parameters.

@@ -12,10 +12,10 @@ use std::time::{Duration, Instant};
 
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
-use troupe_actors::planner::ActionSelection;
 use troupe_algorithms::planner::primitives::FlatState;
 use troupe_algorithms::planner::problem::{PlanningProblem, SearchParams};
 use troupe_algorithms::planner::round::Candidate;
+use troupe_algorithms::planner::selection::ActionSelection;
 
 /// What a search found.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,7 +2,8 @@
 //! [`troupe_algorithms::planner`].
 //!
 //! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
-//!   primitives; the choice among candidates is an [`ActionSelection`] policy.
+//!   primitives; the choice among candidates is an
+//!   [`ActionSelection`](troupe_algorithms::planner::selection::ActionSelection) policy.
 //! - [`TeleopActor`] commits teleoperation primitives at a fixed rate;
 //!   [`ScriptedTeleop`] publishes a timed command script in place of a joystick.
 
@@ -11,8 +12,8 @@ mod memory_share;
 mod teleop_actor;
 
 pub use actor::{
-    ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
-    REMEMBERED_FRONTIERS, RememberedFrontiers,
+    PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport, REMEMBERED_FRONTIERS,
+    RememberedFrontiers,
 };
 pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError};
 pub use teleop_actor::{
