@@ -9,7 +9,8 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use troupe_actors::msgs::{ODOMETRY, Odometry};
+use troupe_actors::msgs::ODOMETRY;
+use troupe_algorithms::frame::Odometry;
 use troupe_runtime::{
     Actor, ActorResult, ActorSpec, Context, Event, Message, QueuePolicy, TimerId, Topic,
 };

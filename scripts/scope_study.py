@@ -42,7 +42,7 @@ def scenario(base: str, robots: int, scope: str) -> str:
     )
 
 
-DEPARTURE_INTERVAL_S = 4.0  # troupe_sims::team::DEPARTURE_INTERVAL_S
+DEPARTURE_INTERVAL_S = 4.0  # troupe_sims::world::DEPARTURE_INTERVAL_S
 
 
 def window_rates(timeseries: pathlib.Path, start_s: float, end_s: float) -> list:

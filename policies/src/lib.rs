@@ -17,8 +17,8 @@
 //!
 //! ```
 //! use nalgebra::{Isometry3, Point3, Vector3};
-//! use troupe_actors::msgs::Odometry;
-//! use troupe_actors::runtime::Time;
+//! use troupe_algorithms::frame::Odometry;
+//! use troupe_core::Time;
 //! use troupe_policies::{BehaviourInputs, SELECTIONS, behaviour_by_name, selection_by_name};
 //!
 //! // A route behaviour: from the origin to 4 m ahead.
@@ -46,9 +46,9 @@ pub mod route;
 pub mod selection;
 
 use nalgebra::Point3;
-use troupe_actors::explorer::ExplorationBehaviour;
-use troupe_actors::planner::ActionSelection;
-use troupe_actors::runtime::Time;
+use troupe_algorithms::exploration::ExplorationBehaviour;
+use troupe_algorithms::planner::selection::ActionSelection;
+use troupe_core::Time;
 
 /// Inputs a behaviour may need besides its own parameters.
 #[derive(Clone, Debug, Default)]

@@ -36,11 +36,11 @@
 //! robots that committed within one round met head on.
 
 use serde::{Deserialize, Serialize};
-pub use troupe_actors::collision::peers::must_yield;
-use troupe_actors::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
-use troupe_actors::msgs::Odometry;
-use troupe_actors::runtime::{ConfigError, RobotId, Time};
-use troupe_actors::trajectory::Trajectory;
+pub use troupe_algorithms::collision::peers::must_yield;
+use troupe_algorithms::collision::peers::{PeerAvoidance, PeerConflict, PeerTable, PeerTrack};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::trajectory::Trajectory;
+use troupe_core::{ConfigError, RobotId, Time};
 
 /// Settings of the priority check (thesis §8.2.3).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -471,8 +471,9 @@ impl PeerAvoidance for PriorityAvoidance {
 mod tests {
     use super::*;
     use nalgebra::{Isometry3, Point3, Vector3};
-    use troupe_actors::msgs::{PeerOdometry, PeerPlan, Plan};
-    use troupe_actors::trajectory::Knot;
+    use troupe_algorithms::plan::Plan;
+    use troupe_algorithms::team::{PeerOdometry, PeerPlan};
+    use troupe_algorithms::trajectory::Knot;
 
     fn t(s: f64) -> Time {
         Time::from_secs_f64(s)

@@ -6,10 +6,10 @@
 //! clearance (the cave's centre lines have at least 1 m).
 
 use nalgebra::{Point3, Vector3};
-use troupe_actors::explorer::ExplorationBehaviour;
-use troupe_actors::msgs::Odometry;
-use troupe_actors::runtime::Time;
-use troupe_actors::trajectory::{Knot, Trajectory, wrap_angle};
+use troupe_algorithms::exploration::ExplorationBehaviour;
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::trajectory::{Knot, Trajectory, wrap_angle};
+use troupe_core::Time;
 
 use crate::PolicyError;
 

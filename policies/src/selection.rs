@@ -10,8 +10,8 @@ pub use mcts::{Mcts, SearchOutcome, search};
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use troupe_actors::planner::ActionSelection;
-use troupe_actors::planner::round::Candidate;
+use troupe_algorithms::planner::round::Candidate;
+use troupe_algorithms::planner::selection::ActionSelection;
 
 /// Single-step selection (paper Alg. 1): the candidate with the highest reward
 /// I + αV; ties go to the first.

@@ -9,18 +9,19 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use troupe_actors::collision::{COLLISION_STATUS, CollisionActor, CollisionActorConfig};
-use troupe_actors::msgs::{
-    CandidatePlan, ODOMETRY, Odometry, PEER_PLAN, PLAN, PLAN_CANDIDATES, PeerPlan, Plan,
-    PlanCandidates,
-};
-use troupe_actors::planner::committed::Committed;
-use troupe_actors::planner::primitives::{Action, DynamicLimits, FlatState, Primitive};
-use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, Publication, RobotId, RobotSpec, SimExecutor,
-    Time, TimerId,
-};
-use troupe_actors::trajectory::{Knot, Trajectory};
+use troupe_actors::msgs::{ODOMETRY, PEER_PLAN, PLAN, PLAN_CANDIDATES};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{CandidatePlan, PlanCandidates};
+use troupe_algorithms::planner::committed::Committed;
+use troupe_algorithms::planner::primitives::{Action, DynamicLimits, FlatState, Primitive};
+use troupe_algorithms::team::PeerPlan;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
+use troupe_core::{RobotId, Time};
 use troupe_policies::priority::{PriorityAvoidance, PriorityConfig};
+use troupe_runtime::{
+    Actor, ActorResult, ActorSpec, Context, Event, Publication, RobotSpec, SimExecutor, TimerId,
+};
 
 const KNOT_STEP_S: f64 = 0.1;
 

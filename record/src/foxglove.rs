@@ -5,7 +5,7 @@
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion};
 use serde::Serialize;
-use troupe_actors::runtime::Time;
+use troupe_core::Time;
 
 /// A time (`foxglove` `time`): whole seconds and nanoseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]

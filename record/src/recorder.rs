@@ -30,11 +30,13 @@ use serde::Serialize;
 use troupe_actors::link::LINK_STATUS;
 use troupe_actors::msgs::{
     DEPTH_FRAME, GRID_SNAPSHOT, KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN,
-    PLAN_CANDIDATES, PLAN_DECISION, PlanCandidates, PlanDecision,
+    PLAN_CANDIDATES, PLAN_DECISION,
 };
 use troupe_actors::planner::REMEMBERED_FRONTIERS;
-use troupe_actors::runtime::{Publication, Tap, Time};
+use troupe_algorithms::planner::candidates::{PlanCandidates, PlanDecision};
 use troupe_core::ConfigError;
+use troupe_core::Time;
+use troupe_runtime::{Publication, Tap};
 
 use crate::foxglove::{
     Color, FrameTransform, KeyValuePair, PointCloud, PoseInFrame, RawImage, SceneEntity,

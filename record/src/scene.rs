@@ -6,11 +6,11 @@
 use nalgebra::{Matrix3, Point3, Rotation3, SymmetricEigen, UnitQuaternion, Vector4};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use troupe_actors::grid::{CellState, GridSnapshot};
-use troupe_actors::msgs::Keyframe;
-use troupe_actors::runtime::Time;
-use troupe_actors::trajectory::Trajectory;
+use troupe_algorithms::grid::{CellState, GridSnapshot};
+use troupe_algorithms::keyframe::Keyframe;
 use troupe_algorithms::mapfile::sample_surface;
+use troupe_algorithms::trajectory::Trajectory;
+use troupe_core::Time;
 
 use crate::foxglove::{
     Color, KeyValuePair, LINE_STRIP, LinePrimitive, PointCloud, Pose, SceneEntity, SpherePrimitive,

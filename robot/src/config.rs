@@ -3,15 +3,15 @@
 use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::ArtifactsConfig;
 use troupe_actors::collision::CollisionActorConfig;
-use troupe_actors::collision::body::BodyConfig;
-use troupe_actors::collision::geofence::GeofenceConfig;
-use troupe_actors::grid::GridConfig;
 use troupe_actors::link::LinkConfig;
 use troupe_actors::mapper::MapperConfig;
-use troupe_actors::planner::teleop::TeleopParams;
 use troupe_actors::planner::{PlannerConfig, ScriptedCommand};
-use troupe_actors::runtime::RestartPolicy;
+use troupe_algorithms::collision::body::BodyConfig;
+use troupe_algorithms::collision::geofence::GeofenceConfig;
+use troupe_algorithms::grid::GridConfig;
+use troupe_algorithms::planner::teleop::TeleopParams;
 use troupe_policies::priority::PriorityConfig;
+use troupe_runtime::RestartPolicy;
 
 /// The `behaviour` value that selects the grid + planner pipeline.
 pub const PLANNER: &str = "planner";
@@ -230,7 +230,7 @@ impl Default for RobotConfig {
     }
 }
 
-pub use troupe_actors::runtime::ConfigError;
+pub use troupe_core::ConfigError;
 
 fn positive(key: &str, value: f64) -> Result<(), ConfigError> {
     ConfigError::positive(key, value)

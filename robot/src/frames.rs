@@ -17,7 +17,7 @@
 //! (facing north, facing east, pitched nose-up, rolled) and round trips.
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use troupe_actors::trajectory::wrap_angle;
+use troupe_algorithms::trajectory::wrap_angle;
 
 /// The rotation taking ENU coordinates to NED coordinates (a half turn about the
 /// axis (1, 1, 0)/√2; it is its own inverse).

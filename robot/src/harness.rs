@@ -24,7 +24,7 @@
 //!
 //! ```no_run
 //! use troupe_actors::link::{LINK_STATUS, LinkActor, LinkConfig};
-//! use troupe_actors::runtime::{ActorSpec, RobotSpec};
+//! use troupe_runtime::{ActorSpec, RobotSpec};
 //! use troupe_comms::scope::SubscriptionConfig;
 //! use troupe_comms::zenoh::ZenohConfig;
 //! use troupe_robot::harness::{self, Harness, Member};
@@ -64,16 +64,16 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use serde::Serialize;
 use troupe_actors::link::LinkJournal;
 use troupe_actors::msgs::ODOMETRY;
-use troupe_actors::runtime::{
-    ErrorChain, Message, Publication, RealtimeExecutor, RobotId, RobotIdsError, RobotReport,
-    RobotSpec, Tap, Topic,
-};
 use troupe_comms::journal::JournalError;
 use troupe_comms::scope::SubscriptionConfig;
 use troupe_comms::transport::TransportError;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats, ZenohTransport};
+use troupe_core::{ErrorChain, Message, RobotId};
 use troupe_record::{
     Clock, RUN_RECORDING, RecordError, RecordOptions, Recorder, RecordingStats, SharedRecorder,
+};
+use troupe_runtime::{
+    Publication, RealtimeExecutor, RobotIdsError, RobotReport, RobotSpec, Tap, Topic,
 };
 
 /// The file every process writes its summary into, in its output directory.

@@ -58,12 +58,13 @@ use troupe_actors::explorer::ExplorerActor;
 use troupe_actors::grid::GridActor;
 use troupe_actors::link::{LinkActor, LinkJournal};
 use troupe_actors::mapper::MapperActor;
-use troupe_actors::msgs::PinholeIntrinsics;
 use troupe_actors::planner::{PlannerActor, ScriptedTeleop, TeleopActor, TeleopConfig};
-use troupe_actors::runtime::{ActorOptions, ActorSpec, LatencyModel, RobotId, RobotSpec};
 use troupe_actors::sensor::{FrameSource, SensorActor};
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_core::RobotId;
 use troupe_policies::priority::PriorityAvoidance;
 use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection_by_name};
+use troupe_runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 
 pub use config::{
     ActorLatencies, CollisionConfig, ConfigError, MapSharing, PLANNER, RobotConfig, TELEOP,
@@ -109,9 +110,9 @@ struct BoxedSource(Box<dyn FrameSource>);
 impl FrameSource for BoxedSource {
     fn capture(
         &mut self,
-        now: troupe_actors::runtime::Time,
-        odometry: Option<&troupe_actors::msgs::Odometry>,
-    ) -> Result<Option<troupe_actors::msgs::DepthFrame>, troupe_actors::runtime::ActorError> {
+        now: troupe_core::Time,
+        odometry: Option<&troupe_algorithms::frame::Odometry>,
+    ) -> Result<Option<troupe_algorithms::frame::DepthFrame>, troupe_runtime::ActorError> {
         self.0.capture(now, odometry)
     }
 }

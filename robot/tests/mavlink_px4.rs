@@ -15,19 +15,21 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde_json::Value;
-use troupe_actors::msgs::{
-    DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PLAN, PinholeIntrinsics, Plan, VEHICLE_HOLD,
-};
-use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec, Time,
-    TimerId,
-};
-use troupe_actors::trajectory::{Knot, Trajectory};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN, VEHICLE_HOLD};
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
+use troupe_core::Time;
 use troupe_robot::frames::{enu_to_ned, yaw_enu_to_ned};
 use troupe_robot::mavlink::{
     AUTOPILOT_STATUS, AutopilotStatus, GeofenceConfig, MavlinkConfig, mavlink_vehicle,
 };
 use troupe_robot::safety::{Geofence, HoldReason};
+use troupe_runtime::{
+    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec,
+    TimerId,
+};
 
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -317,7 +319,7 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let mut executor = RealtimeExecutor::new(vec![robot], 7);
     {
         let (odometry, status) = (odometry.clone(), status.clone());
-        executor.add_tap(move |p: &troupe_actors::runtime::Publication<'_>| {
+        executor.add_tap(move |p: &troupe_runtime::Publication<'_>| {
             if let Some(o) = p.get(&ODOMETRY) {
                 odometry.lock().expect("tap lock").push(o.clone());
             }

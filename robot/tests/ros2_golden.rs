@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use troupe_actors::runtime::Time;
+use troupe_core::Time;
 use troupe_robot::ros2::cdr::{decode, encode};
 use troupe_robot::ros2::convert::{
     DepthInputs, depth_frame_from_image, depth_frame_from_points, odometry_from_ros,
@@ -218,7 +218,7 @@ fn point_cloud_decodes_and_projects_into_the_intrinsics() {
             is_dense: true,
         },
     );
-    let intrinsics = troupe_actors::msgs::PinholeIntrinsics {
+    let intrinsics = troupe_algorithms::camera::PinholeIntrinsics {
         width: 4,
         height: 3,
         fx: 2.0,

@@ -16,17 +16,19 @@ use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
-use troupe_actors::mapper::sogmm::Gmm4;
-use troupe_actors::msgs::{
-    DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, ODOMETRY, Odometry, PLAN, Plan,
-};
-use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, Publication, QueuePolicy, RealtimeExecutor,
-    RobotSpec, Time,
-};
+use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, ODOMETRY, PLAN};
 use troupe_actors::sensor::SensorActor;
-use troupe_actors::trajectory::{Knot, Trajectory};
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::sogmm::Gmm4;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
+use troupe_core::Time;
 use troupe_robot::ros2::{Ros2Config, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
+use troupe_runtime::{
+    Actor, ActorResult, ActorSpec, Context, Event, Publication, QueuePolicy, RealtimeExecutor,
+    RobotSpec,
+};
 
 fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -106,7 +108,7 @@ impl Actor for AheadPlanner {
                 vec![Vector4::new(5.0, 0.0, 1.0, 0.5)],
                 vec![covariance],
             )
-            .map_err(|e| troupe_actors::runtime::ActorError::with_source("gmm", e))?;
+            .map_err(|e| troupe_runtime::ActorError::with_source("gmm", e))?;
             ctx.publish(
                 &KEYFRAME,
                 Keyframe {
@@ -120,7 +122,7 @@ impl Actor for AheadPlanner {
         }
         let later = Time::from_nanos(now.as_nanos() + 1_000_000_000);
         let trajectory = Trajectory::new(vec![knot(now, start), knot(later, ahead)])
-            .map_err(|e| troupe_actors::runtime::ActorError::with_source("plan", e))?;
+            .map_err(|e| troupe_runtime::ActorError::with_source("plan", e))?;
         ctx.publish(&PLAN, Plan::new(now, trajectory));
         Ok(())
     }

@@ -75,7 +75,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", troupe_actors::runtime::ErrorChain(e.as_ref()));
+            eprintln!("error: {}", troupe_core::ErrorChain(e.as_ref()));
             ExitCode::FAILURE
         }
     }

@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use troupe_actors::mapper::decimate;
-use troupe_actors::mapper::sogmm::{
+use troupe_algorithms::sogmm::{
     MeanShiftConfig, MeanShiftKind, frame_points, mean_shift_modes, synthetic,
 };
 use troupe_sims::sequence::Sequence;
@@ -127,7 +127,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", troupe_actors::runtime::ErrorChain(e.as_ref()));
+            eprintln!("error: {}", troupe_core::ErrorChain(e.as_ref()));
             ExitCode::FAILURE
         }
     }

@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use nalgebra::Point3;
 use serde::Serialize;
 use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact, ArtifactList};
-use troupe_actors::runtime::{Publication, Tap};
+use troupe_runtime::{Publication, Tap};
 
 /// A report this close to a placed artifact scores, metres.
 pub const CORRECT_WITHIN_M: f64 = 1.0;

@@ -6,7 +6,7 @@
 //! first surface (see [`CoverageGrid::observe`]). Results depend only on the inputs, never
 //! on thread scheduling.
 
-pub use troupe_actors::geometry::VoxelGrid;
+pub use troupe_algorithms::geometry::VoxelGrid;
 
 use nalgebra::Point3;
 use rayon::prelude::*;

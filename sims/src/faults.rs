@@ -8,7 +8,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use troupe_actors::runtime::{Actor, ActorFactory, ActorResult, Context, Event, RobotId, Time};
+use troupe_core::{RobotId, Time};
+use troupe_runtime::{Actor, ActorFactory, ActorResult, Context, Event};
 
 /// Names of the standard actors a fault can target.
 pub const ACTOR_NAMES: &[&str] = &[

@@ -5,10 +5,10 @@
 
 use std::sync::{Arc, Mutex};
 
-use troupe_actors::mapper::MapModel;
-use troupe_actors::mapper::mapfile::{GmmMap, MapKeyframe};
 use troupe_actors::msgs::KEYFRAME;
-use troupe_actors::runtime::{Publication, Tap};
+use troupe_algorithms::mapfile::{GmmMap, MapKeyframe};
+use troupe_algorithms::model::MapModel;
+use troupe_runtime::{Publication, Tap};
 
 /// Collects each robot's published keyframes into one [`GmmMap`] per robot.
 pub struct MapCollector {

@@ -15,7 +15,7 @@ use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::planner::PLANNING_REPORT;
 
 use crate::network::Positions;
-use troupe_actors::runtime::{LINK_RX, Publication, Tap};
+use troupe_runtime::{LINK_RX, Publication, Tap};
 
 use crate::coverage::CoverageGrid;
 use crate::world::{World, surface_distance_m};

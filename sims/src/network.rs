@@ -11,10 +11,11 @@
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use troupe_actors::runtime::{ConfigError, Destination, RobotId, SimNetwork, Time};
 use troupe_comms::scope::SubscriptionConfig;
 use troupe_comms::shaping::frame;
 use troupe_comms::simnet::{NetStats, SimNet, SimNetConfig};
+use troupe_core::{ConfigError, RobotId, Time};
+use troupe_runtime::{Destination, SimNetwork};
 
 use crate::faults::LossBurst;
 

@@ -6,10 +6,10 @@
 use std::sync::{Arc, Mutex};
 
 use serde::Serialize;
-use troupe_actors::grid::GridConfig;
-use troupe_actors::grid::meter::{ChangeSetMeter, ChangeSetTotals};
 use troupe_actors::msgs::DEPTH_FRAME;
-use troupe_actors::runtime::{Publication, Tap};
+use troupe_algorithms::grid::GridConfig;
+use troupe_algorithms::grid::meter::{ChangeSetMeter, ChangeSetTotals};
+use troupe_runtime::{Publication, Tap};
 
 /// One robot's totals at one resolution (`summary.json` → `og_change_sets[]`).
 #[derive(Clone, Debug, Serialize, PartialEq)]

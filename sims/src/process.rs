@@ -60,8 +60,8 @@ use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact};
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
-use troupe_actors::runtime::{ConfigError, Publication, RobotId, RobotSpec, TopicStats};
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats};
+use troupe_core::{ConfigError, RobotId};
 use troupe_record::{Compression, RecordOptions, RecordingStats, check_rate_hz, period_of_hz};
 use troupe_robot::AssembleError;
 use troupe_robot::harness::{
@@ -69,6 +69,7 @@ use troupe_robot::harness::{
 };
 use troupe_robot::launch::{TeamFiles, client_session, peer_sessions};
 use troupe_robot::toml_file::{KEYFRAME_POLICY_KEY, SettingsFileError, names_key, read_toml};
+use troupe_runtime::{Publication, RobotSpec, TopicStats};
 
 use crate::recording::{record_options, record_world};
 use crate::replay::replaying_robot;

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
-use troupe_actors::runtime::Time;
+use troupe_core::Time;
 use troupe_record::{RecordOptions, Recorder, period_of_hz, schemas};
 
 use crate::report::run_charts;

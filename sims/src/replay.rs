@@ -15,12 +15,14 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Vector3};
 use troupe_actors::link::LinkJournal;
-use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, Odometry};
-use troupe_actors::runtime::{
-    Actor, ActorOptions, ActorResult, ActorSpec, Context, Event, LatencyModel, QueuePolicy,
-    RobotSpec, Time, TimerId,
-};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY};
+use troupe_algorithms::frame::Odometry;
+use troupe_core::Time;
 use troupe_robot::{AssembleError, RobotConfig, RobotParts, assemble};
+use troupe_runtime::{
+    Actor, ActorOptions, ActorResult, ActorSpec, Context, Event, LatencyModel, QueuePolicy,
+    RobotSpec, TimerId,
+};
 
 use crate::sequence::{Sequence, SequenceSource};
 

@@ -11,7 +11,7 @@ use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
 
-use troupe_actors::mapper::mapfile::write_ply_with_source;
+use troupe_algorithms::mapfile::write_ply_with_source;
 use troupe_robot::base::merged_points;
 
 use crate::plot::{Chart, Series, write_chart};

@@ -2,9 +2,10 @@
 
 use std::sync::Arc;
 
-use troupe_actors::msgs::{DepthFrame, Odometry};
-use troupe_actors::runtime::{ActorError, Time};
 use troupe_actors::sensor::FrameSource;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_core::Time;
+use troupe_runtime::ActorError;
 
 use crate::camera::{CameraParams, CameraRenderer, GpuUnavailable};
 use crate::world::World;

@@ -1073,7 +1073,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             let path = write(dir.path(), "bad.toml", text);
             let error = Study::load(&path).expect_err(text);
             // What the CLI prints: the error and its causes.
-            let message = troupe_actors::runtime::ErrorChain(&error).to_string();
+            let message = troupe_core::ErrorChain(&error).to_string();
             assert!(
                 message.contains(needle),
                 "{message:?} should mention {needle}"

@@ -7,14 +7,15 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use troupe_actors::link::LinkJournal;
-use troupe_actors::mapper::mapfile::GmmMap;
-use troupe_actors::runtime::{
-    ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
-    Time, TopicStats,
-};
+use troupe_algorithms::mapfile::GmmMap;
 use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
+use troupe_core::Time;
 use troupe_robot::{AssembleError, RobotParts, assemble};
+use troupe_runtime::{
+    ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
+    TopicStats,
+};
 
 use crate::artifact_score::{ArtifactCollector, ArtifactScore, ScoredArtifact};
 use crate::camera::{CameraBackend, gpu_camera_available, resolve_backend};
@@ -26,10 +27,7 @@ use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::SimCameraSource;
 use crate::vehicle::{SimVehicle, new_body};
-use crate::world::{Site, World};
-
-/// Seconds between the departures of consecutive robots.
-pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
+use crate::world::{DEPARTURE_INTERVAL_S, Site, World};
 
 /// A team ready to run.
 pub struct Team {
@@ -273,7 +271,7 @@ impl Team {
     ///
     /// ```no_run
     /// # use troupe_sims::{scenario::Scenario, team::Team};
-    /// # use troupe_actors::runtime::*;
+    /// # use troupe_runtime::*;
     /// # struct MyActor;
     /// # impl Actor for MyActor { fn handle(&mut self, _: &Event, _: &mut Context<'_>) -> ActorResult { Ok(()) } }
     /// let team = Team::new_with(&Scenario::default(), |_index, robot| {
@@ -393,7 +391,7 @@ impl Team {
 
     /// Adds an observer of every publication of every robot (custom metrics,
     /// recording); call before [`Team::run`].
-    pub fn add_tap(&mut self, tap: impl troupe_actors::runtime::Tap + 'static) {
+    pub fn add_tap(&mut self, tap: impl troupe_runtime::Tap + 'static) {
         self.executor.add_tap(tap);
     }
 

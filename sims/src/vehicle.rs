@@ -21,11 +21,12 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use troupe_actors::msgs::{ODOMETRY, Odometry, PLAN, Plan};
-use troupe_actors::runtime::ConfigError;
-use troupe_actors::runtime::{
-    Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId,
-};
+use troupe_actors::msgs::{ODOMETRY, PLAN};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
+use troupe_core::ConfigError;
+use troupe_core::Time;
+use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
 
 /// Settings of the simulated vehicle (the `[vehicle]` table of a scenario).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use troupe_actors::mapper::mapfile::GmmMap;
+use troupe_algorithms::mapfile::GmmMap;
 use troupe_robot::launch::loopback_endpoints;
 use troupe_sims::process::write_team;
 

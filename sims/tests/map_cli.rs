@@ -7,8 +7,8 @@ use std::process::Command;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use rand::SeedableRng;
-use troupe_actors::mapper::MapModel;
-use troupe_actors::mapper::mapfile::GmmMap;
+use troupe_algorithms::mapfile::GmmMap;
+use troupe_algorithms::model::MapModel;
 use troupe_sims::camera::CameraParams;
 use troupe_sims::sequence::record_camera;
 use troupe_sims::world::{Aabb, BoxRoom, World};

@@ -901,7 +901,7 @@ fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
 /// journaled is in the restarted base's map of the robot.
 #[test]
 fn a_base_killed_and_restarted_keeps_the_keyframes_it_acknowledged() {
-    use troupe_actors::mapper::mapfile::GmmMap;
+    use troupe_algorithms::mapfile::GmmMap;
 
     let dir = tempfile::tempdir().expect("tempdir");
     // The base (id 2) is a recipient from the start: robot 1 never flies here, so

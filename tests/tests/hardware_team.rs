@@ -303,10 +303,9 @@ max_m = {FENCE_MAX:?}
             "the base has no keyframe of robot {id}"
         );
     }
-    let merged = troupe_actors::mapper::mapfile::GmmMap::load(
-        &dir.join("station").join("merged_map.troupe"),
-    )
-    .expect("merged map");
+    let merged =
+        troupe_algorithms::mapfile::GmmMap::load(&dir.join("station").join("merged_map.troupe"))
+            .expect("merged map");
     assert_eq!(
         merged.keyframes.len(),
         robots.values().map(|r| r.keyframes).sum::<usize>()

@@ -12,13 +12,15 @@
 //! - [`explorer`]: route behaviours chosen by name.
 //! - [`link`]: the only actor that talks to other robots.
 //!
-//! The runtime and the algorithm cores are re-exported as [`runtime`], [`geometry`]
-//! and [`trajectory`] for convenience.
+//! One import path for every type: this crate re-exports nothing of the crates below
+//! it; name the runtime's types from [`troupe_runtime`] and the algorithm cores (grid,
+//! planner, collision, map models, message types) from [`troupe_algorithms`].
 //!
 //! ```
-//! use troupe_actors::grid::{GridActor, GridConfig};
+//! use troupe_actors::grid::GridActor;
+//! use troupe_algorithms::grid::GridConfig;
 //! use troupe_actors::msgs::GRID_SNAPSHOT;
-//! use troupe_actors::runtime::{ActorSpec, RobotSpec, SimExecutor, Time};
+//! use troupe_runtime::{ActorSpec, RobotSpec, SimExecutor, Time};
 //!
 //! // A robot with only a grid actor: with no odometry it publishes nothing.
 //! let robot = RobotSpec::new("r0").with(ActorSpec::new("grid", || GridActor::new(GridConfig::default())));
@@ -37,6 +39,3 @@ pub mod mapper;
 pub mod msgs;
 pub mod planner;
 pub mod sensor;
-
-pub use troupe_algorithms::{geometry, trajectory};
-pub use troupe_runtime as runtime;

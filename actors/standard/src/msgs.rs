@@ -1,4 +1,5 @@
-//! The standard topics of a robot and their message types.
+//! The standard topics of a robot and their message types (most of them plain types
+//! of `troupe_algorithms`; import them from there).
 //!
 //! | topic | type | from → to |
 //! |---|---|---|
@@ -18,17 +19,13 @@
 //! | `link/tx`, `link/rx` | [`LinkTx`](troupe_runtime::LinkTx), [`LinkRx`](troupe_runtime::LinkRx) | link ↔ network |
 
 use nalgebra::Isometry3;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{PlanCandidates, PlanDecision};
+use troupe_algorithms::team::{PeerKeyframe, PeerOdometry, PeerPlan};
 use troupe_runtime::{Message, RobotId, Time, Topic};
-
-pub use troupe_algorithms::camera::PinholeIntrinsics;
-pub use troupe_algorithms::frame::{DepthFrame, Odometry};
-pub use troupe_algorithms::grid::GridSnapshot;
-pub use troupe_algorithms::keyframe::Keyframe;
-pub use troupe_algorithms::plan::Plan;
-pub use troupe_algorithms::planner::candidates::{
-    CandidatePlan, PlanCandidates, PlanDecision, Rejection,
-};
-pub use troupe_algorithms::team::{PeerKeyframe, PeerOdometry, PeerPlan};
 
 /// This robot's keyframes.
 pub const KEYFRAME: Topic<Keyframe> = Topic::new("mapper/keyframe");

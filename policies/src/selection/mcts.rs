@@ -12,10 +12,10 @@ use std::time::{Duration, Instant};
 
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
-use troupe_actors::planner::ActionSelection;
-use troupe_actors::planner::primitives::FlatState;
-use troupe_actors::planner::problem::{PlanningProblem, SearchParams};
-use troupe_actors::planner::round::Candidate;
+use troupe_algorithms::planner::primitives::FlatState;
+use troupe_algorithms::planner::problem::{PlanningProblem, SearchParams};
+use troupe_algorithms::planner::round::Candidate;
+use troupe_algorithms::planner::selection::ActionSelection;
 
 /// What a search found.
 #[derive(Clone, Debug, PartialEq)]
@@ -284,9 +284,9 @@ impl ActionSelection for Mcts {
 #[cfg(test)]
 mod tests {
     use rand::SeedableRng;
-    use troupe_actors::msgs::GridSnapshot;
-    use troupe_actors::planner::round::RoundConfig;
-    use troupe_actors::planner::scenes;
+    use troupe_algorithms::grid::GridSnapshot;
+    use troupe_algorithms::planner::round::RoundConfig;
+    use troupe_algorithms::planner::scenes;
 
     use super::*;
 

@@ -8,14 +8,15 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use troupe_actors::mapper::MapModel;
-use troupe_actors::mapper::mapfile::{
+use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
+use troupe_algorithms::mapfile::{
     GmmMap, MapKeyframe, SurfacePoint, sample_surface, write_atomically, write_ply,
     write_ply_with_source,
 };
-use troupe_actors::mapper::sogmm::SogmmError;
-use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PeerKeyframe};
-use troupe_actors::runtime::{LINK_RX, Publication};
+use troupe_algorithms::model::MapModel;
+use troupe_algorithms::sogmm::SogmmError;
+use troupe_algorithms::team::PeerKeyframe;
+use troupe_runtime::{LINK_RX, Publication};
 
 use super::{BaseError, BaseRobotSummary};
 
@@ -90,7 +91,7 @@ impl BaseMaps {
 
     /// Records an observed publication of the base's link (the [`Tap`] body).
     ///
-    /// [`Tap`]: troupe_actors::runtime::Tap
+    /// [`Tap`]: troupe_runtime::Tap
     pub fn observe(&mut self, p: &Publication<'_>, now: Instant) {
         if let Some(rx) = p.get(&LINK_RX) {
             let record = self.robots.entry(rx.from.0).or_default();

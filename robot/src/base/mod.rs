@@ -4,7 +4,7 @@
 //! [`LinkActor`], so every frame the robots send is reassembled, decoded, validated
 //! (team, sender) and deduplicated by the same code a robot uses, and store-and-forward
 //! keyframes are acknowledged like a peer does (a robot adds the base to its
-//! recipients when the first ack arrives and sends it its stored backlog). A [`Tap`](troupe_actors::runtime::Tap)
+//! recipients when the first ack arrives and sends it its stored backlog). A [`Tap`](troupe_runtime::Tap)
 //! on the link's publications collects every robot's keyframes (`peer/keyframe`),
 //! odometry and plans into [`BaseMaps`].
 //!
@@ -67,12 +67,13 @@ use serde::{Deserialize, Serialize};
 use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact, ArtifactActor};
 use troupe_actors::collision::BaseCommand;
 use troupe_actors::link::{LINK_STATUS, LinkActor, LinkStatus};
-use troupe_actors::mapper::mapfile::MapFileError;
-use troupe_actors::mapper::sogmm::SogmmError;
-use troupe_actors::runtime::{ActorSpec, ConfigError, Publication, RobotSpec};
+use troupe_algorithms::mapfile::MapFileError;
+use troupe_algorithms::sogmm::SogmmError;
 use troupe_comms::scope::SubscriptionConfig;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats};
+use troupe_core::ConfigError;
 use troupe_record::{Compression, RecordOptions, Recorder, RecordingStats};
+use troupe_runtime::{ActorSpec, Publication, RobotSpec};
 
 pub use maps::{BaseMaps, RobotRecord, merged_points};
 pub use operator::read_commands;

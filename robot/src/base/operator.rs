@@ -7,7 +7,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use troupe_actors::collision::{BASE_COMMAND, BaseCommand};
-use troupe_actors::runtime::{Actor, ActorResult, Context, ErrorChain, Event, TimerId};
+use troupe_core::ErrorChain;
+use troupe_runtime::{Actor, ActorResult, Context, Event, TimerId};
 
 use super::lock;
 

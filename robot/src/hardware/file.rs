@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use troupe_actors::msgs::PinholeIntrinsics;
+use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_comms::zenoh::ZenohConfig;
 use troupe_record::{Compression, check_rate_hz};
 

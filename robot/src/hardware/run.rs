@@ -11,11 +11,13 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
-use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN, PinholeIntrinsics};
-use troupe_actors::runtime::{ActorSpec, Publication, Time, TopicStats};
+use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN};
 use troupe_actors::sensor::FrameSource;
+use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_comms::zenoh::ZenohStats;
+use troupe_core::Time;
 use troupe_record::{RecordOptions, RecordingStats, period_of_hz, schemas};
+use troupe_runtime::{ActorSpec, Publication, TopicStats};
 
 use super::file::{HardwareError, HardwareRobot};
 use crate::harness::{

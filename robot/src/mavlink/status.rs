@@ -2,7 +2,8 @@
 
 use mavlink::dialects::common::{HEARTBEAT_DATA, MavAutopilot, MavModeFlag, MavType};
 use serde::Serialize;
-use troupe_actors::runtime::{Message, Time, Topic};
+use troupe_core::{Message, Time};
+use troupe_runtime::Topic;
 
 use super::link::LinkStats;
 use crate::safety::{GuardCounters, HoldReason};

@@ -9,9 +9,11 @@ use mavlink::dialects::common::{
     ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
 };
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
-use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, Odometry, PLAN, VEHICLE_HOLD, VehicleHold};
-use troupe_actors::runtime::{
-    Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, Time, TimerId,
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN, VEHICLE_HOLD, VehicleHold};
+use troupe_algorithms::frame::Odometry;
+use troupe_core::Time;
+use troupe_runtime::{
+    Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, TimerId,
 };
 
 use super::config::{MavlinkConfig, MavlinkSettings, OdometrySource};

@@ -2,7 +2,7 @@
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
-use troupe_actors::msgs::PinholeIntrinsics;
+use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_comms::zenoh::ZenohConfig;
 
 use crate::ConfigError;

@@ -16,9 +16,11 @@
 
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rand::Rng;
-use troupe_actors::mapper::sogmm::{Gmm4, IntensityConditional};
-use troupe_actors::msgs::{DepthFrame, Odometry, PinholeIntrinsics, Plan};
-use troupe_actors::runtime::Time;
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::sogmm::{Gmm4, IntensityConditional};
+use troupe_core::Time;
 
 use super::msgs::{
     CameraInfo, Header, Image, Path, PointCloud2, PointField, Pose, PoseStamped, RosTime,

@@ -1,9 +1,9 @@
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
-use troupe_actors::mapper::sogmm::Gmm4;
-use troupe_actors::msgs::Plan;
-use troupe_actors::runtime::Time;
-use troupe_actors::trajectory::{Knot, Trajectory};
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::sogmm::Gmm4;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
+use troupe_core::Time;
 
 use super::*;
 use crate::ros2::cdr::{decode, encode};

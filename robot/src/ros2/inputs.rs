@@ -17,9 +17,11 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use nalgebra::Isometry3;
 use serde::Serialize;
-use troupe_actors::msgs::{DepthFrame, ODOMETRY, Odometry};
-use troupe_actors::runtime::{Actor, ActorError, ActorResult, Context, Event, Time, TimerId};
+use troupe_actors::msgs::ODOMETRY;
 use troupe_actors::sensor::FrameSource;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_core::Time;
+use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, TimerId};
 use zenoh::Wait;
 use zenoh::sample::Sample;
 

@@ -1,4 +1,4 @@
-use troupe_actors::runtime::Time;
+use troupe_core::Time;
 
 use super::*;
 use crate::ros2::cdr::encode;

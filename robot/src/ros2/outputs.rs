@@ -19,7 +19,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use troupe_actors::link::LINK_STATUS;
 use troupe_actors::msgs::{KEYFRAME, PLAN};
-use troupe_actors::runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId};
+use troupe_runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId};
 use zenoh::Wait;
 
 use super::Ros2Error;
@@ -181,9 +181,8 @@ impl Ros2Publisher {
         if !self.enabled(output) {
             return Ok(());
         }
-        let bytes = encode(message).map_err(|e| {
-            troupe_actors::runtime::ActorError::with_source("ros2 output not encoded", e)
-        })?;
+        let bytes = encode(message)
+            .map_err(|e| troupe_runtime::ActorError::with_source("ros2 output not encoded", e))?;
         match self.queue.try_send((output, bytes)) {
             Ok(()) => {
                 self.counters.queued.fetch_add(1, Ordering::Relaxed);

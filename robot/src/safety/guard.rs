@@ -3,9 +3,9 @@
 use std::sync::Arc;
 
 use nalgebra::{Point3, Vector3};
-use troupe_actors::msgs::Plan;
-use troupe_actors::planner::committed::Committed;
-use troupe_actors::runtime::Time;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::committed::Committed;
+use troupe_core::Time;
 
 use super::{Geofence, GeofenceViolation, Watchdog, WatchdogChange};
 
@@ -394,8 +394,8 @@ impl SetpointGuard {
 mod tests {
     use super::*;
     use nalgebra::Vector3;
-    use troupe_actors::planner::primitives::{Action, DynamicLimits, FlatState};
-    use troupe_actors::trajectory::{Knot, Trajectory};
+    use troupe_algorithms::planner::primitives::{Action, DynamicLimits, FlatState};
+    use troupe_algorithms::trajectory::{Knot, Trajectory};
 
     fn t(s: f64) -> Time {
         Time::from_secs_f64(s)

@@ -4,7 +4,7 @@
 //!   heartbeat) stops arriving, reports the loss once and the recovery once.
 //! - [`Geofence`]: an axis-aligned box in the world frame (ENU) that no setpoint may
 //!   leave, with a check of whole trajectories (defined with the collision cores,
-//!   `troupe_actors::collision::geofence`, whose collision actor checks plans against
+//!   `troupe_algorithms::collision::geofence`, whose collision actor checks plans against
 //!   the same box before committing them).
 //! - [`SetpointGuard`]: combines them with the committed plan into the one setpoint a
 //!   vehicle driver may stream at each tick (track, hold, or nothing).
@@ -20,7 +20,7 @@ pub use guard::{
     GuardConfig, GuardCounters, GuardInput, HoldReason, RESUME_TOLERANCE_M, Reference, Setpoint,
     SetpointGuard, reference_at,
 };
-pub use troupe_actors::collision::geofence::{
+pub use troupe_algorithms::collision::geofence::{
     Geofence, GeofenceConfig, GeofenceError, GeofenceViolation,
 };
 pub use watchdog::{Watchdog, WatchdogChange};

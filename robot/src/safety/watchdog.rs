@@ -1,6 +1,6 @@
 //! Timeout on one input stream.
 
-use troupe_actors::runtime::Time;
+use troupe_core::Time;
 
 /// A change of a [`Watchdog`]'s state, reported once per change (so a driver logs a
 /// loss once, not at every tick).

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use troupe_actors::mapper::MapModel;
-use troupe_actors::mapper::sogmm::MeanShiftKind;
+use troupe_algorithms::model::MapModel;
+use troupe_algorithms::sogmm::MeanShiftKind;
 
 use super::progress_bar;
 
@@ -49,7 +49,7 @@ pub(crate) struct MapArgs {
 
 pub(crate) fn run(args: MapArgs) -> anyhow::Result<()> {
     use rand::SeedableRng;
-    use troupe_actors::mapper::mapfile::{sample_surface, write_atomically, write_ply};
+    use troupe_algorithms::mapfile::{sample_surface, write_atomically, write_ply};
     use troupe_sims::sequence::{MapBuildOptions, Sequence, build_map};
 
     if !(args.bandwidth.is_finite() && args.bandwidth > 0.0) {

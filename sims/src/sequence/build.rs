@@ -6,11 +6,12 @@
 use std::time::Instant;
 
 use serde::Serialize;
-use troupe_actors::mapper::keyframe::{Frustum, KeyframeSelector};
-use troupe_actors::mapper::mapfile::{GmmMap, MapKeyframe};
-use troupe_actors::mapper::sogmm::{MeanShiftConfig, MeanShiftKind, SogmmConfig};
-use troupe_actors::mapper::windowed::WindowedConfig;
-use troupe_actors::mapper::{MapModel, decimate, fit_keyframe};
+use troupe_actors::mapper::decimate;
+use troupe_algorithms::keyframe::{Frustum, KeyframeSelector};
+use troupe_algorithms::mapfile::{GmmMap, MapKeyframe};
+use troupe_algorithms::model::{MapModel, fit_keyframe};
+use troupe_algorithms::sogmm::{MeanShiftConfig, MeanShiftKind, SogmmConfig};
+use troupe_algorithms::windowed::WindowedConfig;
 
 use super::{Sequence, SequenceError};
 

@@ -51,9 +51,11 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
-use troupe_actors::msgs::{DepthFrame, Odometry, PinholeIntrinsics};
-use troupe_actors::runtime::{ActorError, ConfigError, Time};
 use troupe_actors::sensor::FrameSource;
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_core::{ConfigError, Time};
+use troupe_runtime::ActorError;
 
 use png_io::Plane;
 

@@ -160,7 +160,7 @@ fn association_by_nearest_timestamp_and_by_file() {
 }
 
 fn open_err(seq: &Path) -> String {
-    troupe_actors::runtime::ErrorChain(&Sequence::open(seq).unwrap_err()).to_string()
+    troupe_core::ErrorChain(&Sequence::open(seq).unwrap_err()).to_string()
 }
 
 #[test]

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
-use troupe_actors::grid::distance::distance_to;
+use troupe_algorithms::grid::distance::distance_to;
 use troupe_core::ConfigError;
 
 pub use super::mesh_io::{MeshError, MeshFormatError};

@@ -476,7 +476,7 @@ mod tests {
                 ..
             }
         ));
-        let chain = troupe_actors::runtime::ErrorChain(&error).to_string();
+        let chain = troupe_core::ErrorChain(&error).to_string();
         assert!(
             chain.ends_with("bad.obj` cannot be parsed: line 1: a vertex needs three numbers"),
             "{chain}"

@@ -40,7 +40,7 @@ pub use mesh::{FreeSpace, MeshParams, MeshWorld, TriangleMesh};
 pub use open_field::{OpenField, OpenFieldParams};
 pub use room::{Room, RoomBox, RoomParams};
 pub use scenes::{DoorParams, OpeningScene, WindowParams};
-pub use troupe_actors::geometry::Aabb;
+pub use troupe_algorithms::geometry::Aabb;
 pub use tunnels::TunnelParams;
 pub use warehouse::{Warehouse, WarehouseParams};
 
@@ -143,6 +143,10 @@ pub trait World: Send + Sync {
         None
     }
 }
+
+/// Seconds between the departures of consecutive robots (a team leaves one robot
+/// after another; a [`Site`] may place later robots by it).
+pub const DEPARTURE_INTERVAL_S: f64 = 4.0;
 
 /// A world with places for robots: start positions and waypoint routes.
 pub trait Site: World {

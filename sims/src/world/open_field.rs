@@ -32,7 +32,7 @@ pub struct OpenFieldParams {
     /// Free margin kept between the route circle and any obstacle.
     pub keep_clear_m: f64,
     /// When > 0: robots that leave at the team's staggered departures
-    /// ([`crate::team::DEPARTURE_INTERVAL_S`]) and fly at this speed reach the centre
+    /// ([`super::DEPARTURE_INTERVAL_S`]) and fly at this speed reach the centre
     /// together: later robots start closer to it (never closer than 2 m). 0: every
     /// robot starts on the route circle.
     pub arrival_speed_mps: f64,
@@ -203,7 +203,7 @@ impl Site for OpenField {
     fn start_position(&self, robot_index: usize, robot_count: usize) -> Point3<f64> {
         let n = robot_count.max(1);
         let a = std::f64::consts::PI * robot_index as f64 / n as f64;
-        let lead_s = n.saturating_sub(1 + robot_index) as f64 * crate::team::DEPARTURE_INTERVAL_S;
+        let lead_s = n.saturating_sub(1 + robot_index) as f64 * super::DEPARTURE_INTERVAL_S;
         let r = (self.params.route_radius_m - lead_s * self.params.arrival_speed_mps)
             .max(2.0_f64.min(self.params.route_radius_m));
         Point3::new(r * a.cos(), r * a.sin(), self.params.route_height_m)

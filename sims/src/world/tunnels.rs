@@ -185,7 +185,7 @@ mod tests {
     use super::*;
     use crate::scenario::Scenario;
     use crate::world::{Site, World, WorldKind};
-    use troupe_actors::runtime::ErrorChain;
+    use troupe_core::ErrorChain;
 
     #[test]
     fn the_t_junction_is_open_along_its_arms_and_closed_elsewhere() {

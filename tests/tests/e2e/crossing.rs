@@ -6,9 +6,7 @@
 use std::sync::{Arc, Mutex};
 
 use troupe_actors::msgs::PLAN_DECISION;
-use troupe_actors::runtime::{
-    Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RobotSpec,
-};
+use troupe_runtime::{Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RobotSpec};
 use troupe_sims::scenario::Scenario;
 use troupe_sims::team::Team;
 use troupe_sims::world::{OpenField, Site};

@@ -98,9 +98,9 @@ fn keyframes_are_fitted_shared_and_received() {
 /// Known (not unknown) cells in each robot's latest grid snapshot after a short run.
 fn known_cells(scenario: &Scenario) -> (troupe_sims::team::Summary, Vec<usize>) {
     use std::sync::{Arc, Mutex};
-    use troupe_actors::grid::CellState;
     use troupe_actors::msgs::GRID_SNAPSHOT;
-    use troupe_actors::runtime::Publication;
+    use troupe_algorithms::grid::CellState;
+    use troupe_runtime::Publication;
 
     let known = Arc::new(Mutex::new(vec![0usize; scenario.robots as usize]));
     let seen = known.clone();

@@ -2,7 +2,7 @@
 //! (`metrics.og_change_set_resolutions_m`, thesis §8.2.6): it matches what the baseline
 //! sends when it is flown, and counting it changes nothing else in the run.
 
-use troupe_actors::grid::UpdateRule;
+use troupe_algorithms::grid::UpdateRule;
 use troupe_robot::MapSharing;
 use troupe_sims::camera::CameraBackend;
 use troupe_sims::report::timeseries_csv;

@@ -48,7 +48,7 @@ fn planned_flights_never_commit_unsafe_plans_or_collide() {
 #[test]
 fn teleoperated_flight_moves_forward_safely() {
     use troupe_actors::planner::{ScriptedCommand, ScriptedTeleop};
-    use troupe_actors::runtime::ActorSpec;
+    use troupe_runtime::ActorSpec;
 
     let scenario = Scenario {
         name: "teleop_cave".into(),
@@ -134,7 +134,8 @@ fn scripted_teleoperation_passes_the_window_slowing_down_at_it() {
 fn committed_plans_take_over_without_a_jump() {
     use std::collections::BTreeMap;
     use std::sync::{Arc, Mutex};
-    use troupe_actors::msgs::{PLAN, Plan};
+    use troupe_actors::msgs::PLAN;
+    use troupe_algorithms::plan::Plan;
     use troupe_runtime::{Publication, Time};
 
     let scenario = Scenario {

@@ -4,9 +4,9 @@
 use std::sync::{Arc, Mutex};
 
 use troupe_actors::msgs::{KEYFRAME, PEER_KEYFRAME};
-use troupe_actors::runtime::Publication;
 use troupe_comms::shaping::ClassConfig;
 use troupe_comms::wire::Class;
+use troupe_runtime::Publication;
 use troupe_sims::report::{timeseries_csv, write_run};
 use troupe_sims::scenario::{Fault, Scenario};
 use troupe_sims::team::{RunOutput, Team};

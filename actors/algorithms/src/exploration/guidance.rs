@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use troupe_core::{RobotId, Time};
 
 use super::memory::{CellKey, FrontierMemory};
+use crate::planner::problem::FrontierField;
 
 /// Where a peer is and where it is heading (the end of its committed plan).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -489,6 +490,12 @@ impl GuidanceField {
             route.push(self.centre(target));
         }
         route
+    }
+}
+
+impl FrontierField for GuidanceField {
+    fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64 {
+        GuidanceField::pose_distance_m(self, p, yaw_rad)
     }
 }
 

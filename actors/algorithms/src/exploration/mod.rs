@@ -19,16 +19,20 @@
 //! - [`Guide`]: one robot's memory, its peers' intents and the rule for when a round
 //!   follows the field.
 //! - [`GuidanceConfig`]: the settings, table `robot.planner.guidance`.
+//! - [`ExplorationBehaviour`]: the plug-in a map-free explorer asks where to go next
+//!   (scripted routes), apart from the memory and the field.
 //!
 //! The planner uses the field when the window is uninformative (see
 //! [`PlanningProblem::guided`](crate::planner::problem::PlanningProblem::guided)); the
 //! primitives it scores pass the same safety checks as ever.
 
+mod behaviour;
 mod config;
 mod guidance;
 mod guide;
 mod memory;
 
+pub use behaviour::ExplorationBehaviour;
 pub use config::GuidanceConfig;
 pub use guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
 pub use guide::Guide;

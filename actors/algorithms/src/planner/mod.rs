@@ -9,6 +9,8 @@
 //! - [`round`]: one planning round: candidates, feasibility, safety, rewards.
 //! - [`problem`]: the round as a generator of scored children of any state, for
 //!   tree search (MCTS, thesis §4.1.3).
+//! - [`selection`]: the [`ActionSelection`](selection::ActionSelection) policy that
+//!   chooses among a round's candidates.
 //! - [`teleop`]: teleoperation commands mapped to the closest safe primitive with
 //!   the forward speed adapted to the free space ahead (thesis §5.1.2, Eq. 5.1).
 //! - [`scenes`]: small synthetic snapshots and the camera, for tests and benches.
@@ -24,4 +26,5 @@ pub mod primitives;
 pub mod problem;
 pub mod round;
 pub mod scenes;
+pub mod selection;
 pub mod teleop;

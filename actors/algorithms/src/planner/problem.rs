@@ -13,8 +13,17 @@ use super::primitives::{Action, FlatState, Primitive};
 pub use super::round::SearchParams;
 use super::round::{Candidate, RoundConfig, pose_of};
 use crate::camera::PinholeIntrinsics;
-use crate::exploration::GuidanceField;
 use crate::grid::GridSnapshot;
+
+/// A frontier-distance field beyond the window that a guided round measures the
+/// frontier reward over (paper V-B over the explored map); the team's
+/// [`GuidanceField`](crate::exploration::GuidanceField) is one. A trait so that the
+/// planner does not depend on the exploration that plans with it.
+pub trait FrontierField: Sync + std::fmt::Debug {
+    /// The route distance to the best frontier from a pose at `p` heading `yaw_rad`
+    /// (level), metres (∞ off the field).
+    fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64;
+}
 
 /// One round's problem: the round's settings, the grid snapshot and the camera, with
 /// the library's actions enumerated once.
@@ -24,7 +33,7 @@ pub struct PlanningProblem<'a> {
     snapshot: &'a GridSnapshot,
     camera: &'a PinholeIntrinsics,
     actions: Vec<(Action, Option<f64>)>,
-    guidance: Option<&'a GuidanceField>,
+    guidance: Option<&'a dyn FrontierField>,
 }
 
 impl<'a> PlanningProblem<'a> {
@@ -55,12 +64,12 @@ impl<'a> PlanningProblem<'a> {
     /// the explored map) instead of the window's Euclidean frontier distance, wherever
     /// the field reaches both ends of a primitive. Safety checks do not change.
     #[must_use]
-    pub fn guided(mut self, field: &'a GuidanceField) -> Self {
+    pub fn guided(mut self, field: &'a dyn FrontierField) -> Self {
         self.guidance = Some(field);
         self
     }
 
-    /// Whether the frontier reward comes from a [`GuidanceField`].
+    /// Whether the frontier reward comes from a [`FrontierField`].
     #[must_use]
     pub fn is_guided(&self) -> bool {
         self.guidance.is_some()
@@ -172,7 +181,7 @@ impl<'a> PlanningProblem<'a> {
     /// the end pose, or summed along the primitive, see
     /// [`RoundConfig::information_samples`]) plus α times the frontier-distance
     /// reward V = d(ξ₀) − d(ξτ) (paper Eq. 8, thesis §4.1.3; over the window, or over
-    /// the [`GuidanceField`] of a [`Self::guided`] problem).
+    /// the [`FrontierField`] of a [`Self::guided`] problem).
     fn score(
         &self,
         from: &FlatState,

@@ -77,7 +77,7 @@ impl ArtifactActor {
 
     /// Confirms detections over frames; a confirmed artifact the team does not
     /// know yet goes into the list and out as a report.
-    fn on_frame(&mut self, frame: &crate::msgs::DepthFrame, ctx: &mut Context<'_>) {
+    fn on_frame(&mut self, frame: &troupe_algorithms::frame::DepthFrame, ctx: &mut Context<'_>) {
         let now_s = frame.stamp.as_secs_f64();
         let radius = self.config.merge_radius_m;
         let mut changed = false;

@@ -42,19 +42,22 @@ use nalgebra::Point3;
 
 use serde::{Deserialize, Serialize};
 
-use super::body::{BodyConfig, BodyError};
-use super::geofence::{Geofence, GeofenceConfig};
 use super::operator::{OPERATOR_HOLD, OperatorHold};
-use super::peers::{PeerAvoidance, PeerTable, PeerTrack, must_yield};
 use crate::msgs::{
-    GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_ODOMETRY, PEER_PLAN, PLAN,
-    PLAN_CANDIDATES, PLAN_DECISION, Plan, PlanCandidates, PlanDecision, Rejection, VEHICLE_HOLD,
-    VehicleHold,
+    GRID_SNAPSHOT, ODOMETRY, PEER_ODOMETRY, PEER_PLAN, PLAN, PLAN_CANDIDATES, PLAN_DECISION,
+    VEHICLE_HOLD, VehicleHold,
 };
-use crate::planner::committed::Committed;
-use crate::planner::primitives::{DynamicLimits, FlatState};
-use crate::planner::round::clear_path;
-use crate::trajectory::{Knot, Trajectory};
+use troupe_algorithms::collision::body::{BodyConfig, BodyError};
+use troupe_algorithms::collision::geofence::{Geofence, GeofenceConfig};
+use troupe_algorithms::collision::peers::{PeerAvoidance, PeerTable, PeerTrack, must_yield};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{PlanCandidates, PlanDecision, Rejection};
+use troupe_algorithms::planner::committed::Committed;
+use troupe_algorithms::planner::primitives::{DynamicLimits, FlatState};
+use troupe_algorithms::planner::round::clear_path;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_runtime::{
     Actor, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, RobotId, Time, Topic,
 };
@@ -573,8 +576,8 @@ mod tests {
     use nalgebra::Point3;
 
     use super::*;
-    use crate::collision::peers::PeerConflict;
-    use crate::msgs::CandidatePlan;
+    use troupe_algorithms::collision::peers::PeerConflict;
+    use troupe_algorithms::planner::candidates::CandidatePlan;
     use troupe_runtime::{ActorSpec, Publication, RobotId, RobotSpec, SimExecutor, TimerId};
 
     /// Rejects every trajectory that ends beyond `x_max` (as if a peer were there).
@@ -711,7 +714,7 @@ mod tests {
             Ok(())
         }
         fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-            use crate::planner::primitives::FlatState;
+            use troupe_algorithms::planner::primitives::FlatState;
             self.0 += 1;
             let now = ctx.now();
             let start = match self.0 {
@@ -751,7 +754,7 @@ mod tests {
 
     #[test]
     fn rejects_candidates_leaving_the_geofence() {
-        use crate::collision::geofence::GeofenceConfig;
+        use troupe_algorithms::collision::geofence::GeofenceConfig;
         let config = CollisionActorConfig {
             geofence: Some(GeofenceConfig {
                 min_m: [-1.0, -1.0, 0.0],

@@ -1,5 +1,5 @@
 //! The collision actor (thesis §7, §8.2.3); the collision cores are
-//! [`troupe_algorithms::collision`], re-exported here.
+//! [`troupe_algorithms::collision`].
 //!
 //! - [`CollisionActor`]: commits the first of a planning round's candidates that is
 //!   clear of the local grid's unsafe space, of higher-priority peers and inside the
@@ -18,4 +18,3 @@ pub use operator::{
     BASE_COMMAND, BaseCommand, CommandParseError, OPERATOR_HOLD, OperatorActor, OperatorCommand,
     OperatorHold,
 };
-pub use troupe_algorithms::collision::*;

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::link::{Peer, ShareClass, ShareFrom, SharePolicy, ShareTo, SharedTopic};
 use crate::planner::TELEOP_COMMAND;
-use crate::planner::teleop::TeleopCommand;
+use troupe_algorithms::planner::teleop::TeleopCommand;
 use troupe_comms::shaping::QueuePolicy as ShaperPolicy;
 use troupe_runtime::{
     Actor, ActorResult, Context, Event, Message, QueuePolicy, RobotId, Time, TimerId, Topic,

@@ -1,8 +1,8 @@
 //! The explorer actor: asks an [`ExplorationBehaviour`] for a plan at a fixed rate
 //! and commits it on [`PLAN`].
 //!
-//! Behaviours live in `troupe-policies` (dependency inversion: this crate defines the
-//! trait, the robot assembly picks an implementation by name). The information-driven
+//! Behaviours live in `troupe-policies` (dependency inversion: `troupe-algorithms`
+//! defines the trait, the robot assembly picks an implementation by name). The information-driven
 //! planner of thesis §4 replaces this actor in a later stage; map-free behaviours
 //! (scripted routes) use it meanwhile.
 //!
@@ -16,22 +16,13 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::msgs::{CandidatePlan, ODOMETRY, Odometry, PLAN, PLAN_CANDIDATES, Plan, PlanCandidates};
-use crate::trajectory::{Knot, Trajectory};
+use crate::msgs::{ODOMETRY, PLAN, PLAN_CANDIDATES};
+use troupe_algorithms::exploration::ExplorationBehaviour;
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{CandidatePlan, PlanCandidates};
+use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_runtime::{Actor, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
-
-/// Decides where the robot goes next.
-pub trait ExplorationBehaviour: Send + 'static {
-    /// A new trajectory to commit, or `None` to keep the current one. Called at the
-    /// replanning rate once odometry is known.
-    fn replan(&mut self, now: Time, odometry: &Odometry) -> Option<Trajectory>;
-}
-
-impl ExplorationBehaviour for Box<dyn ExplorationBehaviour> {
-    fn replan(&mut self, now: Time, odometry: &Odometry) -> Option<Trajectory> {
-        (**self).replan(now, odometry)
-    }
-}
 
 const REPLAN: TimerId = TimerId(0);
 

@@ -16,16 +16,21 @@ use std::time::Duration;
 use nalgebra::{Point3, Vector3};
 
 use super::changeset::{OwnChanges, PeerCells};
-use super::distance::unsafe_distance;
-use super::frontier::frontier_distance;
-use super::hca::{KeyframePair, hca_round, regenerate, straight_path_in_collision};
-use super::{
+use crate::msgs::{
+    DEPTH_FRAME, GRID_CHANGES, GRID_SNAPSHOT, GridChanges, KEYFRAME, ODOMETRY, PEER_GRID_CHANGES,
+    PEER_KEYFRAME,
+};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::grid::distance::unsafe_distance;
+use troupe_algorithms::grid::frontier::frontier_distance;
+use troupe_algorithms::grid::hca::{
+    KeyframePair, hca_round, regenerate, straight_path_in_collision,
+};
+use troupe_algorithms::grid::{
     CellBox, ComponentStore, GridConfig, KeyframeSource, LocalGrid, ScanScratch, insert_frame_with,
 };
-use crate::msgs::{
-    DEPTH_FRAME, GRID_CHANGES, GRID_SNAPSHOT, GridChanges, GridSnapshot, KEYFRAME, Keyframe,
-    ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME,
-};
+use troupe_algorithms::keyframe::Keyframe;
 use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
 
 const PUBLISH: TimerId = TimerId(0);

@@ -203,7 +203,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::grid::{CellState, LogOddsParams};
+    use troupe_algorithms::grid::{CellState, LogOddsParams};
 
     fn grid_at(x: f64) -> LocalGrid {
         LocalGrid::centred(

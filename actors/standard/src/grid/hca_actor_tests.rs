@@ -16,7 +16,8 @@ use troupe_runtime::{
 };
 
 use super::GridActor;
-use crate::msgs::{GRID_SNAPSHOT, KEYFRAME, ODOMETRY, Odometry};
+use crate::msgs::{GRID_SNAPSHOT, KEYFRAME, ODOMETRY};
+use troupe_algorithms::frame::Odometry;
 
 /// Flies along +x at 1 m/s, publishing odometry and a keyframe every 0.2 s.
 struct Flyer {

@@ -1,15 +1,14 @@
 //! The local grid actor and the occupancy-grid map sharing it can do.
 //!
-//! - [`GridActor`]: keeps a [`LocalGrid`] centred
+//! - [`GridActor`]: keeps a [`LocalGrid`](troupe_algorithms::grid::LocalGrid) centred
 //!   on the robot and publishes snapshots (the grid core is
-//!   [`troupe_algorithms::grid`], re-exported here).
+//!   [`troupe_algorithms::grid`]).
 //! - [`changeset`]: occupancy-grid map sharing (the thesis' OG baseline, §8.2.5).
 
 mod actor;
 pub mod changeset;
 
 pub use actor::GridActor;
-pub use troupe_algorithms::grid::*;
 
 #[cfg(test)]
 mod hca_actor_tests;

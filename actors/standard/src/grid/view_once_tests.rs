@@ -15,7 +15,8 @@ use troupe_runtime::{
 };
 
 use super::GridActor;
-use crate::msgs::{DEPTH_FRAME, DepthFrame, GRID_SNAPSHOT, KEYFRAME, ODOMETRY, Odometry};
+use crate::msgs::{DEPTH_FRAME, GRID_SNAPSHOT, KEYFRAME, ODOMETRY};
+use troupe_algorithms::frame::{DepthFrame, Odometry};
 
 /// At 5 m before the window wall: odometry at once, then the depth frame, then (if
 /// `keyframe`) the keyframe fitted to the same view.

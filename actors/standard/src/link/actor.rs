@@ -15,9 +15,12 @@ use troupe_comms::transport::TransportStats;
 use troupe_comms::wire::{self, Class, Envelope, Payload, UserMessage, valid_user_name};
 
 use crate::msgs::{
-    GRID_CHANGES, KEYFRAME, ODOMETRY, Odometry, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_ODOMETRY,
-    PEER_PLAN, PLAN, PeerGridChanges, PeerKeyframe, PeerOdometry, PeerPlan, Plan,
+    GRID_CHANGES, KEYFRAME, ODOMETRY, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN,
+    PLAN, PeerGridChanges,
 };
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::team::{PeerKeyframe, PeerOdometry, PeerPlan};
 
 use troupe_runtime::{
     Actor, ActorError, ActorResult, Context, Destination, ErrorChain, Event, LINK_RX,

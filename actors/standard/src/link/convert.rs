@@ -7,9 +7,10 @@ use nalgebra::{
 };
 use troupe_comms::wire;
 
-use crate::mapper::sogmm::Gmm4;
-use crate::msgs::{Keyframe, Plan};
-use crate::trajectory::{Knot, Trajectory};
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::sogmm::Gmm4;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_runtime::{ActorError, TeamClock, Time};
 
 /// The wire form of a committed plan (thesis §8.2.3): knot times become `f32`
@@ -155,7 +156,7 @@ mod tests {
     use troupe_comms::wire::{Envelope, Payload, decode, encode};
 
     use super::*;
-    use crate::mapper::sogmm::Gmm4;
+    use troupe_algorithms::sogmm::Gmm4;
 
     #[test]
     fn keyframes_survive_the_wire() {

@@ -6,9 +6,10 @@
 use nalgebra::{Isometry3, Matrix4, UnitQuaternion, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
-use crate::msgs::{Keyframe, Plan};
-use crate::trajectory::{Knot, Trajectory, TrajectoryError};
+use troupe_algorithms::keyframe::Keyframe;
 use troupe_algorithms::mixture::{Gmm4, MixtureError};
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::trajectory::{Knot, Trajectory, TrajectoryError};
 
 /// Where a peer's world frame sits in ours (T₀ʲⁱ of Eq. 8.1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

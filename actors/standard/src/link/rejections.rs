@@ -160,7 +160,7 @@ struct Slot {
 /// ```
 /// use std::time::Duration;
 /// use troupe_actors::link::RateLimitedLog;
-/// use troupe_actors::runtime::Time;
+/// use troupe_runtime::Time;
 ///
 /// let mut log = RateLimitedLog::new(Duration::from_secs(1));
 /// let t = |s: f64| Time::from_secs_f64(s);

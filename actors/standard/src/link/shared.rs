@@ -18,7 +18,7 @@
 //! ```
 //! use serde::{Deserialize, Serialize};
 //! use troupe_actors::link::{SharePolicy, SharedTopic};
-//! use troupe_actors::runtime::Message;
+//! use troupe_runtime::Message;
 //!
 //! #[derive(Clone, Debug, Serialize, Deserialize)]
 //! struct GasReading { ppm: f32, position_m: [f32; 3] }

@@ -7,8 +7,8 @@ use std::time::Duration;
 use nalgebra::Point3;
 
 use super::*;
-use crate::msgs::Keyframe;
-use crate::trajectory::{Knot, Trajectory};
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_comms::shaping::ReassemblyConfig;
 use troupe_runtime::{ActorSpec, LinkRx, Publication, RobotSpec, SimExecutor};
 
@@ -185,7 +185,7 @@ struct KeyframeSource {
 fn test_keyframe(id: u32, stamp: Time) -> Keyframe {
     use nalgebra::{Matrix4, Vector4};
     let n = 40;
-    let gmm = crate::mapper::sogmm::Gmm4::new(
+    let gmm = troupe_algorithms::sogmm::Gmm4::new(
         vec![1.0 / n as f64; n],
         (0..n)
             .map(|i| Vector4::new(i as f64 * 0.1, f64::from(id), 1.0, 0.5))

@@ -8,12 +8,15 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::global::{FrameUpdate, GlobalMap, GlobalMapConfig};
-use super::keyframe::{Frustum, KeyframeSelector};
-use super::sogmm::{
+use crate::msgs::{DEPTH_FRAME, KEYFRAME};
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::DepthFrame;
+use troupe_algorithms::global_map::{FrameUpdate, GlobalMap, GlobalMapConfig};
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::keyframe::{Frustum, KeyframeSelector};
+use troupe_algorithms::sogmm::{
     FramePoints, MeanShiftConfig, MeanShiftKind, SogmmConfig, fit_points, frame_points,
 };
-use crate::msgs::{DEPTH_FRAME, DepthFrame, KEYFRAME, Keyframe, PinholeIntrinsics};
 use troupe_runtime::{
     Actor, ActorError, ActorResult, ConfigError, Context, Event, Message, QueuePolicy, Time, Topic,
 };
@@ -366,8 +369,8 @@ mod tests {
     use nalgebra::{Isometry3, Vector3};
 
     use super::*;
-    use crate::mapper::global::COMPONENT_BYTES;
-    use crate::mapper::sogmm::synthetic;
+    use troupe_algorithms::global_map::COMPONENT_BYTES;
+    use troupe_algorithms::sogmm::synthetic;
     use troupe_runtime::{ActorSpec, RobotSpec, SimExecutor, TimerId};
 
     const TICK: TimerId = TimerId(0);

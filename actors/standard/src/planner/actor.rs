@@ -22,63 +22,30 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use nalgebra::Isometry3;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::committed::{Committed, replanning_root};
 use super::memory_share::{MEMORY_CELLS, MemoryCells};
-use super::primitives::FlatState;
-use super::problem::PlanningProblem;
-use super::round::{Candidate, RoundConfig};
 use crate::grid::changeset::cell_centres;
 use crate::link::Peer;
 use crate::msgs::{
-    CandidatePlan, GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PEER_GRID_CHANGES,
-    PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES, PLAN_DECISION, PinholeIntrinsics, Plan,
-    PlanCandidates, PlanDecision,
+    GRID_SNAPSHOT, ODOMETRY, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES,
+    PLAN_DECISION,
 };
+use troupe_algorithms::camera::PinholeIntrinsics;
 use troupe_algorithms::exploration::{GuidanceConfig, GuidanceField, Guide};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::candidates::{CandidatePlan, PlanCandidates, PlanDecision};
+use troupe_algorithms::planner::committed::{Committed, replanning_root};
+use troupe_algorithms::planner::primitives::FlatState;
+use troupe_algorithms::planner::problem::PlanningProblem;
+use troupe_algorithms::planner::round::{Candidate, RoundConfig};
+use troupe_algorithms::planner::selection::ActionSelection;
 use troupe_runtime::{
     Actor, ActorError, ActorResult, Context, Event, Message, QueuePolicy, RobotId, Time, TimerId,
     Topic,
 };
-
-/// Chooses among scored candidates. Implementations live in `troupe-policies`.
-pub trait ActionSelection: Send + 'static {
-    /// Index of the chosen candidate, or `None` to stop.
-    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize>;
-
-    /// Index of the chosen candidate among the children of `root` (`candidates`,
-    /// computed by `problem`), or `None` to stop. Search policies override this to
-    /// expand deeper states through `problem` (thesis §4.1.3); by default it is
-    /// [`Self::select`].
-    fn select_in(
-        &mut self,
-        problem: &PlanningProblem<'_>,
-        root: &FlatState,
-        candidates: &[Candidate],
-        rng: &mut ChaCha8Rng,
-    ) -> Option<usize> {
-        let _ = (problem, root);
-        self.select(candidates, rng)
-    }
-}
-
-impl ActionSelection for Box<dyn ActionSelection> {
-    fn select(&mut self, candidates: &[Candidate], rng: &mut ChaCha8Rng) -> Option<usize> {
-        (**self).select(candidates, rng)
-    }
-
-    fn select_in(
-        &mut self,
-        problem: &PlanningProblem<'_>,
-        root: &FlatState,
-        candidates: &[Candidate],
-        rng: &mut ChaCha8Rng,
-    ) -> Option<usize> {
-        (**self).select_in(problem, root, candidates, rng)
-    }
-}
 
 /// Planner settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

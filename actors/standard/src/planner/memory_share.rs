@@ -106,8 +106,9 @@ mod tests {
 
     use super::*;
     use crate::link::Peer;
-    use crate::planner::round::Candidate;
-    use crate::planner::{ActionSelection, PlannerActor, PlannerConfig};
+    use crate::planner::{PlannerActor, PlannerConfig};
+    use troupe_algorithms::planner::round::Candidate;
+    use troupe_algorithms::planner::selection::ActionSelection;
 
     fn record(frontier: bool) -> CellRecord {
         CellRecord {

@@ -1,8 +1,9 @@
 //! The planning actors (thesis §4.1, §5.1.2); the planning cores are
-//! [`troupe_algorithms::planner`], re-exported here.
+//! [`troupe_algorithms::planner`].
 //!
 //! - [`PlannerActor`]: replans at a fixed rate and commits plans with their stopping
-//!   primitives; the choice among candidates is an [`ActionSelection`] policy.
+//!   primitives; the choice among candidates is an
+//!   [`ActionSelection`](troupe_algorithms::planner::selection::ActionSelection) policy.
 //! - [`TeleopActor`] commits teleoperation primitives at a fixed rate;
 //!   [`ScriptedTeleop`] publishes a timed command script in place of a joystick.
 
@@ -11,11 +12,10 @@ mod memory_share;
 mod teleop_actor;
 
 pub use actor::{
-    ActionSelection, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
-    REMEMBERED_FRONTIERS, RememberedFrontiers,
+    PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport, REMEMBERED_FRONTIERS,
+    RememberedFrontiers,
 };
 pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError};
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
 };
-pub use troupe_algorithms::planner::*;

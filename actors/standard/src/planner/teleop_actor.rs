@@ -9,10 +9,13 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::committed::{Committed, replanning_root};
-use super::round::RoundConfig;
-use super::teleop::{TeleopCommand, TeleopParams, closest_safe_primitive};
-use crate::msgs::{GRID_SNAPSHOT, GridSnapshot, ODOMETRY, Odometry, PLAN, Plan};
+use crate::msgs::{GRID_SNAPSHOT, ODOMETRY, PLAN};
+use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::grid::GridSnapshot;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::planner::committed::{Committed, replanning_root};
+use troupe_algorithms::planner::round::RoundConfig;
+use troupe_algorithms::planner::teleop::{TeleopCommand, TeleopParams, closest_safe_primitive};
 use troupe_runtime::{Actor, ActorResult, Context, Event, QueuePolicy, TimerId, Topic};
 
 /// Operator commands (a joystick driver or a script publishes here).

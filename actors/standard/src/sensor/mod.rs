@@ -6,7 +6,9 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::msgs::{DEPTH_FRAME, DepthFrame, ODOMETRY, Odometry, PinholeIntrinsics};
+use crate::msgs::{DEPTH_FRAME, ODOMETRY};
+use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
 use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, Time, TimerId};
 
 /// Where frames come from.
