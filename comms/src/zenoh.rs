@@ -205,6 +205,13 @@ pub const DEFAULT_ACCEPT_TIMEOUT_S: f64 = 5.0;
 /// The default `accept_pending` (zenoh's: 100); [`DEFAULT_ACCEPT_TIMEOUT_S`].
 pub const DEFAULT_ACCEPT_PENDING: usize = 1000;
 
+/// zenoh's pause after each failed TLS handshake in this build, microseconds, as
+/// the build environment set it (the workspace's `.cargo/config.toml`: 100); `None`:
+/// zenoh's own 100 ms, under which a stranger's junk handshakes can keep the team's
+/// sessions out (`docs/security.md`, "Connection floods"). zenoh reads the same
+/// variable when it is compiled.
+pub const TLS_ACCEPT_THROTTLE_US: Option<&str> = option_env!("TLS_ACCEPT_THROTTLE_TIME");
+
 /// The longest `accept_timeout_s` accepted, seconds.
 const MAX_ACCEPT_TIMEOUT_S: f64 = 60.0;
 
@@ -363,9 +370,21 @@ impl ZenohConfig {
         security::check(self)
     }
 
-    /// The zenoh configuration these settings stand for.
+    /// The zenoh configuration these settings stand for. Warns once per process if
+    /// it listens on TLS in a build that kept zenoh's 100 ms pause after a failed
+    /// handshake ([`TLS_ACCEPT_THROTTLE_US`]).
     pub fn to_zenoh(&self) -> Result<::zenoh::Config, TransportError> {
         self.validate()?;
+        if TLS_ACCEPT_THROTTLE_US.is_none() && self.listen.iter().any(|e| e.starts_with("tls/")) {
+            static WARNED: std::sync::Once = std::sync::Once::new();
+            WARNED.call_once(|| {
+                tracing::warn!(
+                    "this build keeps zenoh's 100 ms pause after each failed TLS handshake: \
+                     a stranger's junk handshakes can keep peers out; build troupe with \
+                     TLS_ACCEPT_THROTTLE_TIME=100 (docs/security.md, \"Connection floods\")"
+                );
+            });
+        }
         let mut c = ::zenoh::Config::default();
         let json = |v: &dyn erased::Json| v.json();
         let mode = match self.mode {

@@ -359,3 +359,10 @@ fn access_control_and_size_limit_reach_zenohs_configuration() {
     );
     let _ = std::fs::remove_file(users);
 }
+
+/// The workspace's builds lower zenoh's pause after a failed TLS handshake
+/// (`.cargo/config.toml`); a build without it warns when it listens on TLS.
+#[test]
+fn this_build_lowers_zenohs_pause_after_a_failed_tls_handshake() {
+    assert_eq!(super::TLS_ACCEPT_THROTTLE_US, Some("100"));
+}
