@@ -1,10 +1,11 @@
 //! troupe-core: the vocabulary every layer of troupe shares.
 //!
-//! Three small types that the actor runtime (`troupe-runtime`) and the algorithm
+//! Small types that the actor runtime (`troupe-runtime`) and the algorithm
 //! cores (`troupe-algorithms`) both speak, so that neither depends on the other:
 //!
 //! - [`Time`]: a point in a run's time (simulated or wall clock), integer nanoseconds;
 //! - [`TeamClock`]: where a run's time sits on the clock the team shares;
+//! - [`TimeSource`]: whether a run's time is simulated or the wall clock;
 //! - [`RobotId`]: a robot's index in its team;
 //! - [`Message`]: what may be published on a topic;
 //! - [`ErrorChain`]: an error and its causes on one line, for logs;
@@ -28,7 +29,7 @@ mod config;
 mod time;
 
 pub use config::ConfigError;
-pub use time::{TeamClock, Time};
+pub use time::{TeamClock, Time, TimeSource};
 
 /// Index of a robot in its team.
 #[derive(

@@ -163,3 +163,35 @@ impl TeamClock {
         Time::from_nanos(team_ns.saturating_sub(self.origin_ns))
     }
 }
+
+/// What moves a run's [`Time`] forward: how an actor may spend time on its work.
+///
+/// Under [`TimeSource::Simulated`] (the sim-time executor) time advances by events
+/// and modelled latencies only, whatever a handler call costs the machine: work that
+/// measures the wall clock — an anytime search stopping on a wall-clock budget — would
+/// make a run depend on the machine and its load instead of the seed alone, so it
+/// must stop on a fixed amount of work there. Under [`TimeSource::WallClock`] (the
+/// real-time executor) the wall clock is the run's time, and a wall-clock budget is
+/// the honest anytime bound.
+///
+/// ```
+/// use troupe_core::TimeSource;
+///
+/// assert!(TimeSource::Simulated.is_simulated());
+/// assert!(!TimeSource::WallClock.is_simulated());
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TimeSource {
+    /// Simulated time: deterministic, nothing may depend on wall-clock time.
+    Simulated,
+    /// The wall clock (the real-time executor, robot processes, hardware).
+    WallClock,
+}
+
+impl TimeSource {
+    /// Whether time is simulated.
+    #[must_use]
+    pub const fn is_simulated(self) -> bool {
+        matches!(self, TimeSource::Simulated)
+    }
+}

@@ -141,6 +141,12 @@ impl CoverageGrid {
         self.state[self.grid.linear_index(c)] == EXPLORED
     }
 
+    /// Volume of one cell, cubic metres.
+    #[must_use]
+    pub fn cell_volume_m3(&self) -> f64 {
+        self.grid.cell_m.powi(3)
+    }
+
     /// Free volume in cubic metres.
     #[must_use]
     pub fn free_volume_m3(&self) -> f64 {

@@ -7,6 +7,7 @@
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
 
 use nalgebra::Point3;
 use serde::Serialize;
@@ -15,6 +16,7 @@ use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::planner::PLANNING_REPORT;
 
 use crate::network::Positions;
+use troupe_core::Time;
 use troupe_runtime::{LINK_RX, Publication, Tap};
 
 use crate::coverage::CoverageGrid;
@@ -55,57 +57,69 @@ pub const UNPRODUCTIVE_MIN_NEW_M3: f64 = 0.5;
 /// observation do not count (the window still holds it).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UnproductiveTime {
-    /// Frames in the window: time, seconds, and new volume, m³.
-    recent: VecDeque<(f64, f64)>,
-    /// Time of the previous frame, seconds.
-    last_frame_s: Option<f64>,
-    /// Unproductive time in the open interval, seconds.
-    current_s: f64,
-    /// Unproductive time over the whole run, seconds.
-    total_s: f64,
-    /// Longest interval so far, seconds.
-    longest_s: f64,
+    /// Frames in the window: time and new volume, m³.
+    recent: VecDeque<(Time, f64)>,
+    /// Time of the previous frame.
+    last_frame: Option<Time>,
+    /// Unproductive time in the open interval, nanoseconds.
+    current_ns: u64,
+    /// Unproductive time over the whole run, nanoseconds.
+    total_ns: u64,
+    /// Longest interval so far, nanoseconds.
+    longest_ns: u64,
     /// The robot's planner last reported no remembered frontier (no report: unknown,
     /// and the time counts).
     no_frontiers: bool,
-    /// Unproductive time in the open interval while a frontier was remembered, seconds.
-    current_with_frontiers_s: f64,
-    /// Longest interval so far counting only that time, seconds.
-    longest_with_frontiers_s: f64,
+    /// Unproductive time in the open interval while a frontier was remembered,
+    /// nanoseconds.
+    current_with_frontiers_ns: u64,
+    /// Longest interval so far counting only that time, nanoseconds.
+    longest_with_frontiers_ns: u64,
+}
+
+/// Seconds of a count of nanoseconds: the times are summed as integers and converted
+/// once, so that a total is exact whatever the order of its steps and of the robots
+/// it is summed over.
+#[must_use]
+pub fn ns_to_s(ns: u64) -> f64 {
+    Duration::from_nanos(ns).as_secs_f64()
 }
 
 impl UnproductiveTime {
-    /// Accounts for a frame at `time_s` that explored `new_m3` first, with the robot
+    /// Accounts for a frame at `time` that explored `new_m3` first, with the robot
     /// moving at `speed_mps`. Frames must come in time order; a frame earlier than the
-    /// previous one, or with non-finite or negative inputs, adds no time.
-    pub fn frame(&mut self, time_s: f64, new_m3: f64, speed_mps: f64) {
+    /// previous one adds no time, a non-finite or negative volume counts as nothing
+    /// new, and a non-finite speed as standing still.
+    pub fn frame(&mut self, time: Time, new_m3: f64, speed_mps: f64) {
         let new_m3 = if new_m3.is_finite() {
             new_m3.max(0.0)
         } else {
             0.0
         };
+        let window = Duration::from_secs_f64(UNPRODUCTIVE_WINDOW_S);
         self.recent
-            .retain(|(t, _)| *t > time_s - UNPRODUCTIVE_WINDOW_S && *t <= time_s);
-        self.recent.push_back((time_s, new_m3));
-        // A handful of frames (the window times the sensor rate): summed afresh.
+            .retain(|(t, _)| *t <= time && time.saturating_since(*t) < window);
+        self.recent.push_back((time, new_m3));
+        // A handful of frames (the window times the sensor rate): summed afresh, in
+        // time order.
         let recent_m3: f64 = self.recent.iter().map(|(_, v)| v).sum();
-        let step_s = match self.last_frame_s {
-            Some(last) if (time_s - last).is_finite() => (time_s - last).max(0.0),
-            _ => 0.0,
-        };
-        self.last_frame_s = Some(time_s);
+        let step_ns = self.last_frame.map_or(0, |last| {
+            u64::try_from(time.saturating_since(last).as_nanos()).unwrap_or(u64::MAX)
+        });
+        self.last_frame = Some(time);
         if recent_m3 >= UNPRODUCTIVE_MIN_NEW_M3 {
-            self.current_s = 0.0;
-            self.current_with_frontiers_s = 0.0;
+            self.current_ns = 0;
+            self.current_with_frontiers_ns = 0;
         } else if speed_mps >= UNPRODUCTIVE_SPEED_MPS {
-            self.current_s += step_s;
-            self.total_s += step_s;
-            self.longest_s = self.longest_s.max(self.current_s);
+            self.current_ns = self.current_ns.saturating_add(step_ns);
+            self.total_ns = self.total_ns.saturating_add(step_ns);
+            self.longest_ns = self.longest_ns.max(self.current_ns);
             if !self.no_frontiers {
-                self.current_with_frontiers_s += step_s;
-                self.longest_with_frontiers_s = self
-                    .longest_with_frontiers_s
-                    .max(self.current_with_frontiers_s);
+                self.current_with_frontiers_ns =
+                    self.current_with_frontiers_ns.saturating_add(step_ns);
+                self.longest_with_frontiers_ns = self
+                    .longest_with_frontiers_ns
+                    .max(self.current_with_frontiers_ns);
             }
         }
     }
@@ -116,23 +130,29 @@ impl UnproductiveTime {
         self.no_frontiers = !remembers;
     }
 
+    /// Unproductive time so far, nanoseconds.
+    #[must_use]
+    pub fn total_ns(&self) -> u64 {
+        self.total_ns
+    }
+
     /// Unproductive time so far, seconds.
     #[must_use]
     pub fn total_s(&self) -> f64 {
-        self.total_s
+        ns_to_s(self.total_ns)
     }
 
     /// The longest unproductive interval so far, seconds (the open one included).
     #[must_use]
     pub fn longest_s(&self) -> f64 {
-        self.longest_s
+        ns_to_s(self.longest_ns)
     }
 
     /// The longest unproductive interval so far counting only the time while the robot
     /// remembered a frontier, seconds (the open one included).
     #[must_use]
     pub fn longest_with_frontiers_s(&self) -> f64 {
-        self.longest_with_frontiers_s
+        ns_to_s(self.longest_with_frontiers_ns)
     }
 }
 
@@ -176,6 +196,9 @@ pub struct RobotTruth {
     /// Volume this robot's frames saw before any other frame of the team, m³ (the
     /// robots' shares of the explored volume).
     pub discovered_m3: f64,
+    /// The coverage cells behind [`Self::discovered_m3`].
+    #[serde(skip)]
+    pub discovered_cells: u64,
     /// Time spent moving without seeing new volume, seconds (see [`UnproductiveTime`]).
     pub unproductive_s: f64,
     /// The longest unproductive interval, seconds (see [`UnproductiveTime`]).
@@ -278,14 +301,16 @@ impl Tap for GroundTruthMonitor {
             if frame.valid_pixels() == 0 {
                 robot.empty_frames += 1;
             }
-            let before_m3 = truth.coverage.explored_volume_m3();
+            // Counted in cells and converted once: no float sum to drift.
+            let before = truth.coverage.explored_cells();
             truth.coverage.observe(frame, self.pixel_stride);
-            let new_m3 = truth.coverage.explored_volume_m3() - before_m3;
+            let new_cells = (truth.coverage.explored_cells() - before) as u64;
+            let cell_m3 = truth.coverage.cell_volume_m3();
+            let new_m3 = new_cells as f64 * cell_m3;
             let robot = &mut truth.robots[r];
-            robot.discovered_m3 += new_m3;
-            robot
-                .unproductive
-                .frame(p.time.as_secs_f64(), new_m3, robot.speed_mps);
+            robot.discovered_cells += new_cells;
+            robot.discovered_m3 = robot.discovered_cells as f64 * cell_m3;
+            robot.unproductive.frame(p.time, new_m3, robot.speed_mps);
             robot.unproductive_s = robot.unproductive.total_s();
             robot.longest_unproductive_s = robot.unproductive.longest_s();
             robot.longest_unproductive_with_frontiers_s =
@@ -398,7 +423,7 @@ mod tests {
     fn fly(u: &mut UnproductiveTime, from_s: f64, to_s: f64, new_m3: f64, speed_mps: f64) {
         let mut t = from_s;
         while t < to_s {
-            u.frame(t, new_m3, speed_mps);
+            u.frame(Time::from_secs_f64(t), new_m3, speed_mps);
             t += 0.25;
         }
     }
@@ -465,10 +490,24 @@ mod tests {
     #[test]
     fn bad_inputs_add_no_time() {
         let mut u = UnproductiveTime::default();
-        u.frame(1.0, f64::NAN, 1.0);
-        u.frame(0.5, 0.0, 1.0); // out of order
-        u.frame(2.0, -3.0, f64::NAN);
-        u.frame(3.0, f64::INFINITY, 1.0);
+        let at = Time::from_secs_f64;
+        u.frame(at(1.0), f64::NAN, 1.0);
+        u.frame(at(0.5), 0.0, 1.0); // out of order
+        u.frame(at(2.0), -3.0, f64::NAN);
+        u.frame(at(3.0), f64::INFINITY, 1.0);
         assert_eq!(u.total_s(), 1.0, "only 2 s → 3 s, moving with nothing new");
+    }
+
+    #[test]
+    fn unproductive_time_is_summed_in_whole_nanoseconds() {
+        // 117 steps of 0.2 s: as floats, 23.400000000000006 s or so, depending on the
+        // order of the additions; as nanoseconds, exactly 23.4 s in every order.
+        let mut u = UnproductiveTime::default();
+        for k in 0..=117u64 {
+            u.frame(Time::from_nanos(k * 200_000_000), 0.0, 1.0);
+        }
+        assert_eq!(u.total_ns(), 23_400_000_000);
+        assert_eq!(u.total_s(), 23.4);
+        assert_eq!(u.longest_s(), 23.4);
     }
 }

@@ -36,6 +36,7 @@ use troupe_comms::wire::Class;
 use troupe_core::ConfigError;
 use troupe_robot::toml_file::{TomlFileError, read_toml};
 
+use crate::monitor::ns_to_s;
 use crate::plot::{Chart, Series, write_chart};
 use crate::scenario::{Scenario, ScenarioError};
 use crate::team::{RunOutput, Summary, Team};
@@ -546,6 +547,7 @@ impl RunRow {
             robot_contacts: s.robot_contacts,
             min_inter_robot_distance_m: s.min_inter_robot_distance_m,
             unsafe_plans: s.per_robot.iter().map(|r| r.truth.unsafe_plans).sum(),
+            // In robot order, a fixed order.
             distance_m: s.per_robot.iter().map(|r| r.truth.distance_m).sum(),
             map_bytes_offered: link_bytes(&map, true),
             map_bytes_sent: link_bytes(&map, false),
@@ -567,7 +569,13 @@ impl RunRow {
                     [r, bytes as f64]
                 })
                 .collect(),
-            unproductive_s: Some(s.per_robot.iter().map(|r| r.truth.unproductive_s).sum()),
+            // Summed in nanoseconds and converted once: exact in any order.
+            unproductive_s: Some(ns_to_s(
+                s.per_robot
+                    .iter()
+                    .map(|r| r.truth.unproductive.total_ns())
+                    .sum(),
+            )),
             longest_unproductive_s: Some(
                 s.per_robot
                     .iter()
@@ -743,13 +751,18 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
     out
 }
 
-/// Mean and 95% confidence half-width (Student t) of a sample.
+/// Mean and 95% confidence half-width (Student t) of a sample. The sums run over the
+/// values in ascending order, so the figures do not depend on the order of the runs
+/// (e.g. on how a study was split into shards and merged).
 #[must_use]
 pub fn mean_ci95(values: &[f64]) -> (f64, f64) {
     let n = values.len();
     if n == 0 {
         return (f64::NAN, f64::NAN);
     }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let values = &sorted[..];
     let mean = values.iter().sum::<f64>() / n as f64;
     if n == 1 {
         return (mean, 0.0);
@@ -1149,6 +1162,62 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             None,
             "corrupt record"
         );
+    }
+
+    /// Issue 42 item 6: a merged or resumed study reads its runs back from
+    /// `study_row.json`; every float must come back as the float written, or the merged
+    /// tables differ from the whole study's in the last digit (`unproductive_s`
+    /// 23.400000000000006 read back as 23.40000000000001).
+    #[test]
+    fn a_finished_run_reads_back_every_float_exactly() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(
+            dir.path(),
+            "study.toml",
+            "name = \"s\"\nseeds = [1]\nduration_s = 5.0\n",
+        );
+        let variants = Study::load(&path)
+            .and_then(|s| s.variants())
+            .expect("variants");
+        let variant = &variants[0];
+        // Sums of 0.1 and 0.2 and their ratios: floats with 16–17 significant digits,
+        // many of which a fast (not correctly rounded) parser gets one ulp wrong.
+        let (mut a, mut b) = (0.0, 0.0);
+        let coverage_over_time: Vec<[f64; 2]> = (1..=300)
+            .map(|_| {
+                a += 0.1;
+                b += 0.2;
+                [a, a / (a + b + 1.0)]
+            })
+            .collect();
+        let row = RunRow {
+            run: variant.name.clone(),
+            seed: variant.seed,
+            final_coverage: 0.1 + 0.2,
+            distance_m: 9.399999999999999,
+            min_inter_robot_distance_m: Some(1.5999999999999999),
+            coverage_over_time,
+            unproductive_s: Some(23.400000000000006),
+            longest_unproductive_s: Some(1.0 / 3.0),
+            longest_unproductive_with_frontiers_s: Some(2.0f64.sqrt()),
+            og_change_set_bytes: vec![[0.1, 1e17 / 3.0]],
+            ..row_with_coverage(1, 0.0)
+        };
+        let run_dir = dir.path().join(&variant.name);
+        std::fs::create_dir(&run_dir).expect("run dir");
+        save_finished_run(&run_dir, "s", variant, &row).expect("save");
+        let read = finished_run(&run_dir, variant, &[]).expect("reused");
+        let bits = |r: &RunRow| -> Vec<u64> {
+            r.coverage_over_time
+                .iter()
+                .flatten()
+                .chain([&r.final_coverage, &r.distance_m])
+                .chain(r.unproductive_s.iter())
+                .map(|x| x.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&read), bits(&row));
+        assert_eq!(read, row);
     }
 
     #[test]

@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::queue::QueuePolicy;
 use crate::topic::{Payload, Topic};
-use troupe_core::{Message, RobotId, TeamClock, Time};
+use troupe_core::{Message, RobotId, TeamClock, Time, TimeSource};
 
 /// Names one of an actor's timers. Actors pick their own ids (`const TICK: TimerId = TimerId(0);`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -69,6 +69,7 @@ pub struct Context<'a> {
     pub(crate) rng: &'a mut ChaCha8Rng,
     pub(crate) bookkeeping: &'a mut bool,
     pub(crate) clock: TeamClock,
+    pub(crate) time_source: TimeSource,
 }
 
 impl Context<'_> {
@@ -86,6 +87,15 @@ impl Context<'_> {
     #[must_use]
     pub fn team_clock(&self) -> TeamClock {
         self.clock
+    }
+
+    /// What moves this run's time: [`TimeSource::Simulated`] under the sim-time
+    /// executor, where nothing an actor does may depend on the wall clock (an anytime
+    /// computation stops on a fixed amount of work instead of a wall-clock budget),
+    /// [`TimeSource::WallClock`] under the real-time one.
+    #[must_use]
+    pub fn time_source(&self) -> TimeSource {
+        self.time_source
     }
 
     /// This robot's index in the team.

@@ -87,7 +87,7 @@ pub use stats::{
 };
 pub use tap::{Publication, Tap};
 pub use topic::{Payload, Received, Topic};
-pub use troupe_core::{ConfigError, ErrorChain, Message, RobotId, TeamClock, Time};
+pub use troupe_core::{ConfigError, ErrorChain, Message, RobotId, TeamClock, Time, TimeSource};
 
 mod topic;
 

@@ -42,7 +42,7 @@ use crate::stats::{RobotReport, TopicStats};
 use crate::tap::{Publication, Tap};
 use crate::topic::Received;
 use troupe_core::Time;
-use troupe_core::{RobotId, TeamClock};
+use troupe_core::{RobotId, TeamClock, TimeSource};
 
 /// How often the transport's counters go out on [`LINK_TRANSPORT`], milliseconds.
 const TRANSPORT_STATS_PERIOD_MS: u64 = 1000;
@@ -422,7 +422,7 @@ impl RealtimeExecutor {
             let mut slots = Vec::new();
             let mut inboxes = Vec::new();
             for (s, actor) in spec.actors.into_iter().enumerate() {
-                let mut slot = Slot::new(actor, self.seed, id, clock);
+                let mut slot = Slot::new(actor, self.seed, id, (clock, TimeSource::WallClock));
                 let mut inputs = Inputs::default();
                 if !slot.instantiate(Time::ZERO)
                     || slot.run_hook(Hook::Start, Time::ZERO, id, &spec.name)

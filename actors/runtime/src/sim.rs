@@ -32,7 +32,7 @@ use crate::stats::RobotReport;
 use crate::tap::{Publication, Tap};
 use crate::topic::{Payload, Received};
 use troupe_core::Time;
-use troupe_core::{RobotId, TeamClock};
+use troupe_core::{RobotId, TeamClock, TimeSource};
 
 /// An event of one robot.
 enum Kind {
@@ -419,7 +419,7 @@ impl SimExecutor {
                 let slots: Vec<Slot> = spec
                     .actors
                     .into_iter()
-                    .map(|a| Slot::new(a, seed, id, TeamClock::SHARED))
+                    .map(|a| Slot::new(a, seed, id, (TeamClock::SHARED, TimeSource::Simulated)))
                     .collect();
                 SimRobot {
                     id,

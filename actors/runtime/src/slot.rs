@@ -14,7 +14,7 @@ use crate::context::{Command, Context, Outgoing};
 use crate::inputs::Inputs;
 use crate::spec::{ActorFactory, ActorOptions, ActorSpec};
 use crate::stats::{ActorReport, ActorStats};
-use troupe_core::{RobotId, TeamClock, Time};
+use troupe_core::{RobotId, TeamClock, Time, TimeSource};
 
 /// Which hook to run.
 pub(crate) enum Hook<'e> {
@@ -58,10 +58,17 @@ pub(crate) struct Slot {
     pub(crate) bookkeeping: bool,
     /// The run's place on the team clock ([`Context::team_clock`](crate::Context::team_clock)).
     clock: TeamClock,
+    /// What moves the run's time ([`Context::time_source`](crate::Context::time_source)).
+    time_source: TimeSource,
 }
 
 impl Slot {
-    pub(crate) fn new(spec: ActorSpec, team_seed: u64, robot: RobotId, clock: TeamClock) -> Self {
+    pub(crate) fn new(
+        spec: ActorSpec,
+        team_seed: u64,
+        robot: RobotId,
+        (clock, time_source): (TeamClock, TimeSource),
+    ) -> Self {
         let seed = team_seed
             ^ stable_hash(spec.name.as_bytes()).rotate_left(17)
             ^ u64::from(robot.0).wrapping_mul(0x9e37_79b9_7f4a_7c15);
@@ -78,6 +85,7 @@ impl Slot {
             commands: Vec::new(),
             bookkeeping: false,
             clock,
+            time_source,
         }
     }
 
@@ -125,6 +133,7 @@ impl Slot {
             rng: &mut self.rng,
             bookkeeping: &mut self.bookkeeping,
             clock: self.clock,
+            time_source: self.time_source,
         };
         let is_handle = matches!(hook, Hook::Handle(_));
         let result = catch_unwind(AssertUnwindSafe(|| -> ActorResult {

@@ -5,8 +5,11 @@
 //! stopping primitive (the kinodynamic checks at expansion) — scores it, and
 //! backs up the return accumulated along the branch. There is no random playout: a
 //! playout step costs as much as an expansion (one CSQMI view), so the budget goes to
-//! growing the tree instead. When the budget (wall time, or an iteration cap) runs
-//! out, the first action of the best branch found is returned.
+//! growing the tree instead. When the budget runs out, the first action of the best
+//! branch found is returned. Under the wall clock the budget is wall time (or an
+//! iteration cap, whichever comes first); under simulated time it is a fixed number
+//! of iterations ([`SearchParams::sim_iterations`]) and the wall clock is never read,
+//! so a simulated flight does not change with the machine's load.
 
 use std::time::{Duration, Instant};
 
@@ -72,8 +75,11 @@ impl Node {
 }
 
 /// Runs one anytime search from `root` whose children are `candidates` (already
-/// computed by the round). Deterministic for a given `rng` state whenever the
-/// iteration cap, not the wall-clock budget, ends it.
+/// computed by the round). Under simulated time
+/// ([`PlanningProblem::time_source`]) it runs [`SearchParams::sim_iterations`]
+/// iterations and is deterministic for a given `rng` state; under the wall clock it
+/// stops at [`SearchParams::budget_s`] or [`SearchParams::max_iterations`], whichever
+/// comes first (deterministic whenever the cap ends it).
 #[must_use]
 pub fn search(
     problem: &PlanningProblem<'_>,
@@ -91,8 +97,13 @@ pub fn search(
             nodes: 1,
         };
     }
-    let started = Instant::now();
-    let budget = Duration::try_from_secs_f64(params.budget_s.max(0.0)).unwrap_or(Duration::MAX);
+    // Under simulated time no wall clock: a fixed number of iterations.
+    let (cap, deadline) = if problem.time_source().is_simulated() {
+        (Some(params.sim_iterations), None)
+    } else {
+        let budget = Duration::try_from_secs_f64(params.budget_s.max(0.0)).unwrap_or(Duration::MAX);
+        (params.max_iterations, Some((Instant::now(), budget)))
+    };
     let max_depth = params.max_depth.max(1);
     let gamma = params.discount.clamp(0.0, 1.0);
     // UCT's exploration term is scaled to the rewards at hand.
@@ -118,7 +129,8 @@ pub fn search(
 
     let mut iterations = 0;
     loop {
-        if params.max_iterations.is_some_and(|cap| iterations >= cap) || started.elapsed() >= budget
+        if cap.is_some_and(|cap| iterations >= cap)
+            || deadline.is_some_and(|(started, budget)| started.elapsed() >= budget)
         {
             break;
         }
@@ -287,6 +299,7 @@ mod tests {
     use troupe_algorithms::grid::GridSnapshot;
     use troupe_algorithms::planner::round::RoundConfig;
     use troupe_algorithms::planner::scenes;
+    use troupe_core::TimeSource;
 
     use super::*;
 
@@ -404,6 +417,48 @@ mod tests {
     }
 
     #[test]
+    fn under_simulated_time_a_search_runs_its_iterations_whatever_the_wall_clock() {
+        let snapshot = scene();
+        let camera = scenes::forward_camera();
+        let config = RoundConfig::default();
+        let wall = PlanningProblem::new(&config, &snapshot, &camera);
+        let simulated =
+            PlanningProblem::new(&config, &snapshot, &camera).under(TimeSource::Simulated);
+        let candidates = wall.children(&root());
+        // No wall-clock budget at all: under the wall clock nothing is searched;
+        // under simulated time the budget is not read and the iterations run.
+        let params = SearchParams {
+            budget_s: 0.0,
+            max_iterations: None,
+            sim_iterations: 64,
+            ..SearchParams::default()
+        };
+        let seeded = || ChaCha8Rng::seed_from_u64(5);
+        let outcome = search(&simulated, &root(), &candidates, &params, &mut seeded());
+        assert_eq!(outcome.iterations, 64);
+        assert_eq!(
+            search(&wall, &root(), &candidates, &params, &mut seeded()).iterations,
+            0
+        );
+        // The same search as the wall clock's capped at 64 with time to spare, and the
+        // same again.
+        let capped = SearchParams {
+            budget_s: 600.0,
+            max_iterations: Some(64),
+            sim_iterations: 0,
+            ..SearchParams::default()
+        };
+        assert_eq!(
+            search(&wall, &root(), &candidates, &capped, &mut seeded()),
+            outcome
+        );
+        assert_eq!(
+            search(&simulated, &root(), &candidates, &params, &mut seeded()),
+            outcome
+        );
+    }
+
+    #[test]
     fn a_complete_tree_finds_the_exhaustive_optimum() {
         let snapshot = scene();
         let camera = scenes::forward_camera();
@@ -428,6 +483,7 @@ mod tests {
         let params = SearchParams {
             budget_s: 600.0,
             max_iterations: Some(20 * tree_size),
+            sim_iterations: 0,
             max_depth: 2,
             discount: gamma,
             // Broad exploration, so that the capped search completes the tree.

@@ -6,6 +6,7 @@
 
 use nalgebra::Point3;
 use rayon::prelude::*;
+use troupe_core::TimeSource;
 
 use super::csqmi::view_information;
 use super::library;
@@ -34,10 +35,12 @@ pub struct PlanningProblem<'a> {
     camera: &'a PinholeIntrinsics,
     actions: Vec<(Action, Option<f64>)>,
     guidance: Option<&'a dyn FrontierField>,
+    time_source: TimeSource,
 }
 
 impl<'a> PlanningProblem<'a> {
-    /// The problem of a round with `config` on `snapshot`, scoring views of `camera`.
+    /// The problem of a round with `config` on `snapshot`, scoring views of `camera`,
+    /// under the wall clock ([`Self::under`]).
     #[must_use]
     pub fn new(
         config: &'a RoundConfig,
@@ -56,7 +59,25 @@ impl<'a> PlanningProblem<'a> {
             camera,
             actions,
             guidance: None,
+            time_source: TimeSource::WallClock,
         }
+    }
+
+    /// The same problem planned under `time_source`: under simulated time a search
+    /// on it stops after a fixed number of iterations
+    /// ([`SearchParams::sim_iterations`]) and never reads the wall clock, so that a
+    /// simulated flight depends on its seed alone; under the wall clock it stops on
+    /// its wall-clock budget ([`SearchParams::budget_s`]).
+    #[must_use]
+    pub fn under(mut self, time_source: TimeSource) -> Self {
+        self.time_source = time_source;
+        self
+    }
+
+    /// What moves the time this problem is planned in ([`Self::under`]).
+    #[must_use]
+    pub fn time_source(&self) -> TimeSource {
+        self.time_source
     }
 
     /// The same problem with the frontier-distance reward V = d(ξ₀) − d(ξτ) measured

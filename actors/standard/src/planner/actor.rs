@@ -360,7 +360,9 @@ impl<S: ActionSelection> PlannerActor<S> {
                 },
             );
         }
-        let mut problem = PlanningProblem::new(round, &snapshot, &self.camera);
+        // Under simulated time a search stops on work done, never on the wall clock.
+        let mut problem =
+            PlanningProblem::new(round, &snapshot, &self.camera).under(ctx.time_source());
         let mut candidates = problem.children(&root);
         if let (Some(guide), Some(field)) = (&self.guide, &field)
             && guide.should_guide(field, &here, &candidates, snapshot.frontier_distance(&here))
