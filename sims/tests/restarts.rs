@@ -15,9 +15,9 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use common::{root, seconds_of_day, strip_ansi, zenoh_python};
+use common::{root, seconds_of_day, strip_ansi, wait_exit, zenoh_python};
 use serde_json::Value;
 use troupe_comms::wire::{self, Envelope, Odometry, Payload, Plan, PlanKnot};
 use troupe_comms::zenoh::key_expr;
@@ -88,20 +88,6 @@ fn spawn_robot(file: &Path, duration_s: f64, log: Option<&Path>) -> Child {
         }
     }
     c.spawn().expect("troupe robot")
-}
-
-fn wait_exit(child: &mut Child, what: &str, within: Duration) -> std::process::ExitStatus {
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            return status;
-        }
-        if start.elapsed() > within {
-            let _ = child.kill();
-            panic!("{what} did not stop within {within:?}");
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }
 
 /// Robot 0's envelopes stamped an hour ahead (odometry, and a plan through robot 1's

@@ -159,8 +159,7 @@ impl Refusal {
     }
 }
 
-/// Whether events at this callsite may stand for a refusal (the counting layer's
-/// interest; the message decides).
+/// Whether events at this callsite may stand for a refusal (the message decides).
 fn may_be_refusal(meta: &Metadata<'_>) -> bool {
     let target = meta.target();
     let level = *meta.level();
@@ -303,7 +302,18 @@ pub fn refusal_layer<S>() -> impl Layer<S>
 where
     S: Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
 {
-    RefusalLayer.with_filter(tracing_subscriber::filter::filter_fn(may_be_refusal))
+    // A static filter: every other callsite's interest is decided once, so the
+    // layer costs nothing where zenoh and troupe log at trace level.
+    RefusalLayer.with_filter(
+        tracing_subscriber::filter::Targets::new()
+            .with_target("zenoh_link_tls::unicast", Level::WARN)
+            .with_target("zenoh_link_tcp::unicast", Level::WARN)
+            .with_target("zenoh_transport::unicast::manager", Level::TRACE)
+            .with_target(
+                "zenoh_transport::unicast::establishment::accept",
+                Level::ERROR,
+            ),
+    )
 }
 
 struct RefusalLayer;
@@ -328,6 +338,14 @@ struct HideRefusals;
 impl<S: Subscriber> Filter<S> for HideRefusals {
     fn enabled(&self, _: &Metadata<'_>, _: &Context<'_, S>) -> bool {
         true
+    }
+
+    fn callsite_enabled(&self, meta: &'static Metadata<'static>) -> tracing::subscriber::Interest {
+        if may_be_refusal(meta) {
+            tracing::subscriber::Interest::sometimes()
+        } else {
+            tracing::subscriber::Interest::always()
+        }
     }
 
     fn event_enabled(&self, event: &Event<'_>, _: &Context<'_, S>) -> bool {

@@ -99,3 +99,36 @@ pub fn seconds_of_day(stamp: &str) -> Option<f64> {
     let s: f64 = parts.next()?.parse().ok()?;
     Some(3600.0 * h + 60.0 * m + s)
 }
+
+/// Waits until something listens on each loopback port; panics after `within`.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn wait_listening(ports: &[u16], within: std::time::Duration) {
+    let start = std::time::Instant::now();
+    while !ports
+        .iter()
+        .all(|p| std::net::TcpStream::connect(("127.0.0.1", *p)).is_ok())
+    {
+        assert!(start.elapsed() < within, "nothing listens on {ports:?}");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+/// Waits for a process at most `within`; kills it and fails after that.
+#[allow(dead_code)] // not every test binary that shares this module uses it
+pub fn wait_exit(
+    child: &mut std::process::Child,
+    what: &str,
+    within: std::time::Duration,
+) -> std::process::ExitStatus {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            return status;
+        }
+        if start.elapsed() > within {
+            let _ = child.kill();
+            panic!("{what} did not stop within {within:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
