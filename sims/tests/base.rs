@@ -8,8 +8,9 @@ mod common;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
+use common::wait_exit;
 use troupe_algorithms::mapfile::GmmMap;
 use troupe_robot::launch::loopback_endpoints;
 use troupe_sims::process::write_team;
@@ -21,20 +22,6 @@ fn troupe() -> Command {
 /// `n` consecutive free TCP ports on loopback, in this binary's range.
 fn free_ports(n: usize) -> Vec<u16> {
     common::free_ports_from(20_000, n)
-}
-
-fn wait(child: &mut Child, within: Duration, what: &str) -> std::process::ExitStatus {
-    let started = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            return status;
-        }
-        if started.elapsed() > within {
-            let _ = child.kill();
-            panic!("{what} did not stop");
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }
 
 /// The vertex count of a binary PLY file, after checking its header and that the
@@ -197,7 +184,7 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
         lines
     });
     for robot in &mut robots {
-        let status = wait(robot, Duration::from_secs_f64(duration_s + 60.0), "robot");
+        let status = wait_exit(robot, "robot", Duration::from_secs_f64(duration_s + 60.0));
         assert!(status.success(), "troupe robot exited with {status}");
     }
     // A hostile participant of the session (robot 5, which does not exist) sends
@@ -213,7 +200,7 @@ fn the_base_collects_both_robots_maps_and_writes_them_on_sigterm() {
             .expect("kill")
             .success()
     );
-    let status = wait(&mut base, Duration::from_secs(60), "base");
+    let status = wait_exit(&mut base, "base", Duration::from_secs(60));
     assert!(status.success(), "troupe base exited with {status}");
     let lines = reader.join().expect("reader");
     let status_lines = |robot: u32| {
