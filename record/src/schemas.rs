@@ -211,14 +211,20 @@ pub const SAMPLE: Schema = Schema {
     },
 };
 
-/// `troupe.Coverage`: the team's explored fraction and volume at a sample time.
+/// `troupe.Coverage`: the team's explored fraction and volume at a sample time, and the
+/// volume its robots re-explored (observed after a peer had, thesis §8.2.7) and observed
+/// alone and their redundant flight time, summed over the robots.
 pub const COVERAGE: Schema = Schema {
     name: "troupe.Coverage",
     document: || {
+        let volume = json!({"type": "number", "minimum": 0});
         object(json!({
             "time_s": number(),
             "fraction": {"type": "number", "minimum": 0, "maximum": 1},
-            "explored_m3": {"type": "number", "minimum": 0},
+            "explored_m3": volume,
+            "reexplored_m3": volume,
+            "exclusive_m3": volume,
+            "redundant_flight_s": {"type": "number", "minimum": 0},
         }))
     },
 };

@@ -74,6 +74,19 @@ impl CoverageGrid {
     /// or a noisy depth past the wall never counts space behind it. Parts of rays outside
     /// the grid are ignored. A frame whose buffers do not fit its intrinsics is ignored.
     pub fn observe(&mut self, frame: &DepthFrame, pixel_stride: usize) {
+        self.observe_visiting(frame, pixel_stride, |_| {});
+    }
+
+    /// Like [`observe`](Self::observe), and calls `visit` with the linear index
+    /// ([`VoxelGrid::linear_index`]) of every free cell a ray marks or crosses again —
+    /// explored before or not, once per ray that crosses it, rays in pixel order — for
+    /// accounts of who saw what ([`crate::reexploration`]).
+    pub fn observe_visiting(
+        &mut self,
+        frame: &DepthFrame,
+        pixel_stride: usize,
+        mut visit: impl FnMut(usize),
+    ) {
         let k = &frame.intrinsics;
         if check_buffers(k, &frame.depth_m, &frame.intensity).is_err() {
             return;
@@ -96,12 +109,17 @@ impl CoverageGrid {
                     if hit && t_exit >= end {
                         return false;
                     }
-                    let s = &mut self.state[grid.linear_index(c)];
+                    let index = grid.linear_index(c);
+                    let s = &mut self.state[index];
                     if *s == FREE {
                         *s = EXPLORED;
                         self.explored_cells += 1;
                     }
-                    *s != ROCK
+                    if *s == ROCK {
+                        return false;
+                    }
+                    visit(index);
+                    true
                 });
             }
         }

@@ -9,7 +9,8 @@
 //! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
 //!   assembled with.
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
-//! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`.
+//! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`;
+//!   [`reexploration`]: who re-flew what a peer had already seen (thesis §8.2.7).
 //! - [`process`]: one simulated robot per process over zenoh (`troupe robot`, on
 //!   [`troupe_robot::harness`]) and its robot files for `troupe launch`
 //!   ([`troupe_robot::launch`]); [`replay`]: a robot process replaying a recorded
@@ -41,6 +42,7 @@ pub mod og_meter;
 pub mod plot;
 pub mod process;
 pub mod recording;
+pub mod reexploration;
 pub mod replay;
 pub mod report;
 pub mod scenario;

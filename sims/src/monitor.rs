@@ -3,7 +3,7 @@
 //! odometry, both checked against the world (never against a robot's map) with
 //! [`surface_distance_m`], the true distance to the surface (a world's SDF is only a
 //! bound), and per robot the time spent moving without seeing new volume
-//! ([`UnproductiveTime`]).
+//! ([`UnproductiveTime`]) and who re-explored what ([`crate::reexploration`]).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -20,6 +20,7 @@ use troupe_core::Time;
 use troupe_runtime::{LINK_RX, Publication, Tap};
 
 use crate::coverage::CoverageGrid;
+use crate::reexploration::{ReExploration, ReExplorationLedger};
 use crate::world::{World, surface_distance_m};
 
 /// Collision checks along the path are this far apart, metres.
@@ -209,12 +210,18 @@ pub struct RobotTruth {
     /// The tracker behind the three unproductive figures.
     #[serde(skip)]
     pub unproductive: UnproductiveTime,
+    /// Observed, first-observed, re-explored and exclusive volume and redundant flight
+    /// time (thesis §8.2.7's mechanism; see [`crate::reexploration`]).
+    #[serde(flatten)]
+    pub reexploration: ReExploration,
 }
 
 /// Everything the monitor knows.
 pub struct Truth {
     /// Explored cells.
     pub coverage: CoverageGrid,
+    /// Who observed which cell of `coverage` when.
+    pub reexploration: ReExplorationLedger,
     /// Per robot.
     pub robots: Vec<RobotTruth>,
     /// Smallest distance between two robot centres seen at an odometry update, metres.
@@ -247,6 +254,8 @@ impl GroundTruthMonitor {
     ) -> Self {
         let coverage = CoverageGrid::new(world.as_ref(), coverage_cell_m);
         let count = robots;
+        let reexploration =
+            ReExplorationLedger::new(coverage.grid().cell_count(), coverage.grid().cell_m, count);
         let robots = vec![
             RobotTruth {
                 min_clearance_m: f64::INFINITY,
@@ -261,6 +270,7 @@ impl GroundTruthMonitor {
             positions: Arc::new(Mutex::new(vec![[0.0; 3]; count])),
             truth: Arc::new(Mutex::new(Truth {
                 coverage,
+                reexploration,
                 robots,
                 min_inter_robot_distance_m: f64::INFINITY,
                 robot_contacts: 0,
@@ -303,7 +313,22 @@ impl Tap for GroundTruthMonitor {
             }
             // Counted in cells and converted once: no float sum to drift.
             let before = truth.coverage.explored_cells();
-            truth.coverage.observe(frame, self.pixel_stride);
+            let Truth {
+                coverage,
+                reexploration,
+                robots,
+                ..
+            } = &mut *truth;
+            let mut account = reexploration.frame(r, p.time);
+            coverage.observe_visiting(frame, self.pixel_stride, |cell| {
+                if let Some(a) = account.as_mut() {
+                    a.saw(cell);
+                }
+            });
+            if let Some(a) = account {
+                a.finish(robots[r].speed_mps);
+            }
+            robots[r].reexploration = reexploration.robot(r);
             let new_cells = (truth.coverage.explored_cells() - before) as u64;
             let cell_m3 = truth.coverage.cell_volume_m3();
             let new_m3 = new_cells as f64 * cell_m3;

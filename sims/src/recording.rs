@@ -36,6 +36,14 @@ pub struct CoverageSample {
     pub fraction: f64,
     /// Explored volume, m³.
     pub explored_m3: f64,
+    /// Volume the robots observed after a peer had, summed over robots, m³ (thesis
+    /// §8.2.7's re-exploration; [`crate::reexploration`]).
+    pub reexplored_m3: f64,
+    /// Volume only one robot observed, summed over robots, m³.
+    pub exclusive_m3: f64,
+    /// Time the robots spent moving between frames that observed nothing new to the
+    /// team, summed over robots, seconds.
+    pub redundant_flight_s: f64,
 }
 
 /// What `[metrics]` asks a run's recorder to write of the bulky topics.
@@ -191,20 +199,25 @@ pub fn record_world(recorder: &mut Recorder, world: &dyn World) -> usize {
 }
 
 /// Writes what the run produced besides publications: every [`SeriesRow`] on its
-/// robot's sample channel and the team coverage at its sample time, and attaches
-/// `summary.json` and `scenario.toml`.
+/// robot's sample channel and the team coverage at its sample time (the robots'
+/// re-exploration figures summed in robot order), and attaches `summary.json` and
+/// `scenario.toml`.
 pub fn record_outputs(recorder: &mut Recorder, output: &RunOutput, scenario: &Scenario) {
-    for row in &output.timeseries {
-        let at = Time::from_secs_f64(row.time_s);
-        recorder.write(&sample_topic(row.robot), &schemas::SAMPLE, at, row);
-        if row.robot == 0 {
-            let coverage = CoverageSample {
-                time_s: row.time_s,
-                fraction: row.team_coverage,
-                explored_m3: row.team_explored_m3,
-            };
-            recorder.write(COVERAGE_TOPIC, &schemas::COVERAGE, at, &coverage);
+    for rows in output.timeseries.chunk_by(|a, b| a.time_s == b.time_s) {
+        let at = Time::from_secs_f64(rows[0].time_s);
+        for row in rows {
+            recorder.write(&sample_topic(row.robot), &schemas::SAMPLE, at, row);
         }
+        let sum = |f: fn(&SeriesRow) -> f64| rows.iter().map(f).sum::<f64>();
+        let coverage = CoverageSample {
+            time_s: rows[0].time_s,
+            fraction: rows[0].team_coverage,
+            explored_m3: rows[0].team_explored_m3,
+            reexplored_m3: sum(|r| r.reexplored_m3),
+            exclusive_m3: sum(|r| r.exclusive_m3),
+            redundant_flight_s: sum(|r| r.redundant_flight_s),
+        };
+        recorder.write(COVERAGE_TOPIC, &schemas::COVERAGE, at, &coverage);
     }
     let end = Time::from_secs_f64(scenario.duration_s);
     match serde_json::to_vec_pretty(&output.summary) {

@@ -40,6 +40,11 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "unproductive_s",
     "longest_unproductive_s",
     "longest_unproductive_with_frontiers_s",
+    "observed_m3",
+    "first_observed_m3",
+    "reexplored_m3",
+    "exclusive_m3",
+    "redundant_flight_s",
 ];
 
 /// The time series as CSV text.
@@ -51,7 +56,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -72,7 +77,12 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.discovered_m3,
             r.unproductive_s,
             r.longest_unproductive_s,
-            r.longest_unproductive_with_frontiers_s
+            r.longest_unproductive_with_frontiers_s,
+            r.observed_m3,
+            r.first_observed_m3,
+            r.reexplored_m3,
+            r.exclusive_m3,
+            r.redundant_flight_s
         );
     }
     out

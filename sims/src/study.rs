@@ -38,6 +38,7 @@ use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use crate::monitor::ns_to_s;
 use crate::plot::{Chart, Series, write_chart};
+use crate::reexploration::TeamReExploration;
 use crate::scenario::{Scenario, ScenarioError};
 use crate::team::{RunOutput, Summary, Team};
 
@@ -509,6 +510,11 @@ pub struct RunRow {
     /// remembered a frontier to go to, seconds (`None` as above).
     #[serde(default)]
     pub longest_unproductive_with_frontiers_s: Option<f64>,
+    /// Re-explored, exclusive and shared volume and redundant flight time, summed over
+    /// robots (thesis §8.2.7's mechanism, see [`crate::reexploration`]; `None` in records
+    /// written before they were measured).
+    #[serde(default)]
+    pub reexploration: Option<TeamReExploration>,
 }
 
 impl RunRow {
@@ -588,6 +594,7 @@ impl RunRow {
                     .map(|r| r.truth.longest_unproductive_with_frontiers_s)
                     .fold(0.0, f64::max),
             ),
+            reexploration: Some(s.reexploration),
         }
     }
 }
@@ -706,6 +713,10 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             "unproductive_s",
             "longest_unproductive_s",
             "longest_unproductive_with_frontiers_s",
+            "reexplored_m3",
+            "exclusive_m3",
+            "shared_m3",
+            "redundant_flight_s",
             "wall_s",
         ]
         .map(String::from),
@@ -737,6 +748,10 @@ pub fn results_csv(study: &Study, rows: &[RunRow]) -> String {
             opt(r.unproductive_s),
             opt(r.longest_unproductive_s),
             opt(r.longest_unproductive_with_frontiers_s),
+            opt(r.reexploration.map(|x| x.reexplored_m3)),
+            opt(r.reexploration.map(|x| x.exclusive_m3)),
+            opt(r.reexploration.map(|x| x.shared_m3)),
+            opt(r.reexploration.map(|x| x.redundant_flight_s)),
             format!("{:.3}", r.wall_s),
         ]);
         cells.extend(og_resolutions.iter().map(|res| {
@@ -820,6 +835,12 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
             "unproductive_s_ci95",
             "longest_unproductive_s_max",
             "longest_unproductive_with_frontiers_s_max",
+            "reexplored_m3_mean",
+            "reexplored_m3_ci95",
+            "exclusive_m3_mean",
+            "exclusive_m3_ci95",
+            "redundant_flight_s_mean",
+            "redundant_flight_s_ci95",
         ]
         .map(String::from),
     );
@@ -864,6 +885,17 @@ pub fn aggregate_csv(study: &Study, rows: &[RunRow]) -> String {
         cells.extend(mean_and_ci95_cells(&unproductive));
         cells.push(opt(longest));
         cells.push(opt(longest_with_frontiers));
+        for figure in [
+            |x: TeamReExploration| x.reexplored_m3,
+            |x: TeamReExploration| x.exclusive_m3,
+            |x: TeamReExploration| x.redundant_flight_s,
+        ] {
+            let values: Vec<f64> = group
+                .iter()
+                .filter_map(|r| r.reexploration.map(figure))
+                .collect();
+            cells.extend(mean_and_ci95_cells(&values));
+        }
         for i in 0..study.coverage_levels.len() {
             let reached: Vec<f64> = group
                 .iter()
@@ -1126,6 +1158,12 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             unproductive_s: Some(12.5),
             longest_unproductive_s: Some(8.0),
             longest_unproductive_with_frontiers_s: Some(6.0),
+            reexploration: Some(TeamReExploration {
+                reexplored_m3: 3.5,
+                exclusive_m3: 40.0,
+                shared_m3: 6.25,
+                redundant_flight_s: 7.5,
+            }),
         };
         let run_dir = dir.path().join(&variant.name);
         assert_eq!(
@@ -1263,6 +1301,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             unproductive_s: None,
             longest_unproductive_s: None,
             longest_unproductive_with_frontiers_s: None,
+            reexploration: None,
         }
     }
 
@@ -1284,6 +1323,35 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         assert_eq!(lines[1][n - 2..], ["6400", "800"]);
         assert_eq!(lines[2][n - 2..], ["", ""], "a run that counted nothing");
         assert!(lines.iter().all(|l| l.len() == n));
+    }
+
+    #[test]
+    fn results_carry_the_reexploration_figures_and_empty_cells_for_old_records() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = write(dir.path(), "study.toml", "name = \"s\"\nseeds = [1, 2]\n");
+        let study = Study::load(&path).expect("study");
+        let levels = study.coverage_levels.len();
+        let [mut measured, mut old] = [1, 2].map(|seed| row_with_coverage(seed, 0.5));
+        for row in [&mut measured, &mut old] {
+            row.time_to_coverage_s = vec![None; levels];
+        }
+        measured.reexploration = Some(TeamReExploration {
+            reexplored_m3: 12.5,
+            exclusive_m3: 300.0,
+            shared_m3: 20.25,
+            redundant_flight_s: 41.0,
+        });
+        let csv = results_csv(&study, &[measured, old]);
+        let lines: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+        let names = [
+            "reexplored_m3",
+            "exclusive_m3",
+            "shared_m3",
+            "redundant_flight_s",
+        ];
+        let at = names.map(|n| lines[0].iter().position(|h| *h == n).expect(n));
+        assert_eq!(at.map(|i| lines[1][i]), ["12.5", "300", "20.25", "41"]);
+        assert_eq!(at.map(|i| lines[2][i]), ["", "", "", ""]);
     }
 
     #[test]
@@ -1320,6 +1388,14 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
                 unproductive_s: Some(2.0 * longest),
                 longest_unproductive_s: Some(longest),
                 longest_unproductive_with_frontiers_s: Some(longest / 2.0),
+                // The third run comes from a record written before re-exploration was
+                // measured: the means are over the other two.
+                reexploration: (seed < 3).then_some(TeamReExploration {
+                    reexplored_m3: 10.0 * longest,
+                    exclusive_m3: 100.0,
+                    shared_m3: 1.0,
+                    redundant_flight_s: longest,
+                }),
                 ..row_with_coverage(seed, 0.6)
             })
             .collect();
@@ -1342,6 +1418,12 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
         assert_eq!(column("unproductive_s_mean"), "34");
         assert_eq!(column("longest_unproductive_s_max"), "40");
         assert_eq!(column("longest_unproductive_with_frontiers_s_max"), "20");
+        assert_eq!(column("reexplored_m3_mean"), "220");
+        let (_, half) = mean_ci95(&[40.0, 400.0]);
+        assert_eq!(column("reexplored_m3_ci95"), half.to_string());
+        assert_eq!(column("exclusive_m3_mean"), "100");
+        assert_eq!(column("exclusive_m3_ci95"), "0");
+        assert_eq!(column("redundant_flight_s_mean"), "22");
     }
 
     #[test]

@@ -24,6 +24,7 @@ use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
 use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
+use crate::reexploration::TeamReExploration;
 use crate::scenario::{Fault, Scenario};
 use crate::sim_sensor::SimCameraSource;
 use crate::vehicle::{SimVehicle, new_body};
@@ -98,6 +99,23 @@ pub struct SeriesRow {
     /// The longest unproductive interval so far counting only the time while the robot
     /// remembered a frontier to go to, seconds.
     pub longest_unproductive_with_frontiers_s: f64,
+    /// Volume this robot's frames observed so far, m³ ([`crate::reexploration`]).
+    #[serde(default)]
+    pub observed_m3: f64,
+    /// Volume this robot observed no later than any other robot so far, m³.
+    #[serde(default)]
+    pub first_observed_m3: f64,
+    /// Volume this robot observed after another robot had observed it so far, m³
+    /// (thesis §8.2.7's re-exploration).
+    #[serde(default)]
+    pub reexplored_m3: f64,
+    /// Volume only this robot has observed so far, m³.
+    #[serde(default)]
+    pub exclusive_m3: f64,
+    /// Time spent moving between frames that observed nothing new to the team so far,
+    /// seconds.
+    #[serde(default)]
+    pub redundant_flight_s: f64,
 }
 
 /// Counters of one actor.
@@ -153,6 +171,10 @@ pub struct Summary {
     pub world: WorldSummary,
     /// Coverage of the free volume by the team's cameras.
     pub coverage: CoverageSummary,
+    /// Volume the robots re-explored (observed after a peer had) and observed alone, and
+    /// their redundant flight time, summed over the team (thesis §8.2.7's mechanism; per
+    /// robot in `per_robot`; see [`crate::reexploration`]).
+    pub reexploration: TeamReExploration,
     /// Collisions with the world over all robots.
     pub collisions: u64,
     /// Episodes of two robot bodies overlapping (ground truth).
@@ -444,6 +466,11 @@ impl Team {
                     unproductive_s: r.unproductive_s,
                     longest_unproductive_s: r.longest_unproductive_s,
                     longest_unproductive_with_frontiers_s: r.longest_unproductive_with_frontiers_s,
+                    observed_m3: r.reexploration.observed_m3,
+                    first_observed_m3: r.reexploration.first_observed_m3,
+                    reexplored_m3: r.reexploration.reexplored_m3,
+                    exclusive_m3: r.reexploration.exclusive_m3,
+                    redundant_flight_s: r.reexploration.redundant_flight_s,
                 });
             }
             drop(truth);
@@ -689,6 +716,7 @@ fn summarise(
             explored_volume_m3: truth.coverage.explored_volume_m3(),
             over_time,
         },
+        reexploration: truth.reexploration.team(),
         collisions: truth.robots.iter().map(|r| r.collisions).sum(),
         robot_contacts: truth.robot_contacts,
         min_inter_robot_distance_m: truth

@@ -1,6 +1,7 @@
 //! The scripted exploration worlds as a user reaches them: `troupe run` on the shipped
 //! T-junction scenario flies the standard team safely, explores beyond the stem, and
-//! reports each robot's discovered volume and unproductive time consistently.
+//! reports each robot's discovered volume, unproductive time and re-exploration
+//! figures consistently.
 
 #![allow(clippy::unwrap_used)]
 
@@ -87,6 +88,38 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
         (discovered_m3 - explored_m3).abs() < 1e-6 * explored_m3,
         "{discovered_m3} m³ discovered, {explored_m3} m³ explored"
     );
+    // Re-exploration (thesis §8.2.7): per robot, observed = first observed +
+    // re-explored; the team's totals are the robots' sums, and its exclusive and
+    // shared volumes make the explored volume.
+    let figure = |r: &Value, name: &str| r[name].as_f64().unwrap();
+    let team = &summary["reexploration"];
+    let (mut reexplored_m3, mut exclusive_m3, mut redundant_s) = (0.0, 0.0, 0.0);
+    for r in robots {
+        let observed = figure(r, "observed_m3");
+        let first = figure(r, "first_observed_m3");
+        let again = figure(r, "reexplored_m3");
+        assert!(
+            (observed - first - again).abs() < 1e-6 * observed,
+            "{}: {observed} m³ observed, {first} first, {again} again",
+            r["name"]
+        );
+        assert!(figure(r, "redundant_flight_s") <= DURATION_S);
+        reexplored_m3 += again;
+        exclusive_m3 += figure(r, "exclusive_m3");
+        redundant_s += figure(r, "redundant_flight_s");
+    }
+    for (name, sum) in [
+        ("reexplored_m3", reexplored_m3),
+        ("exclusive_m3", exclusive_m3),
+        ("redundant_flight_s", redundant_s),
+    ] {
+        assert!((figure(team, name) - sum).abs() <= 1e-9, "team {name}");
+    }
+    let shared_m3 = figure(team, "shared_m3");
+    assert!(
+        (exclusive_m3 + shared_m3 - explored_m3).abs() < 1e-6 * explored_m3,
+        "{exclusive_m3} m³ exclusive + {shared_m3} m³ shared, {explored_m3} m³ explored"
+    );
 
     // The time series ends on the summary's figures.
     let csv = std::fs::read_to_string(dir.join("timeseries.csv")).unwrap();
@@ -105,6 +138,11 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
             "unproductive_s",
             "longest_unproductive_s",
             "longest_unproductive_with_frontiers_s",
+            "observed_m3",
+            "first_observed_m3",
+            "reexplored_m3",
+            "exclusive_m3",
+            "redundant_flight_s",
         ] {
             let cell: f64 = last[column(name)].parse().unwrap();
             // The same sums, added in a different order: equal to rounding.

@@ -321,6 +321,7 @@ mod tests {
             unproductive_s: None,
             longest_unproductive_s: None,
             longest_unproductive_with_frontiers_s: None,
+            reexploration: None,
         };
         save_finished_run(&run_dir, study, variant, &row).expect("record");
     }
