@@ -59,7 +59,7 @@ pub enum Refusal {
 const KINDS: usize = 9;
 
 impl Refusal {
-    /// Every kind, in the order of [`Refusal::index`].
+    /// Every kind, in declaration order.
     pub const ALL: [Refusal; KINDS] = [
         Refusal::NoCertificate,
         Refusal::BadCertificate,
