@@ -212,6 +212,10 @@ pub const DEFAULT_ACCEPT_PENDING: usize = 1000;
 /// variable when it is compiled.
 pub const TLS_ACCEPT_THROTTLE_US: Option<&str> = option_env!("TLS_ACCEPT_THROTTLE_TIME");
 
+/// The shortest `accept_timeout_s` accepted but 0, seconds: a few round trips on
+/// loopback.
+const MIN_ACCEPT_TIMEOUT_S: f64 = 0.1;
+
 /// The longest `accept_timeout_s` accepted, seconds.
 const MAX_ACCEPT_TIMEOUT_S: f64 = 60.0;
 
@@ -361,10 +365,15 @@ impl ZenohConfig {
                 format!("must be at least {MIN_MAX_MESSAGE_BYTES} (one frame), or 0"),
             ));
         }
-        if !(self.accept_timeout_s >= 0.0 && self.accept_timeout_s <= MAX_ACCEPT_TIMEOUT_S) {
+        if !(self.accept_timeout_s == 0.0
+            || (MIN_ACCEPT_TIMEOUT_S..=MAX_ACCEPT_TIMEOUT_S).contains(&self.accept_timeout_s))
+        {
             return Err(config_error(
                 "accept_timeout_s",
-                format!("must be between 0 and {MAX_ACCEPT_TIMEOUT_S} s (0: the default)"),
+                format!(
+                    "must be between {MIN_ACCEPT_TIMEOUT_S} and {MAX_ACCEPT_TIMEOUT_S} s, or 0 \
+                     (the default)"
+                ),
             ));
         }
         security::check(self)

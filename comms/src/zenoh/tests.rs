@@ -360,6 +360,38 @@ fn access_control_and_size_limit_reach_zenohs_configuration() {
     let _ = std::fs::remove_file(users);
 }
 
+/// The accept limits reach zenoh (defaults, and a file's values); a timeout zenoh
+/// could not wait out, or one without end, is refused.
+#[test]
+fn accept_limits_reach_zenohs_configuration() {
+    let z = ZenohConfig::default().to_zenoh().unwrap();
+    assert_eq!(
+        z.get_json("transport/unicast/accept_timeout").unwrap(),
+        "5000"
+    );
+    assert_eq!(
+        z.get_json("transport/unicast/accept_pending").unwrap(),
+        "1000"
+    );
+    let c: ZenohConfig = toml::from_str("accept_timeout_s = 2.5\naccept_pending = 50").unwrap();
+    let z = c.to_zenoh().unwrap();
+    assert_eq!(
+        z.get_json("transport/unicast/accept_timeout").unwrap(),
+        "2500"
+    );
+    assert_eq!(
+        z.get_json("transport/unicast/accept_pending").unwrap(),
+        "50"
+    );
+    for bad in ["0.01", "61.0", "nan", "-1.0"] {
+        let c: ZenohConfig = toml::from_str(&format!("accept_timeout_s = {bad}")).unwrap();
+        assert!(
+            matches!(c.validate(), Err(TransportError::Config { ref key, .. }) if key == "accept_timeout_s"),
+            "{bad}"
+        );
+    }
+}
+
 /// The workspace's builds lower zenoh's pause after a failed TLS handshake
 /// (`.cargo/config.toml`); a build without it warns when it listens on TLS.
 #[test]
