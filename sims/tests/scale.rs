@@ -26,6 +26,23 @@ fn succeeded(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// `troupe sweep study.toml --shard <shard> --jobs 1 --out split` in `dir`.
+fn sweep_shard(shard: &str, dir: &Path) -> Output {
+    troupe(
+        &[
+            "sweep",
+            "study.toml",
+            "--shard",
+            shard,
+            "--jobs",
+            "1",
+            "--out",
+            "split",
+        ],
+        dir,
+    )
+}
+
 /// A study of four very short one-robot runs (two speeds × two seeds) in `dir`.
 fn tiny_study(dir: &Path, duration_s: f64) {
     std::fs::write(
@@ -105,19 +122,7 @@ fn a_study_split_in_three_shards_and_merged_equals_the_study_run_whole() {
     }
 
     for shard in &shares {
-        let out = troupe(
-            &[
-                "sweep",
-                "study.toml",
-                "--shard",
-                shard,
-                "--jobs",
-                "1",
-                "--out",
-                "split",
-            ],
-            d,
-        );
+        let out = sweep_shard(shard, d);
         assert!(succeeded(&out).contains(&format!("shard {shard}")));
     }
     let split = d.join("split/tiny");
@@ -215,19 +220,7 @@ fn a_two_robot_study_merged_from_two_shards_equals_it_run_whole_byte_for_byte() 
         d,
     ));
     for shard in ["0/2", "1/2"] {
-        succeeded(&troupe(
-            &[
-                "sweep",
-                "study.toml",
-                "--shard",
-                shard,
-                "--jobs",
-                "1",
-                "--out",
-                "split",
-            ],
-            d,
-        ));
+        succeeded(&sweep_shard(shard, d));
     }
     succeeded(&troupe(
         &[

@@ -159,15 +159,23 @@ impl Refusal {
     }
 }
 
+/// zenoh's callsites that may log a refused connection, each with the least severe
+/// level that may: the counting layer's static filter, and [`may_be_refusal`].
+const REFUSAL_CALLSITES: [(&str, Level); 4] = [
+    ("zenoh_link_tls::unicast", Level::WARN),
+    ("zenoh_link_tcp::unicast", Level::WARN),
+    ("zenoh_transport::unicast::manager", Level::TRACE),
+    (
+        "zenoh_transport::unicast::establishment::accept",
+        Level::ERROR,
+    ),
+];
+
 /// Whether events at this callsite may stand for a refusal (the message decides).
 fn may_be_refusal(meta: &Metadata<'_>) -> bool {
-    let target = meta.target();
-    let level = *meta.level();
-    ((target.starts_with("zenoh_link_tls::unicast")
-        || target.starts_with("zenoh_link_tcp::unicast"))
-        && level == Level::WARN)
-        || target == "zenoh_transport::unicast::manager"
-        || (target == "zenoh_transport::unicast::establishment::accept" && level == Level::ERROR)
+    REFUSAL_CALLSITES
+        .iter()
+        .any(|(target, level)| meta.target().starts_with(target) && meta.level() <= level)
 }
 
 /// Counts since the process started, and since each kind's last log line.
@@ -305,14 +313,10 @@ where
     // A static filter: every other callsite's interest is decided once, so the
     // layer costs nothing where zenoh and troupe log at trace level.
     RefusalLayer.with_filter(
-        tracing_subscriber::filter::Targets::new()
-            .with_target("zenoh_link_tls::unicast", Level::WARN)
-            .with_target("zenoh_link_tcp::unicast", Level::WARN)
-            .with_target("zenoh_transport::unicast::manager", Level::TRACE)
-            .with_target(
-                "zenoh_transport::unicast::establishment::accept",
-                Level::ERROR,
-            ),
+        REFUSAL_CALLSITES
+            .iter()
+            .copied()
+            .collect::<tracing_subscriber::filter::Targets>(),
     )
 }
 

@@ -364,25 +364,17 @@ fn access_control_and_size_limit_reach_zenohs_configuration() {
 /// could not wait out, or one without end, is refused.
 #[test]
 fn accept_limits_reach_zenohs_configuration() {
-    let z = ZenohConfig::default().to_zenoh().unwrap();
+    let accept = |c: ZenohConfig| {
+        let z = c.to_zenoh().unwrap();
+        let get = |key: &str| z.get_json(&format!("transport/unicast/{key}")).unwrap();
+        (get("accept_timeout"), get("accept_pending"))
+    };
     assert_eq!(
-        z.get_json("transport/unicast/accept_timeout").unwrap(),
-        "5000"
-    );
-    assert_eq!(
-        z.get_json("transport/unicast/accept_pending").unwrap(),
-        "1000"
+        accept(ZenohConfig::default()),
+        ("5000".into(), "1000".into())
     );
     let c: ZenohConfig = toml::from_str("accept_timeout_s = 2.5\naccept_pending = 50").unwrap();
-    let z = c.to_zenoh().unwrap();
-    assert_eq!(
-        z.get_json("transport/unicast/accept_timeout").unwrap(),
-        "2500"
-    );
-    assert_eq!(
-        z.get_json("transport/unicast/accept_pending").unwrap(),
-        "50"
-    );
+    assert_eq!(accept(c), ("2500".into(), "50".into()));
     for bad in ["0.01", "61.0", "nan", "-1.0"] {
         let c: ZenohConfig = toml::from_str(&format!("accept_timeout_s = {bad}")).unwrap();
         assert!(
