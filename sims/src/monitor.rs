@@ -14,6 +14,8 @@ use serde::Serialize;
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::planner::PLANNING_REPORT;
+use troupe_comms::shaping::frame::class_of;
+use troupe_comms::wire::Class;
 
 use crate::network::Positions;
 use troupe_core::Time;
@@ -194,6 +196,10 @@ pub struct RobotTruth {
     /// Bytes the network delivered to this robot (all classes, fragments and acks
     /// included).
     pub received_bytes: u64,
+    /// Of [`Self::received_bytes`], the frames of the keyframe class: the map data
+    /// (GMM keyframes or occupancy-grid change sets) that reached this robot, thesis
+    /// Fig. 8.9 (a)–(f).
+    pub received_bytes_keyframe: u64,
     /// Volume this robot's frames saw before any other frame of the team, m³ (the
     /// robots' shares of the explored volume).
     pub discovered_m3: f64,
@@ -343,6 +349,9 @@ impl Tap for GroundTruthMonitor {
         } else if let Some(packet) = p.get(&LINK_RX) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.received_bytes += packet.bytes.len() as u64;
+                if class_of(&packet.bytes) == Ok(Class::Keyframe) {
+                    robot.received_bytes_keyframe += packet.bytes.len() as u64;
+                }
             }
         } else if let Some(report) = p.get(&PLANNING_REPORT) {
             if let (Some(robot), Some(frontiers)) =

@@ -23,6 +23,10 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// Band around the line as `(x, low, high)`; empty for none.
     pub band: Vec<(f64, f64, f64)>,
+    /// Draw the line dashed.
+    pub dashed: bool,
+    /// Palette index of its colour; `None`: the series' own index.
+    pub colour: Option<usize>,
 }
 
 /// A chart: title, axis labels and lines.
@@ -82,12 +86,32 @@ fn font_ready() -> io::Result<()> {
     }
 }
 
+fn err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> io::Error {
+    io::Error::other(e.to_string())
+}
+
+/// Draws `charts` on `root`, `columns` to a row, and writes the result out.
+fn draw_all<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    charts: &[Chart],
+    columns: usize,
+) -> io::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(err)?;
+    let columns = columns.clamp(1, charts.len().max(1));
+    let rows = charts.len().div_ceil(columns).max(1);
+    for (area, chart) in root.split_evenly((rows, columns)).iter().zip(charts) {
+        draw(area, chart)?;
+    }
+    root.present().map_err(err)
+}
+
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, chart: &Chart) -> io::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| io::Error::other(e.to_string());
-    root.fill(&WHITE).map_err(err)?;
     let ((x0, x1), (y0, y1)) = chart.ranges();
     let mut c = ChartBuilder::on(root)
         .caption(&chart.title, (FAMILY, 22))
@@ -104,7 +128,7 @@ where
         .draw()
         .map_err(err)?;
     for (i, s) in chart.series.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
+        let color = Palette99::pick(s.colour.unwrap_or(i)).to_rgba();
         let band: Vec<(f64, f64, f64)> = s
             .band
             .iter()
@@ -129,11 +153,19 @@ where
             .copied()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
-        c.draw_series(LineSeries::new(points, color.stroke_width(2)))
+        let style = color.stroke_width(2);
+        let drawn = if s.dashed {
+            c.draw_series(DashedLineSeries::new(points, 8, 5, style))
+        } else {
+            c.draw_series(LineSeries::new(points, style))
+        };
+        let legend = if s.dashed { 8 } else { 20 };
+        drawn
             .map_err(err)?
             .label(s.label.as_str())
             .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                // A dashed line's legend shows its dash and gap.
+                PathElement::new(vec![(x, y), (x + legend, y)], style)
             });
     }
     if chart.series.iter().any(|s| !s.label.is_empty()) {
@@ -145,7 +177,7 @@ where
             .draw()
             .map_err(err)?;
     }
-    root.present().map_err(err)
+    Ok(())
 }
 
 /// Writes `dir/<stem>.svg` and `dir/<stem>.png`.
@@ -154,13 +186,31 @@ where
 ///
 /// Any I/O or drawing error.
 pub fn write_chart(chart: &Chart, dir: &Path, stem: &str) -> io::Result<()> {
+    write_panels(std::slice::from_ref(chart), 1, dir, stem)
+}
+
+/// Writes `dir/<stem>.svg` and `dir/<stem>.png`: the charts as panels of one figure,
+/// `columns` to a row, each panel the size of a single chart.
+///
+/// # Errors
+///
+/// Any I/O or drawing error.
+pub fn write_panels(charts: &[Chart], columns: usize, dir: &Path, stem: &str) -> io::Result<()> {
     font_ready()?;
+    let columns = columns.clamp(1, charts.len().max(1));
+    let rows = charts.len().div_ceil(columns).max(1);
+    let size = (SIZE_PX.0 * columns as u32, SIZE_PX.1 * rows as u32);
     let svg = dir.join(format!("{stem}.svg"));
     let png = dir.join(format!("{stem}.png"));
-    draw(&SVGBackend::new(&svg, SIZE_PX).into_drawing_area(), chart)?;
-    draw(
-        &BitMapBackend::new(&png, SIZE_PX).into_drawing_area(),
-        chart,
+    draw_all(
+        &SVGBackend::new(&svg, size).into_drawing_area(),
+        charts,
+        columns,
+    )?;
+    draw_all(
+        &BitMapBackend::new(&png, size).into_drawing_area(),
+        charts,
+        columns,
     )
 }
 
@@ -179,6 +229,8 @@ mod tests {
                 label: "gmm".into(),
                 points: vec![(0.0, 0.0), (1.0, 10.0), (2.0, f64::NAN), (3.0, 30.0)],
                 band: vec![(0.0, 0.0, 0.0), (1.0, 8.0, 12.0), (3.0, 25.0, 35.0)],
+                dashed: true,
+                colour: Some(3),
             }],
         };
         write_chart(&chart, dir.path(), "c").expect("chart written");
@@ -188,5 +240,12 @@ mod tests {
         assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
         // An empty chart still draws its axes.
         write_chart(&Chart::default(), dir.path(), "empty").expect("empty chart written");
+        // Panels: three charts, two to a row, make a figure two charts wide and tall.
+        let three = [chart.clone(), Chart::default(), chart];
+        write_panels(&three, 2, dir.path(), "panels").expect("panels written");
+        let png = std::fs::read(dir.path().join("panels.png")).expect("png");
+        // The IHDR chunk: width and height, big-endian, at bytes 16–23.
+        let be = |at: usize| u32::from_be_bytes([png[at], png[at + 1], png[at + 2], png[at + 3]]);
+        assert_eq!((be(16), be(20)), (2 * SIZE_PX.0, 2 * SIZE_PX.1));
     }
 }

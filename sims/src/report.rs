@@ -36,6 +36,7 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "sent_bytes_keyframe",
     "sent_bytes_bulk",
     "received_bytes",
+    "received_bytes_keyframe",
     "discovered_m3",
     "unproductive_s",
     "longest_unproductive_s",
@@ -56,7 +57,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -74,6 +75,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.sent_bytes[2],
             r.sent_bytes[3],
             r.received_bytes,
+            r.received_bytes_keyframe,
             r.discovered_m3,
             r.unproductive_s,
             r.longest_unproductive_s,
@@ -157,7 +159,7 @@ pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
             .map(|i| Series {
                 label: label(i),
                 points: rows.iter().filter(|r| r.robot == i).filter_map(f).collect(),
-                band: Vec::new(),
+                ..Series::default()
             })
             .collect::<Vec<_>>()
     };
@@ -173,7 +175,7 @@ pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
                 .filter(|r| r.robot == 0)
                 .map(|r| (r.time_s, 100.0 * r.team_coverage))
                 .collect(),
-            band: Vec::new(),
+            ..Series::default()
         }],
     };
     let classes = ["odometry", "plans", "keyframes", "bulk"];
@@ -189,7 +191,7 @@ pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
                 bytes.push(Series {
                     label: format!("robot{i} sent {class}"),
                     points,
-                    band: Vec::new(),
+                    ..Series::default()
                 });
             }
         }
@@ -200,7 +202,7 @@ pub fn run_charts(rows: &[SeriesRow]) -> Vec<(&'static str, Chart)> {
                 .filter(|r| r.robot == i)
                 .map(|r| (r.time_s, r.received_bytes as f64 / 1e3))
                 .collect(),
-            band: Vec::new(),
+            ..Series::default()
         });
     }
     vec![

@@ -37,13 +37,18 @@ use troupe_core::ConfigError;
 use troupe_robot::toml_file::{TomlFileError, read_toml};
 
 use crate::monitor::ns_to_s;
-use crate::plot::{Chart, Series, write_chart};
+use crate::plot::{Chart, Series, write_chart, write_panels};
 use crate::reexploration::TeamReExploration;
 use crate::scenario::{Scenario, ScenarioError};
 use crate::team::{RunOutput, Summary, Team};
 
+mod figure;
 mod shard;
 
+pub use figure::{
+    BOOTSTRAP_RESAMPLES, Claim, Ratio, RatioSpec, RobotMapData, map_data_panels, ratios,
+    ratios_csv, time_to_coverage_chart,
+};
 pub use shard::{MergeError, Merged, Shard, ShardError, merge_finished_runs};
 
 /// One level of an axis.
@@ -84,6 +89,8 @@ struct StudyFile {
     coverage_levels: Vec<f64>,
     #[serde(default)]
     axes: Vec<AxisFile>,
+    #[serde(default)]
+    ratio: Option<RatioSpec>,
 }
 
 fn default_coverage_levels() -> Vec<f64> {
@@ -114,6 +121,8 @@ pub struct Study {
     pub coverage_levels: Vec<f64>,
     /// Axes.
     pub axes: Vec<Axis>,
+    /// The ratio `ratios.csv` reports (`[ratio]`), if any.
+    pub ratio: Option<RatioSpec>,
 }
 
 /// One run of a study: a combination of levels and a seed.
@@ -222,6 +231,7 @@ impl Study {
                     axis_from_file(a).map_err(|e| invalid(e.within(&format!("axes[{i}]"))))
                 })
                 .collect::<Result<_, _>>()?,
+            ratio: file.ratio,
         };
         study.check().map_err(invalid)?;
         // Every variant must be a valid scenario before anything runs.
@@ -270,6 +280,66 @@ impl Study {
                         format!("axes[{i}].levels[{j}].label"),
                         NAME_RULE,
                         format!("{:?}", level.label),
+                    ));
+                }
+            }
+        }
+        if let Some(ratio) = &self.ratio {
+            self.check_ratio(ratio)?;
+        }
+        Ok(())
+    }
+
+    /// `[ratio]` names an axis and two of its levels; each claim, other axes' levels
+    /// and one of `coverage_levels`.
+    fn check_ratio(&self, ratio: &RatioSpec) -> Result<(), ConfigError> {
+        let levels_of = |name: &str| {
+            self.axes
+                .iter()
+                .find(|a| a.name == name)
+                .map(|a| a.levels.iter().map(|l| l.label.clone()).collect::<Vec<_>>())
+        };
+        let Some(labels) = levels_of(&ratio.axis) else {
+            return Err(ConfigError::new(
+                "ratio.axis",
+                "must name an axis of the study",
+                &ratio.axis,
+            ));
+        };
+        for (key, level) in [
+            ("ratio.numerator", &ratio.numerator),
+            ("ratio.denominator", &ratio.denominator),
+        ] {
+            if !labels.contains(level) {
+                return Err(ConfigError::new(
+                    key,
+                    "must be a level of `ratio.axis`",
+                    level,
+                ));
+            }
+        }
+        for (i, claim) in ratio.thesis.iter().enumerate() {
+            if !self
+                .coverage_levels
+                .iter()
+                .any(|l| (l - claim.level).abs() < 1e-9)
+            {
+                return Err(ConfigError::new(
+                    format!("ratio.thesis[{i}].level"),
+                    "must be one of `coverage_levels`",
+                    claim.level,
+                ));
+            }
+            for (axis, value) in &claim.at {
+                let known = (*axis != ratio.axis)
+                    .then(|| levels_of(axis))
+                    .flatten()
+                    .is_some_and(|l| value.as_str().is_some_and(|v| l.iter().any(|x| x == v)));
+                if !known {
+                    return Err(ConfigError::new(
+                        format!("ratio.thesis[{i}].at.{axis}"),
+                        "must be a level of another axis",
+                        value,
                     ));
                 }
             }
@@ -459,7 +529,7 @@ fn unset_dotted(table: &mut Table, key: &str) {
 }
 
 /// The numbers of one run that a study compares.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunRow {
     /// Run name.
     pub run: String,
@@ -515,6 +585,10 @@ pub struct RunRow {
     /// written before they were measured).
     #[serde(default)]
     pub reexploration: Option<TeamReExploration>,
+    /// Each robot's cumulative map data sent and received over time (thesis Fig. 8.9
+    /// (a)–(f); empty in records written before it was kept).
+    #[serde(default)]
+    pub map_data: Vec<RobotMapData>,
 }
 
 impl RunRow {
@@ -595,8 +669,26 @@ impl RunRow {
                     .fold(0.0, f64::max),
             ),
             reexploration: Some(s.reexploration),
+            map_data: map_data(output),
         }
     }
+}
+
+/// Each robot's cumulative keyframe-class bytes sent and received per sample period.
+fn map_data(output: &RunOutput) -> Vec<RobotMapData> {
+    let mut robots: Vec<RobotMapData> = Vec::new();
+    for r in &output.timeseries {
+        if robots.len() <= r.robot {
+            robots.resize_with(r.robot + 1, RobotMapData::default);
+            robots[r.robot].robot = r.robot;
+        }
+        robots[r.robot].over_time.push([
+            r.time_s,
+            r.sent_bytes[Class::Keyframe.index()] as f64,
+            r.received_bytes_keyframe as f64,
+        ]);
+    }
+    robots
 }
 
 /// The file in a run's report directory that lets `troupe sweep --resume` reuse the run
@@ -965,17 +1057,26 @@ pub fn run_variants(
         .collect()
 }
 
-/// Writes `results.csv` and `aggregate.csv` into `root` and returns the file names.
+/// Writes `results.csv`, `aggregate.csv`, `ratios.csv` (when the study has a
+/// `[ratio]`) and the plots — `coverage`, `map_data` (one panel per combination, when
+/// the runs recorded map data) and `time_to_coverage` — into `root` and returns the
+/// file names.
 ///
 /// # Errors
 ///
 /// Any I/O error.
 pub fn write_study(root: &Path, study: &Study, rows: &[RunRow]) -> std::io::Result<Vec<String>> {
     std::fs::create_dir_all(root)?;
-    let files = [
+    let mut files = vec![
         ("results.csv", results_csv(study, rows)),
         ("aggregate.csv", aggregate_csv(study, rows)),
     ];
+    if let Some(spec) = &study.ratio {
+        files.push((
+            "ratios.csv",
+            ratios_csv(study, spec, &ratios(study, spec, rows)),
+        ));
+    }
     let mut written = Vec::new();
     for (name, text) in files {
         let path = root.join(name);
@@ -986,6 +1087,25 @@ pub fn write_study(root: &Path, study: &Study, rows: &[RunRow]) -> std::io::Resu
     }
     write_chart(&coverage_chart(study, rows), root, "coverage")?;
     written.push(root.join("coverage.{svg,png}").display().to_string());
+    let panels = map_data_panels(study, rows);
+    if !panels.is_empty() {
+        // One column per level of the last axis: a row per combination of the others.
+        let columns = study.axes.last().map_or(1, |a| a.levels.len());
+        write_panels(&panels, columns, root, "map_data")?;
+        written.push(root.join("map_data.{svg,png}").display().to_string());
+    }
+    if !study.coverage_levels.is_empty() {
+        write_chart(
+            &time_to_coverage_chart(study, rows),
+            root,
+            "time_to_coverage",
+        )?;
+        written.push(
+            root.join("time_to_coverage.{svg,png}")
+                .display()
+                .to_string(),
+        );
+    }
     Ok(written)
 }
 
@@ -1015,13 +1135,10 @@ pub fn coverage_chart(study: &Study, rows: &[RunRow]) -> Chart {
                 band.push((t, (mean - half).max(0.0), (mean + half).min(100.0)));
             }
             Series {
-                label: if labels.is_empty() {
-                    study.name.clone()
-                } else {
-                    labels.join(" / ")
-                },
+                label: figure::combination_label(study, &labels),
                 points,
                 band,
+                ..Series::default()
             }
         })
         .collect();
@@ -1164,6 +1281,10 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
                 shared_m3: 6.25,
                 redundant_flight_s: 7.5,
             }),
+            map_data: vec![RobotMapData {
+                robot: 0,
+                over_time: vec![[1.0, 0.1, 1e6 / 3.0]],
+            }],
         };
         let run_dir = dir.path().join(&variant.name);
         assert_eq!(
@@ -1286,22 +1407,116 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             labels: Vec::new(),
             seed,
             final_coverage: coverage,
-            time_to_coverage_s: Vec::new(),
-            collisions: 0,
-            robot_contacts: 0,
-            min_inter_robot_distance_m: None,
-            unsafe_plans: 0,
-            distance_m: 0.0,
-            map_bytes_offered: 0,
-            map_bytes_sent: 0,
-            link_bytes_sent: 0,
             coverage_over_time: vec![[1.0, coverage]],
-            wall_s: 0.0,
-            og_change_set_bytes: Vec::new(),
-            unproductive_s: None,
-            longest_unproductive_s: None,
-            longest_unproductive_with_frontiers_s: None,
-            reexploration: None,
+            ..RunRow::default()
+        }
+    }
+
+    const RATIO_STUDY: &str = r#"name = "r"
+seeds = [1, 2, 3, 4]
+coverage_levels = [0.5]
+[[axes]]
+name = "map"
+key = "robot.map_sharing"
+values = ["gmm", "grid"]
+labels = ["gmm", "og"]
+[[axes]]
+name = "rate"
+key = "robot.link.shaper.rate_bps"
+values = [100000, 250000]
+labels = ["slow", "fast"]
+[ratio]
+axis = "map"
+numerator = "gmm"
+denominator = "og"
+[[ratio.thesis]]
+at = { rate = "fast" }
+level = 0.5
+says = 'below 0.8, "faster"'
+"#;
+
+    #[test]
+    fn ratios_pair_seeds_count_never_as_last_and_carry_the_claim() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let study = Study::load(&write(dir.path(), "study.toml", RATIO_STUDY)).expect("study");
+        let spec = study.ratio.clone().expect("a ratio");
+        // Times to 50 % per seed, slow rate: GMM 10, 20, 30, never; OG 40, 50, 60, 70.
+        // Fast rate: both 5 × seed, and seed 4 has no OG run (unpaired).
+        let time = |map: &str, rate: &str, seed: u64| -> Option<Option<f64>> {
+            match (map, rate) {
+                ("gmm", "slow") => Some((seed < 4).then_some(10.0 * seed as f64)),
+                ("og", "slow") => Some(Some(30.0 + 10.0 * seed as f64)),
+                ("og", "fast") if seed == 4 => None,
+                _ => Some(Some(5.0 * seed as f64)),
+            }
+        };
+        let mut rows = Vec::new();
+        for seed in 1..=4 {
+            for map in ["gmm", "og"] {
+                for rate in ["slow", "fast"] {
+                    if let Some(t) = time(map, rate, seed) {
+                        rows.push(RunRow {
+                            labels: vec![map.into(), rate.into()],
+                            time_to_coverage_s: vec![t],
+                            ..row_with_coverage(seed, 0.6)
+                        });
+                    }
+                }
+            }
+        }
+        let r = ratios(&study, &spec, &rows);
+        assert_eq!(r.len(), 2);
+        // Slow: the medians (nearest rank: the upper middle of four) are 30 and 60.
+        assert_eq!(r[0].labels, vec!["slow".to_string()]);
+        assert_eq!((r[0].pairs, r[0].medians_s), (4, [Some(30.0), Some(60.0)]));
+        assert_eq!(r[0].ratio, Some(0.5));
+        assert_eq!(r[0].numerator_first, 3);
+        let (lo, hi) = r[0].interval.expect("an interval");
+        assert!(lo <= 0.5 && hi >= 0.5 && hi < 1.0, "{lo} {hi}");
+        assert_eq!(r[0].thesis, None);
+        // Fast: three pairs, equal times; the study file's claim.
+        assert_eq!(
+            (r[1].pairs, r[1].ratio, r[1].numerator_first),
+            (3, Some(1.0), 0)
+        );
+        assert_eq!(r[1].interval, Some((1.0, 1.0)));
+        let csv = ratios_csv(&study, &spec, &r);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(
+            lines[0],
+            "rate,coverage_level,pairs,gmm_median_s,og_median_s,ratio,ratio_ci95_low,\
+             ratio_ci95_high,gmm_first,thesis"
+        );
+        assert_eq!(
+            lines[2],
+            r#"fast,0.5,3,10,10,1,1,1,0,"below 0.8, ""faster""""#
+        );
+    }
+
+    #[test]
+    fn a_ratio_must_name_an_axis_its_levels_and_a_coverage_level() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        for (from, to, key) in [
+            (r#"axis = "map""#, r#"axis = "speed""#, "ratio.axis"),
+            (
+                r#"numerator = "gmm""#,
+                r#"numerator = "none""#,
+                "ratio.numerator",
+            ),
+            ("level = 0.5", "level = 0.6", "ratio.thesis[0].level"),
+            (
+                r#"rate = "fast""#,
+                r#"rate = "fastest""#,
+                "ratio.thesis[0].at.rate",
+            ),
+        ] {
+            let text = RATIO_STUDY.replace(from, to);
+            assert_ne!(text, RATIO_STUDY);
+            let e = Study::load(&write(dir.path(), "study.toml", &text)).expect_err(key);
+            let StudyError::Invalid { source, .. } = e else {
+                panic!("{e:?}")
+            };
+            assert_eq!(source.key, key);
         }
     }
 

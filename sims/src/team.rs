@@ -89,6 +89,8 @@ pub struct SeriesRow {
     pub sent_bytes: [u64; 4],
     /// Link bytes received so far.
     pub received_bytes: u64,
+    /// Of those, bytes of keyframe-class frames (map data) so far.
+    pub received_bytes_keyframe: u64,
     /// Volume this robot saw first so far, m³.
     pub discovered_m3: f64,
     /// Time spent moving without seeing new volume so far, seconds
@@ -462,6 +464,7 @@ impl Team {
                     nearest_robot_m,
                     sent_bytes,
                     received_bytes: r.received_bytes,
+                    received_bytes_keyframe: r.received_bytes_keyframe,
                     discovered_m3: r.discovered_m3,
                     unproductive_s: r.unproductive_s,
                     longest_unproductive_s: r.longest_unproductive_s,

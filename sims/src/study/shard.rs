@@ -306,22 +306,10 @@ mod tests {
             labels: variant.labels.clone(),
             seed: variant.seed,
             final_coverage: 0.6,
-            time_to_coverage_s: vec![],
-            collisions: 0,
-            robot_contacts: 0,
-            min_inter_robot_distance_m: None,
-            unsafe_plans: 0,
             distance_m: 1.0,
-            map_bytes_offered: 0,
-            map_bytes_sent: 0,
-            link_bytes_sent: 0,
             coverage_over_time: vec![[t, 0.6]],
             wall_s: 0.1,
-            og_change_set_bytes: Vec::new(),
-            unproductive_s: None,
-            longest_unproductive_s: None,
-            longest_unproductive_with_frontiers_s: None,
-            reexploration: None,
+            ..RunRow::default()
         };
         save_finished_run(&run_dir, study, variant, &row).expect("record");
     }

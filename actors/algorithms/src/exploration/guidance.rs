@@ -41,6 +41,13 @@ pub enum Coordination {
     /// same branch.
     #[default]
     Assignment,
+    /// No claims: a robot learns where its peers have been only from the maps it
+    /// receives (their keyframes or grid changes retire the frontiers they saw), never
+    /// from their plans or positions. This is the thesis' coordination in its link
+    /// study, which kept "the planning and coordination methodology the same" for both
+    /// map representations (§8.2.7, Fig. 8.9): the only way a peer's work reaches a
+    /// robot is through its map, so what the link drops a robot may fly again.
+    MapsOnly,
 }
 
 /// How frontiers are weighed when the field is built.
@@ -343,6 +350,7 @@ impl GuidanceField {
                 peers,
                 params.claim_radius_m,
             ),
+            Coordination::MapsOnly => BTreeSet::new(),
         };
         let mut heap = BinaryHeap::new();
         let mut frontiers = 0;

@@ -7,7 +7,7 @@ use nalgebra::{Isometry3, Point3};
 use troupe_core::{RobotId, Time};
 
 use super::config::GuidanceConfig;
-use super::guidance::{FieldParams, GuidanceField, PeerIntent};
+use super::guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
 use super::memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
 use crate::grid::GridSnapshot;
 use crate::planner::round::Candidate;
@@ -141,8 +141,12 @@ impl Guide {
     }
 
     /// Records where a peer is and where it is heading (its plan's first and last
-    /// knots); its position is passable.
+    /// knots); its position is passable. Ignored under [`Coordination::MapsOnly`],
+    /// where a robot knows of its peers only through their maps.
     pub fn observe_peer_plan(&mut self, peer: &PeerPlan) {
+        if self.config.coordination == Coordination::MapsOnly {
+            return;
+        }
         let knots = peer.plan.trajectory.knots();
         let (Some(first), Some(last)) = (knots.first(), knots.last()) else {
             return;

@@ -584,6 +584,18 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
         left(a) != left(b) && (left(a) || right(a)) && (left(b) || right(b)),
         "{a:?} {b:?}"
     );
+    // With maps only (the thesis' link study) the leader's plan is not heard: the
+    // follower takes the branch it would take alone, the one the leader took.
+    let mut maps_only = Guide::new(GuidanceConfig {
+        coordination: Coordination::MapsOnly,
+        ..GuidanceConfig::default()
+    });
+    maps_only.observe_snapshot(
+        &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
+        0.67,
+    );
+    maps_only.observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));
+    assert!(left(target(&mut maps_only, 1, &follow)));
 }
 
 #[test]
