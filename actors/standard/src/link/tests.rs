@@ -7,10 +7,18 @@ use std::time::Duration;
 use nalgebra::Point3;
 
 use super::*;
+use crate::link::{KeyframeEncoding, LinkConfig, LinkJournal, PeerFrame, transform_plan};
+use crate::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
+use std::collections::BTreeMap;
 use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::team::{PeerOdometry, PeerPlan};
 use troupe_algorithms::trajectory::{Knot, Trajectory};
 use troupe_comms::shaping::ReassemblyConfig;
+use troupe_comms::shaping::{Incoming, Reassembler};
+use troupe_comms::wire::{self, Envelope, Payload};
 use troupe_runtime::{ActorSpec, LinkRx, Publication, RobotSpec, SimExecutor};
+use troupe_runtime::{Destination, Message, RobotId, Time};
 
 const TICK: TimerId = TimerId(0);
 
