@@ -29,6 +29,9 @@ mod replay;
 mod shared;
 mod status;
 
+#[cfg(test)]
+mod core_tests;
+
 pub use actor::{LINK_RX_MAX_BYTES, LINK_RX_MAX_FRAMES, LINK_STATUS, LinkActor};
 pub use config::{DEFAULT_PEER_TIMEOUT_S, KeyframeEncoding, LinkConfig, SharedConfig};
 pub use convert::{keyframe_from_wire, keyframe_to_wire, plan_from_wire, plan_to_wire};
