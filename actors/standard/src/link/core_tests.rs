@@ -103,6 +103,14 @@ impl Member {
             .collect()
     }
 
+    /// The x of each peer odometry it published, in order.
+    fn positions_heard(&self) -> Vec<f64> {
+        self.odometry_heard()
+            .iter()
+            .map(|o| o.odometry.pose.translation.x)
+            .collect()
+    }
+
     /// The last status it published.
     fn last_status(&self) -> &LinkStatus {
         self.published
@@ -333,15 +341,21 @@ fn saturated() -> LinkConfig {
     config
 }
 
+/// Robot 0 on a [`saturated`] link with `count` keyframes offered at 0 s.
+fn keyframe_backlog(count: u32) -> Team {
+    let mut team = Team::new(|_| true);
+    team.join(0, LinkCore::new(saturated()).unwrap());
+    for id in 0..count {
+        team.input(0, LinkInput::Keyframe(&test_keyframe(id, Time::ZERO)));
+    }
+    team
+}
+
 /// Bytes sent by time `t` never exceed rate × t + burst, and a backlog keeps the
 /// link at its rate.
 #[test]
 fn the_link_sends_no_more_than_its_rate_and_burst() {
-    let mut team = Team::new(|_| true);
-    team.join(0, LinkCore::new(saturated()).unwrap());
-    for id in 0..60 {
-        team.input(0, LinkInput::Keyframe(&test_keyframe(id, Time::ZERO)));
-    }
+    let mut team = keyframe_backlog(60);
     team.run_until(secs(8.0));
     let (rate, burst) = (10_000.0, 4_096.0);
     let mut total = 0.0;
@@ -361,11 +375,7 @@ fn the_link_sends_no_more_than_its_rate_and_burst() {
 /// of keyframes, they are the next frames out.
 #[test]
 fn odometry_goes_before_plans_and_plans_before_keyframes() {
-    let mut team = Team::new(|_| true);
-    team.join(0, LinkCore::new(saturated()).unwrap());
-    for id in 0..20 {
-        team.input(0, LinkInput::Keyframe(&test_keyframe(id, Time::ZERO)));
-    }
+    let mut team = keyframe_backlog(20);
     team.run_until(secs(2.0));
     // Right after a keyframe frame went out: the bucket is empty, so what is
     // offered now waits for the next frame's tokens.
@@ -409,13 +419,11 @@ fn store_and_forward() -> LinkConfig {
     config
 }
 
-/// A peer that hears nothing for 5 s gets every keyframe once, in order, after the
-/// sender went back to it again and again; once acknowledged, nothing is stored
-/// and nothing more is sent.
-#[test]
-fn store_and_forward_retransmits_until_acknowledged() {
+/// Robot 0 (journaled) offers three store-and-forward keyframes to robot 1 at
+/// 0.5 s, over a network that is `up` when it says.
+fn three_keyframes_stored(up: fn(Time) -> bool) -> (LinkJournal, Team) {
     let journal = LinkJournal::default();
-    let mut team = Team::new(|t| t >= secs(5.0));
+    let mut team = Team::new(up);
     let sender = LinkCore::new(store_and_forward()).unwrap();
     team.join(0, sender.journaled(journal.clone()).unwrap());
     team.join(1, LinkCore::new(store_and_forward()).unwrap());
@@ -423,6 +431,15 @@ fn store_and_forward_retransmits_until_acknowledged() {
     for id in 0..3 {
         team.input(0, LinkInput::Keyframe(&test_keyframe(id, secs(0.5))));
     }
+    (journal, team)
+}
+
+/// A peer that hears nothing for 5 s gets every keyframe once, in order, after the
+/// sender went back to it again and again; once acknowledged, nothing is stored
+/// and nothing more is sent.
+#[test]
+fn store_and_forward_retransmits_until_acknowledged() {
+    let (journal, mut team) = three_keyframes_stored(|t| t >= secs(5.0));
     team.run_until(secs(4.9));
     assert!(team.member(1).keyframes_heard().is_empty());
     assert_eq!(journal.stored_messages(), 3);
@@ -451,15 +468,7 @@ fn store_and_forward_retransmits_until_acknowledged() {
 /// numbers its own messages after them (a reused id would be dropped as a repeat).
 #[test]
 fn a_new_core_from_the_journal_sends_what_the_old_one_stored() {
-    let journal = LinkJournal::default();
-    let mut team = Team::new(|t| t >= secs(3.0));
-    let sender = LinkCore::new(store_and_forward()).unwrap();
-    team.join(0, sender.journaled(journal.clone()).unwrap());
-    team.join(1, LinkCore::new(store_and_forward()).unwrap());
-    team.run_until(secs(0.5));
-    for id in 0..3 {
-        team.input(0, LinkInput::Keyframe(&test_keyframe(id, secs(0.5))));
-    }
+    let (journal, mut team) = three_keyframes_stored(|t| t >= secs(3.0));
     team.run_until(secs(3.0));
     assert_eq!(journal.stored_messages(), 3);
     let restarted = LinkCore::new(store_and_forward()).unwrap();
@@ -609,11 +618,7 @@ fn a_message_replayed_under_a_fresh_id_is_rejected() {
     ]);
     let team = forged(LinkConfig::default(), frames, 3.5);
     let member = team.member(1);
-    let xs: Vec<f64> = member
-        .odometry_heard()
-        .iter()
-        .map(|o| o.odometry.pose.translation.x)
-        .collect();
+    let xs = member.positions_heard();
     assert_eq!(xs, vec![1.0, 2.0, 3.0]);
     let status = member.last_status();
     assert_eq!(status.rejections.replayed, 2);
@@ -650,11 +655,7 @@ fn each_bad_frame_is_rejected_and_counted_under_its_reason() {
     ];
     let team = forged(config, frames, 1.5);
     let member = team.member(1);
-    let xs: Vec<f64> = member
-        .odometry_heard()
-        .iter()
-        .map(|o| o.odometry.pose.translation.x)
-        .collect();
+    let xs = member.positions_heard();
     assert_eq!(xs, vec![1.0]);
     let status = member.last_status();
     let r = status.rejections;
