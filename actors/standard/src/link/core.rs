@@ -130,7 +130,24 @@ pub enum LinkOutput {
 /// Each event goes in through [`handle`](Self::handle) with the time it happens;
 /// what the link then publishes, and the timers it needs, come out as
 /// [`LinkOutput`]s in order. After every event the durable state is written to the
-/// [`LinkJournal`].
+/// [`LinkJournal`]. Call [`start`](Self::start) first: it says which robot the
+/// link runs on.
+///
+/// ```
+/// use troupe_actors::link::{LinkConfig, LinkCore, LinkIdentity, LinkInput, LinkOutput, LinkTimer};
+/// use troupe_runtime::{RobotId, TeamClock, Time};
+///
+/// let mut core = LinkCore::new(LinkConfig::default()).unwrap();
+/// let me = LinkIdentity { robot: RobotId(0), name: "r0".into(), clock: TeamClock::SHARED };
+/// let mut out = Vec::new();
+/// core.start(me, Time::ZERO, &mut out).unwrap();
+/// // It asks for its status tick, once a second.
+/// assert!(out.iter().any(|o| matches!(o, LinkOutput::SetTimer(LinkTimer::Status, _))));
+/// out.clear();
+/// let tick = LinkInput::Tick(LinkTimer::Status);
+/// core.handle(Time::from_secs_f64(1.0), tick, &mut out).unwrap();
+/// assert!(matches!(out.last(), Some(LinkOutput::Status(_))));
+/// ```
 pub struct LinkCore {
     config: LinkConfig,
     /// Who this link runs on (set at [`start`](Self::start)).
@@ -288,12 +305,6 @@ impl LinkCore {
             },
         );
         Ok(())
-    }
-
-    /// The settings.
-    #[must_use]
-    pub fn config(&self) -> &LinkConfig {
-        &self.config
     }
 
     /// Starts the link at `now` on robot `identity`: the configured peers become

@@ -14,6 +14,13 @@
 //! with a reason and counted (as an actor error). Every second the shaper and
 //! reassembler counters are published on [`LINK_STATUS`].
 //!
+//! The state and logic behind all this are a plain [`LinkCore`], with no runtime
+//! context and no executor: it takes the time and each input (a frame with its
+//! sender, a local message, a timer's tick) and returns, in order, the frames to
+//! transmit, the messages to publish and the timers to arm ([`LinkOutput`]). The
+//! [`LinkActor`] subscribes, forwards each event to its core and publishes what
+//! comes back.
+//!
 //! Custom actors share their own topics with the team through the link: see
 //! [`SharedTopic`] (per-name lanes, policies and counters, `Peer<T>` on the
 //! receivers).
