@@ -221,14 +221,64 @@ pub(crate) trait SharedCodec: Send + Sync {
     fn subscribe(&self, ctx: &mut Context<'_>);
     /// The message's bytes if it came on the local topic.
     fn encode(&self, received: &Received) -> Option<Result<Vec<u8>, postcard::Error>>;
-    /// Decodes a peer's bytes and publishes them on the peer topic.
-    fn publish(
+    /// Decodes a peer's bytes into what the link publishes on the peer topic.
+    fn decode(
         &self,
         from: RobotId,
         sent_at: Time,
+        received_at: Time,
         body: &[u8],
-        ctx: &mut Context<'_>,
-    ) -> Result<(), postcard::Error>;
+    ) -> Result<SharedDelivery, postcard::Error>;
+}
+
+/// A peer's message on a shared topic, decoded by the
+/// [`LinkCore`](super::LinkCore): what the link publishes as a [`Peer<T>`] on the
+/// topic's [`peer_topic`](SharedTopic::peer_topic).
+pub struct SharedDelivery(Box<dyn PeerMessage>);
+
+impl SharedDelivery {
+    /// The shared topic's name.
+    #[must_use]
+    pub fn name(&self) -> &str {
+        self.0.name()
+    }
+
+    /// The message as its type, if it is a `Peer<T>`.
+    #[must_use]
+    pub fn message<T: Message>(&self) -> Option<&Peer<T>> {
+        self.0.as_any().downcast_ref()
+    }
+
+    /// Publishes the message on its peer topic.
+    pub fn publish(self, ctx: &mut Context<'_>) {
+        self.0.publish(ctx);
+    }
+}
+
+impl std::fmt::Debug for SharedDelivery {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SharedDelivery({})", self.0.name())
+    }
+}
+
+/// A decoded `Peer<T>` with its topic, types erased.
+trait PeerMessage: Send {
+    fn name(&self) -> &str;
+    fn as_any(&self) -> &dyn std::any::Any;
+    fn publish(self: Box<Self>, ctx: &mut Context<'_>);
+}
+
+impl<T: Message + Serialize + DeserializeOwned> PeerMessage for (SharedTopic<T>, Peer<T>) {
+    fn name(&self) -> &str {
+        self.0.name
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        &self.1
+    }
+    fn publish(self: Box<Self>, ctx: &mut Context<'_>) {
+        let (topic, peer) = *self;
+        ctx.publish(&topic.peer_topic(), peer);
+    }
 }
 
 impl<T: Message + Serialize + DeserializeOwned> SharedCodec for SharedTopic<T> {
@@ -247,26 +297,23 @@ impl<T: Message + Serialize + DeserializeOwned> SharedCodec for SharedTopic<T> {
     fn encode(&self, received: &Received) -> Option<Result<Vec<u8>, postcard::Error>> {
         received.get(&self.topic()).map(postcard::to_allocvec)
     }
-    fn publish(
+    fn decode(
         &self,
         from: RobotId,
         sent_at: Time,
+        received_at: Time,
         body: &[u8],
-        ctx: &mut Context<'_>,
-    ) -> Result<(), postcard::Error> {
+    ) -> Result<SharedDelivery, postcard::Error> {
         let (message, rest) = postcard::take_from_bytes::<T>(body)?;
         if !rest.is_empty() {
             return Err(postcard::Error::DeserializeBadEncoding);
         }
-        ctx.publish(
-            &self.peer_topic(),
-            Peer {
-                robot: from,
-                sent_at,
-                received_at: ctx.now(),
-                message,
-            },
-        );
-        Ok(())
+        let peer = Peer {
+            robot: from,
+            sent_at,
+            received_at,
+            message,
+        };
+        Ok(SharedDelivery(Box::new((*self, peer))))
     }
 }

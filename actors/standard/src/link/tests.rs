@@ -1,16 +1,23 @@
-//! Link actor tests under the sim-time executor: plans over the link (§8.2.3) and
-//! per-peer store-and-forward.
+//! Link actor tests under the sim-time executor: the actor's wiring — plans over
+//! the link (§8.2.3), per-peer store-and-forward, restarts, journals on disk,
+//! transports, the roster and heartbeats between real links. The link's logic
+//! alone is tested without an executor in `core_tests.rs`.
 
+use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use nalgebra::Point3;
-
 use super::*;
+use crate::link::core_tests::{test_keyframe, test_plan};
+use crate::link::{KeyframeEncoding, LinkConfig, LinkJournal, PeerFrame, transform_plan};
+use crate::msgs::{PEER_KEYFRAME, PEER_PLAN};
 use troupe_algorithms::keyframe::Keyframe;
-use troupe_algorithms::trajectory::{Knot, Trajectory};
-use troupe_comms::shaping::ReassemblyConfig;
-use troupe_runtime::{ActorSpec, LinkRx, Publication, RobotSpec, SimExecutor};
+use troupe_algorithms::plan::Plan;
+use troupe_algorithms::team::PeerPlan;
+use troupe_comms::shaping::{Incoming, Reassembler, ReassemblyConfig};
+use troupe_comms::wire::{self, Payload};
+use troupe_runtime::{ActorSpec, Publication, RobotSpec, SimExecutor};
+use troupe_runtime::{Destination, Message, RobotId, Time};
 
 const TICK: TimerId = TimerId(0);
 
@@ -19,21 +26,6 @@ const TICK: TimerId = TimerId(0);
 struct PlanSource {
     period: Duration,
     count: u32,
-}
-
-fn test_plan(index: u32, now: Time) -> Plan {
-    let knots = (0..=20)
-        .map(|k| Knot {
-            time: now + Duration::from_millis(100 * k),
-            position_m: Point3::new(
-                f64::from(index) + 0.1 * k as f64,
-                -0.5 * f64::from(index),
-                1.0,
-            ),
-            yaw_rad: 0.05 * f64::from(index),
-        })
-        .collect();
-    Plan::new(now, Trajectory::new(knots).unwrap())
 }
 
 impl Actor for PlanSource {
@@ -180,26 +172,6 @@ fn a_zero_plan_rate_shares_no_plans() {
 struct KeyframeSource {
     next: u32,
     count: u32,
-}
-
-fn test_keyframe(id: u32, stamp: Time) -> Keyframe {
-    use nalgebra::{Matrix4, Vector4};
-    let n = 40;
-    let gmm = troupe_algorithms::sogmm::Gmm4::new(
-        vec![1.0 / n as f64; n],
-        (0..n)
-            .map(|i| Vector4::new(i as f64 * 0.1, f64::from(id), 1.0, 0.5))
-            .collect(),
-        vec![Matrix4::from_diagonal(&Vector4::new(0.01, 0.02, 0.01, 0.005)); n],
-    )
-    .unwrap();
-    Keyframe {
-        id,
-        stamp,
-        pose: nalgebra::Isometry3::translation(f64::from(id), 0.0, 1.0),
-        support_size: 1000,
-        gmm,
-    }
 }
 
 impl Actor for KeyframeSource {
@@ -731,142 +703,6 @@ fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
     );
 }
 
-/// Plays the envelopes' senders on robot 1's network input: each `(at_s, envelope)`
-/// arrives as a one-fragment frame at `at_s`.
-struct Forger {
-    frames: Vec<(f64, Envelope)>,
-    next_id: u32,
-}
-
-impl Actor for Forger {
-    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
-        ctx.set_timer(TICK, Duration::from_millis(50));
-        Ok(())
-    }
-    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-        if !matches!(event, Event::Timer(TICK)) {
-            return Ok(());
-        }
-        let now_s = ctx.now().as_secs_f64();
-        while self.frames.first().is_some_and(|(at, _)| *at <= now_s) {
-            let (_, envelope) = self.frames.remove(0);
-            let body = wire::encode(&envelope).expect("a valid envelope");
-            // A data frame of one fragment (troupe_comms::shaping::frame's layout).
-            let mut frame = vec![0, envelope.class.index() as u8, 0];
-            frame.extend_from_slice(&self.next_id.to_le_bytes());
-            frame.extend_from_slice(&0u16.to_le_bytes());
-            frame.extend_from_slice(&1u16.to_le_bytes());
-            frame.extend_from_slice(&body);
-            self.next_id += 1;
-            ctx.publish(
-                &LINK_RX,
-                LinkRx {
-                    from: RobotId(envelope.sender),
-                    bytes: Arc::from(frame),
-                },
-            );
-        }
-        Ok(())
-    }
-}
-
-/// Robot `sender`'s odometry at `x`, numbered `sequence`, stamped `stamp_ms` in the
-/// run that started at `run_start_ms` (team clock, ms).
-fn odometry_envelope(
-    sender: u32,
-    run_start_ms: u64,
-    sequence: u64,
-    stamp_ms: u64,
-    x: f64,
-) -> Envelope {
-    Envelope::new(
-        0,
-        sender,
-        sequence,
-        stamp_ms * 1_000_000,
-        Payload::Odometry(wire::Odometry {
-            position_m: [x, 0.0, 1.0],
-            orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
-            velocity_mps: [0.0; 3],
-        }),
-    )
-    .from_run(run_start_ms * 1_000_000)
-}
-
-/// Runs robot 1's link (`config`) until `until_s` with a [`Forger`] playing `frames`
-/// on its network input: the peer odometry it published and its last status.
-fn forged_run(
-    config: &LinkConfig,
-    frames: Vec<(f64, Envelope)>,
-    until_s: f64,
-) -> (Vec<PeerOdometry>, LinkStatus) {
-    let team = vec![
-        RobotSpec::new("r0"),
-        RobotSpec::new("r1")
-            .with(link(config))
-            .with(ActorSpec::new("forger", move || Forger {
-                frames: frames.clone(),
-                next_id: 0,
-            })),
-    ];
-    let heard: Arc<Mutex<Vec<PeerOdometry>>> = Arc::default();
-    let status: Arc<Mutex<Option<LinkStatus>>> = Arc::default();
-    let mut exec = SimExecutor::new(team, 5);
-    let (tap_heard, tap_status) = (heard.clone(), status.clone());
-    exec.add_tap(move |p: &Publication<'_>| {
-        if let Some(o) = p.get(&PEER_ODOMETRY) {
-            tap_heard.lock().unwrap().push(o.clone());
-        } else if let Some(s) = p.get(&LINK_STATUS) {
-            *tap_status.lock().unwrap() = Some(s.clone());
-        }
-    });
-    exec.run_until(Time::from_secs_f64(until_s));
-    exec.finish();
-    let heard = heard.lock().unwrap().clone();
-    let status = status.lock().unwrap().clone().expect("a status");
-    (heard, status)
-}
-
-/// Issue 45, item 1: stamps are on the team clock and every message names its
-/// sender's run, so a restarted peer is heard at once (and announced), while a stamp
-/// too far ahead of this robot's clock is rejected and counted.
-#[test]
-fn a_restarted_peer_is_heard_at_once_and_a_future_stamp_is_rejected() {
-    let odometry = |run_start_ms: u64, stamp_ms: u64, x: f64| {
-        odometry_envelope(0, run_start_ms, stamp_ms, stamp_ms, x)
-    };
-    let frames = vec![
-        (0.5, odometry(0, 450, 1.0)),
-        // An hour ahead: would hold robot 1's view of robot 0 for an hour.
-        (1.0, odometry(0, 3_600_000, 2.0)),
-        // Robot 0 restarted at 1.2 s: its new run is heard at once.
-        (1.5, odometry(1_200, 1_450, 3.0)),
-        // 0.4 s ahead is within the bound (clocks a little apart).
-        (2.0, odometry(1_200, 2_400, 4.0)),
-    ];
-    let (heard, status) = forged_run(&LinkConfig::default(), frames, 3.5);
-    let heard: Vec<(u64, u64, f64)> = heard
-        .iter()
-        .map(|o| {
-            (
-                o.run_start_ns,
-                o.odometry.stamp.as_nanos() / 1_000_000,
-                o.odometry.pose.translation.x,
-            )
-        })
-        .collect();
-    assert_eq!(
-        heard,
-        vec![
-            (0, 450, 1.0),
-            (1_200_000_000, 1_450, 3.0),
-            (1_200_000_000, 2_400, 4.0)
-        ]
-    );
-    assert_eq!(status.rejections.from_the_future, 1);
-    assert_eq!(status.rejections.total(), 1);
-}
-
 /// Issue 40, item 4: members with nothing of their own to say (no odometry: a
 /// base station, a robot whose odometry stopped) send heartbeats, so the robot
 /// storing keyframes for them never suspends them as silent once its keyframes
@@ -933,60 +769,4 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
     for (robot, n) in beats.iter().enumerate() {
         assert!((30..=41).contains(n), "robot {robot} sent {n} heartbeats");
     }
-}
-
-/// Issue 45, item 2: the base station's id may send commands, acknowledgements and
-/// heartbeats, never a robot's messages: odometry under the base's id is rejected
-/// and counted (`base_as_robot`), while its heartbeat is heard and robot 0's
-/// odometry is delivered.
-#[test]
-fn the_base_station_cannot_send_a_robots_messages() {
-    let heartbeat = Envelope::new(
-        0,
-        2,
-        9,
-        900_000_000,
-        Payload::Heartbeat(wire::Heartbeat { uptime_s: 0.9 }),
-    );
-    let frames = vec![
-        (0.5, odometry_envelope(2, 0, 450, 450, 1.0)),
-        (1.0, heartbeat),
-        (1.5, odometry_envelope(0, 0, 1_450, 1_450, 1.0)),
-    ];
-    let config = LinkConfig::default().with_team(2);
-    assert_eq!(config.base_id, Some(2));
-    let (heard, status) = forged_run(&config, frames, 2.5);
-    let senders: Vec<RobotId> = heard.iter().map(|o| o.robot).collect();
-    assert_eq!(senders, vec![RobotId(0)]);
-    assert_eq!(status.rejections.base_as_robot, 1);
-    assert_eq!(status.rejections.total(), 1);
-}
-
-/// Issue 45, item 5: a captured message sent again under a fresh message id passes
-/// the reassembler's duplicate filter but not the envelope's sequence check: it is
-/// rejected and counted (`replayed`); a number not seen yet (sent out of order) is
-/// accepted, and a restarted peer's new run numbers afresh.
-#[test]
-fn a_message_replayed_under_a_fresh_id_is_rejected() {
-    let odometry = |run_start_ms: u64, sequence: u64, stamp_ms: u64, x: f64| {
-        odometry_envelope(0, run_start_ms, sequence, stamp_ms, x)
-    };
-    let frames = vec![
-        (0.5, odometry(0, 10, 450, 1.0)),
-        // The same envelope again (the Forger gives every frame a fresh id).
-        (1.0, odometry(0, 10, 450, 1.0)),
-        // An earlier number not seen yet: sent out of order, accepted.
-        (1.5, odometry(0, 9, 1_400, 2.0)),
-        // Robot 0 restarted without its journal: its new run numbers from 0.
-        (2.0, odometry(1_800, 0, 1_900, 3.0)),
-        (2.5, odometry(1_800, 0, 1_900, 3.0)),
-    ];
-    let (heard, status) = forged_run(&LinkConfig::default(), frames, 3.5);
-    let xs: Vec<f64> = heard
-        .iter()
-        .map(|o| o.odometry.pose.translation.x)
-        .collect();
-    assert_eq!(xs, vec![1.0, 2.0, 3.0]);
-    assert_eq!(status.rejections.replayed, 2);
-    assert_eq!(status.rejections.total(), 2);
 }
