@@ -1472,7 +1472,7 @@ says = 'below 0.8, "faster"'
         assert_eq!(r[0].ratio, Some(0.5));
         assert_eq!(r[0].numerator_first, 3);
         let (lo, hi) = r[0].interval.expect("an interval");
-        assert!(lo <= 0.5 && hi >= 0.5 && hi < 1.0, "{lo} {hi}");
+        assert!(lo <= 0.5 && (0.5..1.0).contains(&hi), "{lo} {hi}");
         assert_eq!(r[0].thesis, None);
         // Fast: three pairs, equal times; the study file's claim.
         assert_eq!(

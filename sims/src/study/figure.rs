@@ -255,7 +255,8 @@ pub fn ratios(study: &Study, spec: &RatioSpec, rows: &[RunRow]) -> Vec<Ratio> {
         l
     };
     // Per combination of the other axes: seed → [numerator's, denominator's] row.
-    let mut pairs: Vec<(Vec<String>, BTreeMap<u64, [Option<&RunRow>; 2]>)> = Vec::new();
+    type BySeed<'a> = BTreeMap<u64, [Option<&'a RunRow>; 2]>;
+    let mut pairs: Vec<(Vec<String>, BySeed)> = Vec::new();
     for r in rows {
         let side = if r.labels[axis] == spec.numerator {
             0
