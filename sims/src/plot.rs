@@ -13,6 +13,8 @@ use plotters::prelude::*;
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
 const FAMILY: &str = "sans-serif";
 const SIZE_PX: (u32, u32) = (900, 560);
+/// Lines of at most this many points are drawn with a marker on each.
+const MARKED_POINTS: usize = 12;
 
 /// One line, optionally with a shaded band (for example a 95% confidence interval).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -154,6 +156,11 @@ where
             .filter(|(x, y)| x.is_finite() && y.is_finite())
             .collect();
         let style = color.stroke_width(2);
+        // A line of a few points (a figure per coverage level) shows each point.
+        if points.len() <= MARKED_POINTS {
+            c.draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .map_err(err)?;
+        }
         let drawn = if s.dashed {
             c.draw_series(DashedLineSeries::new(points, 8, 5, style))
         } else {
