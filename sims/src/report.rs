@@ -37,6 +37,7 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "sent_bytes_bulk",
     "received_bytes",
     "received_bytes_keyframe",
+    "offered_bytes_keyframe",
     "discovered_m3",
     "unproductive_s",
     "longest_unproductive_s",
@@ -57,7 +58,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -76,6 +77,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.sent_bytes[3],
             r.received_bytes,
             r.received_bytes_keyframe,
+            r.offered_bytes_keyframe,
             r.discovered_m3,
             r.unproductive_s,
             r.longest_unproductive_s,

@@ -585,8 +585,8 @@ pub struct RunRow {
     /// written before they were measured).
     #[serde(default)]
     pub reexploration: Option<TeamReExploration>,
-    /// Each robot's cumulative map data sent and received over time (thesis Fig. 8.9
-    /// (a)–(f); empty in records written before it was kept).
+    /// Each robot's cumulative map data offered to the link and received over time
+    /// (thesis Fig. 8.9 (a)–(f); empty in records written before it was kept).
     #[serde(default)]
     pub map_data: Vec<RobotMapData>,
 }
@@ -674,7 +674,7 @@ impl RunRow {
     }
 }
 
-/// Each robot's cumulative keyframe-class bytes sent and received per sample period.
+/// Each robot's cumulative keyframe-class bytes offered and received per sample period.
 fn map_data(output: &RunOutput) -> Vec<RobotMapData> {
     let mut robots: Vec<RobotMapData> = Vec::new();
     for r in &output.timeseries {
@@ -682,9 +682,9 @@ fn map_data(output: &RunOutput) -> Vec<RobotMapData> {
             robots.resize_with(r.robot + 1, RobotMapData::default);
             robots[r.robot].robot = r.robot;
         }
-        robots[r.robot].over_time.push([
+        robots[r.robot].offered_received.push([
             r.time_s,
-            r.sent_bytes[Class::Keyframe.index()] as f64,
+            r.offered_bytes_keyframe as f64,
             r.received_bytes_keyframe as f64,
         ]);
     }
@@ -1283,7 +1283,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
             }),
             map_data: vec![RobotMapData {
                 robot: 0,
-                over_time: vec![[1.0, 0.1, 1e6 / 3.0]],
+                offered_received: vec![[1.0, 0.1, 1e6 / 3.0]],
             }],
         };
         let run_dir = dir.path().join(&variant.name);

@@ -91,6 +91,9 @@ pub struct SeriesRow {
     pub received_bytes: u64,
     /// Of those, bytes of keyframe-class frames (map data) so far.
     pub received_bytes_keyframe: u64,
+    /// Map data (the keyframe class) offered to the link so far, bytes: what the
+    /// robot asked to send, whether or not the link could carry it.
+    pub offered_bytes_keyframe: u64,
     /// Volume this robot saw first so far, m³.
     pub discovered_m3: f64,
     /// Time spent moving without seeing new volume so far, seconds
@@ -465,6 +468,9 @@ impl Team {
                     sent_bytes,
                     received_bytes: r.received_bytes,
                     received_bytes_keyframe: r.received_bytes_keyframe,
+                    offered_bytes_keyframe: r.link.as_ref().map_or(0, |l| {
+                        l.shaper.class(Class::Keyframe).offered_bytes
+                    }),
                     discovered_m3: r.discovered_m3,
                     unproductive_s: r.unproductive_s,
                     longest_unproductive_s: r.longest_unproductive_s,

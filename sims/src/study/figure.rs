@@ -21,14 +21,15 @@ pub const BOOTSTRAP_RESAMPLES: usize = 2000;
 /// Seed of the bootstrap's resampling: the same rows give the same intervals.
 const BOOTSTRAP_SEED: u64 = 0x8_2_7;
 
-/// Map data of one robot over a run: `[time_s, sent_bytes, received_bytes]` of the
-/// keyframe class (GMM keyframes or occupancy-grid change sets), cumulative.
+/// Map data of one robot over a run, cumulative, of the keyframe class (GMM keyframes
+/// or occupancy-grid change sets): what it offered to the link — the thesis' "sent",
+/// which its token bucket then passed or dropped — and what reached it.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RobotMapData {
     /// Robot index.
     pub robot: usize,
-    /// `[time_s, sent_bytes, received_bytes]` per sample period.
-    pub over_time: Vec<[f64; 3]>,
+    /// `[time_s, offered_bytes, received_bytes]` per sample period.
+    pub offered_received: Vec<[f64; 3]>,
 }
 
 /// A ratio the study reports: of the median times to each coverage level at
@@ -105,8 +106,9 @@ pub(super) fn combination_label(study: &Study, labels: &[String]) -> String {
 }
 
 /// Panels (a)–(f) of Fig. 8.9: per combination of levels, each robot's cumulative map
-/// data sent and received, MB, median over seeds with the interquartile band. Empty
-/// when no run recorded map data (records written before it was kept).
+/// data sent (offered to the link) and received, MB, median over seeds with the
+/// interquartile band. Empty when no run recorded map data (records written before it
+/// was kept).
 #[must_use]
 pub fn map_data_panels(study: &Study, rows: &[RunRow]) -> Vec<Chart> {
     if rows.iter().all(|r| r.map_data.is_empty()) {
@@ -127,7 +129,7 @@ pub fn map_data_panels(study: &Study, rows: &[RunRow]) -> Vec<Chart> {
                             format!("robot {robot} {what}"),
                             &group
                                 .iter()
-                                .map(|r| &r.map_data[robot].over_time)
+                                .map(|r| &r.map_data[robot].offered_received)
                                 .collect::<Vec<_>>(),
                             column,
                         )
