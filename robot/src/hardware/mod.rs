@@ -28,4 +28,4 @@ mod file;
 mod run;
 
 pub use file::{HardwareError, HardwareFile, HardwareRobot};
-pub use run::{HardwareSummary, run, run_until_signal};
+pub use run::{HardwareSummary, run, run_until_signal, run_with};
