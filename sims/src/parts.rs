@@ -21,9 +21,9 @@ use std::sync::Arc;
 
 use nalgebra::Isometry3;
 use serde::Deserialize;
+use troupe_actors::vehicle::vehicle_actor;
 use troupe_core::ConfigError;
 use troupe_robot::registry::{PartContext, Registry, SensorDriver};
-use troupe_runtime::ActorSpec;
 
 use crate::scenario::Scenario;
 use crate::sequence::{Sequence, SequenceSource};
@@ -112,10 +112,10 @@ pub fn registry() -> Registry {
         let env = SimEnvironment::of(ctx)?;
         let body = new_body(env.start_pose);
         let config = env.scenario.vehicle.clone();
-        Ok(ActorSpec::new("vehicle", move || {
-            SimVehicle::new(body.clone(), config.clone())
-        })
-        .with_options(ctx.options(ctx.config.latency_s.vehicle)))
+        Ok(
+            vehicle_actor(move || SimVehicle::new(body.clone(), config.clone()))
+                .with_options(ctx.options(ctx.config.latency_s.vehicle)),
+        )
     });
     registry.set_defaults(SIM_CAMERA, SIM_VEHICLE);
     registry
