@@ -120,3 +120,80 @@ pub fn registry() -> Registry {
     registry.set_defaults(SIM_CAMERA, SIM_VEHICLE);
     registry
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use nalgebra::Isometry3;
+    use troupe_robot::{AssembleError, PartChoice};
+
+    use crate::camera::CameraParams;
+    use crate::scenario::Scenario;
+    use crate::sequence::record_camera;
+    use crate::team::Team;
+    use crate::world::{CaveParams, CaveWorld};
+
+    fn short() -> Scenario {
+        Scenario {
+            robots: 1,
+            duration_s: 2.0,
+            ..Scenario::default()
+        }
+    }
+
+    fn refusal(scenario: &Scenario) -> troupe_core::ConfigError {
+        match Team::new(scenario) {
+            Err(AssembleError::Config(e)) => e,
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("assembled"),
+        }
+    }
+
+    #[test]
+    fn a_recorded_sequence_is_a_sensor_driver_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let world = CaveWorld::generate(&CaveParams::default(), 1);
+        let path: Vec<_> = (0..6)
+            .map(|i| (0.2 * f64::from(i), Isometry3::translation(0.0, 0.0, 1.0)))
+            .collect();
+        let camera = CameraParams {
+            width: 32,
+            height: 24,
+            ..CameraParams::default()
+        };
+        let seq = record_camera(&dir.path().join("seq"), &world, &camera, &path, 1).unwrap();
+        let mut scenario = short();
+        let mut sensor = PartChoice::named(super::SEQUENCE);
+        sensor
+            .settings
+            .insert("path".into(), seq.display().to_string().into());
+        scenario.robot.sensor = Some(sensor);
+        let run = Team::new(&scenario).unwrap().run(|_| {});
+        let frames = run.summary.per_robot[0].topics["sensor/frame"].messages;
+        assert_eq!(frames, 6, "the sequence's six frames, then nothing");
+    }
+
+    #[test]
+    fn bad_part_choices_are_refused_by_key() {
+        let mut scenario = short();
+        scenario.robot.sensor = Some(PartChoice::named("lidar"));
+        let e = refusal(&scenario);
+        assert_eq!(e.key, "robot.sensor");
+        assert!(e.rule.contains("ros2, sequence, sim_camera"), "{e}");
+        // ROS 2 needs the hardware robot's session.
+        scenario.robot.sensor = Some(PartChoice::named("ros2"));
+        let e = refusal(&scenario);
+        assert_eq!(e.key, "robot.sensor");
+        assert!(e.rule.contains("ROS 2"), "{e}");
+        let mut sensor = PartChoice::named(super::SEQUENCE);
+        sensor.settings.insert("path".into(), "/nonexistent".into());
+        scenario.robot.sensor = Some(sensor);
+        assert_eq!(refusal(&scenario).key, "robot.sensor.path");
+        scenario.robot.sensor = None;
+        let mut vehicle = PartChoice::named(super::SIM_VEHICLE);
+        vehicle.settings.insert("lag_s".into(), 0.1.into());
+        scenario.robot.vehicle = Some(vehicle);
+        assert_eq!(refusal(&scenario).key, "robot.vehicle.lag_s");
+    }
+}
