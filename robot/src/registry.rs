@@ -330,19 +330,7 @@ impl Registry {
             link_journal: place.link_journal,
         };
         let mut robot = crate::assemble(place.name, config, parts)?;
-        for (i, choice) in config.actors.iter().enumerate() {
-            let key = format!("actors[{i}]");
-            let actor = self.actors[&choice.kind](&context(key.clone(), choice))?;
-            if robot.actor_names().any(|n| n == actor.name()) {
-                return Err(ConfigError::new(
-                    key,
-                    "must build an actor whose name no other actor of the robot has",
-                    format!("{:?} (its actor is {:?})", choice.kind, actor.name()),
-                )
-                .into());
-            }
-            robot.add(actor);
-        }
+        self.add_actors(&mut robot, config, place.index, place.environment)?;
         Ok(robot)
     }
 }
@@ -356,6 +344,45 @@ impl std::fmt::Debug for Registry {
             .field("default_sensor", &self.default_sensor)
             .field("default_vehicle", &self.default_vehicle)
             .finish()
+    }
+}
+
+impl Registry {
+    /// Builds the extra actors `config` names (`[[robot.actors]]`) into `robot`, in
+    /// the file's order, for the robot at `index` in a process offering
+    /// `environment`; each must have a name no other actor of the robot has.
+    /// [`Registry::assemble`] does this after the standard actors; a caller that
+    /// assembles a robot of its own kind (a robot replaying a recording) calls it.
+    pub fn add_actors(
+        &self,
+        robot: &mut RobotSpec,
+        config: &RobotConfig,
+        index: usize,
+        environment: &dyn Any,
+    ) -> Result<(), ConfigError> {
+        let name = robot.name().to_owned();
+        for (i, choice) in config.actors.iter().enumerate() {
+            let key = format!("actors[{i}]");
+            known(&key, "actor", &self.actors, choice)?;
+            let context = PartContext {
+                robot: &name,
+                index,
+                config,
+                key: key.clone(),
+                choice,
+                environment,
+            };
+            let actor = self.actors[&choice.kind](&context)?;
+            if robot.actor_names().any(|n| n == actor.name()) {
+                return Err(ConfigError::new(
+                    key,
+                    "must build an actor whose name no other actor of the robot has",
+                    format!("{:?} (its actor is {:?})", choice.kind, actor.name()),
+                ));
+            }
+            robot.add(actor);
+        }
+        Ok(())
     }
 }
 
@@ -480,6 +507,26 @@ mod tests {
             ..context
         };
         assert_eq!(context.settings::<Settings>().unwrap().count, 2);
+    }
+
+    #[test]
+    fn extra_actors_join_in_order_and_may_not_take_a_name() {
+        let registry = registry();
+        let config: RobotConfig = toml::from_str(
+            "[[actors]]\nkind = \"quiet\"\n[[actors]]\nkind = \"quiet\"\ncount = 1\n",
+        )
+        .unwrap();
+        let mut robot = RobotSpec::new("r0");
+        registry.add_actors(&mut robot, &config, 0, &()).unwrap();
+        assert_eq!(
+            robot.actor_names().collect::<Vec<_>>(),
+            ["quiet0", "quiet1"]
+        );
+        let e = registry
+            .add_actors(&mut robot, &config, 0, &())
+            .unwrap_err();
+        assert_eq!(e.key, "actors[0]");
+        assert!(e.value.contains("quiet0"), "{e}");
     }
 
     #[test]

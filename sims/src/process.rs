@@ -330,10 +330,12 @@ fn build_robot(
             config.link = config.link.with_team(scenario.robots);
             let robot = replaying_robot(
                 &format!("robot{id}"),
+                id as usize,
                 &config,
                 sequence.clone(),
                 scenario.vehicle.odometry_rate_hz,
                 journal,
+                &process.parts,
             );
             (robot, None)
         }
