@@ -203,6 +203,91 @@ pub struct RobotConfig {
     pub latency_s: ActorLatencies,
     /// What happens when an actor panics.
     pub restart: RestartPolicy,
+    /// The sensor driver, by its registered name (`sensor = "sim_camera"`), or a table
+    /// with its name under `kind` and its own settings (`[robot.sensor] kind =
+    /// "sequence"`, `path = "…"`); absent: the process's own (the simulated camera in
+    /// `troupe run` and `troupe robot`, ROS 2 in `troupe-robot`). See
+    /// [`crate::registry`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<PartChoice>,
+    /// The vehicle driver, by its registered name (`vehicle = "sim"`) or as a table
+    /// like `sensor`; absent: the process's own (the simulated vehicle, or MAVLink in
+    /// `troupe-robot`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<PartChoice>,
+    /// Extra actors, each by its registered name and its own settings
+    /// (`[[robot.actors]] kind = "odometer"`, …), added after the standard ones in
+    /// this order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub actors: Vec<PartChoice>,
+}
+
+/// A part of a robot chosen by name from the registry ([`crate::registry`]): written
+/// as its name alone (`sensor = "sim_camera"`) or as a table with the name under
+/// `kind` and the part's own settings beside it (`[robot.sensor] kind = "flaky"`,
+/// `dropout = 0.1`), which its factory reads
+/// ([`PartContext::settings`](crate::registry::PartContext::settings)).
+///
+/// ```
+/// use troupe_robot::PartChoice;
+///
+/// let short: PartChoice = toml::from_str::<toml::Table>("p = \"sim\"").unwrap()["p"].clone().try_into().unwrap();
+/// assert_eq!(short, PartChoice::named("sim"));
+/// let long: PartChoice = toml::from_str("kind = \"flaky\"\ndropout = 0.5\n").unwrap();
+/// assert_eq!(long.kind, "flaky");
+/// assert_eq!(long.settings["dropout"].as_float(), Some(0.5));
+/// ```
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PartChoice {
+    /// The part's registered name.
+    pub kind: String,
+    /// Its own settings (every key of its table but `kind`).
+    pub settings: toml::Table,
+}
+
+impl PartChoice {
+    /// The part called `kind`, with no settings of its own.
+    #[must_use]
+    pub fn named(kind: impl Into<String>) -> Self {
+        PartChoice {
+            kind: kind.into(),
+            settings: toml::Table::new(),
+        }
+    }
+}
+
+impl Serialize for PartChoice {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap as _;
+        if self.settings.is_empty() {
+            return serializer.serialize_str(&self.kind);
+        }
+        let mut map = serializer.serialize_map(Some(self.settings.len() + 1))?;
+        map.serialize_entry("kind", &self.kind)?;
+        for (key, value) in &self.settings {
+            map.serialize_entry(key, value)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for PartChoice {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error as _;
+        match toml::Value::deserialize(deserializer)? {
+            toml::Value::String(kind) => Ok(PartChoice::named(kind)),
+            toml::Value::Table(mut settings) => match settings.remove("kind") {
+                Some(toml::Value::String(kind)) => Ok(PartChoice { kind, settings }),
+                _ => Err(D::Error::custom(
+                    "a part's table needs `kind = \"<registered name>\"`",
+                )),
+            },
+            other => Err(D::Error::custom(format!(
+                "expected a part's name (\"sim_camera\") or a table with `kind`, got {}",
+                other.type_str()
+            ))),
+        }
+    }
 }
 
 impl Default for RobotConfig {
@@ -226,6 +311,9 @@ impl Default for RobotConfig {
             artifacts: ArtifactsConfig::default(),
             latency_s: ActorLatencies::default(),
             restart: RestartPolicy::default(),
+            sensor: None,
+            vehicle: None,
+            actors: Vec::new(),
         }
     }
 }

@@ -1,7 +1,9 @@
 //! troupe-robot: running robots — assembling one robot's actors from configuration,
 //! the hardware drivers, and the deployment layer every troupe process stands on.
 //!
-//! - [`assemble`]: one robot from a [`RobotConfig`] and the parts the caller provides.
+//! - [`assemble`]: one robot from a [`RobotConfig`] and the parts the caller provides;
+//!   [`registry`]: the parts chosen by name in the robot's file (sensor and vehicle
+//!   drivers, extra actors) and built by the factories registered under those names.
 //! - [`ros2`], [`mavlink`], [`safety`]: the hardware drivers and their guards;
 //!   [`hardware`]: a hardware robot in one process (the `troupe-robot` binary).
 //! - [`harness`]: the robot-process harness (journal, team link, executor, signals,
@@ -46,6 +48,7 @@ pub mod harness;
 pub mod keys;
 pub mod launch;
 pub mod mavlink;
+pub mod registry;
 pub mod ros2;
 pub mod router;
 pub mod safety;
@@ -67,8 +70,8 @@ use troupe_policies::{BehaviourInputs, PolicyError, behaviour_by_name, selection
 use troupe_runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
 
 pub use config::{
-    ActorLatencies, CollisionConfig, ConfigError, MapSharing, PLANNER, RobotConfig, TELEOP,
-    TeleopSettings,
+    ActorLatencies, CollisionConfig, ConfigError, MapSharing, PLANNER, PartChoice, RobotConfig,
+    TELEOP, TeleopSettings,
 };
 
 /// Builds a frame source (called at start and on every sensor restart).

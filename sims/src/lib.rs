@@ -7,7 +7,10 @@
 //! - [`camera`]: the pinhole depth + intensity camera, rendered on the CPU.
 //! - [`coverage`]: explored-volume coverage.
 //! - [`vehicle`], [`sim_sensor`]: the simulated vehicle and camera source a robot is
-//!   assembled with.
+//!   assembled with; [`parts`]: them and a recorded sequence by name in the registry
+//!   ([`troupe_robot::registry`]) that builds a robot from the parts its file names.
+//! - [`cli`]: the `troupe` command as a library ([`cli::main_with`]: a user's binary
+//!   with its own parts).
 //! - [`sequence`]: recorded depth + intensity sequences (TUM RGB-D layout).
 //! - [`scenario`], [`team`], [`monitor`], [`maps`], [`report`]: `troupe run`;
 //!   [`reexploration`]: who re-flew what a peer had already seen (thesis §8.2.7).
@@ -33,12 +36,14 @@
 
 pub mod artifact_score;
 pub mod camera;
+pub mod cli;
 pub mod coverage;
 pub mod faults;
 pub mod maps;
 pub mod monitor;
 pub mod network;
 pub mod og_meter;
+pub mod parts;
 pub mod plot;
 pub mod process;
 pub mod recording;

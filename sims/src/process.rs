@@ -68,6 +68,7 @@ use troupe_robot::harness::{
     self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, write_trajectory,
 };
 use troupe_robot::launch::{TeamFiles, client_session, peer_sessions};
+use troupe_robot::registry::Registry;
 use troupe_robot::toml_file::{KEYFRAME_POLICY_KEY, SettingsFileError, names_key, read_toml};
 use troupe_runtime::{Publication, RobotSpec, TopicStats};
 
@@ -131,6 +132,9 @@ pub struct RobotProcess {
     pub out: PathBuf,
     /// The recorded sequence the robot replays, if the file names one.
     pub sequence: Option<Sequence>,
+    /// Where the robot's parts come from (the simulator's [`crate::parts::registry`]
+    /// unless the caller sets its own).
+    pub parts: Registry,
 }
 
 /// Why a robot process could not start or finish.
@@ -221,11 +225,27 @@ impl RobotProcess {
                 path: path.to_path_buf(),
                 source,
             })?;
+        if sequence.is_some() {
+            for (key, named) in [
+                ("robot.sensor", scenario.robot.sensor.is_some()),
+                ("robot.vehicle", scenario.robot.vehicle.is_some()),
+            ] {
+                if named {
+                    return Err(invalid(ConfigError::new(
+                        key,
+                        "must be absent from the scenario of a robot that replays a \
+                         `sequence` (the recording is its sensor and its poses)",
+                        "a part",
+                    )));
+                }
+            }
+        }
         Ok(RobotProcess {
             config,
             scenario,
             out,
             sequence,
+            parts: crate::parts::registry(),
         })
     }
 
@@ -310,10 +330,12 @@ fn build_robot(
             config.link = config.link.with_team(scenario.robots);
             let robot = replaying_robot(
                 &format!("robot{id}"),
+                id as usize,
                 &config,
                 sequence.clone(),
                 scenario.vehicle.odometry_rate_hz,
                 journal,
+                &process.parts,
             );
             (robot, None)
         }
@@ -321,7 +343,7 @@ fn build_robot(
             // A simulated robot keeps its world: the rock surface goes into the recording.
             let world = scenario.world.build().map_err(ProcessError::World)?;
             (
-                simulated_robot(scenario, &world, id as usize, journal),
+                simulated_robot(scenario, &world, id as usize, journal, &process.parts),
                 Some(world),
             )
         }

@@ -18,6 +18,7 @@ use troupe_actors::link::LinkJournal;
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY};
 use troupe_algorithms::frame::Odometry;
 use troupe_core::Time;
+use troupe_robot::registry::Registry;
 use troupe_robot::{AssembleError, RobotConfig, RobotParts, assemble};
 use troupe_runtime::{
     Actor, ActorOptions, ActorResult, ActorSpec, Context, Event, LatencyModel, QueuePolicy,
@@ -98,15 +99,19 @@ impl Actor for ReplayOdometry {
     }
 }
 
-/// Assembles robot `name` with `config` around a recorded sequence (module docs),
-/// publishing odometry at `odometry_rate_hz`. A restarted sensor plays the sequence
+/// Assembles robot `name` (at `index` in its team) with `config` around a recorded
+/// sequence (module docs), publishing odometry at `odometry_rate_hz`, with the extra
+/// actors `config` names from `registry` (`[[robot.actors]]`; they are offered no
+/// environment: there is no simulated world). A restarted sensor plays the sequence
 /// from its first frame again.
 pub fn replaying_robot(
     name: &str,
+    index: usize,
     config: &RobotConfig,
     sequence: Sequence,
     odometry_rate_hz: f64,
     link_journal: LinkJournal,
+    registry: &Registry,
 ) -> Result<RobotSpec, AssembleError> {
     let camera = sequence.camera().intrinsics();
     let parts = RobotParts {
@@ -129,5 +134,8 @@ pub fn replaying_robot(
             robot.add(actor);
         }
     }
+    registry
+        .add_actors(&mut robot, config, index, &())
+        .map_err(|e| AssembleError::Config(e.within("robot")))?;
     Ok(robot)
 }

@@ -11,11 +11,9 @@ use troupe_algorithms::mapfile::GmmMap;
 use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
 use troupe_core::Time;
-use troupe_robot::{AssembleError, RobotParts, assemble};
-use troupe_runtime::{
-    ActorOptions, ActorSpec, LatencyModel, LatencySummary, RobotReport, RobotSpec, SimExecutor,
-    TopicStats,
-};
+use troupe_robot::AssembleError;
+use troupe_robot::registry::{Placement, Registry};
+use troupe_runtime::{LatencySummary, RobotReport, RobotSpec, SimExecutor, TopicStats};
 
 use crate::artifact_score::{ArtifactCollector, ArtifactScore, ScoredArtifact};
 use crate::camera::{CameraBackend, gpu_camera_available, resolve_backend};
@@ -24,10 +22,9 @@ use crate::maps::MapCollector;
 use crate::monitor::{GroundTruthMonitor, RobotTruth, Truth, lock_truth};
 use crate::network::ScenarioNetwork;
 use crate::og_meter::{OgChangeSets, OgMeterTap, OgMeters};
+use crate::parts::SimEnvironment;
 use crate::reexploration::TeamReExploration;
 use crate::scenario::{Fault, Scenario};
-use crate::sim_sensor::SimCameraSource;
-use crate::vehicle::{SimVehicle, new_body};
 use crate::world::{DEPARTURE_INTERVAL_S, Site, World};
 
 /// A team ready to run.
@@ -308,8 +305,23 @@ impl Team {
     /// ```
     pub fn new_with(
         scenario: &Scenario,
+        customize: impl FnMut(usize, &mut RobotSpec),
+    ) -> Result<Team, AssembleError> {
+        Team::with_parts(scenario, &crate::parts::registry(), customize)
+    }
+
+    /// Like [`Team::new_with`], with each robot's sensor and vehicle drivers and extra
+    /// actors — those its `[robot]` table names — from `registry` (a user's parts
+    /// beside the simulator's: [`crate::parts::registry`] extended). Unknown names
+    /// are an error before anything is built.
+    pub fn with_parts(
+        scenario: &Scenario,
+        registry: &Registry,
         mut customize: impl FnMut(usize, &mut RobotSpec),
     ) -> Result<Team, AssembleError> {
+        registry
+            .check(&scenario.robot)
+            .map_err(|e| AssembleError::Config(e.within("robot")))?;
         scenario.check_render_stride()?;
         let (world, artifact_truth) = scenario.world.build_with_artifacts().map_err(|e| {
             AssembleError::Config(troupe_robot::ConfigError::new(
@@ -327,7 +339,7 @@ impl Team {
             scenario.faults.iter().map(|_| Arc::default()).collect();
         let mut team = Vec::with_capacity(count);
         for i in 0..count {
-            let mut robot = simulated_robot(scenario, &world, i, LinkJournal::default())?;
+            let mut robot = simulated_robot(scenario, &world, i, LinkJournal::default(), registry)?;
             for (fault, counters) in scenario.faults.iter().zip(&fault_counters) {
                 robot = inject_fault(robot, i, fault, counters);
             }
@@ -565,14 +577,16 @@ impl Team {
 }
 
 /// Robot `i` of a scenario's team, as the simulation builds it: the standard robot of
-/// `scenario.robot` with a simulated vehicle at the world's start position `i` and a
-/// simulated camera (used by [`Team`] and by the per-robot `troupe robot` process),
-/// keeping its link's durable state in `link_journal`.
+/// `scenario.robot` at the world's start position `i`, with the sensor and vehicle
+/// drivers and extra actors its `[robot]` table names from `registry` (the simulated
+/// camera and vehicle by default; [`crate::parts`]), keeping its link's durable state
+/// in `link_journal` (used by [`Team`] and by the per-robot `troupe robot` process).
 pub fn simulated_robot(
     scenario: &Scenario,
     world: &Arc<dyn Site>,
     i: usize,
     link_journal: LinkJournal,
+    registry: &Registry,
 ) -> Result<RobotSpec, AssembleError> {
     let count = scenario.robots as usize;
     let start = world.start_position(i, count);
@@ -581,13 +595,12 @@ pub fn simulated_robot(
         .iter()
         .find(|p| (p.xy() - start.xy()).norm() > 0.1)
         .map_or(0.0, |p| (p.y - start.y).atan2(p.x - start.x));
-    let pose = Isometry3::from_parts(
+    let start_pose = Isometry3::from_parts(
         Translation3::from(start.coords),
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading),
     );
-    let body = new_body(pose);
-    let camera_world: Arc<dyn World> = world.clone();
     if scenario.camera.backend == CameraBackend::Gpu {
+        let camera_world: Arc<dyn World> = world.clone();
         gpu_camera_available(camera_world.as_ref()).map_err(|e| {
             AssembleError::Config(troupe_robot::ConfigError::new(
                 "camera.backend",
@@ -596,36 +609,33 @@ pub fn simulated_robot(
             ))
         })?;
     }
-    let camera = scenario.camera.clone();
-    let noise_seed = scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1);
-    let vehicle_config = scenario.vehicle.clone();
-    let vehicle = ActorSpec::new("vehicle", move || {
-        SimVehicle::new(body.clone(), vehicle_config.clone())
-    })
-    .with_options(ActorOptions {
-        latency: LatencyModel::fixed(scenario.robot.latency_s.vehicle),
-        restart: scenario.robot.restart,
-        blocking: false,
-    });
-    let parts = RobotParts {
-        frame_source: Box::new(move || {
-            Box::new(SimCameraSource::new(
-                camera_world.clone(),
-                camera.clone(),
-                noise_seed,
-            ))
-        }),
-        vehicle,
-        route,
-        // The robot furthest into the tunnel leaves first; the others follow
-        // at intervals so that robots sharing the first tunnel stay apart.
-        depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
-        camera: scenario.camera.intrinsics(),
-        link_journal,
+    let environment = SimEnvironment {
+        scenario: scenario.clone(),
+        world: world.clone(),
+        start_pose,
+        noise_seed: scenario.seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ (i as u64 + 1),
     };
     let mut config = scenario.robot.clone();
     config.link = config.link.with_team(scenario.robots);
-    assemble(&format!("robot{i}"), &config, parts)
+    let name = format!("robot{i}");
+    registry
+        .assemble(
+            &config,
+            Placement {
+                name: &name,
+                index: i,
+                environment: &environment,
+                route,
+                // The robot furthest into the tunnel leaves first; the others follow
+                // at intervals so that robots sharing the first tunnel stay apart.
+                depart_at_s: (count - 1 - i) as f64 * DEPARTURE_INTERVAL_S,
+                link_journal,
+            },
+        )
+        .map_err(|e| match e {
+            AssembleError::Config(e) => AssembleError::Config(e.within("robot")),
+            other => other,
+        })
 }
 
 /// Applies one scheduled fault to robot `index` (faults aimed elsewhere, and network

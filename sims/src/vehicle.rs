@@ -21,12 +21,12 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use troupe_actors::msgs::{ODOMETRY, PLAN};
+use troupe_actors::vehicle::Vehicle;
 use troupe_algorithms::frame::Odometry;
 use troupe_algorithms::plan::Plan;
 use troupe_core::ConfigError;
 use troupe_core::Time;
-use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
+use troupe_runtime::{ActorError, ActorResult, Context};
 
 /// Settings of the simulated vehicle (the `[vehicle]` table of a scenario).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -132,9 +132,8 @@ pub fn new_body(pose: Isometry3<f64>) -> SimBody {
     }))
 }
 
-const ODOMETRY_TICK: TimerId = TimerId(0);
-
-/// See the [module docs](self).
+/// The simulated vehicle driver (a [`Vehicle`], in the robot's `vehicle` actor); see
+/// the [module docs](self).
 pub struct SimVehicle {
     body: SimBody,
     config: VehicleConfig,
@@ -160,7 +159,8 @@ impl SimVehicle {
             .map_err(|_| ActorError::msg("vehicle body lock poisoned"))
     }
 
-    fn publish(&self, ctx: &mut Context<'_>) -> ActorResult {
+    /// Moves the body to now and says where it is.
+    fn advance(&self, ctx: &mut Context<'_>) -> Result<Odometry, ActorError> {
         let now = ctx.now();
         let mut body = self.body()?;
         if self.config.tracking_error_std_m > 0.0 && now > body.error_time {
@@ -184,14 +184,11 @@ impl SimVehicle {
             body.pose = pose;
             body.velocity_mps = state.velocity_mps;
         }
-        let odometry = Odometry {
+        Ok(Odometry {
             stamp: now,
             pose: body.pose,
             velocity_mps: body.velocity_mps,
-        };
-        drop(body);
-        ctx.publish(&ODOMETRY, odometry);
-        Ok(())
+        })
     }
 }
 
@@ -240,26 +237,22 @@ fn fly_lagging(body: &mut BodyState, now: Time, lag_s: f64) {
     body.dynamics_time = Some(now);
 }
 
-impl Actor for SimVehicle {
-    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
-        ctx.subscribe(&PLAN, QueuePolicy::LATEST);
-        ctx.set_timer(
-            ODOMETRY_TICK,
-            Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz.max(1e-3)),
-        );
-        self.publish(ctx)
+impl Vehicle for SimVehicle {
+    fn period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.config.odometry_rate_hz.max(1e-3))
     }
 
-    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-        match event {
-            Event::Message(m) => {
-                if let Some(plan) = m.get_arc(&PLAN) {
-                    self.body()?.plan = Some(plan);
-                }
-                Ok(())
-            }
-            Event::Timer(_) => self.publish(ctx),
-        }
+    fn start(&mut self, ctx: &mut Context<'_>) -> Result<Option<Odometry>, ActorError> {
+        self.advance(ctx).map(Some)
+    }
+
+    fn follow(&mut self, plan: Arc<Plan>, _ctx: &mut Context<'_>) -> ActorResult {
+        self.body()?.plan = Some(plan);
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context<'_>) -> Result<Option<Odometry>, ActorError> {
+        self.advance(ctx).map(Some)
     }
 }
 

@@ -5,6 +5,8 @@
 //!
 //! - [`msgs`]: the standard topics and their message types (the data flow of a robot).
 //! - [`sensor`]: captures depth frames from a [`FrameSource`](sensor::FrameSource).
+//! - [`vehicle`]: the robot's `vehicle` actor around a [`Vehicle`](vehicle::Vehicle)
+//!   driver (follows the committed plan, publishes odometry).
 //! - [`mapper`]: keyframe selection and SOGMM fits (thesis §6, §8.2.2).
 //! - [`grid`]: the local occupancy grid (§3.2.3) and occupancy-grid map sharing.
 //! - [`planner`]: the motion-primitive planner (§4) and teleoperation (§5.1.2).
@@ -39,3 +41,4 @@ pub mod mapper;
 pub mod msgs;
 pub mod planner;
 pub mod sensor;
+pub mod vehicle;

@@ -22,10 +22,14 @@
 //! calibration and opens the team link before the MAVLink vehicle starts, so a robot
 //! that cannot start never sends a setpoint. Around the actors it is a process like
 //! any other: [`crate::harness`] runs it (signals, duration, recording,
-//! `summary.json`).
+//! `summary.json`). Its sensor and vehicle drivers are the registry's `ros2` and
+//! `mavlink` unless `[robot] sensor` / `vehicle` name others; [`run_with`] and
+//! [`main_with`] take a registry with a user's parts ([`crate::registry`]).
 
+mod command;
 mod file;
 mod run;
 
+pub use command::main_with;
 pub use file::{HardwareError, HardwareFile, HardwareRobot};
-pub use run::{HardwareSummary, run, run_until_signal};
+pub use run::{HardwareSummary, run, run_until_signal, run_with};

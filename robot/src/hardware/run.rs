@@ -23,10 +23,10 @@ use super::file::{HardwareError, HardwareRobot};
 use crate::harness::{
     self, ActorHealth, Harness, HarnessError, Member, shutdown_signal, unix_now_s,
 };
-use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, GaveUp, OdometrySource, mavlink_vehicle};
+use crate::mavlink::{AUTOPILOT_STATUS, AutopilotStatus, GaveUp, OdometrySource};
+use crate::registry::{HardwareEnvironment, MAVLINK, Placement, Registry};
 use crate::ros2::{InputStats, OutputStats, Ros2Inputs, Ros2Outputs, Ros2Publisher, open_session};
 use crate::toml_file::SettingsFileError;
-use crate::{RobotParts, assemble};
 
 /// How often the camera's first frame is looked for at start.
 const CALIBRATION_POLL: Duration = Duration::from_millis(20);
@@ -147,33 +147,48 @@ fn camera_intrinsics(
     }
 }
 
-/// Every startup step that can fail, in order: the ROS 2 session and topics, the
-/// camera's intrinsics, the robot's actors, the team link. The vehicle's MAVLink
-/// connection opens only when the executor starts it, after all of these.
-fn start(robot: &HardwareRobot) -> Result<Started, HardwareError> {
+/// Every startup step that can fail, in order: the part names, the ROS 2 session and
+/// topics, the camera's intrinsics, the robot's actors (its parts from `registry`),
+/// the team link. The vehicle's MAVLink connection opens only when the executor
+/// starts it, after all of these.
+fn start(robot: &HardwareRobot, registry: &Registry) -> Result<Started, HardwareError> {
     let file = &robot.file;
+    let invalid = |e: crate::ConfigError| SettingsFileError::config(&robot.path, e);
+    registry
+        .check(&file.robot)
+        .map_err(|e| invalid(e.within("robot")))?;
     let ros_session = open_session(&file.ros2)?;
     let inputs = Ros2Inputs::subscribe(&ros_session, &file.ros2)?;
     tracing::info!(robot = file.id, "waiting for the ROS 2 topics");
     inputs.wait_for_topics()?;
     let camera = camera_intrinsics(robot, &inputs)?;
     let publisher = Ros2Publisher::open(&ros_session, &file.ros2)?;
-    let vehicle = mavlink_vehicle(&file.mavlink)
-        .map_err(|e| SettingsFileError::config(&robot.path, e.within("mavlink")))?;
+    if registry.choices(&file.robot).1.kind == MAVLINK {
+        file.mavlink
+            .validate()
+            .map_err(|e| invalid(e.within("mavlink")))?;
+    }
     // The link's journal outlives the process (docs/link-durability.md).
     let link_journal = harness::open_journal(&file.robot.link.journal_dir_in(&robot.out), None)?;
-    let source_inputs = inputs.clone();
-    let parts = RobotParts {
-        frame_source: Box::new(move || Box::new(source_inputs.frame_source())),
-        vehicle,
-        route: Vec::new(),
-        depart_at_s: 0.0,
+    let environment = HardwareEnvironment {
+        inputs: inputs.clone(),
         camera,
-        link_journal,
+        mavlink: file.mavlink.clone(),
     };
     let mut config = file.robot.clone();
     config.link = config.link.with_team(file.team_size).with_roster_as_peers();
-    let mut spec = assemble(&format!("robot{}", file.id), &config, parts)?;
+    let name = format!("robot{}", file.id);
+    let mut spec = registry.assemble(
+        &config,
+        Placement {
+            name: &name,
+            index: file.id as usize,
+            environment: &environment,
+            route: Vec::new(),
+            depart_at_s: 0.0,
+            link_journal,
+        },
+    )?;
     if file.mavlink.odometry_source == OdometrySource::External {
         let odometry = inputs.clone();
         spec.add(ActorSpec::new("ros2_odometry", move || {
@@ -211,7 +226,17 @@ pub fn run(
     robot: &HardwareRobot,
     stop: impl Future<Output = ()>,
 ) -> Result<HardwareSummary, HardwareError> {
-    let started = start(robot)?;
+    run_with(robot, &Registry::hardware(), stop)
+}
+
+/// [`run`] with the robot's parts from `registry` (a user's drivers and actors beside
+/// troupe's: [`Registry::hardware`] extended).
+pub fn run_with(
+    robot: &HardwareRobot,
+    registry: &Registry,
+    stop: impl Future<Output = ()>,
+) -> Result<HardwareSummary, HardwareError> {
+    let started = start(robot, registry)?;
     let (summary, events, gave_up) = harness::block_on(fly(robot, started, stop))??;
     harness::write_summary(&robot.out, &summary)?;
     write_events(&robot.out, &events)?;

@@ -1,7 +1,9 @@
 //! A vehicle driver for PX4 and ArduPilot flight controllers over MAVLink 2.
 //!
-//! [`MavlinkVehicle`] is the robot's `vehicle` actor on hardware (build it with
-//! [`mavlink_vehicle`] and hand it to [`RobotParts::vehicle`](crate::RobotParts)):
+//! [`MavlinkVehicle`] is the robot's vehicle driver on hardware (a
+//! [`Vehicle`](troupe_actors::vehicle::Vehicle); the registry's `mavlink`, or build its
+//! `vehicle` actor with [`mavlink_vehicle`] and hand it to
+//! [`RobotParts::vehicle`](crate::RobotParts)):
 //!
 //! - it samples the committed plan (`plan/committed`) at `setpoint_rate_hz` (≥ 20 Hz;
 //!   PX4 leaves offboard mode when setpoints arrive at under 2 Hz) and streams

@@ -3,18 +3,19 @@
 //! or changes mode.
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::Duration;
 
 use mavlink::dialects::common::{
     ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage,
 };
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
-use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN, VEHICLE_HOLD, VehicleHold};
+use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, VEHICLE_HOLD, VehicleHold};
+use troupe_actors::vehicle::{Vehicle, vehicle_actor};
 use troupe_algorithms::frame::Odometry;
+use troupe_algorithms::plan::Plan;
 use troupe_core::Time;
-use troupe_runtime::{
-    Actor, ActorError, ActorResult, ActorSpec, Context, Event, QueuePolicy, TimerId,
-};
+use troupe_runtime::{ActorError, ActorResult, ActorSpec, Context, QueuePolicy, Received};
 
 use super::config::{MavlinkConfig, MavlinkSettings, OdometrySource};
 use super::link::{INBOUND_CAPACITY, Inbound, MavlinkLink, Outbound};
@@ -26,7 +27,6 @@ use crate::safety::{
     GuardConfig, GuardInput, HoldReason, RESUME_TOLERANCE_M, SetpointGuard, WatchdogChange,
 };
 
-const SETPOINT_TICK: TimerId = TimerId(0);
 /// Period of this program's own heartbeat.
 const OWN_HEARTBEAT_PERIOD_S: f64 = 1.0;
 /// Period of the status topic when nothing changes.
@@ -35,16 +35,15 @@ const STATUS_PERIOD_S: f64 = 0.5;
 const HOLD_PERIOD_S: f64 = 1.0;
 
 /// Builds the vehicle for [`RobotParts::vehicle`](crate::RobotParts::vehicle) from a
-/// `[mavlink]` section; a bad value is an error naming its key.
+/// `[mavlink]` section (the registry's `mavlink` vehicle driver); a bad value is an
+/// error naming its key.
 pub fn mavlink_vehicle(config: &MavlinkConfig) -> Result<ActorSpec, ConfigError> {
     let settings = config.validate()?;
-    Ok(ActorSpec::new("vehicle", move || {
-        MavlinkVehicle::new(settings.clone())
-    }))
+    Ok(vehicle_actor(move || MavlinkVehicle::new(settings.clone())))
 }
 
-/// The robot's `vehicle` actor on a MAVLink autopilot; see the [`mavlink`](crate::mavlink)
-/// module for what it does.
+/// The robot's vehicle driver on a MAVLink autopilot (a [`Vehicle`], in the robot's
+/// `vehicle` actor); see the [`mavlink`](crate::mavlink) module for what it does.
 pub struct MavlinkVehicle {
     settings: MavlinkSettings,
     link: Option<MavlinkLink>,
@@ -406,15 +405,24 @@ fn log_change(input: GuardInput, change: Option<WatchdogChange>) {
     }
 }
 
-impl Actor for MavlinkVehicle {
-    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+/// The MAVLink vehicle as a [`Vehicle`] driver. Its [`Vehicle::step`] is the setpoint
+/// tick, which publishes the autopilot's odometry itself (between reading the
+/// autopilot and publishing the hold and status topics, as it always did) and returns
+/// none for the vehicle actor to publish.
+impl Vehicle for MavlinkVehicle {
+    fn period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.settings.setpoint_rate_hz)
+    }
+
+    fn start(&mut self, ctx: &mut Context<'_>) -> Result<Option<Odometry>, ActorError> {
+        // The vehicle actor has subscribed to the plan and set the tick's timer: the
+        // ticks come first, so that without a link they still give up after
+        // `autopilot_wait_s`.
         let s = &self.settings;
-        ctx.subscribe(&PLAN, QueuePolicy::LATEST);
         ctx.subscribe(&DEPTH_FRAME, QueuePolicy::LATEST);
         if s.odometry_source == OdometrySource::External {
             ctx.subscribe(&ODOMETRY, QueuePolicy::LATEST);
         }
-        let period_s = 1.0 / s.setpoint_rate_hz;
         self.started_at = ctx.now();
         self.guard = Some(SetpointGuard::new(
             GuardConfig {
@@ -425,8 +433,6 @@ impl Actor for MavlinkVehicle {
             },
             ctx.now(),
         ));
-        // Ticks first: without a link they still give up after `autopilot_wait_s`.
-        ctx.set_timer(SETPOINT_TICK, Duration::from_secs_f64(period_s));
         let link = MavlinkLink::open(&s.connection, s.source_system_id, s.source_component_id)
             .map_err(|e| ActorError::with_source("cannot start the MAVLink link", e))?;
         self.link = Some(link);
@@ -438,34 +444,36 @@ impl Actor for MavlinkVehicle {
                 s.autopilot_wait_s
             );
         }
+        Ok(None)
+    }
+
+    fn follow(&mut self, plan: Arc<Plan>, _ctx: &mut Context<'_>) -> ActorResult {
+        if let Err(violation) = self.guard()?.plan(plan) {
+            tracing::warn!(
+                "committed plan leaves the geofence ({violation}); \
+                 the vehicle will hold inside it"
+            );
+        }
+        Ok(())
+    }
+
+    fn step(&mut self, ctx: &mut Context<'_>) -> Result<Option<Odometry>, ActorError> {
+        self.tick(ctx).map(|()| None)
+    }
+
+    fn receive(&mut self, message: &Received, ctx: &mut Context<'_>) -> ActorResult {
+        let now = ctx.now();
+        if message.get(&DEPTH_FRAME).is_some() {
+            let change = self.guard()?.depth_frame(now);
+            log_change(GuardInput::Sensor, change);
+        } else if let Some(odometry) = message.get(&ODOMETRY) {
+            self.odometry_arrived(odometry, now)?;
+        }
         Ok(())
     }
 
     fn stop(&mut self, _ctx: &mut Context<'_>) {
         // Dropping the link stops its threads and closes the connection.
         self.link = None;
-    }
-
-    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-        let now = ctx.now();
-        match event {
-            Event::Timer(_) => self.tick(ctx),
-            Event::Message(m) => {
-                if let Some(plan) = m.get_arc(&PLAN) {
-                    if let Err(violation) = self.guard()?.plan(plan) {
-                        tracing::warn!(
-                            "committed plan leaves the geofence ({violation}); \
-                             the vehicle will hold inside it"
-                        );
-                    }
-                } else if m.get(&DEPTH_FRAME).is_some() {
-                    let change = self.guard()?.depth_frame(now);
-                    log_change(GuardInput::Sensor, change);
-                } else if let Some(odometry) = m.get(&ODOMETRY) {
-                    self.odometry_arrived(odometry, now)?;
-                }
-                Ok(())
-            }
-        }
     }
 }

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
+use crate::scenario::load_team;
 use troupe_robot::base::{BaseStation, run_until_signal};
-use troupe_sims::scenario::load_team;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct BaseArgs {

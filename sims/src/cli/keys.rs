@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
+use crate::scenario::Scenario;
 use troupe_robot::keys::write_team_keys;
-use troupe_sims::scenario::Scenario;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct KeysArgs {

@@ -4,10 +4,11 @@
 
 use std::path::PathBuf;
 
+use crate::process::SimulatedTeam;
+use crate::scenario::Scenario;
 use anyhow::Context as _;
 use troupe_robot::launch::{LaunchOptions, launch};
-use troupe_sims::process::SimulatedTeam;
-use troupe_sims::scenario::Scenario;
+use troupe_robot::registry::Registry;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct LaunchArgs {
@@ -31,11 +32,16 @@ pub(crate) struct LaunchArgs {
     out: PathBuf,
 }
 
-pub(crate) fn run(args: LaunchArgs) -> anyhow::Result<()> {
+pub(crate) fn run(args: LaunchArgs, registry: &Registry) -> anyhow::Result<()> {
     if args.duration_s.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
         anyhow::bail!("--duration-s must be a finite number > 0");
     }
     let scenario = Scenario::load(&args.scenario)?;
+    // The robots are this binary's `robot` subcommand, with the same parts.
+    registry
+        .check(&scenario.robot)
+        .map_err(|e| e.within("robot"))
+        .with_context(|| format!("{}: the robots' parts", args.scenario.display()))?;
     let dir = args.out.join(&scenario.name);
     let troupe = std::env::current_exe().context("locating troupe")?;
     println!(

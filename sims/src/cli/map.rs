@@ -48,9 +48,9 @@ pub(crate) struct MapArgs {
 }
 
 pub(crate) fn run(args: MapArgs) -> anyhow::Result<()> {
+    use crate::sequence::{MapBuildOptions, Sequence, build_map};
     use rand::SeedableRng;
     use troupe_algorithms::mapfile::{sample_surface, write_atomically, write_ply};
-    use troupe_sims::sequence::{MapBuildOptions, Sequence, build_map};
 
     if !(args.bandwidth.is_finite() && args.bandwidth > 0.0) {
         anyhow::bail!("--bandwidth must be a number > 0, got {}", args.bandwidth);

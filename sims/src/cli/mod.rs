@@ -1,5 +1,18 @@
-//! The `troupe` command line: [`Cli`] and one module per subcommand, each with its
-//! arguments (their help text beside them), what it does, and a parse test.
+//! The `troupe` command line: [`main_with`] (the `troupe` binary calls [`main`]), the
+//! parsed command line and one module per subcommand, each with its arguments (their
+//! help text beside them), what it does, and a parse test.
+//!
+//! A user's own binary adds its parts (sensor and vehicle drivers, extra actors) to
+//! the simulator's registry and hands it over; its scenario files then name them, and
+//! `run`, `robot` and `launch` build robots with them (`examples/custom_parts/`):
+//!
+//! ```no_run
+//! fn main() -> std::process::ExitCode {
+//!     let registry = troupe_sims::parts::registry();
+//!     // registry.add_sensor("my_camera", …); registry.add_actor("my_actor", …);
+//!     troupe_sims::cli::main_with(registry)
+//! }
+//! ```
 
 mod base;
 mod keys;
@@ -12,9 +25,27 @@ mod run;
 mod sweep;
 
 use std::io::IsTerminal as _;
+use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use troupe_robot::harness::{exit_code, init_logging};
+use troupe_robot::registry::Registry;
+
+/// The `troupe` command with the simulator's parts ([`crate::parts::registry`]).
+#[must_use]
+pub fn main() -> ExitCode {
+    main_with(crate::parts::registry())
+}
+
+/// The `troupe` command (logging, the command line of this process, the subcommand,
+/// the exit code) building robots from the parts in `registry`.
+#[must_use]
+pub fn main_with(registry: Registry) -> ExitCode {
+    init_logging();
+    let result = Cli::parse().command.run(&registry);
+    exit_code("error", result.as_ref().map(|_| ()).map_err(|e| e.as_ref()))
+}
 
 /// troupe: teams of robots that explore and map unknown places over weak links.
 #[derive(Debug, Parser)]
@@ -75,14 +106,15 @@ pub(crate) enum Command {
 }
 
 impl Command {
-    /// Does what the subcommand says.
-    pub(crate) fn run(self) -> anyhow::Result<()> {
+    /// Does what the subcommand says, with robots' parts from `registry` (`sweep`
+    /// runs the simulator's own).
+    pub(crate) fn run(self, registry: &Registry) -> anyhow::Result<()> {
         match self {
-            Command::Run(args) => run::run(args),
+            Command::Run(args) => run::run(args, registry),
             Command::Sweep(args) => sweep::run(args),
             Command::Map(args) => map::run(args),
-            Command::Launch(args) => launch::run(args),
-            Command::Robot(args) => robot::run(args),
+            Command::Launch(args) => launch::run(args, registry),
+            Command::Robot(args) => robot::run(args, registry),
             Command::Router(args) => router::run(args),
             Command::Keys(args) => keys::run(args),
             Command::Base(args) => base::run(args),

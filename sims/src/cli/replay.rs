@@ -3,7 +3,7 @@
 use std::io::Write as _;
 use std::path::PathBuf;
 
-use troupe_sims::recording::RecordingFile;
+use crate::recording::RecordingFile;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct ReplayArgs {

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use troupe_sims::process::{RobotProcess, run_until_signal};
+use crate::process::{RobotProcess, run_until_signal};
+use troupe_robot::registry::Registry;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct RobotArgs {
@@ -16,8 +17,9 @@ pub(crate) struct RobotArgs {
     duration_s: Option<f64>,
 }
 
-pub(crate) fn run(args: RobotArgs) -> anyhow::Result<()> {
+pub(crate) fn run(args: RobotArgs, registry: &Registry) -> anyhow::Result<()> {
     let mut process = RobotProcess::load(&args.config)?;
+    process.parts = registry.clone();
     if let Some(d) = args.duration_s {
         if !(d.is_finite() && d > 0.0) {
             anyhow::bail!("--duration-s must be a finite number > 0, got {d}");

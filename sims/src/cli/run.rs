@@ -3,12 +3,13 @@
 
 use std::path::PathBuf;
 
+use crate::recording::{record_options, record_outputs, record_world};
+use crate::report::write_run;
+use crate::scenario::Scenario;
+use crate::team::Team;
 use anyhow::Context as _;
 use troupe_record::{Clock, RUN_RECORDING, Recorder, SharedRecorder};
-use troupe_sims::recording::{record_options, record_outputs, record_world};
-use troupe_sims::report::write_run;
-use troupe_sims::scenario::Scenario;
-use troupe_sims::team::Team;
+use troupe_robot::registry::Registry;
 
 use super::progress_bar;
 
@@ -40,7 +41,7 @@ pub(crate) struct RunArgs {
     no_record: bool,
 }
 
-pub(crate) fn run(args: RunArgs) -> anyhow::Result<()> {
+pub(crate) fn run(args: RunArgs, registry: &Registry) -> anyhow::Result<()> {
     let mut scenario = match &args.scenario {
         Some(path) => Scenario::load(path)?,
         None => Scenario::default(),
@@ -65,7 +66,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<()> {
         scenario.metrics.record = false;
     }
     scenario.validate(&source)?;
-    let mut team = Team::new(&scenario)
+    let mut team = Team::with_parts(&scenario, registry, |_, _| {})
         .with_context(|| format!("assembling the robots of {}", source.display()))?;
     // Written beside the run directory while the run goes, moved into it at the end.
     let recording = if scenario.metrics.record {

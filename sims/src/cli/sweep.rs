@@ -3,12 +3,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context as _;
-use troupe_sims::report::write_run;
-use troupe_sims::study::{
+use crate::report::write_run;
+use crate::study::{
     RunRow, Shard, Study, Variant, finished_run, merge_finished_runs, run_variants,
     save_finished_run, write_study,
 };
+use anyhow::Context as _;
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct SweepArgs {

@@ -6,6 +6,7 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Point3};
 use troupe_actors::link::LinkJournal;
 use troupe_actors::msgs::{DEPTH_FRAME, PEER_ODOMETRY};
+use troupe_actors::vehicle::VehicleActor;
 use troupe_robot::{RobotConfig, RobotParts, assemble};
 use troupe_runtime::{ActorSpec, Publication, RealtimeExecutor};
 use troupe_sims::camera::CameraParams;
@@ -35,7 +36,7 @@ fn standard_robots_run_on_the_wall_clock() {
                     ))
                 }),
                 vehicle: ActorSpec::new("vehicle", move || {
-                    SimVehicle::new(body.clone(), VehicleConfig::default())
+                    VehicleActor::new(SimVehicle::new(body.clone(), VehicleConfig::default()))
                 }),
                 route: world.centreline_route(i, 2),
                 depart_at_s: 0.0,
