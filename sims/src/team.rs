@@ -480,9 +480,10 @@ impl Team {
                     sent_bytes,
                     received_bytes: r.received_bytes,
                     received_bytes_keyframe: r.received_bytes_keyframe,
-                    offered_bytes_keyframe: r.link.as_ref().map_or(0, |l| {
-                        l.shaper.class(Class::Keyframe).offered_bytes
-                    }),
+                    offered_bytes_keyframe: r
+                        .link
+                        .as_ref()
+                        .map_or(0, |l| l.shaper.class(Class::Keyframe).offered_bytes),
                     discovered_m3: r.discovered_m3,
                     unproductive_s: r.unproductive_s,
                     longest_unproductive_s: r.longest_unproductive_s,
