@@ -32,8 +32,12 @@ use troupe_actors::msgs::{
     DEPTH_FRAME, GRID_SNAPSHOT, KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION,
 };
-use troupe_actors::planner::REMEMBERED_FRONTIERS;
+use troupe_actors::planner::{REMEMBERED_FRONTIERS, RememberedFrontiers};
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::keyframe::Keyframe;
+use troupe_algorithms::plan::Plan;
 use troupe_algorithms::planner::candidates::{PlanCandidates, PlanDecision};
+use troupe_algorithms::team::{PeerKeyframe, PeerPlan};
 use troupe_core::ConfigError;
 use troupe_core::Time;
 use troupe_runtime::{Publication, Tap};
@@ -311,59 +315,9 @@ impl Recorder {
     pub fn observe(&mut self, p: &Publication<'_>) {
         let i = p.robot.0;
         if let Some(odometry) = p.get(&ODOMETRY) {
-            let stamp = Timestamp::from_nanos(self.clock.nanos(odometry.stamp));
-            let body = format!("robot{i}");
-            let state = self.robots.entry(i).or_default();
-            if !std::mem::replace(&mut state.camera_written, true) {
-                let camera = camera_in_body();
-                self.write(
-                    "/tf",
-                    &schemas::FRAME_TRANSFORM,
-                    p.time,
-                    &FrameTransform {
-                        timestamp: stamp,
-                        parent_frame_id: body.clone(),
-                        child_frame_id: format!("{body}/camera"),
-                        translation: camera.translation.vector.into(),
-                        rotation: camera.rotation.into(),
-                    },
-                );
-            }
-            let pose = &odometry.pose;
-            self.write(
-                "/tf",
-                &schemas::FRAME_TRANSFORM,
-                p.time,
-                &FrameTransform {
-                    timestamp: stamp,
-                    parent_frame_id: "world".into(),
-                    child_frame_id: body,
-                    translation: pose.translation.vector.into(),
-                    rotation: pose.rotation.into(),
-                },
-            );
-            self.write(
-                &format!("/robot{i}/pose"),
-                &schemas::POSE_IN_FRAME,
-                p.time,
-                &PoseInFrame {
-                    timestamp: stamp,
-                    frame_id: "world".into(),
-                    pose: pose.into(),
-                },
-            );
+            self.record_odometry(i, p.time, odometry);
         } else if let Some(plan) = p.get(&PLAN) {
-            let mut entity =
-                SceneEntity::new(self.stamp(plan.stamp), "world", format!("robot{i}/plan"));
-            entity
-                .lines
-                .push(trajectory_line(&plan.trajectory, robot_color(i, 1.0)));
-            entity.metadata = vec![
-                KeyValuePair::new("robot", i),
-                KeyValuePair::new("stopping", plan.stopping),
-                KeyValuePair::new("knots", plan.trajectory.knots().len()),
-            ];
-            self.write_scene(&format!("/robot{i}/plan"), p.time, entity);
+            self.record_plan(i, p.time, plan);
         } else if let Some(candidates) = p.get(&PLAN_CANDIDATES) {
             self.robots.entry(i).or_default().candidates = Some(candidates.clone());
         } else if let Some(decision) = p.get(&PLAN_DECISION) {
@@ -373,51 +327,11 @@ impl Recorder {
                 self.write_scene(&format!("/robot{i}/candidates"), p.time, entity);
             }
         } else if let Some(keyframe) = p.get(&KEYFRAME) {
-            let entity = keyframe_entity(
-                i,
-                keyframe,
-                Time::from_nanos(self.clock.nanos(keyframe.stamp)),
-            );
-            let stamp = entity.timestamp;
-            self.write_scene(&format!("/robot{i}/keyframes"), p.time, entity);
-            if self.options.keyframe_points > 0 {
-                let cloud = keyframe_cloud(i, keyframe, self.options.keyframe_points, stamp);
-                self.write_cloud(&format!("/robot{i}/keyframe_points"), p.time, &cloud);
-            }
+            self.record_keyframe(i, p.time, keyframe);
         } else if let Some(peer) = p.get(&PEER_KEYFRAME) {
-            // A peer's stamps count from its own start (in processes): what was
-            // received is stamped when it arrived.
-            let mut entity = keyframe_entity(
-                peer.robot.0,
-                &peer.keyframe,
-                Time::from_nanos(self.clock.nanos(p.time)),
-            );
-            entity.metadata.push(KeyValuePair::new("received_by", i));
-            entity.metadata.push(KeyValuePair::new(
-                "received_at_s",
-                peer.received_at.as_secs_f64(),
-            ));
-            let stamp = entity.timestamp;
-            self.write_scene(&format!("/robot{i}/peer_keyframes"), p.time, entity);
-            if self.options.keyframe_points > 0 {
-                let n = self.options.keyframe_points;
-                let cloud = keyframe_cloud(peer.robot.0, &peer.keyframe, n, stamp);
-                self.write_cloud(&format!("/robot{i}/peer_keyframe_points"), p.time, &cloud);
-            }
+            self.record_peer_keyframe(i, p.time, peer);
         } else if let Some(peer) = p.get(&PEER_PLAN) {
-            let j = peer.robot.0;
-            let mut entity =
-                SceneEntity::new(self.stamp(p.time), "world", format!("robot{j}/plan"));
-            entity
-                .lines
-                .push(trajectory_line(&peer.plan.trajectory, robot_color(j, 0.6)));
-            entity.metadata = vec![
-                KeyValuePair::new("robot", j),
-                KeyValuePair::new("received_by", i),
-                KeyValuePair::new("received_at_s", peer.received_at.as_secs_f64()),
-                KeyValuePair::new("priority", peer.priority),
-            ];
-            self.write_scene(&format!("/robot{i}/peer_plans"), p.time, entity);
+            self.record_peer_plan(i, p.time, peer);
         } else if let Some(peer) = p.get(&PEER_ODOMETRY) {
             if self.peer_poses {
                 let pose = PoseInFrame {
@@ -448,29 +362,7 @@ impl Recorder {
                 p.time,
                 period_s,
             ) {
-                let cloud = PointCloud::xyzi(
-                    self.stamp(memory.stamp),
-                    "world",
-                    memory.centres_m.iter().map(|c| (*c, memory.cell_m)),
-                );
-                self.write_cloud(&format!("/robot{i}/remembered_frontiers"), p.time, &cloud);
-                let mut entity =
-                    SceneEntity::new(self.stamp(memory.stamp), "world", format!("robot{i}/route"));
-                entity.metadata = vec![
-                    KeyValuePair::new("robot", i),
-                    KeyValuePair::new("cells", memory.route_m.len()),
-                ];
-                if let Some(goal) = memory.route_m.last() {
-                    entity.metadata.push(KeyValuePair::new(
-                        "goal",
-                        format!("{:.1} {:.1} {:.1}", goal.x, goal.y, goal.z),
-                    ));
-                }
-                entity.lines.push(path_line(
-                    memory.route_m.iter().copied(),
-                    robot_color(i, 0.5),
-                ));
-                self.write_scene(&format!("/robot{i}/route"), p.time, entity);
+                self.record_memory(i, p.time, memory);
             }
         } else if let Some(frame) = p.get(&DEPTH_FRAME) {
             let period_s = self.options.depth_period_s;
@@ -479,33 +371,164 @@ impl Recorder {
                 p.time,
                 period_s,
             ) {
-                let k = &frame.intrinsics;
-                if frame.depth_m.len() == k.width as usize * k.height as usize {
-                    let image = RawImage::float32(
-                        self.stamp(frame.stamp),
-                        &format!("robot{i}/camera"),
-                        k.width,
-                        k.height,
-                        &frame.depth_m,
-                    );
-                    self.write(
-                        &format!("/robot{i}/depth"),
-                        &schemas::RAW_IMAGE,
-                        p.time,
-                        &image,
-                    );
-                } else {
-                    self.failed += 1;
-                }
+                self.record_depth(i, p.time, frame);
             }
         } else if let Some(status) = p.get(&LINK_STATUS) {
-            self.write(
-                &format!("/robot{i}/link"),
-                &schemas::LINK_STATUS,
-                p.time,
-                status,
-            );
+            let topic = format!("/robot{i}/link");
+            self.write(&topic, &schemas::LINK_STATUS, p.time, status);
         }
+    }
+
+    /// `/tf` (the camera's mount once, then the body in the world) and `/robot<i>/pose`.
+    fn record_odometry(&mut self, i: u32, time: Time, odometry: &Odometry) {
+        let stamp = self.stamp(odometry.stamp);
+        let body = format!("robot{i}");
+        let state = self.robots.entry(i).or_default();
+        if !std::mem::replace(&mut state.camera_written, true) {
+            let camera = camera_in_body();
+            let mount = FrameTransform {
+                timestamp: stamp,
+                parent_frame_id: body.clone(),
+                child_frame_id: format!("{body}/camera"),
+                translation: camera.translation.vector.into(),
+                rotation: camera.rotation.into(),
+            };
+            self.write("/tf", &schemas::FRAME_TRANSFORM, time, &mount);
+        }
+        let pose = &odometry.pose;
+        let transform = FrameTransform {
+            timestamp: stamp,
+            parent_frame_id: "world".into(),
+            child_frame_id: body,
+            translation: pose.translation.vector.into(),
+            rotation: pose.rotation.into(),
+        };
+        self.write("/tf", &schemas::FRAME_TRANSFORM, time, &transform);
+        let pose = PoseInFrame {
+            timestamp: stamp,
+            frame_id: "world".into(),
+            pose: pose.into(),
+        };
+        self.write(
+            &format!("/robot{i}/pose"),
+            &schemas::POSE_IN_FRAME,
+            time,
+            &pose,
+        );
+    }
+
+    fn record_plan(&mut self, i: u32, time: Time, plan: &Plan) {
+        let mut entity =
+            SceneEntity::new(self.stamp(plan.stamp), "world", format!("robot{i}/plan"));
+        entity
+            .lines
+            .push(trajectory_line(&plan.trajectory, robot_color(i, 1.0)));
+        entity.metadata = vec![
+            KeyValuePair::new("robot", i),
+            KeyValuePair::new("stopping", plan.stopping),
+            KeyValuePair::new("knots", plan.trajectory.knots().len()),
+        ];
+        self.write_scene(&format!("/robot{i}/plan"), time, entity);
+    }
+
+    fn record_keyframe(&mut self, i: u32, time: Time, keyframe: &Keyframe) {
+        let entity = keyframe_entity(
+            i,
+            keyframe,
+            Time::from_nanos(self.clock.nanos(keyframe.stamp)),
+        );
+        let stamp = entity.timestamp;
+        self.write_scene(&format!("/robot{i}/keyframes"), time, entity);
+        if self.options.keyframe_points > 0 {
+            let cloud = keyframe_cloud(i, keyframe, self.options.keyframe_points, stamp);
+            self.write_cloud(&format!("/robot{i}/keyframe_points"), time, &cloud);
+        }
+    }
+
+    fn record_peer_keyframe(&mut self, i: u32, time: Time, peer: &PeerKeyframe) {
+        // A peer's stamps count from its own start (in processes): what was
+        // received is stamped when it arrived.
+        let mut entity = keyframe_entity(
+            peer.robot.0,
+            &peer.keyframe,
+            Time::from_nanos(self.clock.nanos(time)),
+        );
+        entity.metadata.push(KeyValuePair::new("received_by", i));
+        entity.metadata.push(KeyValuePair::new(
+            "received_at_s",
+            peer.received_at.as_secs_f64(),
+        ));
+        let stamp = entity.timestamp;
+        self.write_scene(&format!("/robot{i}/peer_keyframes"), time, entity);
+        if self.options.keyframe_points > 0 {
+            let n = self.options.keyframe_points;
+            let cloud = keyframe_cloud(peer.robot.0, &peer.keyframe, n, stamp);
+            self.write_cloud(&format!("/robot{i}/peer_keyframe_points"), time, &cloud);
+        }
+    }
+
+    fn record_peer_plan(&mut self, i: u32, time: Time, peer: &PeerPlan) {
+        let j = peer.robot.0;
+        let mut entity = SceneEntity::new(self.stamp(time), "world", format!("robot{j}/plan"));
+        entity
+            .lines
+            .push(trajectory_line(&peer.plan.trajectory, robot_color(j, 0.6)));
+        entity.metadata = vec![
+            KeyValuePair::new("robot", j),
+            KeyValuePair::new("received_by", i),
+            KeyValuePair::new("received_at_s", peer.received_at.as_secs_f64()),
+            KeyValuePair::new("priority", peer.priority),
+        ];
+        self.write_scene(&format!("/robot{i}/peer_plans"), time, entity);
+    }
+
+    /// The remembered frontiers as a cloud and the route to the current goal.
+    fn record_memory(&mut self, i: u32, time: Time, memory: &RememberedFrontiers) {
+        let stamp = self.stamp(memory.stamp);
+        let cloud = PointCloud::xyzi(
+            stamp,
+            "world",
+            memory.centres_m.iter().map(|c| (*c, memory.cell_m)),
+        );
+        self.write_cloud(&format!("/robot{i}/remembered_frontiers"), time, &cloud);
+        let mut entity = SceneEntity::new(stamp, "world", format!("robot{i}/route"));
+        entity.metadata = vec![
+            KeyValuePair::new("robot", i),
+            KeyValuePair::new("cells", memory.route_m.len()),
+        ];
+        if let Some(goal) = memory.route_m.last() {
+            entity.metadata.push(KeyValuePair::new(
+                "goal",
+                format!("{:.1} {:.1} {:.1}", goal.x, goal.y, goal.z),
+            ));
+        }
+        entity.lines.push(path_line(
+            memory.route_m.iter().copied(),
+            robot_color(i, 0.5),
+        ));
+        self.write_scene(&format!("/robot{i}/route"), time, entity);
+    }
+
+    /// The depth image, if its size matches its intrinsics (else counted as failed).
+    fn record_depth(&mut self, i: u32, time: Time, frame: &DepthFrame) {
+        let k = &frame.intrinsics;
+        if frame.depth_m.len() != k.width as usize * k.height as usize {
+            self.failed += 1;
+            return;
+        }
+        let image = RawImage::float32(
+            self.stamp(frame.stamp),
+            &format!("robot{i}/camera"),
+            k.width,
+            k.height,
+            &frame.depth_m,
+        );
+        self.write(
+            &format!("/robot{i}/depth"),
+            &schemas::RAW_IMAGE,
+            time,
+            &image,
+        );
     }
 
     fn stamp(&self, time: Time) -> Timestamp {

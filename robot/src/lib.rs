@@ -133,15 +133,6 @@ pub fn assemble(
     parts: RobotParts,
 ) -> Result<RobotSpec, AssembleError> {
     config.validate()?;
-    let options = |latency_s: f64| ActorOptions {
-        latency: LatencyModel::fixed(latency_s),
-        restart: config.restart,
-        blocking: false,
-    };
-    let heavy = |latency_s: f64| ActorOptions {
-        blocking: true,
-        ..options(latency_s)
-    };
     let mut frame_source = parts.frame_source;
     let (sensor_rate_hz, max_width_px) = (config.sensor_rate_hz, config.sensor_max_width_px);
     // The planner scores views with the frames the sensor publishes.
@@ -149,13 +140,77 @@ pub fn assemble(
         parts.camera.width,
         max_width_px,
     ));
+    let mut robot = RobotSpec::new(name);
+    robot.add(parts.vehicle).add(
+        ActorSpec::new("sensor", move || {
+            SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
+                .decimating_to(max_width_px)
+        })
+        .with_options(actor_options(config, config.latency_s.sensor, true)),
+    );
+    if config.mapper.enabled {
+        let mapper = config.mapper;
+        robot.add(
+            ActorSpec::new("mapper", move || MapperActor::new(mapper)).with_options(actor_options(
+                config,
+                config.latency_s.mapper,
+                true,
+            )),
+        );
+    }
+    add_behaviour(&mut robot, config, camera, parts.route, parts.depart_at_s)?;
+    if config.collision.enabled {
+        add_collision(&mut robot, config);
+    }
+    if config.artifacts.enabled {
+        let artifacts = config.artifacts;
+        robot.add(
+            ActorSpec::new("artifacts", move || ArtifactActor::new(artifacts))
+                .with_options(actor_options(config, 0.0, false)),
+        );
+    }
     let mut link = config.link.clone();
-    let collision = config.collision.enabled;
-    if collision {
+    if config.collision.enabled {
         link.priority = config.collision.peers.priority;
     }
     let sharing = config.map_sharing;
-    let grid = config.grid;
+    let journal = parts.link_journal;
+    robot.add(
+        ActorSpec::new("link", move || {
+            let actor = LinkActor::new(link.clone())?.journaled(journal.clone())?;
+            Ok(if sharing == MapSharing::Gmm {
+                actor
+            } else {
+                actor.without_keyframes()
+            })
+        })
+        .with_options(actor_options(config, config.latency_s.link, false)),
+    );
+    Ok(robot)
+}
+
+/// An actor's options: its fixed latency, the robot's restart policy, and whether
+/// its handler blocks (heavy work run off the executor's thread).
+fn actor_options(config: &RobotConfig, latency_s: f64, blocking: bool) -> ActorOptions {
+    ActorOptions {
+        latency: LatencyModel::fixed(latency_s),
+        restart: config.restart,
+        blocking,
+    }
+}
+
+/// The behaviour's actors: the local grid and teleoperation (with a scripted
+/// joystick if one is given), the local grid and the planner, or the explorer
+/// following a named route behaviour.
+fn add_behaviour(
+    robot: &mut RobotSpec,
+    config: &RobotConfig,
+    camera: PinholeIntrinsics,
+    route: Vec<Point3<f64>>,
+    depart_at_s: f64,
+) -> Result<(), AssembleError> {
+    let collision = config.collision.enabled;
+    let (sharing, grid) = (config.map_sharing, config.grid);
     let grid_actor = move || {
         let actor = GridActor::new(grid);
         if sharing == MapSharing::Grid {
@@ -164,21 +219,8 @@ pub fn assemble(
             actor
         }
     };
-    let mut robot = RobotSpec::new(name);
-    robot.add(parts.vehicle).add(
-        ActorSpec::new("sensor", move || {
-            SensorActor::new(BoxedSource(frame_source()), sensor_rate_hz)
-                .decimating_to(max_width_px)
-        })
-        .with_options(heavy(config.latency_s.sensor)),
-    );
-    if config.mapper.enabled {
-        let mapper = config.mapper;
-        robot.add(
-            ActorSpec::new("mapper", move || MapperActor::new(mapper))
-                .with_options(heavy(config.latency_s.mapper)),
-        );
-    }
+    let grid_options = actor_options(config, config.latency_s.grid, true);
+    let planner_options = actor_options(config, config.latency_s.planner, true);
     if config.behaviour == TELEOP {
         let teleop = TeleopConfig {
             rate_hz: config.planner.rate_hz,
@@ -187,10 +229,10 @@ pub fn assemble(
             params: config.teleop.params,
         };
         robot
-            .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
+            .add(ActorSpec::new("grid", grid_actor).with_options(grid_options))
             .add(
                 ActorSpec::new("teleop", move || TeleopActor::new(teleop))
-                    .with_options(heavy(config.latency_s.planner)),
+                    .with_options(planner_options),
             );
         if !config.teleop.script.is_empty() {
             let (script, rate_hz) = (config.teleop.script.clone(), config.teleop.command_rate_hz);
@@ -208,7 +250,7 @@ pub fn assemble(
             .map(|f| (RobotId(f.robot), f.transform()))
             .collect();
         robot
-            .add(ActorSpec::new("grid", grid_actor).with_options(heavy(config.latency_s.grid)))
+            .add(ActorSpec::new("grid", grid_actor).with_options(grid_options))
             .add(
                 ActorSpec::new("planner", move || {
                     let actor = PlannerActor::new(planner, camera, selection())
@@ -219,16 +261,16 @@ pub fn assemble(
                         actor
                     }
                 })
-                .with_options(heavy(config.latency_s.planner)),
+                .with_options(planner_options),
             );
     } else {
         let behaviour = behaviour_by_name(
             &config.behaviour,
             &BehaviourInputs {
-                route: parts.route,
+                route,
                 speed_mps: config.speed_mps,
                 yaw_rate_rad_s: config.yaw_rate_rad_s,
-                depart_at_s: parts.depart_at_s,
+                depart_at_s,
             },
         )?;
         let replan_rate_hz = config.replan_rate_hz;
@@ -241,48 +283,35 @@ pub fn assemble(
                     actor
                 }
             })
-            .with_options(options(config.latency_s.explorer)),
+            .with_options(actor_options(config, config.latency_s.explorer, false)),
         );
     }
-    if collision {
-        let check = config.collision.actor();
-        let peers = config.collision.peers;
-        let operator = config.collision.operator_commands;
-        let (limits, knot_step_s) = (config.planner.round.limits, config.planner.knot_step_s);
-        robot.add(
-            ActorSpec::new("collision", move || {
-                let actor = CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
-                    .braking_for_peers(limits, knot_step_s);
-                if operator {
-                    actor.obeying_operator()
-                } else {
-                    actor
-                }
-            })
-            .with_options(options(config.latency_s.collision)),
-        );
-        if config.collision.operator_commands {
-            robot.add(ActorSpec::new("operator", OperatorActor::new).with_options(options(0.0)));
-        }
-    }
-    if config.artifacts.enabled {
-        let artifacts = config.artifacts;
-        robot.add(
-            ActorSpec::new("artifacts", move || ArtifactActor::new(artifacts))
-                .with_options(options(0.0)),
-        );
-    }
-    let journal = parts.link_journal;
+    Ok(())
+}
+
+/// The collision actor (priority avoidance, braking for peers), and the operator
+/// actor if `operator_commands` is on.
+fn add_collision(robot: &mut RobotSpec, config: &RobotConfig) {
+    let check = config.collision.actor();
+    let peers = config.collision.peers;
+    let operator = config.collision.operator_commands;
+    let (limits, knot_step_s) = (config.planner.round.limits, config.planner.knot_step_s);
     robot.add(
-        ActorSpec::new("link", move || {
-            let actor = LinkActor::new(link.clone())?.journaled(journal.clone())?;
-            Ok(if sharing == MapSharing::Gmm {
-                actor
+        ActorSpec::new("collision", move || {
+            let actor = CollisionActor::new(check.clone(), PriorityAvoidance::new(peers))
+                .braking_for_peers(limits, knot_step_s);
+            if operator {
+                actor.obeying_operator()
             } else {
-                actor.without_keyframes()
-            })
+                actor
+            }
         })
-        .with_options(options(config.latency_s.link)),
+        .with_options(actor_options(config, config.latency_s.collision, false)),
     );
-    Ok(robot)
+    if operator {
+        robot.add(
+            ActorSpec::new("operator", OperatorActor::new)
+                .with_options(actor_options(config, 0.0, false)),
+        );
+    }
 }

@@ -14,6 +14,8 @@ use serde::Serialize;
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::planner::PLANNING_REPORT;
+use troupe_algorithms::frame::{DepthFrame, Odometry};
+use troupe_algorithms::plan::Plan;
 use troupe_comms::shaping::frame::class_of;
 use troupe_comms::wire::Class;
 
@@ -309,43 +311,7 @@ impl Tap for GroundTruthMonitor {
     fn on_publish(&mut self, p: &Publication<'_>) {
         let r = p.robot.0 as usize;
         if let Some(frame) = p.get(&DEPTH_FRAME) {
-            let mut truth = lock_truth(&self.truth);
-            let Some(robot) = truth.robots.get_mut(r) else {
-                return;
-            };
-            robot.frames += 1;
-            if frame.valid_pixels() == 0 {
-                robot.empty_frames += 1;
-            }
-            // Counted in cells and converted once: no float sum to drift.
-            let before = truth.coverage.explored_cells();
-            let Truth {
-                coverage,
-                reexploration,
-                robots,
-                ..
-            } = &mut *truth;
-            let mut account = reexploration.frame(r, p.time);
-            coverage.observe_visiting(frame, self.pixel_stride, |cell| {
-                if let Some(a) = account.as_mut() {
-                    a.saw(cell);
-                }
-            });
-            if let Some(a) = account {
-                a.finish(robots[r].speed_mps);
-            }
-            robots[r].reexploration = reexploration.robot(r);
-            let new_cells = (truth.coverage.explored_cells() - before) as u64;
-            let cell_m3 = truth.coverage.cell_volume_m3();
-            let new_m3 = new_cells as f64 * cell_m3;
-            let robot = &mut truth.robots[r];
-            robot.discovered_cells += new_cells;
-            robot.discovered_m3 = robot.discovered_cells as f64 * cell_m3;
-            robot.unproductive.frame(p.time, new_m3, robot.speed_mps);
-            robot.unproductive_s = robot.unproductive.total_s();
-            robot.longest_unproductive_s = robot.unproductive.longest_s();
-            robot.longest_unproductive_with_frontiers_s =
-                robot.unproductive.longest_with_frontiers_s();
+            self.on_depth_frame(r, p.time, frame);
         } else if let Some(packet) = p.get(&LINK_RX) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
                 robot.received_bytes += packet.bytes.len() as u64;
@@ -364,86 +330,139 @@ impl Tap for GroundTruthMonitor {
                 robot.link = Some(status.clone());
             }
         } else if let Some(plan) = p.get(&PLAN) {
-            let closest = plan
-                .trajectory
-                .knots()
-                .iter()
-                .map(|k| {
-                    let d = surface_distance_m(self.world.as_ref(), &k.position_m, self.radius_m);
-                    (d, k.position_m)
-                })
-                .min_by(|a, b| a.0.total_cmp(&b.0));
-            let unsafe_plan = closest.is_some_and(|(d, _)| d < self.radius_m);
-            let mut truth = lock_truth(&self.truth);
-            let Some(robot) = truth.robots.get_mut(r) else {
-                return;
-            };
-            robot.plans += 1;
-            if unsafe_plan {
-                robot.unsafe_plans += 1;
-                if let Some((distance_m, at)) = closest {
-                    tracing::warn!(robot = r, time = %p.time, clearance_m = distance_m - self.radius_m,
-                        x = at.x, y = at.y, z = at.z, "committed plan enters the rock (ground truth)");
-                }
-            }
+            self.on_plan(r, p.time, plan);
         } else if let Some(odometry) = p.get(&ODOMETRY) {
-            let position = Point3::from(odometry.pose.translation.vector);
-            if let Some(slot) = self
-                .positions
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .get_mut(r)
-            {
-                *slot = position.coords.into();
+            self.on_odometry(r, p.time, odometry);
+        }
+    }
+}
+
+impl GroundTruthMonitor {
+    /// Coverage, re-exploration and unproductive time from what robot `r`'s frame saw.
+    fn on_depth_frame(&mut self, r: usize, time: Time, frame: &DepthFrame) {
+        let mut truth = lock_truth(&self.truth);
+        let Some(robot) = truth.robots.get_mut(r) else {
+            return;
+        };
+        robot.frames += 1;
+        if frame.valid_pixels() == 0 {
+            robot.empty_frames += 1;
+        }
+        // Counted in cells and converted once: no float sum to drift.
+        let before = truth.coverage.explored_cells();
+        let Truth {
+            coverage,
+            reexploration,
+            robots,
+            ..
+        } = &mut *truth;
+        let mut account = reexploration.frame(r, time);
+        coverage.observe_visiting(frame, self.pixel_stride, |cell| {
+            if let Some(a) = account.as_mut() {
+                a.saw(cell);
             }
-            let (_, _, yaw) = odometry.pose.rotation.euler_angles();
-            let mut truth = lock_truth(&self.truth);
-            let Some(robot) = truth.robots.get_mut(r) else {
-                return;
+        });
+        if let Some(a) = account {
+            a.finish(robots[r].speed_mps);
+        }
+        robots[r].reexploration = reexploration.robot(r);
+        let new_cells = (truth.coverage.explored_cells() - before) as u64;
+        let cell_m3 = truth.coverage.cell_volume_m3();
+        let new_m3 = new_cells as f64 * cell_m3;
+        let robot = &mut truth.robots[r];
+        robot.discovered_cells += new_cells;
+        robot.discovered_m3 = robot.discovered_cells as f64 * cell_m3;
+        robot.unproductive.frame(time, new_m3, robot.speed_mps);
+        robot.unproductive_s = robot.unproductive.total_s();
+        robot.longest_unproductive_s = robot.unproductive.longest_s();
+        robot.longest_unproductive_with_frontiers_s = robot.unproductive.longest_with_frontiers_s();
+    }
+
+    /// Counts robot `r`'s committed plan, and whether it enters the rock.
+    fn on_plan(&mut self, r: usize, time: Time, plan: &Plan) {
+        let closest = plan
+            .trajectory
+            .knots()
+            .iter()
+            .map(|k| {
+                let d = surface_distance_m(self.world.as_ref(), &k.position_m, self.radius_m);
+                (d, k.position_m)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let unsafe_plan = closest.is_some_and(|(d, _)| d < self.radius_m);
+        let mut truth = lock_truth(&self.truth);
+        let Some(robot) = truth.robots.get_mut(r) else {
+            return;
+        };
+        robot.plans += 1;
+        if unsafe_plan {
+            robot.unsafe_plans += 1;
+            if let Some((distance_m, at)) = closest {
+                tracing::warn!(robot = r, time = %time, clearance_m = distance_m - self.radius_m,
+                    x = at.x, y = at.y, z = at.z, "committed plan enters the rock (ground truth)");
+            }
+        }
+    }
+
+    /// Robot `r`'s path checked against the rock (collisions, clearance) and its
+    /// distance to the other robots (contacts).
+    fn on_odometry(&mut self, r: usize, time: Time, odometry: &Odometry) {
+        let position = Point3::from(odometry.pose.translation.vector);
+        if let Some(slot) = self
+            .positions
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .get_mut(r)
+        {
+            *slot = position.coords.into();
+        }
+        let (_, _, yaw) = odometry.pose.rotation.euler_angles();
+        let mut truth = lock_truth(&self.truth);
+        let Some(robot) = truth.robots.get_mut(r) else {
+            return;
+        };
+        let previous = robot.position.unwrap_or(position);
+        let step = (position - previous).norm();
+        let checks = (step / PATH_CHECK_STEP_M).ceil().max(1.0) as usize;
+        let mut colliding = robot.in_collision;
+        for i in 1..=checks {
+            let q = previous + (position - previous) * (i as f64 / checks as f64);
+            let clearance = surface_distance_m(
+                self.world.as_ref(),
+                &q,
+                self.radius_m + CLEARANCE_REPORTED_M,
+            ) - self.radius_m;
+            robot.min_clearance_m = robot.min_clearance_m.min(clearance);
+            if clearance < 0.0 {
+                if !colliding {
+                    robot.collisions += 1;
+                    tracing::warn!(robot = r, x = q.x, y = q.y, z = q.z, time = %time, "collision with the world");
+                }
+                colliding = true;
+            } else {
+                colliding = false;
+            }
+        }
+        robot.in_collision = colliding;
+        robot.distance_m += step;
+        robot.position = Some(position);
+        robot.yaw_rad = yaw;
+        robot.speed_mps = odometry.velocity_mps.norm();
+        robot.max_speed_mps = robot.max_speed_mps.max(robot.speed_mps);
+        let n = truth.robots.len();
+        for j in (0..n).filter(|j| *j != r) {
+            let Some(other) = truth.robots[j].position else {
+                continue;
             };
-            let previous = robot.position.unwrap_or(position);
-            let step = (position - previous).norm();
-            let checks = (step / PATH_CHECK_STEP_M).ceil().max(1.0) as usize;
-            let mut colliding = robot.in_collision;
-            for i in 1..=checks {
-                let q = previous + (position - previous) * (i as f64 / checks as f64);
-                let clearance = surface_distance_m(
-                    self.world.as_ref(),
-                    &q,
-                    self.radius_m + CLEARANCE_REPORTED_M,
-                ) - self.radius_m;
-                robot.min_clearance_m = robot.min_clearance_m.min(clearance);
-                if clearance < 0.0 {
-                    if !colliding {
-                        robot.collisions += 1;
-                        tracing::warn!(robot = r, x = q.x, y = q.y, z = q.z, time = %p.time, "collision with the world");
-                    }
-                    colliding = true;
-                } else {
-                    colliding = false;
-                }
+            let distance = (other - position).norm();
+            truth.min_inter_robot_distance_m = truth.min_inter_robot_distance_m.min(distance);
+            let (a, b) = (r.min(j), r.max(j));
+            let touching = distance < 2.0 * self.radius_m;
+            if touching && !truth.in_contact[a * n + b] {
+                truth.robot_contacts += 1;
+                tracing::warn!(robots = ?(a, b), distance, time = %time, "robot bodies overlap");
             }
-            robot.in_collision = colliding;
-            robot.distance_m += step;
-            robot.position = Some(position);
-            robot.yaw_rad = yaw;
-            robot.speed_mps = odometry.velocity_mps.norm();
-            robot.max_speed_mps = robot.max_speed_mps.max(robot.speed_mps);
-            let n = truth.robots.len();
-            for j in (0..n).filter(|j| *j != r) {
-                let Some(other) = truth.robots[j].position else {
-                    continue;
-                };
-                let distance = (other - position).norm();
-                truth.min_inter_robot_distance_m = truth.min_inter_robot_distance_m.min(distance);
-                let (a, b) = (r.min(j), r.max(j));
-                let touching = distance < 2.0 * self.radius_m;
-                if touching && !truth.in_contact[a * n + b] {
-                    truth.robot_contacts += 1;
-                    tracing::warn!(robots = ?(a, b), distance, time = %p.time, "robot bodies overlap");
-                }
-                truth.in_contact[a * n + b] = touching;
-            }
+            truth.in_contact[a * n + b] = touching;
         }
     }
 }

@@ -453,48 +453,7 @@ impl Team {
             let truth = lock_truth(&self.truth);
             let coverage = truth.coverage.coverage();
             over_time.push([t, coverage]);
-            for (i, r) in truth.robots.iter().enumerate() {
-                let p = r.position.unwrap_or_else(Point3::origin);
-                let nearest_robot_m = truth
-                    .robots
-                    .iter()
-                    .enumerate()
-                    .filter(|(j, _)| *j != i)
-                    .filter_map(|(_, o)| Some((o.position? - r.position?).norm()))
-                    .reduce(f64::min);
-                let sent_bytes =
-                    Class::ALL.map(|c| r.link.as_ref().map_or(0, |l| l.shaper.class(c).sent_bytes));
-                timeseries.push(SeriesRow {
-                    time_s: t,
-                    robot: i,
-                    x_m: p.x,
-                    y_m: p.y,
-                    z_m: p.z,
-                    yaw_rad: r.yaw_rad,
-                    speed_mps: r.speed_mps,
-                    distance_m: r.distance_m,
-                    frames: r.frames,
-                    team_coverage: coverage,
-                    team_explored_m3: truth.coverage.explored_volume_m3(),
-                    nearest_robot_m,
-                    sent_bytes,
-                    received_bytes: r.received_bytes,
-                    received_bytes_keyframe: r.received_bytes_keyframe,
-                    offered_bytes_keyframe: r
-                        .link
-                        .as_ref()
-                        .map_or(0, |l| l.shaper.class(Class::Keyframe).offered_bytes),
-                    discovered_m3: r.discovered_m3,
-                    unproductive_s: r.unproductive_s,
-                    longest_unproductive_s: r.longest_unproductive_s,
-                    longest_unproductive_with_frontiers_s: r.longest_unproductive_with_frontiers_s,
-                    observed_m3: r.reexploration.observed_m3,
-                    first_observed_m3: r.reexploration.first_observed_m3,
-                    reexplored_m3: r.reexploration.reexplored_m3,
-                    exclusive_m3: r.reexploration.exclusive_m3,
-                    redundant_flight_s: r.reexploration.redundant_flight_s,
-                });
-            }
+            timeseries.extend((0..truth.robots.len()).map(|i| series_row(&truth, i, t, coverage)));
             drop(truth);
             progress(t);
         }
@@ -532,24 +491,7 @@ impl Team {
                 }
             })
             .collect();
-        let timing = Timing {
-            wall_s,
-            sim_s: end,
-            sim_seconds_per_wall_second: end / wall_s.max(1e-9),
-            events_per_wall_second: events as f64 / wall_s.max(1e-9),
-            handler_latency: reports
-                .iter()
-                .map(|r| {
-                    (
-                        r.name.clone(),
-                        r.actors
-                            .iter()
-                            .map(|a| (a.name.clone(), a.stats.handler_wall.summary()))
-                            .collect(),
-                    )
-                })
-                .collect(),
-        };
+        let timing = Timing::of(&reports, wall_s, end, events);
         let maps = std::mem::take(
             &mut *self
                 .maps
@@ -573,6 +515,75 @@ impl Team {
             timing,
             timeseries,
             maps,
+        }
+    }
+}
+
+/// Robot `i`'s row of the time series at `t` seconds (team coverage `coverage`).
+fn series_row(truth: &Truth, i: usize, t: f64, coverage: f64) -> SeriesRow {
+    let r = &truth.robots[i];
+    let p = r.position.unwrap_or_else(Point3::origin);
+    let nearest_robot_m = truth
+        .robots
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j != i)
+        .filter_map(|(_, o)| Some((o.position? - r.position?).norm()))
+        .reduce(f64::min);
+    let sent_bytes =
+        Class::ALL.map(|c| r.link.as_ref().map_or(0, |l| l.shaper.class(c).sent_bytes));
+    SeriesRow {
+        time_s: t,
+        robot: i,
+        x_m: p.x,
+        y_m: p.y,
+        z_m: p.z,
+        yaw_rad: r.yaw_rad,
+        speed_mps: r.speed_mps,
+        distance_m: r.distance_m,
+        frames: r.frames,
+        team_coverage: coverage,
+        team_explored_m3: truth.coverage.explored_volume_m3(),
+        nearest_robot_m,
+        sent_bytes,
+        received_bytes: r.received_bytes,
+        received_bytes_keyframe: r.received_bytes_keyframe,
+        offered_bytes_keyframe: r
+            .link
+            .as_ref()
+            .map_or(0, |l| l.shaper.class(Class::Keyframe).offered_bytes),
+        discovered_m3: r.discovered_m3,
+        unproductive_s: r.unproductive_s,
+        longest_unproductive_s: r.longest_unproductive_s,
+        longest_unproductive_with_frontiers_s: r.longest_unproductive_with_frontiers_s,
+        observed_m3: r.reexploration.observed_m3,
+        first_observed_m3: r.reexploration.first_observed_m3,
+        reexplored_m3: r.reexploration.reexplored_m3,
+        exclusive_m3: r.reexploration.exclusive_m3,
+        redundant_flight_s: r.reexploration.redundant_flight_s,
+    }
+}
+
+impl Timing {
+    /// The run's speed and each actor's handler latency, from the executor's reports.
+    fn of(reports: &[RobotReport], wall_s: f64, sim_s: f64, events: u64) -> Self {
+        Timing {
+            wall_s,
+            sim_s,
+            sim_seconds_per_wall_second: sim_s / wall_s.max(1e-9),
+            events_per_wall_second: events as f64 / wall_s.max(1e-9),
+            handler_latency: reports
+                .iter()
+                .map(|r| {
+                    (
+                        r.name.clone(),
+                        r.actors
+                            .iter()
+                            .map(|a| (a.name.clone(), a.stats.handler_wall.summary()))
+                            .collect(),
+                    )
+                })
+                .collect(),
         }
     }
 }

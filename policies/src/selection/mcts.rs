@@ -135,78 +135,9 @@ pub fn search(
             break;
         }
         iterations += 1;
-        // Selection: descend by UCT while the node is fully expanded.
-        let mut id = 0;
-        loop {
-            let node = &tree[id];
-            if node.depth >= max_depth {
-                break;
-            }
-            if node.state.is_none() {
-                break; // not expanded yet
-            }
-            if !node.untried.is_empty() {
-                break;
-            }
-            if node.children.is_empty() {
-                break; // a dead end
-            }
-            let ln_n = f64::from(node.visits.max(1)).ln();
-            let mut best_child = node.children[0];
-            let mut best_score = f64::NEG_INFINITY;
-            for &child in &node.children {
-                let ch = &tree[child];
-                let n = f64::from(ch.visits.max(1));
-                let score = ch.total / n + c_uct * (2.0 * ln_n / n).sqrt();
-                if score > best_score {
-                    best_score = score;
-                    best_child = child;
-                }
-            }
-            id = best_child;
-        }
-        // Expansion: one new feasible, safe child of `id`, if it has any left.
-        if tree[id].depth < max_depth {
-            if tree[id].state.is_none() {
-                let next = tree[id]
-                    .candidate
-                    .as_ref()
-                    .and_then(|c| problem.continuation(c));
-                let mut untried: Vec<usize> = if next.is_some() {
-                    (0..problem.actions().len()).collect()
-                } else {
-                    Vec::new()
-                };
-                untried.shuffle(rng);
-                tree[id].untried = untried;
-                tree[id].state = Some(next);
-            }
-            if let Some(Some(from)) = tree[id].state {
-                while let Some(action) = tree[id].untried.pop() {
-                    if let Some(child) = problem.child(&from, action) {
-                        let child_id = tree.len();
-                        let depth = tree[id].depth + 1;
-                        tree.push(Node::new(Some(child), Some(id), depth));
-                        tree[id].children.push(child_id);
-                        id = child_id;
-                        break;
-                    }
-                }
-            }
-        }
-        // Backpropagation of the return accumulated along the branch, discounted.
-        let mut value = 0.0;
-        let mut cursor = Some(id);
-        while let Some(n) = cursor {
-            let node = &mut tree[n];
-            if node.parent.is_some() {
-                value = node.reward() + gamma * value;
-                node.best = node.best.max(value);
-            }
-            node.visits += 1;
-            node.total += value;
-            cursor = node.parent;
-        }
+        let selected = select(&tree, c_uct, max_depth);
+        let leaf = expand(&mut tree, selected, problem, rng, max_depth);
+        backpropagate(&mut tree, leaf, gamma);
     }
 
     // The first action of the best branch (ties go to the earlier candidate).
@@ -218,12 +149,106 @@ pub fn search(
     }
     let first = tree[0].children[choice];
     let best_return = tree[first].best;
-    // Follow the best child downwards to report the branch.
-    let mut best_branch = Vec::new();
+    let best_branch = best_branch(&tree, first, gamma);
+    SearchOutcome {
+        choice: Some(choice),
+        best_return: Some(best_return),
+        best_branch,
+        iterations,
+        nodes: tree.len(),
+    }
+}
+
+/// Selection: descends from the root by UCT while the node is fully expanded, and
+/// returns the node to expand.
+fn select(tree: &[Node], c_uct: f64, max_depth: usize) -> usize {
+    let mut id = 0;
+    loop {
+        let node = &tree[id];
+        let expandable = node.state.is_none() || !node.untried.is_empty();
+        if node.depth >= max_depth || expandable || node.children.is_empty() {
+            return id;
+        }
+        let ln_n = f64::from(node.visits.max(1)).ln();
+        let mut best_child = node.children[0];
+        let mut best_score = f64::NEG_INFINITY;
+        for &child in &node.children {
+            let ch = &tree[child];
+            let n = f64::from(ch.visits.max(1));
+            let score = ch.total / n + c_uct * (2.0 * ln_n / n).sqrt();
+            if score > best_score {
+                best_score = score;
+                best_child = child;
+            }
+        }
+        id = best_child;
+    }
+}
+
+/// Expansion: adds one new feasible, safe child of `id`, if it has any left, and
+/// returns it (else `id`).
+fn expand(
+    tree: &mut Vec<Node>,
+    id: usize,
+    problem: &PlanningProblem<'_>,
+    rng: &mut ChaCha8Rng,
+    max_depth: usize,
+) -> usize {
+    if tree[id].depth >= max_depth {
+        return id;
+    }
+    if tree[id].state.is_none() {
+        let next = tree[id]
+            .candidate
+            .as_ref()
+            .and_then(|c| problem.continuation(c));
+        let mut untried: Vec<usize> = if next.is_some() {
+            (0..problem.actions().len()).collect()
+        } else {
+            Vec::new()
+        };
+        untried.shuffle(rng);
+        tree[id].untried = untried;
+        tree[id].state = Some(next);
+    }
+    if let Some(Some(from)) = tree[id].state {
+        while let Some(action) = tree[id].untried.pop() {
+            if let Some(child) = problem.child(&from, action) {
+                let child_id = tree.len();
+                let depth = tree[id].depth + 1;
+                tree.push(Node::new(Some(child), Some(id), depth));
+                tree[id].children.push(child_id);
+                return child_id;
+            }
+        }
+    }
+    id
+}
+
+/// Backpropagation of the return accumulated along the branch ending at `id`,
+/// discounted by `gamma`.
+fn backpropagate(tree: &mut [Node], id: usize, gamma: f64) {
+    let mut value = 0.0;
+    let mut cursor = Some(id);
+    while let Some(n) = cursor {
+        let node = &mut tree[n];
+        if node.parent.is_some() {
+            value = node.reward() + gamma * value;
+            node.best = node.best.max(value);
+        }
+        node.visits += 1;
+        node.total += value;
+        cursor = node.parent;
+    }
+}
+
+/// The action indices of the best branch from `first` downwards.
+fn best_branch(tree: &[Node], first: usize, gamma: f64) -> Vec<usize> {
+    let mut branch = Vec::new();
     let mut id = first;
     loop {
         if let Some(c) = &tree[id].candidate {
-            best_branch.push(c.action_index);
+            branch.push(c.action_index);
         }
         let Some(&next) = tree[id].children.iter().max_by(|&&a, &&b| {
             tree[a]
@@ -231,22 +256,15 @@ pub fn search(
                 .partial_cmp(&tree[b].best)
                 .unwrap_or(std::cmp::Ordering::Equal)
         }) else {
-            break;
+            return branch;
         };
         // Only follow a child that lies on the best branch.
         let r = tree[id].reward();
         if (r + gamma * tree[next].best - tree[id].best).abs() > 1e-9 * tree[id].best.abs().max(1.0)
         {
-            break;
+            return branch;
         }
         id = next;
-    }
-    SearchOutcome {
-        choice: Some(choice),
-        best_return: Some(best_return),
-        best_branch,
-        iterations,
-        nodes: tree.len(),
     }
 }
 

@@ -207,6 +207,75 @@ impl Ros2Config {
     /// names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.key_format()?;
+        self.validate_topics()?;
+        for (key, list, known) in [
+            ("depth_encodings", &self.depth_encodings, ["16UC1", "32FC1"]),
+            (
+                "intensity_encodings",
+                &self.intensity_encodings,
+                ["mono8", "mono16"],
+            ),
+        ] {
+            if list.is_empty() {
+                return Err(ConfigError::new(
+                    key,
+                    "must list at least one encoding",
+                    "[]",
+                ));
+            }
+            if let Some(bad) = list.iter().find(|e| !known.contains(&e.as_str())) {
+                return Err(ConfigError::new(
+                    key,
+                    format!("must list supported encodings ({})", known.join(", ")),
+                    format!("{bad:?}"),
+                ));
+            }
+        }
+        if self.extrinsics.isometry().is_none() {
+            return Err(ConfigError::new(
+                "extrinsics",
+                "needs a finite translation and a non-zero quaternion",
+                format!("{:?}", self.extrinsics),
+            ));
+        }
+        ConfigError::positive("max_depth_m", self.max_depth_m)?;
+        ConfigError::positive("startup_timeout_s", self.startup_timeout_s)?;
+        ConfigError::positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
+        ConfigError::positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
+        ConfigError::positive("status_period_s", self.status_period_s)?;
+        for (key, n) in [
+            ("odometry_history", self.odometry_history),
+            ("send_queue", self.send_queue),
+        ] {
+            if n == 0 {
+                return Err(ConfigError::new(key, "must be at least 1", n));
+            }
+        }
+        if self.world_frame_id.is_empty() {
+            return Err(ConfigError::new(
+                "world_frame_id",
+                "must not be empty",
+                "\"\"",
+            ));
+        }
+        if self.node_name.is_empty()
+            || !self
+                .node_name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_')
+        {
+            return Err(ConfigError::new(
+                "node_name",
+                "must be a ROS node name (ASCII letters, digits, `_`)",
+                format!("{:?}", self.node_name),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The topics: each a valid name, and either a depth image with its camera info
+    /// or a point cloud with the intrinsics to project it into.
+    fn validate_topics(&self) -> Result<(), ConfigError> {
         let t = &self.topics;
         let named = [
             ("topics.depth", &t.depth),
@@ -270,68 +339,6 @@ impl Ros2Config {
                     format!("{t:?}"),
                 ));
             }
-        }
-        for (key, list, known) in [
-            ("depth_encodings", &self.depth_encodings, ["16UC1", "32FC1"]),
-            (
-                "intensity_encodings",
-                &self.intensity_encodings,
-                ["mono8", "mono16"],
-            ),
-        ] {
-            if list.is_empty() {
-                return Err(ConfigError::new(
-                    key,
-                    "must list at least one encoding",
-                    "[]",
-                ));
-            }
-            if let Some(bad) = list.iter().find(|e| !known.contains(&e.as_str())) {
-                return Err(ConfigError::new(
-                    key,
-                    format!("must list supported encodings ({})", known.join(", ")),
-                    format!("{bad:?}"),
-                ));
-            }
-        }
-        if self.extrinsics.isometry().is_none() {
-            return Err(ConfigError::new(
-                "extrinsics",
-                "needs a finite translation and a non-zero quaternion",
-                format!("{:?}", self.extrinsics),
-            ));
-        }
-        ConfigError::positive("max_depth_m", self.max_depth_m)?;
-        ConfigError::positive("startup_timeout_s", self.startup_timeout_s)?;
-        ConfigError::positive("odometry_tolerance_s", self.odometry_tolerance_s)?;
-        ConfigError::positive("intensity_tolerance_s", self.intensity_tolerance_s)?;
-        ConfigError::positive("status_period_s", self.status_period_s)?;
-        for (key, n) in [
-            ("odometry_history", self.odometry_history),
-            ("send_queue", self.send_queue),
-        ] {
-            if n == 0 {
-                return Err(ConfigError::new(key, "must be at least 1", n));
-            }
-        }
-        if self.world_frame_id.is_empty() {
-            return Err(ConfigError::new(
-                "world_frame_id",
-                "must not be empty",
-                "\"\"",
-            ));
-        }
-        if self.node_name.is_empty()
-            || !self
-                .node_name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_')
-        {
-            return Err(ConfigError::new(
-                "node_name",
-                "must be a ROS node name (ASCII letters, digits, `_`)",
-                format!("{:?}", self.node_name),
-            ));
         }
         Ok(())
     }

@@ -297,48 +297,7 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshFormatError> {
     let header =
         std::str::from_utf8(&bytes[..end]).map_err(|_| MeshFormatError::PlyHeaderNotText)?;
     let body = &bytes[end + b"end_header\n".len()..];
-    let mut lines = header.lines();
-    if lines.next().map(str::trim) != Some("ply") {
-        return Err(MeshFormatError::PlyNoMagic);
-    }
-    let mut binary = None;
-    let mut elements: Vec<Element> = Vec::new();
-    for line in lines {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["format", "ascii", _] => binary = Some(false),
-            ["format", "binary_little_endian", _] => binary = Some(true),
-            ["format", other, _] => return Err(MeshFormatError::PlyFormat((*other).to_owned())),
-            ["element", name, count] => elements.push(Element {
-                name: (*name).to_string(),
-                count: count
-                    .parse()
-                    .map_err(|_| MeshFormatError::PlyElementCount((*name).to_owned()))?,
-                properties: Vec::new(),
-            }),
-            ["property", "list", count, item, name] => {
-                let (Some(c), Some(i)) = (Scalar::parse(count), Scalar::parse(item)) else {
-                    return Err(MeshFormatError::PlyPropertyType(line.to_owned()));
-                };
-                elements
-                    .last_mut()
-                    .ok_or(MeshFormatError::PlyOrphanProperty)?
-                    .properties
-                    .push(Property::List((*name).to_string(), c, i));
-            }
-            ["property", kind, name] => {
-                let s = Scalar::parse(kind)
-                    .ok_or_else(|| MeshFormatError::PlyPropertyType(line.to_owned()))?;
-                elements
-                    .last_mut()
-                    .ok_or(MeshFormatError::PlyOrphanProperty)?
-                    .properties
-                    .push(Property::Scalar((*name).to_string(), s));
-            }
-            _ => {}
-        }
-    }
-    let binary = binary.ok_or(MeshFormatError::PlyNoFormat)?;
+    let (binary, elements) = parse_ply_header(header)?;
     let mut body = if binary {
         Body::Binary(body)
     } else {
@@ -413,6 +372,53 @@ fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshFormatError> {
         mesh.grey = Some(grey);
     }
     Ok(mesh)
+}
+
+/// A PLY header: whether the body is binary (little-endian) or text, and its elements.
+fn parse_ply_header(header: &str) -> Result<(bool, Vec<Element>), MeshFormatError> {
+    let mut lines = header.lines();
+    if lines.next().map(str::trim) != Some("ply") {
+        return Err(MeshFormatError::PlyNoMagic);
+    }
+    let mut binary = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for line in lines {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["format", "ascii", _] => binary = Some(false),
+            ["format", "binary_little_endian", _] => binary = Some(true),
+            ["format", other, _] => return Err(MeshFormatError::PlyFormat((*other).to_owned())),
+            ["element", name, count] => elements.push(Element {
+                name: (*name).to_string(),
+                count: count
+                    .parse()
+                    .map_err(|_| MeshFormatError::PlyElementCount((*name).to_owned()))?,
+                properties: Vec::new(),
+            }),
+            ["property", "list", count, item, name] => {
+                let (Some(c), Some(i)) = (Scalar::parse(count), Scalar::parse(item)) else {
+                    return Err(MeshFormatError::PlyPropertyType(line.to_owned()));
+                };
+                elements
+                    .last_mut()
+                    .ok_or(MeshFormatError::PlyOrphanProperty)?
+                    .properties
+                    .push(Property::List((*name).to_string(), c, i));
+            }
+            ["property", kind, name] => {
+                let s = Scalar::parse(kind)
+                    .ok_or_else(|| MeshFormatError::PlyPropertyType(line.to_owned()))?;
+                elements
+                    .last_mut()
+                    .ok_or(MeshFormatError::PlyOrphanProperty)?
+                    .properties
+                    .push(Property::Scalar((*name).to_string(), s));
+            }
+            _ => {}
+        }
+    }
+    let binary = binary.ok_or(MeshFormatError::PlyNoFormat)?;
+    Ok((binary, elements))
 }
 
 fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {

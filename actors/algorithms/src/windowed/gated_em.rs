@@ -175,6 +175,88 @@ fn responsibilities(
     lse
 }
 
+/// The M-step of a hard partition: per component its point count, mean and
+/// covariance (regularised by `reg_covar`).
+fn partition_start(
+    xyz: &[Vector3<f64>],
+    assignment: &[u32],
+    m: usize,
+    reg_covar: f64,
+) -> (Vec<f64>, Vec<Vector3<f64>>, Vec<Matrix3<f64>>) {
+    let mut count = vec![0.0f64; m];
+    let mut means = vec![Vector3::zeros(); m];
+    for (p, &a) in xyz.iter().zip(assignment) {
+        count[a as usize] += 1.0;
+        means[a as usize] += p;
+    }
+    for (mean, c) in means.iter_mut().zip(&count) {
+        *mean /= c.max(f64::MIN_POSITIVE);
+    }
+    let mut covs = vec![Matrix3::zeros(); m];
+    for (p, &a) in xyz.iter().zip(assignment) {
+        let d = p - means[a as usize];
+        covs[a as usize] += d * d.transpose();
+    }
+    for (cov, c) in covs.iter_mut().zip(&count) {
+        *cov /= c.max(f64::MIN_POSITIVE);
+        *cov += Matrix3::identity() * reg_covar;
+    }
+    (count, means, covs)
+}
+
+/// EM over the `kept` points, each informing only its gated components, until the
+/// mean log-likelihood changes by less than the tolerance or the iterations run out:
+/// `(iterations, converged)`, `None` if a covariance stops being positive definite.
+fn run_em(
+    xyz: &[Vector3<f64>],
+    kept: &[usize],
+    gate: &Gate,
+    means: &mut [Vector3<f64>],
+    covs: &mut [Matrix3<f64>],
+    weights: &mut [f64],
+    config: &GatedEmConfig,
+) -> Option<(usize, bool)> {
+    let m = means.len();
+    let n_kept = kept.len() as f64;
+    let mut buf = Vec::with_capacity(m);
+    let mut resp = Vec::with_capacity(m);
+    let mut prev_ll = f64::NEG_INFINITY;
+    let mut iterations = 0;
+    for _ in 0..config.max_iterations {
+        let chol = factor(means, covs)?;
+        let log_weights: Vec<f64> = weights.iter().map(|w| w.ln()).collect();
+        let mut mom = Moments::new(m);
+        let mut ll = 0.0;
+        for &i in kept {
+            let p = &xyz[i];
+            let x = [p[0], p[1], p[2]];
+            ll += responsibilities(&x, gate.of(i), &chol, &log_weights, &mut buf, &mut resp);
+            for &(k, r) in &resp {
+                let d = p - means[k];
+                mom.n[k] += r;
+                mom.s1[k] += r * d;
+                mom.s2[k] += r * d * d.transpose();
+            }
+        }
+        iterations += 1;
+        let ll = ll / n_kept;
+        // M-step (shifted moments: Σ γ (x − c)(x − c)ᵀ / N − δ δᵀ with δ = Σ γ (x − c) / N).
+        for k in 0..m {
+            let nk = mom.n[k] + 10.0 * f64::EPSILON;
+            let delta = mom.s1[k] / nk;
+            means[k] += delta;
+            let cov = mom.s2[k] / nk - delta * delta.transpose();
+            covs[k] = 0.5 * (cov + cov.transpose()) + Matrix3::identity() * config.reg_covar;
+            weights[k] = (mom.n[k] / n_kept).max(f64::MIN_POSITIVE);
+        }
+        if (ll - prev_ll).abs() < config.tolerance {
+            return Some((iterations, true));
+        }
+        prev_ll = ll;
+    }
+    Some((iterations, false))
+}
+
 /// Fit `components` Gaussians to `points` (x, y, z in the first three coordinates; the
 /// fourth, e.g. intensity, is carried into [`GatedFit::joint`] but not fitted): k-means++
 /// seeding (steps 1a–1c, on x, y, z) → hard-partition start → gate (Eq. 3.3) → EM.
@@ -198,24 +280,8 @@ pub fn fit_gated_em<R: Rng + ?Sized>(
     let xyz: Vec<Vector3<f64>> = points.iter().map(|p| p.xyz()).collect();
 
     // Start: the M-step of the hard partition.
-    let mut count = vec![0.0f64; m];
-    let mut means = vec![Vector3::zeros(); m];
-    for (p, &a) in xyz.iter().zip(&seeding.assignment) {
-        count[a as usize] += 1.0;
-        means[a as usize] += p;
-    }
-    for (mean, c) in means.iter_mut().zip(&count) {
-        *mean /= c.max(f64::MIN_POSITIVE);
-    }
-    let mut covs = vec![Matrix3::zeros(); m];
-    for (p, &a) in xyz.iter().zip(&seeding.assignment) {
-        let d = p - means[a as usize];
-        covs[a as usize] += d * d.transpose();
-    }
-    for (cov, c) in covs.iter_mut().zip(&count) {
-        *cov /= c.max(f64::MIN_POSITIVE);
-        *cov += Matrix3::identity() * config.reg_covar;
-    }
+    let (count, mut means, mut covs) =
+        partition_start(&xyz, &seeding.assignment, m, config.reg_covar);
     let n_total = xyz.len() as f64;
     let mut weights: Vec<f64> = count.iter().map(|c| c / n_total).collect();
 
@@ -237,45 +303,18 @@ pub fn fit_gated_em<R: Rng + ?Sized>(
         }
     }
 
+    let (iterations, converged) = run_em(
+        &xyz,
+        &kept,
+        &gate,
+        &mut means,
+        &mut covs,
+        &mut weights,
+        config,
+    )?;
+
     let mut buf = Vec::with_capacity(m);
     let mut resp = Vec::with_capacity(m);
-    let mut prev_ll = f64::NEG_INFINITY;
-    let mut iterations = 0;
-    let mut converged = false;
-    for _ in 0..config.max_iterations {
-        let chol = factor(&means, &covs)?;
-        let log_weights: Vec<f64> = weights.iter().map(|w| w.ln()).collect();
-        let mut mom = Moments::new(m);
-        let mut ll = 0.0;
-        for &i in &kept {
-            let p = &xyz[i];
-            let x = [p[0], p[1], p[2]];
-            ll += responsibilities(&x, gate.of(i), &chol, &log_weights, &mut buf, &mut resp);
-            for &(k, r) in &resp {
-                let d = p - means[k];
-                mom.n[k] += r;
-                mom.s1[k] += r * d;
-                mom.s2[k] += r * d * d.transpose();
-            }
-        }
-        iterations += 1;
-        let ll = ll / n_kept;
-        // M-step (shifted moments: Σ γ (x − c)(x − c)ᵀ / N − δ δᵀ with δ = Σ γ (x − c) / N).
-        for k in 0..m {
-            let nk = mom.n[k] + 10.0 * f64::EPSILON;
-            let delta = mom.s1[k] / nk;
-            means[k] += delta;
-            let cov = mom.s2[k] / nk - delta * delta.transpose();
-            covs[k] = 0.5 * (cov + cov.transpose()) + Matrix3::identity() * config.reg_covar;
-            weights[k] = (mom.n[k] / n_kept).max(f64::MIN_POSITIVE);
-        }
-        if (ll - prev_ll).abs() < config.tolerance {
-            converged = true;
-            break;
-        }
-        prev_ll = ll;
-    }
-
     // Final pass: responsibility mass per component and the joint 4D moments.
     let chol = factor(&means, &covs)?;
     let log_weights: Vec<f64> = weights.iter().map(|w| w.ln()).collect();

@@ -317,18 +317,16 @@ impl<S: ActionSelection> PlannerActor<S> {
         );
     }
 
-    fn plan(&mut self, ctx: &mut Context<'_>) {
-        let (Some(snapshot), Some(odometry)) = (self.snapshot.clone(), self.odometry.clone())
-        else {
-            return;
-        };
-        let now = ctx.now();
-        let start = now + Duration::from_secs_f64(self.lead_s());
-        let root = replanning_root(self.committed.as_ref(), start, &odometry.pose);
-        let round = &self.config.round;
-        let here = nalgebra::Point3::from(root.position_m());
-        let own = ctx.robot();
-        let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
+    /// Logs the frontiers the guide gave up this round, publishes the memory's changes
+    /// to peers (with `share_memory`) and the remembered frontiers with the route to
+    /// the current target.
+    fn publish_memory(
+        &mut self,
+        ctx: &mut Context<'_>,
+        now: Time,
+        here: &nalgebra::Point3<f64>,
+        field: Option<&GuidanceField>,
+    ) {
         if let Some(guide) = &self.guide
             && tracing::enabled!(tracing::Level::DEBUG)
         {
@@ -354,12 +352,62 @@ impl<S: ActionSelection> PlannerActor<S> {
                     stamp: now,
                     cell_m: memory.cell_m(),
                     centres_m: memory.frontiers().map(|k| memory.centre(k)).collect(),
-                    route_m: field
-                        .as_ref()
-                        .map_or_else(Vec::new, |f| f.route_from(&here)),
+                    route_m: field.map_or_else(Vec::new, |f| f.route_from(here)),
                 },
             );
         }
+    }
+
+    /// The round at debug level and every candidate at trace level.
+    fn log_round(
+        &self,
+        ctx: &mut Context<'_>,
+        root: &FlatState,
+        candidates: &[Candidate],
+        choice: Option<usize>,
+        guided: bool,
+        field: Option<&GuidanceField>,
+    ) {
+        let now = ctx.now();
+        let here = nalgebra::Point3::from(root.position_m());
+        tracing::debug!(
+            robot = ctx.robot_name(),
+            time = %now,
+            candidates = candidates.len(),
+            clearance_m = self.snapshot.as_ref().map(|s| s.clearance_m(&here)),
+            reward = choice.map(|i| candidates[i].reward),
+            guided,
+            frontiers = field.map(|f| f.frontier_count()),
+            route_m = field.map(|f| f.distance_m(&here)),
+            target = ?field.and_then(|f| f.target_of(&here)).zip(self.guide.as_ref()).map(|(k, g)| g.memory().centre(k).coords.as_slice().to_vec()),
+            position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
+        );
+        for c in candidates {
+            tracing::trace!(
+                robot = ctx.robot_name(),
+                time = %now,
+                action = ?c.primitive.action(),
+                information = c.information,
+                frontier_gain_m = c.frontier_gain_m,
+                reward = c.reward,
+                "candidate"
+            );
+        }
+    }
+
+    fn plan(&mut self, ctx: &mut Context<'_>) {
+        let (Some(snapshot), Some(odometry)) = (self.snapshot.clone(), self.odometry.clone())
+        else {
+            return;
+        };
+        let now = ctx.now();
+        let start = now + Duration::from_secs_f64(self.lead_s());
+        let root = replanning_root(self.committed.as_ref(), start, &odometry.pose);
+        let here = nalgebra::Point3::from(root.position_m());
+        let own = ctx.robot();
+        let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
+        self.publish_memory(ctx, now, &here, field.as_ref());
+        let round = &self.config.round;
         // Under simulated time a search stops on work done, never on the wall clock.
         let mut problem =
             PlanningProblem::new(round, &snapshot, &self.camera).under(ctx.time_source());
@@ -374,40 +422,16 @@ impl<S: ActionSelection> PlannerActor<S> {
         let choice = self
             .selection
             .select_in(&problem, &root, &candidates, ctx.rng());
-        tracing::debug!(
-            robot = ctx.robot_name(),
-            time = %now,
-            candidates = candidates.len(),
-            clearance_m = snapshot.clearance_m(&nalgebra::Point3::from(root.position_m())),
-            reward = choice.map(|i| candidates[i].reward),
+        self.log_round(ctx, &root, &candidates, choice, guided, field.as_ref());
+        let report = PlanningReport {
+            stamp: now,
+            candidates: candidates.len(),
+            chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
             guided,
-            frontiers = field.as_ref().map(|f| f.frontier_count()),
-            route_m = field.as_ref().map(|f| f.distance_m(&here)),
-            target = ?field.as_ref().and_then(|f| f.target_of(&here)).zip(self.guide.as_ref()).map(|(k, g)| g.memory().centre(k).coords.as_slice().to_vec()),
-            position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
-        );
-        for c in &candidates {
-            tracing::trace!(
-                robot = ctx.robot_name(),
-                time = %now,
-                action = ?c.primitive.action(),
-                information = c.information,
-                frontier_gain_m = c.frontier_gain_m,
-                reward = c.reward,
-                "candidate"
-            );
-        }
+            frontiers: field.as_ref().map(GuidanceField::frontier_count),
+        };
         if self.deferred {
-            ctx.publish(
-                &PLANNING_REPORT,
-                PlanningReport {
-                    stamp: now,
-                    candidates: candidates.len(),
-                    chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
-                    guided,
-                    frontiers: field.as_ref().map(GuidanceField::frontier_count),
-                },
-            );
+            ctx.publish(&PLANNING_REPORT, report);
             self.defer((now, start), &root, &candidates, choice, ctx);
             return;
         }
@@ -426,16 +450,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                 stop
             }
         };
-        ctx.publish(
-            &PLANNING_REPORT,
-            PlanningReport {
-                stamp: now,
-                candidates: candidates.len(),
-                chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
-                guided,
-                frontiers: field.as_ref().map(GuidanceField::frontier_count),
-            },
-        );
+        ctx.publish(&PLANNING_REPORT, report);
         let stopping = choice.and_then(|i| candidates.get(i)).is_none();
         // The flight that leads to the new plan: the previous one, which took over
         // before now (`lead_s` is below the period).
