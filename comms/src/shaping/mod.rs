@@ -838,7 +838,7 @@ impl LinkShaper {
                     bytes,
                 })
             }
-            Next::Queued(lane, _) => {
+            Next::Queued(lane, _) | Next::Stored(lane, _, _) => {
                 let class = self.lane_classes[lane];
                 let stats = match lane.checked_sub(Class::ALL.len()) {
                     Some(extra) => {
@@ -847,30 +847,19 @@ impl LinkShaper {
                     }
                     None => &mut self.stats.classes[lane],
                 };
-                match &mut self.lanes[lane] {
-                    Lane::Queue(q) => Some(send_queued(q, stats, self.chunk_bytes, now_ns, class)),
-                    Lane::Store(_) => None,
-                }
-            }
-            Next::Stored(lane, _, next) => {
-                let class = self.lane_classes[lane];
-                let stats = match lane.checked_sub(Class::ALL.len()) {
-                    Some(extra) => {
-                        self.stats.lane_sent_bytes += len as u64;
-                        &mut self.lane_stats[extra]
+                match (&mut self.lanes[lane], &next) {
+                    (Lane::Queue(q), Next::Queued(..)) => {
+                        Some(send_queued(q, stats, self.chunk_bytes, now_ns, class))
                     }
-                    None => &mut self.stats.classes[lane],
-                };
-                match &mut self.lanes[lane] {
-                    Lane::Store(s) => Some(send_stored(
+                    (Lane::Store(s), Next::Stored(_, _, which)) => Some(send_stored(
                         s,
                         stats,
                         self.chunk_bytes,
                         now_ns,
                         class,
-                        &next,
+                        which,
                     )),
-                    Lane::Queue(_) => None,
+                    _ => None,
                 }
             }
         }
