@@ -191,7 +191,7 @@ pub fn assemble(
 
 /// An actor's options: its fixed latency, the robot's restart policy, and whether
 /// its handler blocks (heavy work run off the executor's thread).
-fn actor_options(config: &RobotConfig, latency_s: f64, blocking: bool) -> ActorOptions {
+pub(crate) fn actor_options(config: &RobotConfig, latency_s: f64, blocking: bool) -> ActorOptions {
     ActorOptions {
         latency: LatencyModel::fixed(latency_s),
         restart: config.restart,

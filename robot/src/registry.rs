@@ -49,7 +49,7 @@ use nalgebra::Point3;
 use serde::de::DeserializeOwned;
 use troupe_actors::link::LinkJournal;
 use troupe_algorithms::camera::PinholeIntrinsics;
-use troupe_runtime::{ActorOptions, ActorSpec, LatencyModel, RobotSpec};
+use troupe_runtime::{ActorOptions, ActorSpec, RobotSpec};
 
 use crate::mavlink::{MavlinkConfig, mavlink_vehicle};
 use crate::ros2::Ros2Inputs;
@@ -114,11 +114,7 @@ impl PartContext<'_> {
     /// robot's restart policy, not blocking.
     #[must_use]
     pub fn options(&self, latency_s: f64) -> ActorOptions {
-        ActorOptions {
-            latency: LatencyModel::fixed(latency_s),
-            restart: self.config.restart,
-            blocking: false,
-        }
+        crate::actor_options(self.config, latency_s, false)
     }
 }
 

@@ -288,10 +288,7 @@ pub fn ratios(study: &Study, spec: &RatioSpec, rows: &[RunRow]) -> Vec<Ratio> {
                 .iter()
                 .map(|p| p.map(|r| r.time_to_coverage_s[i]))
                 .collect();
-            let ratio_of = |idx: &mut dyn Iterator<Item = usize>| {
-                let (num, den): (Vec<_>, Vec<_>) = idx.map(|j| (times[j][0], times[j][1])).unzip();
-                Some(median_time(&num)? / median_time(&den)?)
-            };
+            let ratio_of = |[num, den]: [Option<f64>; 2]| Some(num? / den?);
             let medians_s =
                 [0, 1].map(|s| median_time(&times.iter().map(|t| t[s]).collect::<Vec<_>>()));
             out.push(Ratio {
@@ -299,8 +296,12 @@ pub fn ratios(study: &Study, spec: &RatioSpec, rows: &[RunRow]) -> Vec<Ratio> {
                 level,
                 pairs: both.len(),
                 medians_s,
-                ratio: ratio_of(&mut (0..times.len())),
-                interval: bootstrap(times.len(), |idx| ratio_of(&mut idx.iter().copied())),
+                ratio: ratio_of(medians_s),
+                interval: bootstrap(times.len(), |idx| {
+                    ratio_of([0, 1].map(|s| {
+                        median_time(&idx.iter().map(|&j| times[j][s]).collect::<Vec<_>>())
+                    }))
+                }),
                 numerator_first: times
                     .iter()
                     .filter(|[a, b]| match (a, b) {
