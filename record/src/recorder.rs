@@ -32,7 +32,7 @@ use troupe_actors::msgs::{
     DEPTH_FRAME, GRID_SNAPSHOT, KEYFRAME, ODOMETRY, PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN, PLAN,
     PLAN_CANDIDATES, PLAN_DECISION,
 };
-use troupe_actors::planner::{REMEMBERED_FRONTIERS, RememberedFrontiers};
+use troupe_actors::planner::{MISSION_STATUS, REMEMBERED_FRONTIERS, RememberedFrontiers};
 use troupe_algorithms::frame::{DepthFrame, Odometry};
 use troupe_algorithms::keyframe::Keyframe;
 use troupe_algorithms::plan::Plan;
@@ -376,6 +376,9 @@ impl Recorder {
         } else if let Some(status) = p.get(&LINK_STATUS) {
             let topic = format!("/robot{i}/link");
             self.write(&topic, &schemas::LINK_STATUS, p.time, status);
+        } else if let Some(status) = p.get(&MISSION_STATUS.topic()) {
+            let topic = format!("/robot{i}/mission");
+            self.write(&topic, &schemas::MISSION_STATUS, p.time, status);
         }
     }
 

@@ -250,8 +250,27 @@ pub const VEHICLE_STATUS: Schema = Schema {
     },
 };
 
+/// `troupe.MissionStatus`: a robot's mission at its first planning round and at each
+/// change of phase (exploring, returning, home): when exploring ended and why, when
+/// the robot was home, the return's time and distance, and home.
+pub const MISSION_STATUS: Schema = Schema {
+    name: "troupe.MissionStatus",
+    document: || {
+        let seconds = json!({"type": ["number", "null"], "minimum": 0});
+        object(json!({
+            "phase": {"enum": ["exploring", "returning", "home"]},
+            "ended_s": seconds,
+            "end": {"enum": ["explored", "commanded", null]},
+            "home_s": seconds,
+            "return_s": seconds,
+            "return_distance_m": {"type": "number", "minimum": 0},
+            "home_m": {"type": ["array", "null"], "items": number(), "minItems": 3, "maxItems": 3},
+        }))
+    },
+};
+
 /// Every schema a recording may use.
-pub const ALL: [Schema; 9] = [
+pub const ALL: [Schema; 10] = [
     FRAME_TRANSFORM,
     POSE_IN_FRAME,
     SCENE_UPDATE,
@@ -261,6 +280,7 @@ pub const ALL: [Schema; 9] = [
     SAMPLE,
     COVERAGE,
     VEHICLE_STATUS,
+    MISSION_STATUS,
 ];
 
 #[cfg(test)]

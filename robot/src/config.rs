@@ -401,6 +401,10 @@ impl RobotConfig {
             .guidance
             .validate()
             .map_err(|e| e.within("planner.guidance"))?;
+        self.planner
+            .mission
+            .validate()
+            .map_err(|e| e.within("planner.mission"))?;
         if !troupe_policies::SELECTIONS.contains(&self.selection.as_str()) {
             return Err(ConfigError::new(
                 "selection",

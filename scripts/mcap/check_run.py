@@ -58,6 +58,7 @@ SCHEMAS = [
     (r"/robot\d+/(plan|candidates|keyframes|peer_keyframes|peer_plans|route)", "foxglove.SceneUpdate"),
     (r"/robot\d+/link", "troupe.LinkStatus"),
     (r"/robot\d+/vehicle", "troupe.VehicleStatus"),
+    (r"/robot\d+/mission", "troupe.MissionStatus"),
     (r"/robot\d+/sample", "troupe.Sample"),
     (r"/team/coverage", "troupe.Coverage"),
     (r"/robot\d+/peers/robot\d+/pose", "foxglove.PoseInFrame"),

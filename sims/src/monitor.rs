@@ -14,6 +14,7 @@ use serde::Serialize;
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, ODOMETRY, PLAN};
 use troupe_actors::planner::PLANNING_REPORT;
+use troupe_algorithms::exploration::MissionStatus;
 use troupe_algorithms::frame::{DepthFrame, Odometry};
 use troupe_algorithms::plan::Plan;
 use troupe_comms::shaping::frame::class_of;
@@ -222,6 +223,10 @@ pub struct RobotTruth {
     /// time (thesis §8.2.7's mechanism; see [`crate::reexploration`]).
     #[serde(flatten)]
     pub reexploration: ReExploration,
+    /// The robot's mission after its planner's last round: phase, when exploring ended
+    /// and why, when it was home, the return's time and distance (absent without a
+    /// planner).
+    pub mission: Option<MissionStatus>,
 }
 
 /// Everything the monitor knows.
@@ -320,10 +325,11 @@ impl Tap for GroundTruthMonitor {
                 }
             }
         } else if let Some(report) = p.get(&PLANNING_REPORT) {
-            if let (Some(robot), Some(frontiers)) =
-                (lock_truth(&self.truth).robots.get_mut(r), report.frontiers)
-            {
-                robot.unproductive.remembers_frontiers(frontiers > 0);
+            if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {
+                if let Some(frontiers) = report.frontiers {
+                    robot.unproductive.remembers_frontiers(frontiers > 0);
+                }
+                robot.mission = Some(report.mission);
             }
         } else if let Some(status) = p.get(&LINK_STATUS) {
             if let Some(robot) = lock_truth(&self.truth).robots.get_mut(r) {

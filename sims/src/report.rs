@@ -47,6 +47,7 @@ pub const TIMESERIES_COLUMNS: &[&str] = &[
     "reexplored_m3",
     "exclusive_m3",
     "redundant_flight_s",
+    "phase",
 ];
 
 /// The time series as CSV text.
@@ -58,7 +59,7 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
         // Writing to a String cannot fail.
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.time_s,
             r.robot,
             r.x_m,
@@ -86,7 +87,8 @@ pub fn timeseries_csv(rows: &[SeriesRow]) -> String {
             r.first_observed_m3,
             r.reexplored_m3,
             r.exclusive_m3,
-            r.redundant_flight_s
+            r.redundant_flight_s,
+            r.phase.as_str()
         );
     }
     out

@@ -7,6 +7,7 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use troupe_actors::link::LinkJournal;
+use troupe_algorithms::exploration::{MissionPhase, MissionStatus};
 use troupe_algorithms::mapfile::GmmMap;
 use troupe_comms::simnet::{NetStats, Partition};
 use troupe_comms::wire::Class;
@@ -118,6 +119,9 @@ pub struct SeriesRow {
     /// seconds.
     #[serde(default)]
     pub redundant_flight_s: f64,
+    /// The robot's mission phase (exploring before its planner's first round).
+    #[serde(default)]
+    pub phase: MissionPhase,
 }
 
 /// Counters of one actor.
@@ -177,6 +181,10 @@ pub struct Summary {
     /// their redundant flight time, summed over the team (thesis §8.2.7's mechanism; per
     /// robot in `per_robot`; see [`crate::reexploration`]).
     pub reexploration: TeamReExploration,
+    /// When the team's mission ended: every robot's exploring, and every robot home
+    /// (each `null` until the last robot got there; per robot in `per_robot`'s
+    /// `mission`).
+    pub mission: TeamMission,
     /// Collisions with the world over all robots.
     pub collisions: u64,
     /// Episodes of two robot bodies overlapping (ground truth).
@@ -207,6 +215,32 @@ pub struct Summary {
     /// each of `metrics.og_change_set_resolutions_m` (absent when none).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub og_change_sets: Vec<OgChangeSets>,
+}
+
+/// The team's mission times (issue 43), seconds.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct TeamMission {
+    /// When the last robot's exploring ended.
+    pub complete_s: Option<f64>,
+    /// When the last robot got home.
+    pub home_s: Option<f64>,
+}
+
+impl TeamMission {
+    /// The latest of the robots' times, if every robot has one.
+    fn of(robots: &[RobotTruth]) -> Self {
+        let last = |time: fn(&MissionStatus) -> Option<f64>| {
+            robots
+                .iter()
+                .map(|r| r.mission.as_ref().and_then(time))
+                .try_fold(0.0f64, |latest, t| t.map(|t| latest.max(t)))
+                .filter(|_| !robots.is_empty())
+        };
+        TeamMission {
+            complete_s: last(|m| m.ended_s),
+            home_s: last(|m| m.home_s),
+        }
+    }
 }
 
 /// One robot's published map.
@@ -561,6 +595,7 @@ fn series_row(truth: &Truth, i: usize, t: f64, coverage: f64) -> SeriesRow {
         reexplored_m3: r.reexploration.reexplored_m3,
         exclusive_m3: r.reexploration.exclusive_m3,
         redundant_flight_s: r.reexploration.redundant_flight_s,
+        phase: r.mission.map(|m| m.phase).unwrap_or_default(),
     }
 }
 
@@ -748,6 +783,7 @@ fn summarise(
             over_time,
         },
         reexploration: truth.reexploration.team(),
+        mission: TeamMission::of(&truth.robots),
         collisions: truth.robots.iter().map(|r| r.collisions).sum(),
         robot_contacts: truth.robot_contacts,
         min_inter_robot_distance_m: truth

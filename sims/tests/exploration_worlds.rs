@@ -154,3 +154,126 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
         }
     }
 }
+
+/// A dead end shortened (14 m tunnel, 8 m side tunnel) so that the team explores it
+/// all in about a minute.
+fn short_dead_end(dir: &Path) -> std::path::PathBuf {
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/dead_end.toml");
+    let text = std::fs::read_to_string(shipped)
+        .unwrap()
+        .replace("dead_end_length_m = 24.0", "dead_end_length_m = 14.0")
+        .replace("side_length_m = 12.0", "side_length_m = 8.0");
+    assert!(text.contains("= 14.0") && text.contains("= 8.0"), "{text}");
+    let path = dir.join("short_dead_end.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Issue 43's mission that ends: once nothing is left to explore, each robot flies home
+/// along its memory's route and holds there, and the reports say when and how far.
+#[test]
+fn a_team_that_has_explored_everything_flies_home_and_holds() {
+    const FLOWN_S: f64 = 80.0;
+    let out = tempfile::tempdir().unwrap();
+    let run = Command::new(TROUPE)
+        .arg("run")
+        .arg(short_dead_end(out.path()))
+        .args(["--duration-s", &FLOWN_S.to_string(), "--no-progress"])
+        .arg("--out")
+        .arg(out.path())
+        .env("RUST_LOG", "off")
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let dir = out.path().join("dead_end");
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["collisions"], 0);
+    assert_eq!(summary["robot_contacts"], 0);
+    let coverage = summary["coverage"]["final_fraction"].as_f64().unwrap();
+    assert!(coverage > 0.95, "the team went home at coverage {coverage}");
+
+    let csv = std::fs::read_to_string(dir.join("timeseries.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let number = |row: &[&str], name: &str| row[column(name)].parse::<f64>().unwrap();
+
+    let mut ended = Vec::new();
+    let mut home = Vec::new();
+    for (i, r) in summary["per_robot"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(r["unsafe_plans"], 0, "{}", r["name"]);
+        let m = &r["mission"];
+        assert_eq!(m["phase"], "home", "{}: {m}", r["name"]);
+        assert_eq!(m["end"], "explored", "{}: {m}", r["name"]);
+        let ended_s = m["ended_s"].as_f64().unwrap();
+        let home_s = m["home_s"].as_f64().unwrap();
+        let return_s = m["return_s"].as_f64().unwrap();
+        assert!(ended_s < home_s && home_s < FLOWN_S, "{}: {m}", r["name"]);
+        assert!((home_s - ended_s - return_s).abs() < 1e-6, "{m}");
+        assert!(m["return_distance_m"].as_f64().unwrap() > 0.0, "{m}");
+        ended.push(ended_s);
+        home.push(home_s);
+        // Home is where the robot began, and it holds there.
+        let own: Vec<&Vec<&str>> = rows
+            .iter()
+            .filter(|row| row[column("robot")] == i.to_string())
+            .collect();
+        let home_m: Vec<f64> = m["home_m"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let first = own.first().unwrap();
+        let start = [
+            number(first, "x_m"),
+            number(first, "y_m"),
+            number(first, "z_m"),
+        ];
+        let gap = |p: [f64; 3]| {
+            p.iter()
+                .zip(&home_m)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        assert!(
+            gap(start) < 0.2,
+            "{}: home {home_m:?}, start {start:?}",
+            r["name"]
+        );
+        for row in own
+            .iter()
+            .filter(|row| number(row, "time_s") >= home_s + 2.0)
+        {
+            let p = [number(row, "x_m"), number(row, "y_m"), number(row, "z_m")];
+            assert!(gap(p) < 1.2, "{} left home: {p:?} at {}", r["name"], row[0]);
+            assert_eq!(row[column("phase")], "home");
+        }
+        // The phases follow each other in order: exploring, returning, home.
+        let order = |phase: &str| {
+            ["exploring", "returning", "home"]
+                .iter()
+                .position(|p| *p == phase)
+        };
+        let phases: Vec<usize> = own
+            .iter()
+            .map(|row| order(row[column("phase")]).unwrap())
+            .collect();
+        assert!(
+            phases.windows(2).all(|w| w[0] <= w[1]),
+            "{}: {phases:?}",
+            r["name"]
+        );
+    }
+    let team = &summary["mission"];
+    let latest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    assert_eq!(team["complete_s"].as_f64(), Some(latest(&ended)));
+    assert_eq!(team["home_s"].as_f64(), Some(latest(&home)));
+}

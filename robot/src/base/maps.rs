@@ -9,6 +9,8 @@ use std::time::Instant;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
+use troupe_actors::planner::MISSION_STATUS;
+use troupe_algorithms::exploration::MissionStatus;
 use troupe_algorithms::mapfile::{
     GmmMap, MapKeyframe, SurfacePoint, sample_surface, write_atomically, write_ply,
     write_ply_with_source,
@@ -40,6 +42,8 @@ pub struct RobotRecord {
     pub plans: u64,
     /// Speed of the last odometry, m/s.
     pub speed_mps: Option<f64>,
+    /// Its mission as it last reported it (exploring, returning, home).
+    pub mission: Option<MissionStatus>,
 }
 
 impl Default for RobotRecord {
@@ -56,6 +60,7 @@ impl Default for RobotRecord {
             last_odometry: None,
             plans: 0,
             speed_mps: None,
+            mission: None,
         }
     }
 }
@@ -106,12 +111,15 @@ impl BaseMaps {
             record.speed_mps = Some(o.odometry.velocity_mps.norm());
         } else if let Some(plan) = p.get(&PEER_PLAN) {
             self.robots.entry(plan.robot.0).or_default().plans += 1;
+        } else if let Some(status) = p.get(&MISSION_STATUS.peer_topic()) {
+            self.robots.entry(status.robot.0).or_default().mission = Some(status.message);
         }
     }
 
     /// One status line per robot (every robot of `team` first, then any other sender
     /// heard), e.g. `robot0 keyframes=12 components=3456 bytes=812345
-    /// odometry_age_s=0.08 plans=9 speed_mps=0.42` (`none` before the first odometry).
+    /// odometry_age_s=0.08 plans=9 speed_mps=0.42 phase=exploring` (`none` before the
+    /// first odometry, or the first mission status).
     #[must_use]
     pub fn status_lines(&self, team: u32, now: Instant) -> Vec<String> {
         let ids: BTreeSet<u32> = (0..team).chain(self.robots.keys().copied()).collect();
@@ -123,9 +131,10 @@ impl BaseMaps {
                     format!("{:.2}", now.saturating_duration_since(t).as_secs_f64())
                 });
                 let speed = r.speed_mps.map_or("none".into(), |v| format!("{v:.2}"));
+                let phase = r.mission.map_or("none", |m| m.phase.as_str());
                 format!(
                     "robot{id} keyframes={} components={} bytes={} odometry_age_s={age} plans={} \
-                     speed_mps={speed}",
+                     speed_mps={speed} phase={phase}",
                     r.map.keyframes.len(),
                     r.map.occupied_components(),
                     r.bytes,
@@ -149,6 +158,7 @@ impl BaseMaps {
                     bytes: r.bytes,
                     odometry: r.odometry,
                     plans: r.plans,
+                    mission: r.mission,
                     ply_points: written.get(robot).copied().unwrap_or(0),
                 };
                 (*robot, summary)

@@ -41,7 +41,7 @@
 //! no message id is used twice.
 //!
 //! An operator types commands on the base's standard input, one per line —
-//! `robot1 hold`, `all hold`, `robot1 resume`, `robot1 velocity 0.5 0 0.1` — which
+//! `robot1 hold`, `all hold`, `robot1 resume`, `robot1 return`, `robot1 velocity 0.5 0 0.1` — which
 //! go to the robots as [`BaseCommand`]s on the shared topic
 //! [`BASE_COMMAND`](troupe_actors::collision::BASE_COMMAND)
 //! (store-and-forward, highest priority; robots with `[robot.collision]
@@ -295,6 +295,8 @@ pub struct BaseRobotSummary {
     pub odometry: u64,
     /// Committed plans.
     pub plans: u64,
+    /// The robot's mission as it last reported it (absent if it never did).
+    pub mission: Option<troupe_algorithms::exploration::MissionStatus>,
     /// Points in `maps/robot<i>.ply`.
     pub ply_points: usize,
 }

@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use troupe_actors::collision::{BASE_COMMAND, BaseCommand};
+use troupe_actors::planner::MISSION_STATUS;
 use troupe_core::ErrorChain;
 use troupe_runtime::{Actor, ActorResult, Context, Event, TimerId};
 
@@ -40,8 +41,10 @@ impl Actor for CountRejections {
     }
 }
 
-/// Shares [`BASE_COMMAND`] with the team and publishes the operator's commands on it
-/// as they arrive from the standard-input reader ([`read_commands`]).
+/// The operator's end of the link: shares [`BASE_COMMAND`] with the team and publishes
+/// the operator's commands on it as they arrive from the standard-input reader
+/// ([`read_commands`]), and shares the robots' [`MISSION_STATUS`] so that the link
+/// delivers it to the base (the status lines show each robot's phase).
 pub(super) struct Commander {
     pub(super) commands: Arc<Mutex<std::sync::mpsc::Receiver<BaseCommand>>>,
 }
@@ -51,6 +54,7 @@ const POLL_COMMANDS: TimerId = TimerId(0);
 impl Actor for Commander {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         BASE_COMMAND.share(ctx);
+        MISSION_STATUS.share(ctx);
         ctx.set_timer(POLL_COMMANDS, Duration::from_millis(50));
         Ok(())
     }

@@ -89,6 +89,8 @@ pub struct GuidanceField {
     look_ahead_m: f64,
     distance_m: HashMap<CellKey, (f64, CellKey), Fixed>,
     frontiers: usize,
+    /// The goal of a field [`Self::towards`] a point, and its cell.
+    goal: Option<(Point3<f64>, CellKey)>,
 }
 
 /// The cells of `frontiers` with the route length each one's region adds, in key
@@ -382,6 +384,31 @@ impl GuidanceField {
             look_ahead_m: params.look_ahead_m,
             distance_m,
             frontiers,
+            goal: None,
+        }
+    }
+
+    /// The route distance to the point `goal_m` over `memory`'s passable cells, in
+    /// place of a frontier's (a robot flying home, [`Mission`](super::Mission)):
+    /// Dijkstra from the goal's cell (or its passable neighbours), and the straight
+    /// distance within the goal's cell and its neighbours, so that the field's least
+    /// value is at the goal itself. Measured at the pose, with no look-ahead (a look-ahead
+    /// would hold a robot facing its goal one look-ahead short of it). Empty (∞
+    /// everywhere) when the goal lies in no known passable cell.
+    #[must_use]
+    pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>) -> Self {
+        let cell_m = memory.cell_m();
+        let distance_m = routes_from(memory, goal_m);
+        GuidanceField {
+            cell_m,
+            key_scale: 1.0 / cell_m,
+            look_ahead_m: 0.0,
+            frontiers: usize::from(!distance_m.is_empty()),
+            goal: memory
+                .key_of(goal_m)
+                .filter(|_| !distance_m.is_empty())
+                .map(|key| (*goal_m, key)),
+            distance_m,
         }
     }
 
@@ -411,6 +438,11 @@ impl GuidanceField {
     /// cell holding `p` and its 26 neighbours (∞ and `None` when none was reached).
     #[must_use]
     pub fn distance_at(&self, p: &Point3<f64>) -> (f64, Option<CellKey>) {
+        if let (Some((goal_m, goal)), Some(key)) = (self.goal, self.key_of(p))
+            && (0..3).all(|i| (key[i] - goal[i]).abs() <= 1)
+        {
+            return ((p - goal_m).norm(), Some(goal));
+        }
         self.entry_at(p)
             .map_or((f64::INFINITY, None), |e| (e.cost_m, Some(e.target)))
     }

@@ -1,7 +1,7 @@
 //! One robot's guide: its frontier memory, what it knows of where its peers are
 //! heading, and the rule that decides when a planning round follows the global field.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use nalgebra::{Isometry3, Point3};
 use troupe_core::{RobotId, Time};
@@ -26,6 +26,9 @@ pub struct Guide {
     /// Frontiers watched for [`GuidanceConfig::give_up_after_s`] without being retired,
     /// and when each was given up.
     given_up: BTreeMap<CellKey, Time>,
+    /// Every frontier given up at least once, looked for again or not (bounded by the
+    /// memory, like `watched_s`): what is left of them does not keep a mission going.
+    ever_given_up: BTreeSet<CellKey>,
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
@@ -61,6 +64,7 @@ impl Guide {
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),
             given_up: BTreeMap::new(),
+            ever_given_up: BTreeSet::new(),
             last_field: None,
             last_target: None,
             progress: None,
@@ -233,12 +237,31 @@ impl Guide {
                 })
                 .collect();
             for f in near.into_iter().chain(std::iter::once(goal)) {
-                self.given_up.entry(f).or_insert(now);
+                self.give_up(f, now);
             }
             self.progress = None;
         } else {
             self.progress = Some((tracked_m, best_m, since));
         }
+    }
+
+    fn give_up(&mut self, frontier: CellKey, now: Time) {
+        self.given_up.entry(frontier).or_insert(now);
+        self.ever_given_up.insert(frontier);
+    }
+
+    /// Whether a frontier is left for the robot at `robot_m` to explore in `field`
+    /// (built by [`Self::field`] this round): one that seeds the field and that this
+    /// robot never gave up, while the field reaches the robot. Frontiers it gave up
+    /// and looks for again still pull it while it explores, but do not keep its
+    /// [`Mission`](super::Mission) going: the camera could not see into them before.
+    #[must_use]
+    pub fn has_work(&self, field: &GuidanceField, robot_m: &Point3<f64>) -> bool {
+        let memory = &self.memory;
+        field.distance_m(robot_m).is_finite()
+            && memory.frontiers().any(|f| {
+                !self.ever_given_up.contains(&f) && field.distance_m(&memory.centre(f)).is_finite()
+            })
     }
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
@@ -258,6 +281,7 @@ impl Guide {
         let memory = &self.memory;
         let known = |k: &CellKey| memory.record(*k) != CellRecord::default();
         self.watched_s.retain(|k, _| known(k));
+        self.ever_given_up.retain(known);
         // Given up long enough ago: looked for again (the time near a frontier counts
         // on every pass, so a real opening beside a junction crossed again and again
         // may have been given up with the pockets).
@@ -280,6 +304,7 @@ impl Guide {
             *watched_s += dt_s;
             if *watched_s >= limit_s {
                 self.given_up.entry(f).or_insert(now);
+                self.ever_given_up.insert(f);
             }
         }
     }

@@ -19,6 +19,8 @@
 //! - [`Guide`]: one robot's memory, its peers' intents and the rule for when a round
 //!   follows the field.
 //! - [`GuidanceConfig`]: the settings, table `robot.planner.guidance`.
+//! - [`Mission`]: how a mission ends — exploring until nothing is left, then home and
+//!   hold ([`MissionConfig`], table `robot.planner.mission`).
 //! - [`ExplorationBehaviour`]: the plug-in a map-free explorer asks where to go next
 //!   (scripted routes), apart from the memory and the field.
 //!
@@ -31,12 +33,14 @@ mod config;
 mod guidance;
 mod guide;
 mod memory;
+mod mission;
 
 pub use behaviour::ExplorationBehaviour;
 pub use config::GuidanceConfig;
 pub use guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
 pub use guide::Guide;
 pub use memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
+pub use mission::{Mission, MissionConfig, MissionEnd, MissionPhase, MissionStatus};
 
 #[cfg(test)]
 mod tests;

@@ -35,6 +35,8 @@ pub struct PlanningProblem<'a> {
     camera: &'a PinholeIntrinsics,
     actions: Vec<(Action, Option<f64>)>,
     guidance: Option<&'a dyn FrontierField>,
+    /// The round only flies along `guidance` (home): information is not scored.
+    homing: bool,
     time_source: TimeSource,
 }
 
@@ -59,6 +61,7 @@ impl<'a> PlanningProblem<'a> {
             camera,
             actions,
             guidance: None,
+            homing: false,
             time_source: TimeSource::WallClock,
         }
     }
@@ -87,6 +90,17 @@ impl<'a> PlanningProblem<'a> {
     #[must_use]
     pub fn guided(mut self, field: &'a dyn FrontierField) -> Self {
         self.guidance = Some(field);
+        self
+    }
+
+    /// The same problem flying home along `field` (the route distance to home,
+    /// [`GuidanceField::towards`](crate::exploration::GuidanceField::towards)): the
+    /// objective is α V alone — views are not scored, so the robot takes the shortest
+    /// route rather than the most informative one. Safety checks do not change.
+    #[must_use]
+    pub fn homing(mut self, field: &'a dyn FrontierField) -> Self {
+        self.guidance = Some(field);
+        self.homing = true;
         self
     }
 
@@ -131,6 +145,7 @@ impl<'a> PlanningProblem<'a> {
         } else {
             0.0
         };
+        let information = if self.homing { 0.0 } else { information };
         let mut reward = information + self.config.frontier_weight * frontier_gain_m;
         if self.config.reward_per_second {
             reward /= primitive.duration_s();
@@ -217,7 +232,7 @@ impl<'a> PlanningProblem<'a> {
         // what CSQMI still promises there (cells it cannot resolve, e.g. behind pixels
         // with no return) will not be gained by staying, and would otherwise keep a
         // robot hovering forever whenever it beats every move.
-        let information = if stays_put(from, &end) {
+        let information = if self.homing || stays_put(from, &end) {
             0.0
         } else {
             (1..=samples)

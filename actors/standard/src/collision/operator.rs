@@ -11,7 +11,9 @@
 //!   the round's stopping trajectory whatever the candidates) and a zero teleop command;
 //! - `resume`: publishes `held = false`: planning goes on;
 //! - `velocity`: publishes the command on the teleop topic ([`TELEOP_COMMAND`]), which a
-//!   `behaviour = "teleop"` robot maps to its closest safe primitive.
+//!   `behaviour = "teleop"` robot maps to its closest safe primitive;
+//! - `return`: ends the robot's exploring ([`MISSION_RETURN`]: its planner flies it home
+//!   along its memory's route and holds there) and releases a hold.
 //!
 //! It republishes the hold state every second, so a restarted collision actor learns it
 //! again. Only the base may send commands: the link accepts frames of its own team
@@ -25,7 +27,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use crate::link::{Peer, ShareClass, ShareFrom, SharePolicy, ShareTo, SharedTopic};
-use crate::planner::TELEOP_COMMAND;
+use crate::planner::{MISSION_RETURN, ReturnCommand, TELEOP_COMMAND};
 use troupe_algorithms::planner::teleop::TeleopCommand;
 use troupe_comms::shaping::QueuePolicy as ShaperPolicy;
 use troupe_runtime::{
@@ -39,6 +41,8 @@ pub enum OperatorCommand {
     Hold,
     /// Go on planning.
     Resume,
+    /// End exploring: fly home and hold there (a held robot is released).
+    Return,
     /// A teleoperation command in the body frame (thesis §5.1.2: a = (v_x, v_z, ω)).
     Velocity {
         /// Forward speed, m/s.
@@ -58,8 +62,8 @@ pub enum CommandParseError {
     Target(String),
     /// The verb is unknown or its arguments are wrong.
     #[error(
-        "`{0}` is not a command: write hold, resume or velocity VX_MPS VZ_MPS YAW_RATE_RAD_S \
-         (finite numbers)"
+        "`{0}` is not a command: write hold, resume, return or velocity VX_MPS VZ_MPS \
+         YAW_RATE_RAD_S (finite numbers)"
     )]
     Command(String),
 }
@@ -79,7 +83,7 @@ pub struct BaseCommand {
 impl Message for BaseCommand {}
 
 impl BaseCommand {
-    /// Parses an operator's line, `robot1 hold`, `all hold`, `robot0 resume`,
+    /// Parses an operator's line, `robot1 hold`, `all hold`, `robot0 resume`, `all return`,
     /// `robot2 velocity 0.5 0 0.1` (`vel` for short); `Ok(None)` for a blank line.
     pub fn parse(line: &str, id: u64) -> Result<Option<Self>, CommandParseError> {
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -98,6 +102,7 @@ impl BaseCommand {
         let command = match rest {
             ["hold" | "stop"] => OperatorCommand::Hold,
             ["resume"] => OperatorCommand::Resume,
+            ["return" | "home"] => OperatorCommand::Return,
             ["velocity" | "vel", vx, vz, w] => {
                 let number = |s: &str| s.parse::<f64>().ok().filter(|v| v.is_finite());
                 OperatorCommand::Velocity {
@@ -182,6 +187,10 @@ impl OperatorActor {
                 ctx.publish(&TELEOP_COMMAND, stop(now));
             }
             OperatorCommand::Resume => self.held = false,
+            OperatorCommand::Return => {
+                self.held = false;
+                ctx.publish(&MISSION_RETURN, ReturnCommand);
+            }
             OperatorCommand::Velocity {
                 vx_mps,
                 vz_mps,

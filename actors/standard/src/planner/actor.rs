@@ -16,6 +16,13 @@
 //! ([`PEER_GRID_CHANGES`]), and their plans ([`PEER_PLAN`]) feed it, and its
 //! rounds score the frontier reward over the route distance to the remembered
 //! frontiers (beyond the window), avoiding those peers are heading to.
+//!
+//! With guidance on, the planner also keeps the robot's [`Mission`]
+//! (`[robot.planner.mission]`): once no frontier is left for it (or the base commands
+//! it home, [`MISSION_RETURN`]) it flies home along its memory's route, scoring only
+//! the route distance ([`PlanningProblem::homing`]), and holds there by committing
+//! stopping trajectories. Each change of phase is published on [`MISSION_STATUS`],
+//! which the link carries to the peers and the base station.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
@@ -26,13 +33,15 @@ use serde::{Deserialize, Serialize};
 
 use super::memory_share::{MEMORY_CELLS, MemoryCells};
 use crate::grid::changeset::cell_centres;
-use crate::link::Peer;
+use crate::link::{Peer, SharePolicy, SharedTopic};
 use crate::msgs::{
     GRID_SNAPSHOT, ODOMETRY, PEER_GRID_CHANGES, PEER_KEYFRAME, PEER_PLAN, PLAN, PLAN_CANDIDATES,
     PLAN_DECISION,
 };
 use troupe_algorithms::camera::PinholeIntrinsics;
-use troupe_algorithms::exploration::{GuidanceConfig, GuidanceField, Guide};
+use troupe_algorithms::exploration::{
+    GuidanceConfig, GuidanceField, Guide, Mission, MissionConfig, MissionPhase, MissionStatus,
+};
 use troupe_algorithms::frame::Odometry;
 use troupe_algorithms::grid::GridSnapshot;
 use troupe_algorithms::plan::Plan;
@@ -68,6 +77,9 @@ pub struct PlannerConfig {
     pub lead_s: f64,
     /// Team frontier memory, global guidance and implicit coordination.
     pub guidance: GuidanceConfig,
+    /// How the mission ends: home and hold once nothing is left to explore (needs
+    /// guidance).
+    pub mission: MissionConfig,
 }
 
 impl Default for PlannerConfig {
@@ -78,6 +90,7 @@ impl Default for PlannerConfig {
             knot_step_s: 0.1,
             lead_s: 0.11,
             guidance: GuidanceConfig::default(),
+            mission: MissionConfig::default(),
         }
     }
 }
@@ -97,6 +110,8 @@ pub struct PlanningReport {
     /// this robot (given-up ones and ones no known route reaches left out); `None`
     /// with guidance off.
     pub frontiers: Option<usize>,
+    /// The mission after this round (its phase, and the return so far).
+    pub mission: MissionStatus,
 }
 impl Message for PlanningReport {}
 
@@ -123,6 +138,24 @@ impl Message for RememberedFrontiers {
         std::mem::size_of::<Self>() + 24 * (self.centres_m.len() + self.route_m.len())
     }
 }
+
+/// A robot's mission ([`MissionStatus`]) at each change of phase: shared with the
+/// peers and the base station, store-and-forward at plan priority (three messages a
+/// mission).
+pub const MISSION_STATUS: SharedTopic<MissionStatus> = SharedTopic::new(
+    "mission/status",
+    1,
+    SharePolicy::store_and_forward_in_plan_class(),
+);
+
+/// The base station's command home (`robot<N> return`), as the operator actor
+/// passes it on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReturnCommand;
+impl Message for ReturnCommand {}
+
+/// Where the operator actor passes on the base's command home.
+pub const MISSION_RETURN: Topic<ReturnCommand> = Topic::new("mission/return");
 
 /// Remembered frontiers, one message per planning round.
 pub const REMEMBERED_FRONTIERS: Topic<RememberedFrontiers> = Topic::new("planner/frontiers");
@@ -157,6 +190,11 @@ pub struct PlannerActor<S> {
     deferred: bool,
     round: u64,
     guide: Option<Guide>,
+    mission: Mission,
+    /// The mission's route home is unknown (warned once per return).
+    no_route_home: bool,
+    /// The phase last published on [`MISSION_STATUS`].
+    published_phase: Option<MissionPhase>,
     /// Where the link publishes the peers' memory cells.
     peer_memory: Topic<Peer<MemoryCells>>,
     /// Each peer's world frame in ours, for peers without a frame in common with us.
@@ -191,6 +229,9 @@ impl<S: ActionSelection> PlannerActor<S> {
             deferred: false,
             round: 0,
             guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
+            mission: Mission::new(config.mission),
+            no_route_home: false,
+            published_phase: None,
             peer_memory: MEMORY_CELLS.peer_topic(),
             peer_frames: BTreeMap::new(),
             sent_rounds: VecDeque::new(),
@@ -395,6 +436,75 @@ impl<S: ActionSelection> PlannerActor<S> {
         }
     }
 
+    /// The mission's round: whether a frontier is left for the robot (with guidance
+    /// off, always — only the base's command ends its exploring), the phase it
+    /// gives, and the status on [`MISSION_STATUS`] at the first round and at every
+    /// change of phase.
+    fn advance_mission(
+        &mut self,
+        ctx: &mut Context<'_>,
+        now: Time,
+        here: &nalgebra::Point3<f64>,
+        field: Option<&GuidanceField>,
+    ) -> MissionPhase {
+        let work = match (&self.guide, field) {
+            (Some(guide), Some(field)) => guide.has_work(field, here),
+            _ => true,
+        };
+        let phase = self.mission.update(now, here, work);
+        if self.published_phase != Some(phase) {
+            self.published_phase = Some(phase);
+            let status = self.mission.status();
+            if phase != MissionPhase::Exploring {
+                tracing::info!(
+                    robot = ctx.robot_name(),
+                    time = %now,
+                    phase = phase.as_str(),
+                    end = ?status.end,
+                    home = ?status.home_m,
+                    return_distance_m = status.return_distance_m,
+                    "mission: {}",
+                    match phase {
+                        MissionPhase::Returning => "exploring ended, flying home",
+                        _ => "home, holding",
+                    }
+                );
+            }
+            ctx.publish(&MISSION_STATUS.topic(), status);
+        }
+        phase
+    }
+
+    /// While returning: the route distance home over the frontier memory
+    /// ([`GuidanceField::towards`]); `None` when it does not reach the robot (no
+    /// guidance, or no known route: the robot holds where it is, warned once, and
+    /// tries again each round).
+    fn home_field(
+        &mut self,
+        ctx: &Context<'_>,
+        phase: MissionPhase,
+        here: &nalgebra::Point3<f64>,
+    ) -> Option<GuidanceField> {
+        if phase != MissionPhase::Returning {
+            return None;
+        }
+        let field = self
+            .guide
+            .as_ref()
+            .zip(self.mission.home_m())
+            .map(|(guide, home)| GuidanceField::towards(guide.memory(), &home))
+            .filter(|f| f.distance_m(here).is_finite());
+        if field.is_none() && !std::mem::replace(&mut self.no_route_home, true) {
+            tracing::warn!(
+                robot = ctx.robot_name(),
+                home = ?self.mission.home_m().map(|p| [p.x, p.y, p.z]),
+                "mission: no known route home; holding here"
+            );
+        }
+        self.no_route_home &= field.is_none();
+        field
+    }
+
     fn plan(&mut self, ctx: &mut Context<'_>) {
         let (Some(snapshot), Some(odometry)) = (self.snapshot.clone(), self.odometry.clone())
         else {
@@ -406,18 +516,36 @@ impl<S: ActionSelection> PlannerActor<S> {
         let here = nalgebra::Point3::from(root.position_m());
         let own = ctx.robot();
         let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
-        self.publish_memory(ctx, now, &here, field.as_ref());
+        let phase = self.advance_mission(ctx, now, &here, field.as_ref());
+        let home_field = self.home_field(ctx, phase, &here);
+        self.publish_memory(ctx, now, &here, home_field.as_ref().or(field.as_ref()));
         let round = &self.config.round;
         // Under simulated time a search stops on work done, never on the wall clock.
         let mut problem =
             PlanningProblem::new(round, &snapshot, &self.camera).under(ctx.time_source());
-        let mut candidates = problem.children(&root);
-        if let (Some(guide), Some(field)) = (&self.guide, &field)
-            && guide.should_guide(field, &here, &candidates, snapshot.frontier_distance(&here))
-        {
-            problem = problem.guided(field);
-            candidates = problem.rescored(&root, candidates);
-        }
+        let candidates = match (phase, &home_field) {
+            (MissionPhase::Exploring, _) => {
+                let mut candidates = problem.children(&root);
+                if let (Some(guide), Some(field)) = (&self.guide, &field)
+                    && guide.should_guide(
+                        field,
+                        &here,
+                        &candidates,
+                        snapshot.frontier_distance(&here),
+                    )
+                {
+                    problem = problem.guided(field);
+                    candidates = problem.rescored(&root, candidates);
+                }
+                candidates
+            }
+            (MissionPhase::Returning, Some(home)) => {
+                problem = problem.homing(home);
+                problem.children(&root)
+            }
+            // Home, or no known route there: hold (the stopping trajectory).
+            _ => Vec::new(),
+        };
         let guided = problem.is_guided();
         let choice = self
             .selection
@@ -429,6 +557,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             chosen_reward: choice.and_then(|i| candidates.get(i)).map(|c| c.reward),
             guided,
             frontiers: field.as_ref().map(GuidanceField::frontier_count),
+            mission: self.mission.status(),
         };
         if self.deferred {
             ctx.publish(&PLANNING_REPORT, report);
@@ -485,6 +614,8 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
             MEMORY_CELLS.share(ctx);
             ctx.subscribe(&self.peer_memory, QueuePolicy::fifo(32));
         }
+        MISSION_STATUS.share(ctx);
+        ctx.subscribe(&MISSION_RETURN, QueuePolicy::LATEST);
         if self.guide.is_some() {
             ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
             ctx.subscribe(&PEER_PLAN, QueuePolicy::fifo(16));
@@ -556,6 +687,8 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                     self.committed = Some(Committed::clone(reference));
                 } else if let Some(decision) = m.get(&PLAN_DECISION) {
                     self.decided(decision, ctx.now(), ctx);
+                } else if m.get(&MISSION_RETURN).is_some() {
+                    self.mission.command_return(ctx.now());
                 }
                 // Stored for the next round (the frontier memory's update included):
                 // the modelled planning latency is charged to rounds only.

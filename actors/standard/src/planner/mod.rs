@@ -12,8 +12,8 @@ mod memory_share;
 mod teleop_actor;
 
 pub use actor::{
-    PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport, REMEMBERED_FRONTIERS,
-    RememberedFrontiers,
+    MISSION_RETURN, MISSION_STATUS, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
+    REMEMBERED_FRONTIERS, RememberedFrontiers, ReturnCommand,
 };
 pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError};
 pub use teleop_actor::{

@@ -1,0 +1,337 @@
+//! How a robot's mission ends: it explores while a frontier is left for it, then flies
+//! home along its memory's route and holds there (issue 43; the thesis' missions end on
+//! a timer, §8.2.7).
+//!
+//! [`Mission`] is the state machine one planner keeps: [`MissionPhase::Exploring`]
+//! until no frontier it has not already given up once is left (for
+//! [`MissionConfig::finish_after_s`]) or the base station commands it home, then
+//! [`MissionPhase::Returning`] (the planner steers along the route distance to home,
+//! [`GuidanceField::towards`](super::GuidanceField::towards)), then
+//! [`MissionPhase::Home`] within [`MissionConfig::home_radius_m`] of home, where the
+//! planner commits only stopping trajectories: the robot hovers, its link stays up.
+
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+use troupe_core::{ConfigError, Message, Time};
+
+/// Where a robot is in its mission.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MissionPhase {
+    /// Flying to frontiers.
+    #[default]
+    Exploring,
+    /// Exploring has ended: flying home.
+    Returning,
+    /// Home: holding.
+    Home,
+}
+
+impl MissionPhase {
+    /// The phase's name, as reports write it.
+    #[must_use]
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MissionPhase::Exploring => "exploring",
+            MissionPhase::Returning => "returning",
+            MissionPhase::Home => "home",
+        }
+    }
+}
+
+/// Why exploring ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MissionEnd {
+    /// No frontier was left for the robot to explore.
+    Explored,
+    /// The base station commanded it home.
+    Commanded,
+}
+
+/// Settings of the mission's end (`[robot.planner.mission]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MissionConfig {
+    /// End exploring when nothing is left to explore, fly home and hold. `false`: the
+    /// robot explores (and wanders once nothing is left) until the run ends; a
+    /// command from the base still sends it home.
+    pub return_home: bool,
+    /// Exploring ends once no frontier has been left for this long, seconds: a
+    /// frontier seen for a moment (a window rebuilt from sparse keyframe samples)
+    /// does not restart it, and a short gap between openings does not end it.
+    pub finish_after_s: f64,
+    /// Home, world frame, metres; absent: where the robot was at its first planning
+    /// round (its start).
+    pub home_m: Option<[f64; 3]>,
+    /// Home is reached within this distance of it, metres.
+    pub home_radius_m: f64,
+}
+
+impl Default for MissionConfig {
+    fn default() -> Self {
+        MissionConfig {
+            return_home: true,
+            finish_after_s: 10.0,
+            home_m: None,
+            home_radius_m: 1.0,
+        }
+    }
+}
+
+impl MissionConfig {
+    /// Checks the numbers; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        ConfigError::non_negative("finish_after_s", self.finish_after_s)?;
+        ConfigError::positive("home_radius_m", self.home_radius_m)?;
+        if let Some(home) = self.home_m
+            && !home.iter().all(|v| v.is_finite())
+        {
+            return Err(ConfigError::new(
+                "home_m",
+                "must be three finite numbers",
+                format!("{home:?}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What a robot tells its team and its reports of its mission.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MissionStatus {
+    /// The phase now.
+    pub phase: MissionPhase,
+    /// When exploring ended, seconds of the robot's run.
+    pub ended_s: Option<f64>,
+    /// Why it ended.
+    pub end: Option<MissionEnd>,
+    /// When the robot reached home, seconds of the robot's run.
+    pub home_s: Option<f64>,
+    /// From the end of exploring to home, seconds.
+    pub return_s: Option<f64>,
+    /// Path flown from the end of exploring to home (so far, while returning), metres.
+    pub return_distance_m: f64,
+    /// Home, world frame, metres (`None` before the first round).
+    pub home_m: Option<[f64; 3]>,
+}
+
+impl Message for MissionStatus {}
+
+/// One robot's mission: its phase, its home and the times and distance of its return.
+#[derive(Clone, Debug)]
+pub struct Mission {
+    config: MissionConfig,
+    phase: MissionPhase,
+    home_m: Option<Point3<f64>>,
+    /// A frontier was left at some round: exploring may end only after one was.
+    had_work: bool,
+    /// Since when no frontier has been left.
+    idle_since: Option<Time>,
+    ended: Option<(Time, MissionEnd)>,
+    home_at: Option<Time>,
+    last_position_m: Option<Point3<f64>>,
+    return_distance_m: f64,
+}
+
+impl Mission {
+    /// A mission that has not begun: home is fixed at the first [`Self::update`].
+    #[must_use]
+    pub fn new(config: MissionConfig) -> Self {
+        Mission {
+            config,
+            phase: MissionPhase::Exploring,
+            home_m: config.home_m.map(Point3::from),
+            had_work: false,
+            idle_since: None,
+            ended: None,
+            home_at: None,
+            last_position_m: None,
+            return_distance_m: 0.0,
+        }
+    }
+
+    /// The phase now.
+    #[must_use]
+    pub fn phase(&self) -> MissionPhase {
+        self.phase
+    }
+
+    /// Home (`None` before the first update when the config gives none).
+    #[must_use]
+    pub fn home_m(&self) -> Option<Point3<f64>> {
+        self.home_m
+    }
+
+    /// One planning round with the robot at `position_m` (non-finite positions are
+    /// ignored) and `work`: whether a frontier is left for it to explore. Returns the
+    /// phase for this round.
+    pub fn update(&mut self, now: Time, position_m: &Point3<f64>, work: bool) -> MissionPhase {
+        if !position_m.coords.iter().all(|v| v.is_finite()) {
+            return self.phase;
+        }
+        let home_m = *self.home_m.get_or_insert(*position_m);
+        if self.phase == MissionPhase::Returning
+            && let Some(last) = self.last_position_m
+        {
+            self.return_distance_m += (position_m - last).norm();
+        }
+        self.last_position_m = Some(*position_m);
+        match self.phase {
+            MissionPhase::Exploring if work => {
+                self.had_work = true;
+                self.idle_since = None;
+            }
+            MissionPhase::Exploring if self.had_work && self.config.return_home => {
+                let since = *self.idle_since.get_or_insert(now);
+                if now.saturating_since(since).as_secs_f64() >= self.config.finish_after_s {
+                    self.end(now, MissionEnd::Explored);
+                }
+            }
+            MissionPhase::Exploring | MissionPhase::Home => {}
+            MissionPhase::Returning => {
+                if (position_m - home_m).norm() <= self.config.home_radius_m {
+                    self.phase = MissionPhase::Home;
+                    self.home_at = Some(now);
+                }
+            }
+        }
+        self.phase
+    }
+
+    /// The base station commands the robot home: exploring ends now (no change once
+    /// it has ended).
+    pub fn command_return(&mut self, now: Time) {
+        if self.phase == MissionPhase::Exploring {
+            self.end(now, MissionEnd::Commanded);
+        }
+    }
+
+    fn end(&mut self, now: Time, why: MissionEnd) {
+        self.phase = MissionPhase::Returning;
+        self.ended = Some((now, why));
+    }
+
+    /// The mission as reports and peers see it.
+    #[must_use]
+    pub fn status(&self) -> MissionStatus {
+        let span_s = |from: Time, to: Time| to.saturating_since(from).as_secs_f64();
+        MissionStatus {
+            phase: self.phase,
+            ended_s: self.ended.map(|(t, _)| t.as_secs_f64()),
+            end: self.ended.map(|(_, why)| why),
+            home_s: self.home_at.map(Time::as_secs_f64),
+            return_s: self
+                .ended
+                .zip(self.home_at)
+                .map(|((ended, _), home)| span_s(ended, home)),
+            return_distance_m: self.return_distance_m,
+            home_m: self.home_m.map(|p| [p.x, p.y, p.z]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(s: f64) -> Time {
+        Time::from_secs_f64(s)
+    }
+
+    #[test]
+    fn exploring_ends_after_the_idle_time_and_the_robot_is_home_within_the_radius() {
+        let mut m = Mission::new(MissionConfig::default());
+        let start = Point3::new(1.0, 2.0, 0.5);
+        // No frontier before any was seen: the start, not the end.
+        for s in 0..20 {
+            assert_eq!(
+                m.update(at(f64::from(s)), &start, false),
+                MissionPhase::Exploring
+            );
+        }
+        let far = Point3::new(21.0, 2.0, 0.5);
+        m.update(at(20.0), &far, true);
+        // 9 s without a frontier, then one for a round: still exploring.
+        for s in 21..=30 {
+            assert_eq!(
+                m.update(at(f64::from(s)), &far, false),
+                MissionPhase::Exploring
+            );
+        }
+        m.update(at(30.5), &far, true);
+        for s in 31..41 {
+            assert_eq!(
+                m.update(at(f64::from(s)), &far, false),
+                MissionPhase::Exploring
+            );
+        }
+        assert_eq!(m.update(at(41.0), &far, false), MissionPhase::Returning);
+        // Frontiers seen on the way home change nothing.
+        let halfway = Point3::new(11.0, 2.0, 0.5);
+        assert_eq!(m.update(at(50.0), &halfway, true), MissionPhase::Returning);
+        let near = Point3::new(1.9, 2.0, 0.5);
+        assert_eq!(m.update(at(60.0), &near, true), MissionPhase::Home);
+        assert_eq!(m.update(at(70.0), &far, true), MissionPhase::Home);
+        let status = m.status();
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
+        assert!(close(status.ended_s, 41.0));
+        assert_eq!(status.end, Some(MissionEnd::Explored));
+        assert!(close(status.home_s, 60.0));
+        assert!(close(status.return_s, 19.0));
+        assert_eq!(status.home_m, Some([1.0, 2.0, 0.5]));
+        // 10 m to halfway, 9.1 m to home; what is flown after home is not the return's.
+        assert!((status.return_distance_m - 19.1).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_command_sends_the_robot_home_and_return_home_off_keeps_it_exploring() {
+        let config = MissionConfig {
+            return_home: false,
+            home_m: Some([0.0, 0.0, 1.0]),
+            ..MissionConfig::default()
+        };
+        let mut m = Mission::new(config);
+        let p = Point3::new(5.0, 0.0, 1.0);
+        m.update(at(0.0), &p, true);
+        for s in 1..100 {
+            assert_eq!(
+                m.update(at(f64::from(s)), &p, false),
+                MissionPhase::Exploring
+            );
+        }
+        m.command_return(at(100.0));
+        assert_eq!(m.phase(), MissionPhase::Returning);
+        assert_eq!(m.status().end, Some(MissionEnd::Commanded));
+        m.command_return(at(101.0));
+        assert!((m.status().ended_s.unwrap_or(0.0) - 100.0).abs() < 1e-9);
+        assert_eq!(
+            m.update(at(110.0), &Point3::new(0.5, 0.0, 1.0), false),
+            MissionPhase::Home
+        );
+        // A non-finite pose changes nothing.
+        let nan = Point3::new(f64::NAN, 0.0, 0.0);
+        assert_eq!(m.update(at(111.0), &nan, true), MissionPhase::Home);
+        assert!(m.status().return_distance_m.is_finite());
+    }
+
+    #[test]
+    fn bad_settings_name_their_key() {
+        let bad = MissionConfig {
+            home_radius_m: 0.0,
+            ..MissionConfig::default()
+        };
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("home_radius_m")
+        );
+        let bad = MissionConfig {
+            home_m: Some([0.0, f64::NAN, 0.0]),
+            ..MissionConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("home_m"));
+        assert!(MissionConfig::default().validate().is_ok());
+    }
+}
