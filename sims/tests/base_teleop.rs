@@ -3,7 +3,8 @@
 //! standard input: the command crosses the link (shared topic `base/command`), the
 //! robot's collision actor commits only stopping trajectories and the robot comes to
 //! rest (the base's status lines show its odometry speed); `robot0 resume` and it
-//! plans and moves again.
+//! plans and moves again; `robot0 return` and it ends its exploring and flies home (the
+//! status lines show the phase the robot reports over the link).
 
 mod common;
 
@@ -43,8 +44,15 @@ fn speed(line: &str) -> Option<f64> {
         .ok()
 }
 
+/// The mission phase in a base status line of robot 0, if it is one.
+fn phase(line: &str) -> Option<&str> {
+    line.strip_prefix("robot0 keyframes=")?
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("phase="))
+}
+
 #[test]
-fn the_base_holds_and_resumes_a_robot_over_the_link() {
+fn the_base_holds_resumes_and_calls_home_a_robot_over_the_link() {
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::write(
         dir.path().join("team.toml"),
@@ -119,6 +127,9 @@ fn the_base_holds_and_resumes_a_robot_over_the_link() {
     writeln!(stdin, "robot0 resume").expect("send resume");
     let resumed_at = Instant::now();
     let moved_again = read(resumed_at + Duration::from_secs(20), &moving);
+    writeln!(stdin, "robot0 return").expect("send return");
+    let returned_at = Instant::now();
+    read(returned_at + Duration::from_secs(5), &|_| false);
     drop(stdin);
     terminate(&mut robot, "troupe robot");
     terminate(&mut base, "troupe base");
@@ -142,12 +153,31 @@ fn the_base_holds_and_resumes_a_robot_over_the_link() {
         "moving while held: {text:?}"
     );
     assert!(moved_again, "robot 0 did not move after resume: {text:?}");
-    // Both commands crossed the link and robot 0 acknowledged them.
+    // Exploring until the command home; then returning (or home already).
+    let phases = |from: Instant, to: Instant| -> Vec<&str> {
+        seen.iter()
+            .filter(|(at, _)| (from..to).contains(at))
+            .filter_map(|(_, l)| phase(l))
+            .collect()
+    };
+    let before = phases(held_at, returned_at);
+    assert!(
+        !before.is_empty() && before.iter().all(|p| *p == "exploring"),
+        "{text:?}"
+    );
+    let after = phases(returned_at + Duration::from_secs(3), Instant::now());
+    assert!(
+        !after.is_empty() && after.iter().all(|p| ["returning", "home"].contains(p)),
+        "{text:?}"
+    );
+    // The three commands crossed the link and robot 0 acknowledged them.
     let summary: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("station/summary.json")).expect("summary"),
     )
     .expect("json");
     let lane = &summary["link"]["shared"]["base/command"]["sent"];
-    assert_eq!(lane["offered_messages"].as_u64(), Some(2), "{summary}");
-    assert_eq!(lane["acknowledged_messages"].as_u64(), Some(2), "{summary}");
+    assert_eq!(lane["offered_messages"].as_u64(), Some(3), "{summary}");
+    assert_eq!(lane["acknowledged_messages"].as_u64(), Some(3), "{summary}");
+    let mission = &summary["robots"]["0"]["mission"];
+    assert_eq!(mission["end"], "commanded", "{summary}");
 }

@@ -657,9 +657,11 @@ fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
     let (near, far) = (Point3::new(2.0, 0.0, 0.0), Point3::new(10.0, 0.0, 0.0));
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
     let frontiers = guide.memory().frontiers().count();
-    // Hovering beside it: given up (the rule of the test above) at about 4 s.
+    // Hovering beside it: given up (the rule of the test above) at about 4 s; until
+    // then it is work for the robot's mission.
     for s in 0..10 {
-        guide.field((RobotId(0), &near), second(f64::from(s)));
+        let field = guide.field((RobotId(0), &near), second(f64::from(s)));
+        assert_eq!(guide.has_work(&field, &near), s < 4, "at {s} s");
     }
     assert!(!guide.given_up().is_empty());
     let given_up_by_s = 10.0;
@@ -670,6 +672,8 @@ fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
         if back.is_none() && field.frontier_count() == frontiers {
             back = Some(f64::from(s));
         }
+        // Looked for again or not, what was given up does not keep the mission going.
+        assert!(!guide.has_work(&field, &far), "at {s} s");
     }
     let back = back.expect("never looked for again");
     assert!(
@@ -759,4 +763,47 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
         }
     }
     assert_eq!(when, Some(6));
+}
+
+#[test]
+fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
+    // The dead-end tunnel, flown from x = 2 to the blind end: the robot flies back to
+    // where it began along the route distance alone (views are not scored).
+    let world = dead_end_tunnel();
+    let mut guide = Guide::new(GuidanceConfig::default());
+    let home = Point3::new(2.0, 0.3, 0.1);
+    for x in [2.0, 12.0, 22.0, 32.0, 37.0] {
+        let here = Point3::new(x, 0.0, 0.0);
+        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+        guide.field((RobotId(0), &here), Time::ZERO);
+    }
+    let field = GuidanceField::towards(guide.memory(), &home);
+    assert_eq!(field.distance_m(&home), 0.0, "least at home itself");
+    let config = RoundConfig::default();
+    let camera = forward_camera();
+    let mut state = FlatState::at_rest(Vector3::new(37.0, 0.0, 0.0), 0.0);
+    let mut closest_m = f64::INFINITY;
+    for _ in 0..60 {
+        let here = Point3::from(state.position_m());
+        let snapshot = window(here, [20.0, 20.0, 4.0], &world);
+        let problem = PlanningProblem::new(&config, &snapshot, &camera).homing(&field);
+        let candidates = problem.children(&state);
+        assert!(candidates.iter().all(|c| c.information == 0.0));
+        let Some(best) = candidates.iter().max_by(|a, b| {
+            a.reward
+                .total_cmp(&b.reward)
+                .then(b.action_index.cmp(&a.action_index))
+        }) else {
+            break;
+        };
+        state = best
+            .primitive
+            .state_at(config.planning_period_s.min(best.primitive.duration_s()));
+        closest_m = closest_m.min((Point3::from(state.position_m()) - home).norm());
+    }
+    assert!(closest_m < 1.0, "came within {closest_m} m of home");
+    // A home in no known passable cell gives an empty field.
+    let nowhere = GuidanceField::towards(guide.memory(), &Point3::new(0.0, 50.0, 0.0));
+    assert_eq!(nowhere.frontier_count(), 0);
+    assert!(!nowhere.distance_m(&Point3::new(20.0, 0.0, 0.0)).is_finite());
 }

@@ -275,11 +275,12 @@ mod tests {
             yaw_rate_rad_s: 0.1,
         };
         let commands = vec![
-            c(Some(1), 10, OperatorCommand::Hold), // another robot's
-            c(Some(0), 11, OperatorCommand::Hold), // held
-            c(None, 9, OperatorCommand::Resume),   // older: ignored
-            c(Some(0), 12, velocity),              // teleop, still held
-            c(None, 13, OperatorCommand::Resume),  // resumed
+            c(Some(1), 10, OperatorCommand::Hold),   // another robot's
+            c(Some(0), 11, OperatorCommand::Hold),   // held
+            c(None, 9, OperatorCommand::Resume),     // older: ignored
+            c(Some(0), 12, velocity),                // teleop, still held
+            c(None, 13, OperatorCommand::Resume),    // resumed
+            c(Some(0), 14, OperatorCommand::Return), // home
         ];
         let robot = RobotSpec::new("r0")
             .with(ActorSpec::new("deliver", move || Deliver(commands.clone())))
@@ -295,6 +296,8 @@ mod tests {
                 tap.lock()
                     .unwrap()
                     .push((t, format!("teleop vx={}", c.vx_mps)));
+            } else if p.get(&MISSION_RETURN).is_some() {
+                tap.lock().unwrap().push((t, "return".into()));
             }
         });
         exec.run_until(Time::from_secs_f64(4.2));
@@ -317,8 +320,10 @@ mod tests {
             held.contains(&2.0) && held.iter().all(|&t| t < 2.5),
             "{log:?}"
         );
-        assert_eq!(at("held=false"), [2.5], "{log:?}");
-        assert!(log.iter().all(|(t, _)| *t <= 2.5), "{log:?}");
+        assert_eq!(at("held=false"), [2.5, 3.0], "{log:?}");
+        // The command home at 3.0 s goes to the planner.
+        assert_eq!(at("return"), [3.0], "{log:?}");
+        assert!(log.iter().all(|(t, _)| *t <= 3.0), "{log:?}");
     }
 
     #[test]
@@ -347,6 +352,8 @@ mod tests {
                 yaw_rate_rad_s: 0.2
             }
         );
+        let c = BaseCommand::parse("all return", 10).unwrap().unwrap();
+        assert_eq!((c.robot, c.command), (None, OperatorCommand::Return));
         assert_eq!(BaseCommand::parse("   ", 1), Ok(None));
         for (line, error) in [
             ("robotX hold", "`robotX` is not a robot"),
