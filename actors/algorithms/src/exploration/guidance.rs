@@ -132,31 +132,46 @@ fn weigh_regions(
     weighed.into_iter().collect()
 }
 
-/// Route distance (metres) from `from` to every passable memory cell it reaches, from
-/// the cell holding `from` (or its passable neighbours when that cell is not passable).
-fn routes_from(memory: &FrontierMemory, from: &Point3<f64>) -> Reached {
+/// Route distance (metres) from `from` to every cell that `passable` admits and that it
+/// reaches, from the cell holding `from` (or its passable neighbours when that cell is
+/// not passable).
+fn routes_from(
+    memory: &FrontierMemory,
+    from: &Point3<f64>,
+    passable: &dyn Fn(CellKey) -> bool,
+) -> Reached {
     let Some(start) = memory.key_of(from) else {
         return Reached::default();
     };
     let seeds = std::iter::once(start)
         .chain(neighbours(start).map(|(n, _)| n))
-        .filter(|n| memory.record(*n).passable)
+        .filter(|n| passable(*n))
         .map(|n| Entry {
             cost_m: (memory.centre(n) - from).norm(),
             key: n,
             target: start,
         })
         .collect();
-    spread(memory, seeds)
+    spread(memory, seeds, passable)
+}
+
+/// Whether a cell of `memory` is passable.
+fn passable_in(memory: &FrontierMemory) -> impl Fn(CellKey) -> bool + '_ {
+    |key| memory.record(key).passable
 }
 
 /// Each reached cell's least route cost, metres, and the target of the seed it came from.
 type Reached = HashMap<CellKey, (f64, CellKey), Fixed>;
 
-/// Dijkstra over the 26-connected passable cells of `memory` from the `seeds`.
+/// Dijkstra over the 26-connected cells of `memory` that `passable` admits, from the
+/// `seeds`.
 ///
 /// Time: `O(c log c)` for `c` passable cells; memory: one entry per reached cell.
-fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
+fn spread(
+    memory: &FrontierMemory,
+    mut heap: BinaryHeap<Entry>,
+    passable: &dyn Fn(CellKey) -> bool,
+) -> Reached {
     let cell_m = memory.cell_m();
     let mut reached = Reached::default();
     while let Some(Entry {
@@ -170,7 +185,7 @@ fn spread(memory: &FrontierMemory, mut heap: BinaryHeap<Entry>) -> Reached {
         }
         reached.insert(key, (cost_m, target));
         for (n, step) in neighbours(key) {
-            if !reached.contains_key(&n) && memory.record(n).passable {
+            if !reached.contains_key(&n) && passable(n) {
                 heap.push(Entry {
                     cost_m: cost_m + step * cell_m,
                     key: n,
@@ -211,7 +226,7 @@ fn claimed_by_assignment(
     // The robots' Dijkstras are independent: on the rayon pool, in robot order.
     let routes: Vec<Reached> = robots
         .par_iter()
-        .map(|(_, position_m)| routes_from(memory, position_m))
+        .map(|(_, position_m)| routes_from(memory, position_m, &passable_in(memory)))
         .collect();
     let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
     for (&(id, _), routes) in robots.iter().zip(&routes) {
@@ -377,7 +392,7 @@ impl GuidanceField {
             }
             frontiers += usize::from(seeded);
         }
-        let distance_m = spread(memory, heap);
+        let distance_m = spread(memory, heap, &passable_in(memory));
         GuidanceField {
             cell_m,
             key_scale: 1.0 / cell_m,
@@ -388,9 +403,11 @@ impl GuidanceField {
         }
     }
 
-    /// The route distance to the point `goal_m` over `memory`'s passable cells, in
-    /// place of a frontier's (a robot flying home, [`Mission`](super::Mission)):
-    /// Dijkstra from the goal's cell (or its passable neighbours), and the straight
+    /// The route distance to the point `goal_m` over `memory`'s passable cells and the
+    /// robot's trail ([`FrontierMemory::mark_trail`]: the way it came is always a way
+    /// back), in place of a frontier's (a robot flying home,
+    /// [`Mission`](super::Mission)): Dijkstra from the goal's cell (or its passable
+    /// neighbours), and the straight
     /// distance within the goal's cell and its neighbours, so that the field's least
     /// value is at the goal itself. Measured at the pose, with no look-ahead (a look-ahead
     /// would hold a robot facing its goal one look-ahead short of it). Empty (∞
@@ -398,7 +415,8 @@ impl GuidanceField {
     #[must_use]
     pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>) -> Self {
         let cell_m = memory.cell_m();
-        let distance_m = routes_from(memory, goal_m);
+        let passable = |key| memory.on_trail(key) || memory.record(key).passable;
+        let distance_m = routes_from(memory, goal_m, &passable);
         GuidanceField {
             cell_m,
             key_scale: 1.0 / cell_m,

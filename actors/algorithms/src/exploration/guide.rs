@@ -35,6 +35,8 @@ pub struct Guide {
     /// Progress towards the goal being tracked: its centre, the least route distance
     /// to it so far, metres, and when the route last got [`PROGRESS_M`] shorter.
     progress: Option<(Point3<f64>, f64, Time)>,
+    /// Where the robot was at the last [`Self::field`].
+    last_position_m: Option<Point3<f64>>,
 }
 
 /// How much shorter the route to a goal must get to count as progress, metres.
@@ -68,6 +70,7 @@ impl Guide {
             last_field: None,
             last_target: None,
             progress: None,
+            last_position_m: None,
         }
     }
 
@@ -177,11 +180,14 @@ impl Guide {
         &self.given_up
     }
 
-    /// Marks the robot's own cell passable, counts the time since the last call
+    /// Marks the robot's own cell passable and the way from its last position on its
+    /// trail ([`FrontierMemory::mark_trail`]), counts the time since the last call
     /// towards the frontiers near `robot_m` (giving up those watched too long) and
     /// builds the field for robot `own` there at `now`, with the peers' claims.
     pub fn field(&mut self, (own, robot_m): (RobotId, &Point3<f64>), now: Time) -> GuidanceField {
         self.memory.mark_body(robot_m);
+        let from = self.last_position_m.replace(*robot_m).unwrap_or(*robot_m);
+        self.memory.mark_trail(&from, robot_m);
         self.watch(robot_m, now);
         let field = GuidanceField::build(
             &self.memory,

@@ -87,6 +87,11 @@ pub struct FrontierMemory {
     /// kept only when [`Self::tracking_changes`].
     changed: BTreeSet<CellKey>,
     track_changes: bool,
+    /// Cells this robot's body has passed through, joined without gaps
+    /// ([`Self::mark_trail`]): the way it came, passable whatever later windows say of
+    /// them (a window's clearance decides `passable` anew at every look, and may break
+    /// the chain of passable cells behind a robot). At most `max_cells` of them.
+    trail: BTreeSet<CellKey>,
 }
 
 /// Per-cell tallies of the fine cells of a window.
@@ -113,6 +118,7 @@ impl FrontierMemory {
             dropped: 0,
             changed: BTreeSet::new(),
             track_changes: false,
+            trail: BTreeSet::new(),
         }
     }
 
@@ -461,6 +467,31 @@ impl FrontierMemory {
             self.store(key, old, record, &mut update);
         }
         update
+    }
+
+    /// Adds the cells the straight segment `from`–`to` of this robot's own flight
+    /// crosses to its trail (sampled every quarter cell; non-finite points and cells
+    /// beyond `max_cells` are left out).
+    pub fn mark_trail(&mut self, from: &Point3<f64>, to: &Point3<f64>) {
+        let length_m = (to - from).norm();
+        if !length_m.is_finite() {
+            return;
+        }
+        let steps = (length_m / (self.cell_m / 4.0)).ceil().max(1.0) as usize;
+        for s in 0..=steps {
+            let p = from + (to - from) * (s as f64 / steps as f64);
+            if let Some(key) = self.key_of(&p)
+                && self.trail.len() < self.max_cells
+            {
+                self.trail.insert(key);
+            }
+        }
+    }
+
+    /// Whether this robot's body passed through a cell ([`Self::mark_trail`]).
+    #[must_use]
+    pub fn on_trail(&self, key: CellKey) -> bool {
+        self.trail.contains(&key)
     }
 
     /// Marks the cell of a body position passable and seen (a robot is there: own or a

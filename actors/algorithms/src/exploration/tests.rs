@@ -807,3 +807,39 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     assert_eq!(nowhere.frontier_count(), 0);
     assert!(!nowhere.distance_m(&Point3::new(20.0, 0.0, 0.0)).is_finite());
 }
+
+#[test]
+fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
+    // Two ends of a flight, passable where the body was, nothing known between them
+    // (later windows found no clearance there): no route home without the trail.
+    let mut memory = FrontierMemory::new(1.0, 1000);
+    let (home, there) = (Point3::new(0.5, 0.5, 0.5), Point3::new(10.2, 3.5, 0.5));
+    memory.mark_body(&home);
+    memory.mark_body(&there);
+    assert!(
+        !GuidanceField::towards(&memory, &home)
+            .distance_m(&there)
+            .is_finite()
+    );
+    // The trail joins the rounds' positions without gaps, even 1.5 cells apart.
+    let mut last = home;
+    for k in 1..=8 {
+        let p = home + (there - home) * (f64::from(k) / 8.0);
+        memory.mark_trail(&last, &p);
+        last = p;
+    }
+    let field = GuidanceField::towards(&memory, &home);
+    let route_m = field.distance_m(&there);
+    let straight_m = (there - home).norm();
+    assert!(
+        route_m >= straight_m - 1e-9 && route_m < 1.3 * straight_m,
+        "{route_m} m along the trail, {straight_m} m straight"
+    );
+    // The trail is this robot's alone: the frontier field does not use it.
+    assert!(memory.on_trail(memory.key_of(&Point3::new(5.0, 2.0, 0.5)).unwrap()));
+    assert!(
+        !memory
+            .record(memory.key_of(&Point3::new(5.0, 2.0, 0.5)).unwrap())
+            .passable
+    );
+}
