@@ -60,6 +60,8 @@ use troupe_actors::artifacts::{ARTIFACT_LIST, Artifact};
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{PEER_KEYFRAME, PEER_ODOMETRY, PEER_PLAN};
+use troupe_actors::planner::PLANNING_REPORT;
+use troupe_algorithms::exploration::MissionStatus;
 use troupe_comms::zenoh::{ZenohConfig, ZenohStats};
 use troupe_core::{ConfigError, RobotId};
 use troupe_record::{Compression, RecordOptions, RecordingStats, check_rate_hz, period_of_hz};
@@ -280,6 +282,9 @@ pub struct ProcessSummary {
     /// The collision actor's last counters (`stopped`: rounds that committed the
     /// stopping trajectory).
     pub collision: Option<CollisionStatus>,
+    /// The robot's mission after its planner's last round (phase, when exploring ended
+    /// and why, the return; absent without a planner).
+    pub mission: Option<MissionStatus>,
     /// The zenoh session's counters.
     pub zenoh: ZenohStats,
     /// Packets the executor could not hand to the transport.
@@ -402,6 +407,7 @@ pub async fn run(
     harness.track_trajectory();
     let link = harness.latest(LINK_STATUS);
     let collision = harness.latest(COLLISION_STATUS);
+    let planning = harness.latest(PLANNING_REPORT);
     let artifacts = harness.latest(ARTIFACT_LIST);
     let peers = count_peers(&mut harness);
     if process.config.record {
@@ -420,6 +426,7 @@ pub async fn run(
         actors: finished.actors(),
         link: link.take(),
         collision: collision.take(),
+        mission: planning.take().map(|report| report.mission),
         zenoh: finished.zenoh,
         transport_errors: finished.transport_errors,
         trajectory_samples: finished.trajectory.len(),

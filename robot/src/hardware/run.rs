@@ -12,8 +12,10 @@ use serde::Serialize;
 use troupe_actors::collision::{COLLISION_STATUS, CollisionStatus};
 use troupe_actors::link::{LINK_STATUS, LinkStatus};
 use troupe_actors::msgs::{DEPTH_FRAME, KEYFRAME, PLAN};
+use troupe_actors::planner::PLANNING_REPORT;
 use troupe_actors::sensor::FrameSource;
 use troupe_algorithms::camera::PinholeIntrinsics;
+use troupe_algorithms::exploration::MissionStatus;
 use troupe_comms::zenoh::ZenohStats;
 use troupe_core::Time;
 use troupe_record::{RecordOptions, RecordingStats, period_of_hz, schemas};
@@ -49,6 +51,9 @@ pub struct HardwareSummary {
     /// The collision actor's last counters (rounds, stops, rejections by reason —
     /// `rejected_geofence` for candidates leaving the fence — and operator holds).
     pub collision: Option<CollisionStatus>,
+    /// The robot's mission after its planner's last round (phase, when exploring ended
+    /// and why, the return; absent without a planner).
+    pub mission: Option<MissionStatus>,
     /// The team link's last counters.
     pub link: Option<LinkStatus>,
     /// The team link's zenoh counters.
@@ -300,6 +305,7 @@ async fn fly(
     };
     let link = harness.latest(LINK_STATUS);
     let collision = harness.latest(COLLISION_STATUS);
+    let planning = harness.latest(PLANNING_REPORT);
     if robot.file.record {
         let options = RecordOptions {
             depth_period_s: period_of_hz(robot.file.record_depth_hz),
@@ -329,6 +335,7 @@ async fn fly(
         plans: finished.messages(PLAN.name()),
         vehicle: vehicle.as_ref().map(VehicleSummary::from),
         collision: collision.take(),
+        mission: planning.take().map(|report| report.mission),
         link: link.take(),
         zenoh: finished.zenoh.clone(),
         transport_errors: finished.transport_errors,
