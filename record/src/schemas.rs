@@ -259,11 +259,13 @@ pub const MISSION_STATUS: Schema = Schema {
         let seconds = json!({"type": ["number", "null"], "minimum": 0});
         object(json!({
             "phase": {"enum": ["exploring", "returning", "home"]},
+            "idle": {"type": "boolean"},
             "ended_s": seconds,
             "end": {"enum": ["explored", "commanded", null]},
             "home_s": seconds,
             "return_s": seconds,
             "return_distance_m": {"type": "number", "minimum": 0},
+            "home_gap_m": seconds,
             "home_m": {"type": ["array", "null"], "items": number(), "minItems": 3, "maxItems": 3},
         }))
     },

@@ -3,8 +3,9 @@
 //! a timer, §8.2.7).
 //!
 //! [`Mission`] is the state machine one planner keeps: [`MissionPhase::Exploring`]
-//! until no frontier it has not already given up once is left (for
-//! [`MissionConfig::finish_after_s`]) or the base station commands it home, then
+//! until no frontier it has not already given up once has been left for
+//! [`MissionConfig::finish_after_s`] (it is then *idle*) while every peer that reports
+//! its mission is idle or done too, or until the base station commands it home, then
 //! [`MissionPhase::Returning`] (the planner steers along the route distance to home,
 //! [`GuidanceField::towards`](super::GuidanceField::towards)), then
 //! [`MissionPhase::Home`] within [`MissionConfig::home_radius_m`] of home, where the
@@ -66,6 +67,11 @@ pub struct MissionConfig {
     pub home_m: Option<[f64; 3]>,
     /// Home is reached within this distance of it, metres.
     pub home_radius_m: f64,
+    /// A return whose route home has not got 0.5 m shorter for this long ends where
+    /// the robot is (phase home, `home_gap_m` from home): a peer holding at its own
+    /// home in a narrow tunnel, or a route the robot cannot fly, would otherwise keep
+    /// it trying for ever, seconds.
+    pub stalled_after_s: f64,
 }
 
 impl Default for MissionConfig {
@@ -75,6 +81,7 @@ impl Default for MissionConfig {
             finish_after_s: 10.0,
             home_m: None,
             home_radius_m: 1.0,
+            stalled_after_s: 15.0,
         }
     }
 }
@@ -84,6 +91,7 @@ impl MissionConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         ConfigError::non_negative("finish_after_s", self.finish_after_s)?;
         ConfigError::positive("home_radius_m", self.home_radius_m)?;
+        ConfigError::positive("stalled_after_s", self.stalled_after_s)?;
         if let Some(home) = self.home_m
             && !home.iter().all(|v| v.is_finite())
         {
@@ -102,6 +110,9 @@ impl MissionConfig {
 pub struct MissionStatus {
     /// The phase now.
     pub phase: MissionPhase,
+    /// Exploring, but no frontier has been left for the robot for
+    /// [`MissionConfig::finish_after_s`]: it ends once its peers are idle or done too.
+    pub idle: bool,
     /// When exploring ended, seconds of the robot's run.
     pub ended_s: Option<f64>,
     /// Why it ended.
@@ -112,6 +123,9 @@ pub struct MissionStatus {
     pub return_s: Option<f64>,
     /// Path flown from the end of exploring to home (so far, while returning), metres.
     pub return_distance_m: f64,
+    /// How far from home the robot holds, metres (above `home_radius_m` when its return
+    /// stalled; `None` before it holds).
+    pub home_gap_m: Option<f64>,
     /// Home, world frame, metres (`None` before the first round).
     pub home_m: Option<[f64; 3]>,
 }
@@ -128,11 +142,20 @@ pub struct Mission {
     had_work: bool,
     /// Since when no frontier has been left.
     idle_since: Option<Time>,
+    /// No frontier has been left for `finish_after_s`.
+    idle: bool,
     ended: Option<(Time, MissionEnd)>,
     home_at: Option<Time>,
     last_position_m: Option<Point3<f64>>,
     return_distance_m: f64,
+    /// While returning: the shortest route home so far, metres, and when it last got
+    /// [`RETURN_PROGRESS_M`] shorter.
+    return_progress: Option<(f64, Time)>,
+    home_gap_m: Option<f64>,
 }
+
+/// How much shorter the route home must get to count as progress, metres.
+pub const RETURN_PROGRESS_M: f64 = 0.5;
 
 impl Mission {
     /// A mission that has not begun: home is fixed at the first [`Self::update`].
@@ -144,10 +167,13 @@ impl Mission {
             home_m: config.home_m.map(Point3::from),
             had_work: false,
             idle_since: None,
+            idle: false,
             ended: None,
             home_at: None,
             last_position_m: None,
             return_distance_m: 0.0,
+            return_progress: None,
+            home_gap_m: None,
         }
     }
 
@@ -164,9 +190,18 @@ impl Mission {
     }
 
     /// One planning round with the robot at `position_m` (non-finite positions are
-    /// ignored) and `work`: whether a frontier is left for it to explore. Returns the
-    /// phase for this round.
-    pub fn update(&mut self, now: Time, position_m: &Point3<f64>, work: bool) -> MissionPhase {
+    /// ignored); `work`: whether a frontier is left for it to explore; `peers_done`:
+    /// whether every peer that reports its mission is idle or has ended exploring (a
+    /// robot that has nothing left of its own does not end while a peer still
+    /// explores: what that peer finds may be work for it, and its own memory does not
+    /// know the peer's frontiers). Returns the phase for this round.
+    pub fn update(
+        &mut self,
+        now: Time,
+        position_m: &Point3<f64>,
+        work: bool,
+        peers_done: bool,
+    ) -> MissionPhase {
         if !position_m.coords.iter().all(|v| v.is_finite()) {
             return self.phase;
         }
@@ -181,22 +216,50 @@ impl Mission {
             MissionPhase::Exploring if work => {
                 self.had_work = true;
                 self.idle_since = None;
+                self.idle = false;
             }
-            MissionPhase::Exploring if self.had_work && self.config.return_home => {
+            MissionPhase::Exploring if self.had_work => {
                 let since = *self.idle_since.get_or_insert(now);
-                if now.saturating_since(since).as_secs_f64() >= self.config.finish_after_s {
+                self.idle = now.saturating_since(since).as_secs_f64() >= self.config.finish_after_s;
+                if self.idle && peers_done && self.config.return_home {
                     self.end(now, MissionEnd::Explored);
                 }
             }
             MissionPhase::Exploring | MissionPhase::Home => {}
             MissionPhase::Returning => {
-                if (position_m - home_m).norm() <= self.config.home_radius_m {
-                    self.phase = MissionPhase::Home;
-                    self.home_at = Some(now);
+                let gap_m = (position_m - home_m).norm();
+                if gap_m <= self.config.home_radius_m {
+                    self.hold(now, gap_m);
                 }
             }
         }
         self.phase
+    }
+
+    /// While returning, the route distance home from where the robot is this round
+    /// (∞ without a known route): a return whose known route has not got
+    /// [`RETURN_PROGRESS_M`] shorter for [`MissionConfig::stalled_after_s`] ends, and
+    /// the robot holds where it is.
+    pub fn returning(&mut self, now: Time, route_m: f64, position_m: &Point3<f64>) {
+        if self.phase != MissionPhase::Returning || !route_m.is_finite() {
+            // No known route: the robot holds and looks for one; the clock waits.
+            self.return_progress = None;
+            return;
+        }
+        let (best_m, since) = *self.return_progress.get_or_insert((route_m, now));
+        if route_m <= best_m - RETURN_PROGRESS_M {
+            self.return_progress = Some((route_m, now));
+        } else if now.saturating_since(since).as_secs_f64() >= self.config.stalled_after_s
+            && let Some(home_m) = self.home_m
+        {
+            self.hold(now, (position_m - home_m).norm());
+        }
+    }
+
+    fn hold(&mut self, now: Time, gap_m: f64) {
+        self.phase = MissionPhase::Home;
+        self.home_at = Some(now);
+        self.home_gap_m = Some(gap_m);
     }
 
     /// The base station commands the robot home: exploring ends now (no change once
@@ -209,6 +272,7 @@ impl Mission {
 
     fn end(&mut self, now: Time, why: MissionEnd) {
         self.phase = MissionPhase::Returning;
+        self.idle = false;
         self.ended = Some((now, why));
     }
 
@@ -218,6 +282,7 @@ impl Mission {
         let span_s = |from: Time, to: Time| to.saturating_since(from).as_secs_f64();
         MissionStatus {
             phase: self.phase,
+            idle: self.idle,
             ended_s: self.ended.map(|(t, _)| t.as_secs_f64()),
             end: self.ended.map(|(_, why)| why),
             home_s: self.home_at.map(Time::as_secs_f64),
@@ -226,6 +291,7 @@ impl Mission {
                 .zip(self.home_at)
                 .map(|((ended, _), home)| span_s(ended, home)),
             return_distance_m: self.return_distance_m,
+            home_gap_m: self.home_gap_m,
             home_m: self.home_m.map(|p| [p.x, p.y, p.z]),
         }
     }
@@ -246,33 +312,46 @@ mod tests {
         // No frontier before any was seen: the start, not the end.
         for s in 0..20 {
             assert_eq!(
-                m.update(at(f64::from(s)), &start, false),
+                m.update(at(f64::from(s)), &start, false, true),
                 MissionPhase::Exploring
             );
         }
         let far = Point3::new(21.0, 2.0, 0.5);
-        m.update(at(20.0), &far, true);
+        m.update(at(20.0), &far, true, true);
         // 9 s without a frontier, then one for a round: still exploring.
         for s in 21..=30 {
             assert_eq!(
-                m.update(at(f64::from(s)), &far, false),
+                m.update(at(f64::from(s)), &far, false, true),
                 MissionPhase::Exploring
             );
         }
-        m.update(at(30.5), &far, true);
+        m.update(at(30.5), &far, true, true);
         for s in 31..41 {
             assert_eq!(
-                m.update(at(f64::from(s)), &far, false),
+                m.update(at(f64::from(s)), &far, false, true),
                 MissionPhase::Exploring
             );
         }
-        assert_eq!(m.update(at(41.0), &far, false), MissionPhase::Returning);
+        // Idle from 31 s; while a peer still explores, the robot goes on.
+        assert_eq!(
+            m.update(at(41.0), &far, false, false),
+            MissionPhase::Exploring
+        );
+        assert!(m.status().idle);
+        assert_eq!(
+            m.update(at(41.0), &far, false, true),
+            MissionPhase::Returning
+        );
+        assert!(!m.status().idle);
         // Frontiers seen on the way home change nothing.
         let halfway = Point3::new(11.0, 2.0, 0.5);
-        assert_eq!(m.update(at(50.0), &halfway, true), MissionPhase::Returning);
+        assert_eq!(
+            m.update(at(50.0), &halfway, true, true),
+            MissionPhase::Returning
+        );
         let near = Point3::new(1.9, 2.0, 0.5);
-        assert_eq!(m.update(at(60.0), &near, true), MissionPhase::Home);
-        assert_eq!(m.update(at(70.0), &far, true), MissionPhase::Home);
+        assert_eq!(m.update(at(60.0), &near, true, true), MissionPhase::Home);
+        assert_eq!(m.update(at(70.0), &far, true, true), MissionPhase::Home);
         let status = m.status();
         let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
         assert!(close(status.ended_s, 41.0));
@@ -293,10 +372,10 @@ mod tests {
         };
         let mut m = Mission::new(config);
         let p = Point3::new(5.0, 0.0, 1.0);
-        m.update(at(0.0), &p, true);
+        m.update(at(0.0), &p, true, true);
         for s in 1..100 {
             assert_eq!(
-                m.update(at(f64::from(s)), &p, false),
+                m.update(at(f64::from(s)), &p, false, true),
                 MissionPhase::Exploring
             );
         }
@@ -306,12 +385,12 @@ mod tests {
         m.command_return(at(101.0));
         assert!((m.status().ended_s.unwrap_or(0.0) - 100.0).abs() < 1e-9);
         assert_eq!(
-            m.update(at(110.0), &Point3::new(0.5, 0.0, 1.0), false),
+            m.update(at(110.0), &Point3::new(0.5, 0.0, 1.0), false, true),
             MissionPhase::Home
         );
         // A non-finite pose changes nothing.
         let nan = Point3::new(f64::NAN, 0.0, 0.0);
-        assert_eq!(m.update(at(111.0), &nan, true), MissionPhase::Home);
+        assert_eq!(m.update(at(111.0), &nan, true, true), MissionPhase::Home);
         assert!(m.status().return_distance_m.is_finite());
     }
 
@@ -328,10 +407,56 @@ mod tests {
                 .contains("home_radius_m")
         );
         let bad = MissionConfig {
+            stalled_after_s: -1.0,
+            ..MissionConfig::default()
+        };
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("stalled_after_s")
+        );
+        let bad = MissionConfig {
             home_m: Some([0.0, f64::NAN, 0.0]),
             ..MissionConfig::default()
         };
         assert!(bad.validate().unwrap_err().to_string().contains("home_m"));
         assert!(MissionConfig::default().validate().is_ok());
+    }
+
+    #[test]
+    fn a_return_that_stops_getting_nearer_ends_where_the_robot_is() {
+        let mut m = Mission::new(MissionConfig::default());
+        let home = Point3::new(0.0, 0.0, 1.0);
+        m.update(at(0.0), &home, true, true);
+        let blocked = Point3::new(4.0, 0.0, 1.0);
+        m.command_return(at(10.0));
+        // Nearer each round for 5 s, then stuck 4 m out.
+        for s in 10..=15 {
+            let route_m = 9.0 - f64::from(s - 10);
+            m.returning(at(f64::from(s)), route_m, &blocked);
+        }
+        for s in 16..30 {
+            m.returning(at(f64::from(s)), 4.0, &blocked);
+            assert_eq!(
+                m.update(at(f64::from(s)), &blocked, false, true),
+                MissionPhase::Returning
+            );
+        }
+        m.returning(at(30.0), 4.0, &blocked);
+        assert_eq!(m.phase(), MissionPhase::Home);
+        let status = m.status();
+        assert!(
+            (status.home_gap_m.unwrap_or(0.0) - 4.0).abs() < 1e-9,
+            "{status:?}"
+        );
+        // Without a known route the return does not count as stalled: it waits.
+        let mut m = Mission::new(MissionConfig::default());
+        m.update(at(0.0), &home, true, true);
+        m.command_return(at(1.0));
+        for s in 1..100 {
+            m.returning(at(f64::from(s)), f64::INFINITY, &blocked);
+        }
+        assert_eq!(m.phase(), MissionPhase::Returning);
     }
 }

@@ -193,10 +193,14 @@ pub struct PlannerActor<S> {
     mission: Mission,
     /// The mission's route home is unknown (warned once per return).
     no_route_home: bool,
-    /// The phase last published on [`MISSION_STATUS`].
-    published_phase: Option<MissionPhase>,
+    /// The phase and idleness last published on [`MISSION_STATUS`].
+    published_phase: Option<(MissionPhase, bool)>,
+    /// The peers' missions as they last reported them.
+    peer_missions: BTreeMap<RobotId, MissionStatus>,
     /// Where the link publishes the peers' memory cells.
     peer_memory: Topic<Peer<MemoryCells>>,
+    /// Where the link publishes the peers' missions.
+    peer_mission: Topic<Peer<MissionStatus>>,
     /// Each peer's world frame in ours, for peers without a frame in common with us.
     peer_frames: BTreeMap<RobotId, Isometry3<f64>>,
     /// The latest rounds sent to the collision actor and their times.
@@ -232,7 +236,9 @@ impl<S: ActionSelection> PlannerActor<S> {
             mission: Mission::new(config.mission),
             no_route_home: false,
             published_phase: None,
+            peer_missions: BTreeMap::new(),
             peer_memory: MEMORY_CELLS.peer_topic(),
+            peer_mission: MISSION_STATUS.peer_topic(),
             peer_frames: BTreeMap::new(),
             sent_rounds: VecDeque::new(),
             decision_delays_s: VecDeque::new(),
@@ -437,9 +443,9 @@ impl<S: ActionSelection> PlannerActor<S> {
     }
 
     /// The mission's round: whether a frontier is left for the robot (with guidance
-    /// off, always — only the base's command ends its exploring), the phase it
-    /// gives, and the status on [`MISSION_STATUS`] at the first round and at every
-    /// change of phase.
+    /// off, always — only the base's command ends its exploring) and whether its
+    /// peers are idle or done, the phase they give, and the status on
+    /// [`MISSION_STATUS`] at the first round and at every change of phase or idleness.
     fn advance_mission(
         &mut self,
         ctx: &mut Context<'_>,
@@ -451,11 +457,16 @@ impl<S: ActionSelection> PlannerActor<S> {
             (Some(guide), Some(field)) => guide.has_work(field, here),
             _ => true,
         };
-        let phase = self.mission.update(now, here, work);
-        if self.published_phase != Some(phase) {
-            self.published_phase = Some(phase);
-            let status = self.mission.status();
-            if phase != MissionPhase::Exploring {
+        let peers_done = self
+            .peer_missions
+            .values()
+            .all(|m| m.idle || m.phase != MissionPhase::Exploring);
+        let phase = self.mission.update(now, here, work, peers_done);
+        let status = self.mission.status();
+        if self.published_phase != Some((phase, status.idle)) {
+            let changed_phase = self.published_phase.map(|(p, _)| p) != Some(phase);
+            self.published_phase = Some((phase, status.idle));
+            if changed_phase && phase != MissionPhase::Exploring {
                 tracing::info!(
                     robot = ctx.robot_name(),
                     time = %now,
@@ -463,6 +474,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                     end = ?status.end,
                     home = ?status.home_m,
                     return_distance_m = status.return_distance_m,
+                    home_gap_m = status.home_gap_m,
                     "mission: {}",
                     match phase {
                         MissionPhase::Returning => "exploring ended, flying home",
@@ -494,6 +506,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             .zip(self.mission.home_m())
             .map(|(guide, home)| GuidanceField::towards(guide.memory(), &home))
             .filter(|f| f.distance_m(here).is_finite());
+        let route_m = field.as_ref().map_or(f64::INFINITY, |f| f.distance_m(here));
+        self.mission.returning(ctx.now(), route_m, here);
         if field.is_none() && !std::mem::replace(&mut self.no_route_home, true) {
             tracing::warn!(
                 robot = ctx.robot_name(),
@@ -615,6 +629,7 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
             ctx.subscribe(&self.peer_memory, QueuePolicy::fifo(32));
         }
         MISSION_STATUS.share(ctx);
+        ctx.subscribe(&self.peer_mission, QueuePolicy::fifo(16));
         ctx.subscribe(&MISSION_RETURN, QueuePolicy::LATEST);
         if self.guide.is_some() {
             ctx.subscribe(&PEER_KEYFRAME, QueuePolicy::fifo(32));
@@ -689,6 +704,8 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                     self.decided(decision, ctx.now(), ctx);
                 } else if m.get(&MISSION_RETURN).is_some() {
                     self.mission.command_return(ctx.now());
+                } else if let Some(peer) = m.get(&self.peer_mission) {
+                    self.peer_missions.insert(peer.robot, peer.message);
                 }
                 // Stored for the next round (the frontier memory's update included):
                 // the modelled planning latency is charged to rounds only.
