@@ -830,7 +830,16 @@ fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
                 );
             }
         } else {
-            team_keyframes = now.received.iter().filter(|m| m.source == 1).count();
+            // Robot 1's keyframes (its mission status is journalled too).
+            team_keyframes = now
+                .received
+                .iter()
+                .filter(|m| {
+                    m.source == 1
+                        && wire::decode(&m.bytes)
+                            .is_ok_and(|e| matches!(e.payload, Payload::Keyframe(_)))
+                })
+                .count();
             assert!(team_keyframes >= 1, "robot 0 received nothing from robot 1");
         }
         accepted.extend(stored);
