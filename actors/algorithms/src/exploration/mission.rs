@@ -149,13 +149,13 @@ pub struct Mission {
     last_position_m: Option<Point3<f64>>,
     return_distance_m: f64,
     /// While returning: the shortest route home so far, metres, and when it last got
-    /// [`RETURN_PROGRESS_M`] shorter.
+    /// `RETURN_PROGRESS_M` shorter.
     return_progress: Option<(f64, Time)>,
     home_gap_m: Option<f64>,
 }
 
 /// How much shorter the route home must get to count as progress, metres.
-pub const RETURN_PROGRESS_M: f64 = 0.5;
+const RETURN_PROGRESS_M: f64 = 0.5;
 
 impl Mission {
     /// A mission that has not begun: home is fixed at the first [`Self::update`].
@@ -237,9 +237,9 @@ impl Mission {
     }
 
     /// While returning, the route distance home from where the robot is this round
-    /// (∞ without a known route): a return whose known route has not got
-    /// [`RETURN_PROGRESS_M`] shorter for [`MissionConfig::stalled_after_s`] ends, and
-    /// the robot holds where it is.
+    /// (∞ without a known route): a return whose known route has not got 0.5 m
+    /// shorter for [`MissionConfig::stalled_after_s`] ends, and the robot holds where
+    /// it is.
     pub fn returning(&mut self, now: Time, route_m: f64, position_m: &Point3<f64>) {
         if self.phase != MissionPhase::Returning || !route_m.is_finite() {
             // No known route: the robot holds and looks for one; the clock waits.
