@@ -5,7 +5,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::Value;
@@ -15,16 +15,15 @@ const TROUPE: &str = env!("CARGO_BIN_EXE_troupe");
 /// Simulated seconds flown: enough to reach the fork (10 m ahead) and look into it.
 const DURATION_S: f64 = 30.0;
 
-#[test]
-fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
-    let out = tempfile::tempdir().unwrap();
-    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/t_junction.toml");
+/// `troupe run SCENARIO` for `duration_s` into `out`: the run's directory (`out/name`)
+/// and its `summary.json`.
+fn fly(scenario: &Path, duration_s: f64, out: &Path, name: &str) -> (PathBuf, Value) {
     let run = Command::new(TROUPE)
         .arg("run")
-        .arg(&scenario)
-        .args(["--duration-s", &DURATION_S.to_string(), "--no-progress"])
+        .arg(scenario)
+        .args(["--duration-s", &duration_s.to_string(), "--no-progress"])
         .arg("--out")
-        .arg(out.path())
+        .arg(out)
         .env("RUST_LOG", "off")
         .output()
         .unwrap();
@@ -33,9 +32,17 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let dir = out.path().join("t_junction");
-    let summary: Value =
+    let dir = out.join(name);
+    let summary =
         serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    (dir, summary)
+}
+
+#[test]
+fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
+    let out = tempfile::tempdir().unwrap();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/t_junction.toml");
+    let (dir, summary) = fly(&scenario, DURATION_S, out.path(), "t_junction");
 
     assert_eq!(summary["world"]["kind"], "t_junction");
     assert_eq!(summary["collisions"], 0, "collisions with the world");
@@ -157,7 +164,7 @@ fn a_team_explores_the_t_junction_safely_and_accounts_its_unproductive_time() {
 
 /// A dead end shortened (14 m tunnel, 8 m side tunnel) so that the team explores it
 /// all in about a minute.
-fn short_dead_end(dir: &Path) -> std::path::PathBuf {
+fn short_dead_end(dir: &Path) -> PathBuf {
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/dead_end.toml");
     let text = std::fs::read_to_string(shipped)
         .unwrap()
@@ -178,23 +185,7 @@ fn short_dead_end(dir: &Path) -> std::path::PathBuf {
 fn a_team_that_has_explored_everything_flies_home_and_holds() {
     const FLOWN_S: f64 = 100.0;
     let out = tempfile::tempdir().unwrap();
-    let run = Command::new(TROUPE)
-        .arg("run")
-        .arg(short_dead_end(out.path()))
-        .args(["--duration-s", &FLOWN_S.to_string(), "--no-progress"])
-        .arg("--out")
-        .arg(out.path())
-        .env("RUST_LOG", "off")
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let dir = out.path().join("dead_end");
-    let summary: Value =
-        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    let (dir, summary) = fly(&short_dead_end(out.path()), FLOWN_S, out.path(), "dead_end");
     assert_eq!(summary["collisions"], 0);
     assert_eq!(summary["robot_contacts"], 0);
     let coverage = summary["coverage"]["final_fraction"].as_f64().unwrap();

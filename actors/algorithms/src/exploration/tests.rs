@@ -9,7 +9,7 @@ use crate::grid::{CellState, GridSnapshot, LocalGrid, LogOddsParams};
 use crate::keyframe::Keyframe;
 use crate::planner::primitives::FlatState;
 use crate::planner::problem::PlanningProblem;
-use crate::planner::round::RoundConfig;
+use crate::planner::round::{Candidate, RoundConfig};
 use crate::planner::scenes::{forward_camera, snapshot_of};
 use crate::sogmm::Gmm4;
 use crate::team::PeerKeyframe;
@@ -379,11 +379,7 @@ fn fly(
             candidates = problem.rescored(&state, candidates);
             guided += 1;
         }
-        let Some(best) = candidates.iter().max_by(|a, b| {
-            a.reward
-                .total_cmp(&b.reward)
-                .then(b.action_index.cmp(&a.action_index))
-        }) else {
+        let Some(best) = greedy(&candidates) else {
             break;
         };
         // Safe as the planner checks it: the whole period keeps the margin.
@@ -400,6 +396,15 @@ fn fly(
         path.push(Point3::from(state.position_m()));
     }
     (path, guided)
+}
+
+/// The greedy choice: the highest reward, the first action on a tie.
+fn greedy(candidates: &[Candidate]) -> Option<&Candidate> {
+    candidates.iter().max_by(|a, b| {
+        a.reward
+            .total_cmp(&b.reward)
+            .then(b.action_index.cmp(&a.action_index))
+    })
 }
 
 /// A 45 m tunnel along x, closed at x = 40 m, seen from x = 0 on: its frontier lies at
@@ -789,11 +794,7 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
         let problem = PlanningProblem::new(&config, &snapshot, &camera).homing(&field);
         let candidates = problem.children(&state);
         assert!(candidates.iter().all(|c| c.information == 0.0));
-        let Some(best) = candidates.iter().max_by(|a, b| {
-            a.reward
-                .total_cmp(&b.reward)
-                .then(b.action_index.cmp(&a.action_index))
-        }) else {
+        let Some(best) = greedy(&candidates) else {
             break;
         };
         state = best
