@@ -409,18 +409,20 @@ impl GuidanceField {
     /// [`Mission`](super::Mission)): Dijkstra from the goal's cell (or its passable
     /// neighbours), and the straight
     /// distance within the goal's cell and its neighbours, so that the field's least
-    /// value is at the goal itself. Measured at the pose, with no look-ahead (a look-ahead
-    /// would hold a robot facing its goal one look-ahead short of it). Empty (∞
-    /// everywhere) when the goal lies in no known passable cell.
+    /// value is at the goal itself. Measured `look_ahead_m` ahead of a pose, so that a
+    /// robot facing away from its way home turns round, except within the goal's
+    /// neighbourhood (there a look-ahead would hold a robot facing its goal one
+    /// look-ahead short of it). Empty (∞ everywhere) when the goal lies in no known
+    /// passable cell.
     #[must_use]
-    pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>) -> Self {
+    pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
         let cell_m = memory.cell_m();
         let passable = |key| memory.on_trail(key) || memory.record(key).passable;
         let distance_m = routes_from(memory, goal_m, &passable);
         GuidanceField {
             cell_m,
             key_scale: 1.0 / cell_m,
-            look_ahead_m: 0.0,
+            look_ahead_m,
             frontiers: usize::from(!distance_m.is_empty()),
             goal: memory
                 .key_of(goal_m)
@@ -456,9 +458,7 @@ impl GuidanceField {
     /// cell holding `p` and its 26 neighbours (∞ and `None` when none was reached).
     #[must_use]
     pub fn distance_at(&self, p: &Point3<f64>) -> (f64, Option<CellKey>) {
-        if let (Some((goal_m, goal)), Some(key)) = (self.goal, self.key_of(p))
-            && (0..3).all(|i| (key[i] - goal[i]).abs() <= 1)
-        {
+        if let Some((goal_m, goal)) = self.goal.filter(|_| self.near_goal(p)) {
             return ((p - goal_m).norm(), Some(goal));
         }
         self.entry_at(p)
@@ -487,6 +487,15 @@ impl GuidanceField {
             })
     }
 
+    /// Whether `p` lies in the goal's cell or a neighbour of it (a field
+    /// [`Self::towards`] a point).
+    fn near_goal(&self, p: &Point3<f64>) -> bool {
+        match (self.goal, self.key_of(p)) {
+            (Some((_, goal)), Some(key)) => (0..3).all(|i| (key[i] - goal[i]).abs() <= 1),
+            _ => false,
+        }
+    }
+
     /// The route distance from `p` to the best frontier, metres (∞ off the field).
     #[must_use]
     pub fn distance_m(&self, p: &Point3<f64>) -> f64 {
@@ -499,6 +508,9 @@ impl GuidanceField {
     /// turns round instead of hovering.
     #[must_use]
     pub fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64 {
+        if self.near_goal(p) {
+            return self.distance_m(p);
+        }
         let ahead =
             p + nalgebra::Vector3::new(yaw_rad.cos(), yaw_rad.sin(), 0.0) * self.look_ahead_m;
         let d = self.distance_m(&ahead);

@@ -782,7 +782,7 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
         guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
         guide.field((RobotId(0), &here), Time::ZERO);
     }
-    let field = GuidanceField::towards(guide.memory(), &home);
+    let field = GuidanceField::towards(guide.memory(), &home, 1.0);
     assert_eq!(field.distance_m(&home), 0.0, "least at home itself");
     let config = RoundConfig::default();
     let camera = forward_camera();
@@ -804,7 +804,7 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     }
     assert!(closest_m < 1.0, "came within {closest_m} m of home");
     // A home in no known passable cell gives an empty field.
-    let nowhere = GuidanceField::towards(guide.memory(), &Point3::new(0.0, 50.0, 0.0));
+    let nowhere = GuidanceField::towards(guide.memory(), &Point3::new(0.0, 50.0, 0.0), 1.0);
     assert_eq!(nowhere.frontier_count(), 0);
     assert!(!nowhere.distance_m(&Point3::new(20.0, 0.0, 0.0)).is_finite());
 }
@@ -818,7 +818,7 @@ fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
     memory.mark_body(&home);
     memory.mark_body(&there);
     assert!(
-        !GuidanceField::towards(&memory, &home)
+        !GuidanceField::towards(&memory, &home, 1.0)
             .distance_m(&there)
             .is_finite()
     );
@@ -829,7 +829,7 @@ fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
         memory.mark_trail(&last, &p);
         last = p;
     }
-    let field = GuidanceField::towards(&memory, &home);
+    let field = GuidanceField::towards(&memory, &home, 1.0);
     let route_m = field.distance_m(&there);
     let straight_m = (there - home).norm();
     assert!(

@@ -504,7 +504,9 @@ impl<S: ActionSelection> PlannerActor<S> {
             .guide
             .as_ref()
             .zip(self.mission.home_m())
-            .map(|(guide, home)| GuidanceField::towards(guide.memory(), &home))
+            .map(|(guide, home)| {
+                GuidanceField::towards(guide.memory(), &home, self.config.guidance.look_ahead_m)
+            })
             .filter(|f| f.distance_m(here).is_finite());
         let route_m = field.as_ref().map_or(f64::INFINITY, |f| f.distance_m(here));
         self.mission.returning(ctx.now(), route_m, here);
