@@ -21,8 +21,9 @@
 //! (`[robot.planner.mission]`): once no frontier is left for it (or the base commands
 //! it home, [`MISSION_RETURN`]) it flies home along its memory's route, scoring only
 //! the route distance ([`PlanningProblem::homing`]), and holds there by committing
-//! stopping trajectories. Each change of phase is published on [`MISSION_STATUS`],
-//! which the link carries to the peers and the base station.
+//! stopping trajectories. Each change of phase or idleness is published on
+//! [`MISSION_STATUS`], which the link carries to the peers (a robot with nothing left
+//! of its own ends only once its peers are idle or done) and the base station.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
