@@ -300,6 +300,7 @@ impl Guide {
             }
             keep
         });
+        let mut watched_out = Vec::new();
         for f in memory.frontiers() {
             if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
                 || self.given_up.contains_key(&f)
@@ -309,9 +310,11 @@ impl Guide {
             let watched_s = self.watched_s.entry(f).or_insert(0.0);
             *watched_s += dt_s;
             if *watched_s >= limit_s {
-                self.given_up.entry(f).or_insert(now);
-                self.ever_given_up.insert(f);
+                watched_out.push(f);
             }
+        }
+        for f in watched_out {
+            self.give_up(f, now);
         }
     }
 

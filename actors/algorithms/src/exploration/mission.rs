@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use troupe_core::{ConfigError, Message, Time};
 
 /// Where a robot is in its mission.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MissionPhase {
     /// Flying to frontiers.

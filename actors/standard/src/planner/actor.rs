@@ -491,7 +491,8 @@ impl<S: ActionSelection> PlannerActor<S> {
     /// While returning: the route distance home over the frontier memory
     /// ([`GuidanceField::towards`]); `None` when it does not reach the robot (no
     /// guidance, or no known route: the robot holds where it is, warned once, and
-    /// tries again each round).
+    /// tries again each round). The mission learns the route's length
+    /// ([`Mission::returning`]), so that a return that gets no nearer ends.
     fn home_field(
         &mut self,
         ctx: &Context<'_>,
