@@ -84,6 +84,16 @@ pub struct GuidanceConfig {
     /// robot's world frame when its file gives that peer's (`[[link.peer_frames]]`).
     /// Off by default (docs/exploration.md).
     pub share_memory: bool,
+    /// Judge remembered frontiers by their viewpoints: a frontier seeds the guidance
+    /// field at the passable cells within [`Self::viewpoint_range_m`] from which the
+    /// robot's level camera, with its real vertical field of view, sees it along a line
+    /// of passable cells, and a frontier without one is no goal
+    /// ([`viewpoints`](super::viewpoints)). `false`: the passable cells beside a
+    /// frontier seed it, whatever the camera can see.
+    pub viewpoints: bool,
+    /// Farthest a viewpoint may be from its frontier, metres (capped at the camera's
+    /// range).
+    pub viewpoint_range_m: f64,
 }
 
 impl Default for GuidanceConfig {
@@ -107,6 +117,8 @@ impl Default for GuidanceConfig {
             give_up_radius_m: 3.0,
             retry_given_up_after_s: Some(100.0),
             share_memory: false,
+            viewpoints: true,
+            viewpoint_range_m: 4.0,
         }
     }
 }
@@ -160,6 +172,14 @@ impl GuidanceConfig {
             ConfigError::positive("give_up_without_progress_s", s)?;
         }
         ConfigError::non_negative("give_up_radius_m", self.give_up_radius_m)?;
+        let range_m = self.viewpoint_range_m;
+        if !(range_m.is_finite() && (0.5..=64.0).contains(&range_m)) {
+            return Err(ConfigError::new(
+                "viewpoint_range_m",
+                "must be between 0.5 and 64",
+                range_m,
+            ));
+        }
         ConfigError::non_negative("look_ahead_m", self.look_ahead_m)
     }
 }

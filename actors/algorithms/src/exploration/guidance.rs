@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use troupe_core::{RobotId, Time};
 
 use super::memory::{CellKey, FrontierMemory};
+use crate::camera::PinholeIntrinsics;
 use crate::planner::problem::FrontierField;
 
 /// Where a peer is and where it is heading (the end of its committed plan).
@@ -71,6 +72,103 @@ pub struct FieldParams {
     pub switch_penalty_m: f64,
     /// How far ahead of a pose [`GuidanceField::pose_distance_m`] measures, metres.
     pub look_ahead_m: f64,
+    /// What the camera sees: a frontier then seeds the field at its viewpoints
+    /// ([`viewpoints`]); `None`: at the passable cells beside it.
+    pub view: Option<ViewCone>,
+}
+
+/// What a level camera that yaws with its robot sees from a point: everything within
+/// `range_m` between `down_rad` below and `up_rad` above the horizontal (the
+/// horizontal field of view does not limit it, since the robot can turn). Used to judge
+/// remembered frontiers by their viewpoints, as FUEL (Zhou et al., RA-L 2021) samples
+/// viewpoints around each frontier cluster: a frontier that no passable place sees is no
+/// goal (issue 43).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewCone {
+    /// Steepest view upwards, radians above the horizontal.
+    pub up_rad: f64,
+    /// Steepest view downwards, radians below the horizontal.
+    pub down_rad: f64,
+    /// Farthest a viewpoint may be from what it sees, metres.
+    pub range_m: f64,
+}
+
+impl ViewCone {
+    /// The cone of a level pinhole camera (rows above its principal point look up),
+    /// reaching `range_m` or the camera's largest depth, whichever is less.
+    #[must_use]
+    pub fn of_camera(camera: &PinholeIntrinsics, range_m: f64) -> Self {
+        let fy = camera.fy.max(f64::MIN_POSITIVE);
+        ViewCone {
+            up_rad: (camera.cy.max(0.0) / fy).atan(),
+            down_rad: ((f64::from(camera.height) - camera.cy).max(0.0) / fy).atan(),
+            range_m: range_m.min(camera.max_depth_m),
+        }
+    }
+
+    /// Whether a camera at `eye_m` can look at `target_m`: within range and between the
+    /// steepest views (straight up or down only with a field of view past ±90°).
+    #[must_use]
+    pub fn reaches(&self, eye_m: &Point3<f64>, target_m: &Point3<f64>) -> bool {
+        let d = target_m - eye_m;
+        let elevation_rad = d.z.atan2(d.x.hypot(d.y));
+        d.norm() <= self.range_m && elevation_rad <= self.up_rad && elevation_rad >= -self.down_rad
+    }
+}
+
+/// The places from which a robot attends to the frontier `f`, with the straight distance
+/// from each to `f`'s centre, metres, in key order.
+///
+/// With a `view`: its viewpoints — every passable cell whose centre the cone lets look at
+/// `f`'s centre along a line of sight through passable cells or the robot's trail (the
+/// frontier's own 26 neighbours excepted: a frontier borders unknown space). A pocket
+/// under the floor seen only from straight above, or a cell behind a wall, has none.
+/// Without: the passable cells among `f` and its 26 neighbours.
+///
+/// Time: `(2⌈range / cell⌉ + 1)³` cells looked at, each with a line of at most
+/// `2 range / cell` steps.
+#[must_use]
+pub fn viewpoints(
+    memory: &FrontierMemory,
+    f: CellKey,
+    view: Option<&ViewCone>,
+) -> Vec<(CellKey, f64)> {
+    let cell_m = memory.cell_m();
+    let Some(view) = view else {
+        return std::iter::once((f, 0.0))
+            .chain(neighbours(f))
+            .filter(|(n, _)| memory.record(*n).passable)
+            .map(|(n, step)| (n, step * cell_m))
+            .collect();
+    };
+    let target_m = memory.centre(f);
+    let reach = (view.range_m / cell_m).ceil().clamp(1.0, 64.0) as i32;
+    let near_f = |k: CellKey| (0..3).all(|i| (k[i] - f[i]).abs() <= 1);
+    let open = |k: CellKey| memory.record(k).passable || memory.on_trail(k);
+    let mut found = Vec::new();
+    for dx in -reach..=reach {
+        for dy in -reach..=reach {
+            for dz in -reach..=reach {
+                let v = [f[0] + dx, f[1] + dy, f[2] + dz];
+                let eye_m = memory.centre(v);
+                if v == f || !view.reaches(&eye_m, &target_m) || !memory.record(v).passable {
+                    continue;
+                }
+                let distance_m = (target_m - eye_m).norm();
+                let steps = (2.0 * distance_m / cell_m).ceil() as usize;
+                let clear = (1..steps).all(|s| {
+                    let p = eye_m + (target_m - eye_m) * (s as f64 / steps as f64);
+                    memory
+                        .key_of(&p)
+                        .is_some_and(|k| k == v || near_f(k) || open(k))
+                });
+                if clear {
+                    found.push((v, distance_m));
+                }
+            }
+        }
+    }
+    found
 }
 
 /// A deterministic hasher: lookups only (the field is never iterated to decide).
@@ -88,7 +186,9 @@ pub struct GuidanceField {
     key_scale: f64,
     look_ahead_m: f64,
     distance_m: HashMap<CellKey, (f64, CellKey), Fixed>,
-    frontiers: usize,
+    /// The frontiers that seed the field (those with a viewpoint or a passable
+    /// neighbour).
+    seeded: BTreeSet<CellKey>,
     /// The goal of a field [`Self::towards`] a point, and its cell.
     goal: Option<(Point3<f64>, CellKey)>,
 }
@@ -198,8 +298,8 @@ fn spread(
 }
 
 /// The frontiers of `open` that the greedy assignment ([`Coordination::Assignment`])
-/// gives to a peer of `own`: each robot's route cost to each frontier (through a
-/// passable neighbour, as the field seeds it; plus the frontier's region weight and, for
+/// gives to a peer of `own`: each robot's route cost to each frontier (through one of
+/// its `approaches`, as the field seeds it; plus the frontier's region weight and, for
 /// `own`, its cost of switching); repeatedly the cheapest (robot, frontier)
 /// pair whose robot has no frontier yet and whose frontier is unclaimed is assigned, and
 /// the unclaimed frontiers within `claim_radius_m` of it become that robot's.
@@ -209,12 +309,12 @@ fn spread(
 fn claimed_by_assignment(
     memory: &FrontierMemory,
     open: &[(CellKey, f64)],
+    approaches: &[Vec<(CellKey, f64)>],
     (own, own_m): (RobotId, &Point3<f64>),
     own_extra_m: &dyn Fn(&CellKey) -> f64,
     peers: &BTreeMap<RobotId, PeerIntent>,
     claim_radius_m: f64,
 ) -> BTreeSet<CellKey> {
-    let cell_m = memory.cell_m();
     let robots: Vec<(RobotId, Point3<f64>)> = std::iter::once((own, *own_m))
         .chain(
             peers
@@ -230,13 +330,13 @@ fn claimed_by_assignment(
         .collect();
     let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
     for (&(id, _), routes) in robots.iter().zip(&routes) {
-        for &(f, extra_m) in open {
+        for (&(f, extra_m), views) in open.iter().zip(approaches) {
             let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
             let cost_m = extra_m
                 + mine_m
-                + std::iter::once((f, 0.0))
-                    .chain(neighbours(f))
-                    .filter_map(|(n, step)| routes.get(&n).map(|(d, _)| d + step * cell_m))
+                + views
+                    .iter()
+                    .filter_map(|(n, view_m)| routes.get(n).map(|(d, _)| d + view_m))
                     .fold(f64::INFINITY, f64::min);
             if cost_m.is_finite() {
                 pairs.push((cost_m, id, f));
@@ -326,6 +426,11 @@ impl GuidanceField {
             params.min_region_cells,
             params.small_region_penalty_m,
         );
+        // Each frontier's viewpoints are independent: on the rayon pool, in key order.
+        let approaches: Vec<Vec<(CellKey, f64)>> = open
+            .par_iter()
+            .map(|(f, _)| viewpoints(memory, *f, params.view.as_ref()))
+            .collect();
         // This robot's own cost of leaving the frontier it was heading to.
         let switching: BTreeSet<CellKey> = match last_target.filter(|t| {
             params.switch_penalty_m > 0.0 && open.binary_search_by_key(t, |(f, _)| *f).is_ok()
@@ -362,6 +467,7 @@ impl GuidanceField {
             Coordination::Assignment => claimed_by_assignment(
                 memory,
                 &open,
+                &approaches,
                 (own, robot_m),
                 &own_extra_m,
                 peers,
@@ -370,8 +476,8 @@ impl GuidanceField {
             Coordination::MapsOnly => BTreeSet::new(),
         };
         let mut heap = BinaryHeap::new();
-        let mut frontiers = 0;
-        for &(f, extra_m) in &open {
+        let mut seeded = BTreeSet::new();
+        for (&(f, extra_m), views) in open.iter().zip(&approaches) {
             let penalty_m = extra_m
                 + own_extra_m(&f)
                 + if claimed.contains(&f) {
@@ -379,18 +485,16 @@ impl GuidanceField {
                 } else {
                     0.0
                 };
-            let mut seeded = false;
-            for (n, step) in std::iter::once((f, 0.0)).chain(neighbours(f)) {
-                if memory.record(n).passable {
-                    seeded = true;
-                    heap.push(Entry {
-                        cost_m: step * cell_m + penalty_m,
-                        key: n,
-                        target: f,
-                    });
-                }
+            for &(n, view_m) in views {
+                heap.push(Entry {
+                    cost_m: view_m + penalty_m,
+                    key: n,
+                    target: f,
+                });
             }
-            frontiers += usize::from(seeded);
+            if !views.is_empty() {
+                seeded.insert(f);
+            }
         }
         let distance_m = spread(memory, heap, &passable_in(memory));
         GuidanceField {
@@ -398,7 +502,7 @@ impl GuidanceField {
             key_scale: 1.0 / cell_m,
             look_ahead_m: params.look_ahead_m,
             distance_m,
-            frontiers,
+            seeded,
             goal: None,
         }
     }
@@ -419,23 +523,31 @@ impl GuidanceField {
         let cell_m = memory.cell_m();
         let passable = |key| memory.on_trail(key) || memory.record(key).passable;
         let distance_m = routes_from(memory, goal_m, &passable);
+        let goal = memory
+            .key_of(goal_m)
+            .filter(|_| !distance_m.is_empty())
+            .map(|key| (*goal_m, key));
         GuidanceField {
             cell_m,
             key_scale: 1.0 / cell_m,
             look_ahead_m,
-            frontiers: usize::from(!distance_m.is_empty()),
-            goal: memory
-                .key_of(goal_m)
-                .filter(|_| !distance_m.is_empty())
-                .map(|key| (*goal_m, key)),
+            seeded: goal.iter().map(|(_, key)| *key).collect(),
+            goal,
             distance_m,
         }
     }
 
-    /// Remembered frontiers that seed the field (next to a passable cell).
+    /// Remembered frontiers that seed the field ([`viewpoints`]).
     #[must_use]
     pub fn frontier_count(&self) -> usize {
-        self.frontiers
+        self.seeded.len()
+    }
+
+    /// Whether the frontier `f` seeds the field (it is open and has a viewpoint, or a
+    /// passable neighbour without a view cone: [`viewpoints`]).
+    #[must_use]
+    pub fn seeds(&self, f: CellKey) -> bool {
+        self.seeded.contains(&f)
     }
 
     fn key_of(&self, p: &Point3<f64>) -> Option<CellKey> {

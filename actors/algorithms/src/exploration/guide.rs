@@ -7,8 +7,9 @@ use nalgebra::{Isometry3, Point3};
 use troupe_core::{RobotId, Time};
 
 use super::config::GuidanceConfig;
-use super::guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
+use super::guidance::{Coordination, FieldParams, GuidanceField, PeerIntent, ViewCone};
 use super::memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
+use crate::camera::PinholeIntrinsics;
 use crate::grid::GridSnapshot;
 use crate::planner::round::Candidate;
 use crate::team::{PeerKeyframe, PeerPlan};
@@ -37,6 +38,10 @@ pub struct Guide {
     progress: Option<(Point3<f64>, f64, Time)>,
     /// Where the robot was at the last [`Self::field`].
     last_position_m: Option<Point3<f64>>,
+    /// What the robot's camera sees, when frontiers are judged by their viewpoints.
+    view: Option<ViewCone>,
+    /// The route distance from the robot to its target at the last [`Self::field`].
+    last_route_m: f64,
 }
 
 /// How much shorter the route to a goal must get to count as progress, metres.
@@ -71,7 +76,23 @@ impl Guide {
             last_target: None,
             progress: None,
             last_position_m: None,
+            view: None,
+            last_route_m: f64::INFINITY,
         }
+    }
+
+    /// The same guide judging frontiers by what `camera` (level, on the robot) can see
+    /// of them within [`GuidanceConfig::viewpoint_range_m`]: a frontier seeds the field
+    /// at its viewpoints ([`viewpoints`](super::viewpoints)), and one without any is no
+    /// goal. Without a camera, or with [`GuidanceConfig::viewpoints`] off, the passable
+    /// cells beside a frontier seed it.
+    #[must_use]
+    pub fn seeing_with(mut self, camera: &PinholeIntrinsics) -> Self {
+        self.view = self
+            .config
+            .viewpoints
+            .then(|| ViewCone::of_camera(camera, self.config.viewpoint_range_m));
+        self
     }
 
     /// The memory.
@@ -188,7 +209,8 @@ impl Guide {
         self.memory.mark_body(robot_m);
         let from = self.last_position_m.replace(*robot_m).unwrap_or(*robot_m);
         self.memory.mark_trail(&from, robot_m);
-        self.watch(robot_m, now);
+        let looking_at = self.looking_at();
+        self.watch(robot_m, looking_at, now);
         let field = GuidanceField::build(
             &self.memory,
             (own, robot_m),
@@ -203,6 +225,7 @@ impl Guide {
                 claim_penalty_m: self.config.claim_penalty_m,
                 switch_penalty_m: self.config.switch_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
+                view: self.view,
             },
         );
         let (route_m, target) = field.distance_at(robot_m);
@@ -210,7 +233,18 @@ impl Guide {
             self.check_progress(target, route_m, now, limit_s);
         }
         self.last_target = target;
+        self.last_route_m = route_m;
         field
+    }
+
+    /// Where the robot looks from the end of its route: the frontier its route led to
+    /// last round, when that route was no longer than a viewpoint may be from it (the
+    /// robot is at one of its viewpoints, or on the line of sight from it). `None`
+    /// without viewpoints.
+    fn looking_at(&self) -> Option<Point3<f64>> {
+        let view = self.view?;
+        let target = self.last_target?;
+        (self.last_route_m <= view.range_m).then(|| self.memory.centre(target))
     }
 
     /// The rule of goals that cannot be reached (explore_lite's progress timeout): a
@@ -265,18 +299,19 @@ impl Guide {
     pub fn has_work(&self, field: &GuidanceField, robot_m: &Point3<f64>) -> bool {
         let memory = &self.memory;
         field.distance_m(robot_m).is_finite()
-            && memory.frontiers().any(|f| {
-                !self.ever_given_up.contains(&f) && field.distance_m(&memory.centre(f)).is_finite()
-            })
+            && memory
+                .frontiers()
+                .any(|f| !self.ever_given_up.contains(&f) && field.seeds(f))
     }
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
-    /// `robot_m`; a frontier watched for [`GuidanceConfig::give_up_after_s`] in all is
+    /// `robot_m` or of the frontier it is `looking_at` from a viewpoint (the robot
+    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away); a frontier watched for [`GuidanceConfig::give_up_after_s`] in all is
     /// given up. The count survives a frontier's flicker (the window's frontier mask
     /// drops and restores cells at a surface's edge as rays accumulate); cells the
     /// memory forgets are forgotten here too, so both stay bounded by the memory.
-    fn watch(&mut self, robot_m: &Point3<f64>, now: Time) {
+    fn watch(&mut self, robot_m: &Point3<f64>, looking_at: Option<Point3<f64>>, now: Time) {
         let dt_s = self.last_field.map_or(0.0, |last| {
             now.saturating_since(last).as_secs_f64().min(2.0)
         });
@@ -302,7 +337,9 @@ impl Guide {
         });
         let mut watched_out = Vec::new();
         for f in memory.frontiers() {
-            if (memory.centre(f) - robot_m).norm() > self.config.give_up_radius_m
+            let near =
+                |p: &Point3<f64>| (memory.centre(f) - p).norm() <= self.config.give_up_radius_m;
+            if !(near(robot_m) || looking_at.as_ref().is_some_and(near))
                 || self.given_up.contains_key(&f)
             {
                 continue;

@@ -37,7 +37,7 @@ mod mission;
 
 pub use behaviour::ExplorationBehaviour;
 pub use config::GuidanceConfig;
-pub use guidance::{Coordination, FieldParams, GuidanceField, PeerIntent};
+pub use guidance::{Coordination, FieldParams, GuidanceField, PeerIntent, ViewCone, viewpoints};
 pub use guide::Guide;
 pub use memory::{CellKey, CellRecord, FrontierMemory, MemoryUpdate};
 pub use mission::{Mission, MissionConfig, MissionEnd, MissionPhase, MissionStatus};

@@ -844,3 +844,85 @@ fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
             .passable
     );
 }
+
+#[test]
+fn a_frontier_is_a_goal_only_where_the_level_camera_can_see_it_from_a_passable_place() {
+    // The default camera (±29.6° vertically), viewpoints within 4 m.
+    let view = ViewCone::of_camera(&forward_camera(), 4.0);
+    assert!((view.up_rad.to_degrees() - 29.6).abs() < 1.0, "{view:?}");
+    let passable = CellRecord {
+        seen: true,
+        passable: true,
+        ..CellRecord::default()
+    };
+    let frontier = CellRecord {
+        seen: true,
+        frontier: true,
+        ..CellRecord::default()
+    };
+    let wall = CellRecord {
+        seen: true,
+        ..CellRecord::default()
+    };
+    let mut memory = FrontierMemory::new(1.0, 10_000);
+    // A level tunnel along x (y = 0, z = 0) from x = 0 to 10, a vertical shaft above
+    // x = 20 joined to nothing else, and four frontiers: at the tunnel's open end, in a
+    // pocket 2 m under its floor, behind its side wall, and at the shaft's foot.
+    let tunnel = (0..=10).map(|x| ([x, 0, 0], passable));
+    let shaft = (0..=6).map(|z| ([20, 0, z], passable));
+    let walls = (0..=10).map(|x| ([x, 1, 0], wall));
+    let (end, pocket, behind, foot) = ([11, 0, 0], [5, 0, -2], [5, 3, 0], [20, 0, -1]);
+    let frontiers = [end, pocket, behind, foot].map(|f| (f, frontier));
+    memory.merge_peer_cells(tunnel.chain(shaft).chain(walls).chain(frontiers));
+    let seen_from = |f| viewpoints(&memory, f, Some(&view));
+    // The open end is seen down the tunnel, from up to 4 m back, each viewpoint at
+    // its straight distance.
+    let ahead = seen_from(end);
+    assert_eq!(
+        ahead.iter().map(|(v, _)| *v).collect::<Vec<_>>(),
+        (7..=10).map(|x| [x, 0, 0]).collect::<Vec<_>>()
+    );
+    for (v, d) in &ahead {
+        assert!((d - f64::from(11 - v[0])).abs() < 1e-9);
+    }
+    // A pocket 2 m below the floor is seen only from over 3.5 m away, out of range;
+    // the frontier behind the wall only through unknown space; the shaft's foot only
+    // straight down.
+    assert!(seen_from(pocket).is_empty());
+    assert!(seen_from(behind).is_empty());
+    assert!(seen_from(foot).is_empty());
+    // Without a camera, the passable cells beside a frontier attend to it: the shaft's
+    // foot is a goal then, seeded from the cell above it.
+    assert_eq!(viewpoints(&memory, foot, None), vec![([20, 0, 0], 1.0)]);
+    assert_eq!(viewpoints(&memory, pocket, None), vec![]);
+
+    // In the field: only the open end seeds it, so a robot in the shaft has no route.
+    let params = |view| FieldParams {
+        coordination: Coordination::MapsOnly,
+        min_region_cells: 1,
+        small_region_penalty_m: None,
+        claim_radius_m: 6.0,
+        claim_penalty_m: 30.0,
+        switch_penalty_m: 0.0,
+        look_ahead_m: 1.0,
+        view,
+    };
+    let field = |view| {
+        GuidanceField::build(
+            &memory,
+            (RobotId(0), &Point3::new(0.5, 0.5, 0.5)),
+            &std::collections::BTreeMap::new(),
+            &std::collections::BTreeMap::new(),
+            None,
+            &params(view),
+        )
+    };
+    let judged = field(Some(view));
+    assert!(judged.seeds(end) && !judged.seeds(foot) && !judged.seeds(pocket));
+    assert_eq!(judged.frontier_count(), 1);
+    assert!((judged.distance_m(&Point3::new(0.5, 0.5, 0.5)) - 11.0).abs() < 1e-9);
+    assert!(!judged.distance_m(&Point3::new(20.5, 0.5, 3.5)).is_finite());
+    let beside = field(None);
+    assert!(beside.seeds(end) && beside.seeds(foot));
+    assert!(beside.distance_m(&Point3::new(20.5, 0.5, 3.5)).is_finite());
+}

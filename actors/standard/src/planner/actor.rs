@@ -233,7 +233,10 @@ impl<S: ActionSelection> PlannerActor<S> {
             committed: None,
             deferred: false,
             round: 0,
-            guide: config.guidance.enabled.then(|| Guide::new(config.guidance)),
+            guide: config
+                .guidance
+                .enabled
+                .then(|| Guide::new(config.guidance).seeing_with(&camera)),
             mission: Mission::new(config.mission),
             no_route_home: false,
             published_phase: None,
