@@ -116,6 +116,21 @@ impl ViewCone {
     }
 }
 
+/// Whether the straight line from the centre of cell `eye` to the centre of the frontier
+/// `f` crosses only passable cells or the robot's trail, apart from `eye` itself and
+/// `f`'s 26 neighbours (a frontier borders unknown space): sampled every half cell.
+fn line_of_sight(memory: &FrontierMemory, eye: CellKey, f: CellKey) -> bool {
+    let (eye_m, target_m) = (memory.centre(eye), memory.centre(f));
+    let steps = (2.0 * (target_m - eye_m).norm() / memory.cell_m()).ceil() as usize;
+    let near_f = |k: CellKey| (0..3).all(|i| (k[i] - f[i]).abs() <= 1);
+    (1..steps).all(|s| {
+        let p = eye_m + (target_m - eye_m) * (s as f64 / steps as f64);
+        memory.key_of(&p).is_some_and(|k| {
+            k == eye || near_f(k) || memory.record(k).passable || memory.on_trail(k)
+        })
+    })
+}
+
 /// The places from which a robot attends to the frontier `f`, with the straight distance
 /// from each to `f`'s centre, metres, in key order.
 ///
@@ -143,8 +158,6 @@ pub fn viewpoints(
     };
     let target_m = memory.centre(f);
     let reach = (view.range_m / cell_m).ceil().clamp(1.0, 64.0) as i32;
-    let near_f = |k: CellKey| (0..3).all(|i| (k[i] - f[i]).abs() <= 1);
-    let open = |k: CellKey| memory.record(k).passable || memory.on_trail(k);
     let mut found = Vec::new();
     for dx in -reach..=reach {
         for dy in -reach..=reach {
@@ -154,16 +167,8 @@ pub fn viewpoints(
                 if v == f || !view.reaches(&eye_m, &target_m) || !memory.record(v).passable {
                     continue;
                 }
-                let distance_m = (target_m - eye_m).norm();
-                let steps = (2.0 * distance_m / cell_m).ceil() as usize;
-                let clear = (1..steps).all(|s| {
-                    let p = eye_m + (target_m - eye_m) * (s as f64 / steps as f64);
-                    memory
-                        .key_of(&p)
-                        .is_some_and(|k| k == v || near_f(k) || open(k))
-                });
-                if clear {
-                    found.push((v, distance_m));
+                if line_of_sight(memory, v, f) {
+                    found.push((v, (target_m - eye_m).norm()));
                 }
             }
         }
