@@ -182,7 +182,7 @@ type Fixed = BuildHasherDefault<std::collections::hash_map::DefaultHasher>;
 /// Route distance (metres) from passable memory cells to the nearest remembered
 /// frontier, plus the claim penalty of that frontier: multi-source Dijkstra over the
 /// 26-connected passable cells. A frontier cell is seldom passable itself (it borders
-/// unknown, unsafe space): it seeds the passable cells of its 26-neighbourhood.
+/// unknown, unsafe space): it seeds the field at its [`viewpoints`].
 ///
 /// Time: `O(c log c)` for `c` passable cells; memory: one entry per reached cell.
 #[derive(Clone, Debug)]

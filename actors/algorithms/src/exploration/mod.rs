@@ -11,8 +11,9 @@
 //!   keyframe GMMs sampled at the memory's resolution (thesis §6.1.4–6.1.5: a GMM can
 //!   be resampled at any resolution), which retire the frontiers anyone has looked into.
 //! - [`GuidanceField`]: route distance through known passable cells to the nearest
-//!   remembered frontier (multi-source Dijkstra), the global `d` of V (optionally seeded only by
-//!   frontier regions of a few cells). Frontiers assigned to peers
+//!   remembered frontier (multi-source Dijkstra), the global `d` of V, seeded at each
+//!   frontier's [`viewpoints`] — the passable places from which the level camera sees it
+//!   (optionally only frontier regions of a few cells). Frontiers assigned to peers
 //!   ([`Coordination`]: greedy assignment by route cost over every known robot's
 //!   [`PeerIntent`]) are made longer by a penalty, so teammates spread over different
 //!   openings.
