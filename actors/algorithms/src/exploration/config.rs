@@ -90,7 +90,7 @@ pub struct GuidanceConfig {
     /// of passable cells, and a frontier without one is no goal
     /// ([`viewpoints`](super::viewpoints)). `false` (the default): the passable cells
     /// beside a frontier seed it, whatever the camera can see — viewpoints end more
-    /// missions but hid a real opening on one seed of eight at 700 s
+    /// missions but hid a real opening on one seed of ten at 700 s
     /// (docs/exploration.md).
     pub viewpoints: bool,
     /// Farthest a viewpoint may be from its frontier, metres (capped at the camera's
