@@ -307,8 +307,8 @@ impl Guide {
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
     /// `robot_m` or of the frontier it is `looking_at` from a viewpoint (the robot
-    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away); a frontier watched for [`GuidanceConfig::give_up_after_s`] in all is
-    /// given up. The count survives a frontier's flicker (the window's frontier mask
+    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away); a frontier
+    /// watched for [`GuidanceConfig::give_up_after_s`] in all is given up. The count survives a frontier's flicker (the window's frontier mask
     /// drops and restores cells at a surface's edge as rays accumulate); cells the
     /// memory forgets are forgotten here too, so both stay bounded by the memory.
     fn watch(&mut self, robot_m: &Point3<f64>, looking_at: Option<Point3<f64>>, now: Time) {
