@@ -1,5 +1,5 @@
 //! Issue 23 against real `troupe robot` processes (the transport-level tests are in
-//! `security.rs`): a team launched with `troupe launch --tls` keeps hostile zenoh
+//! `transport/security.rs`): a team launched with `troupe launch --tls` keeps hostile zenoh
 //! clients (`eclipse-zenoh` from PyPI, `sims/tests/zenoh_hostile.py`) out; a robot
 //! flooded with junk and sent a 200 MB message keeps its memory and its log; a robot
 //! killed with SIGKILL three times loses no keyframe and reuses no message id.
@@ -81,6 +81,23 @@ fn data_frame(class: Class, message_id: u32, ack_requested: bool, body: &[u8]) -
         other => panic!("not a data frame: {other:?}"),
     }
     f
+}
+
+/// `body` as data frames of at most 60 kB each (fragment `k` of `n`): a message
+/// larger than one zenoh message may be, as a peer sends it.
+fn data_fragments(class: Class, message_id: u32, ack_requested: bool, body: &[u8]) -> Vec<Vec<u8>> {
+    let chunks: Vec<&[u8]> = body.chunks(60_000).collect();
+    let count = u16::try_from(chunks.len()).expect("at most 65 535 fragments");
+    chunks
+        .iter()
+        .enumerate()
+        .map(|(k, chunk)| {
+            let mut f = data_frame(class, message_id, ack_requested, chunk);
+            f[7..9].copy_from_slice(&(k as u16).to_le_bytes());
+            f[9..11].copy_from_slice(&count.to_le_bytes());
+            f
+        })
+        .collect()
 }
 
 /// An acknowledgement frame of `ids`.
@@ -181,12 +198,12 @@ struct Hostile {
     puts: Vec<(String, PathBuf)>,
 }
 
-fn spawn_hostile(python: &Path, endpoint: &str, h: &Hostile, count: u32) -> Child {
+fn spawn_hostile(python: &Path, endpoint: &str, h: &Hostile, options: &[&str]) -> Child {
     let mut c = Command::new(python);
     c.arg(root().join("sims/tests/zenoh_hostile.py"))
         .arg(endpoint)
         .args(&h.credentials)
-        .args(["--count", &count.to_string()]);
+        .args(options);
     for (key, file) in &h.puts {
         c.arg("--put-file").arg(format!("{key}={}", file.display()));
     }
@@ -391,19 +408,26 @@ fn tls_team_under_attack(router: bool) {
     };
     let children: Vec<Child> = attacks
         .iter()
-        .map(|(port, h)| spawn_hostile(&python, &format!("tls/127.0.0.1:{port}"), h, 50))
+        .map(|(port, h)| {
+            spawn_hostile(
+                &python,
+                &format!("tls/127.0.0.1:{port}"),
+                h,
+                &["--count", "50"],
+            )
+        })
         .collect();
     let control_child = spawn_hostile(
         &python,
         &format!("tls/127.0.0.1:{}", ports[0]),
         &control,
-        20,
+        &["--count", "20"],
     );
     let base_child = spawn_hostile(
         &python,
         &format!("tls/127.0.0.1:{}", ports[0]),
         &base_as_robot,
-        20,
+        &["--count", "20"],
     );
     let mut reports: Vec<String> = attacks
         .iter()
@@ -700,21 +724,30 @@ fn a_flood_and_a_200_mb_message_leave_a_robot_process_as_it_was() {
     );
 }
 
+/// The journal of the running robot whose outputs are in `out`, read from a copy
+/// (opening the journal itself would cut it at a record being written); empty until
+/// the robot has made its journal.
+fn journal_copy(out: &Path) -> Recovered {
+    let Ok(entries) = std::fs::read_dir(out.join("state")) else {
+        return Recovered::default();
+    };
+    let copy = tempfile::tempdir().expect("tempdir");
+    for entry in entries {
+        // A compaction's temporary file may be gone by the time it is copied.
+        let entry = entry.expect("entry");
+        let _ = std::fs::copy(entry.path(), copy.path().join(entry.file_name()));
+    }
+    DiskJournal::open(copy.path(), 0, MAX_RECEIVED_BYTES)
+        .expect("journal copy")
+        .1
+}
+
 /// Waits until the running robot whose outputs are in `out` has journaled a message
-/// for `peer` (read from a copy of its journal, which opening would otherwise cut at
-/// a record being written); panics after `within`.
+/// for `peer`; panics after `within`.
 fn wait_stored_for(out: &Path, peer: u32, within: Duration) {
     let started = Instant::now();
-    let copy = tempfile::tempdir().expect("tempdir");
     loop {
-        for entry in std::fs::read_dir(out.join("state")).expect("the journal directory") {
-            // A compaction's temporary file may be gone by the time it is copied.
-            let entry = entry.expect("entry");
-            let _ = std::fs::copy(entry.path(), copy.path().join(entry.file_name()));
-        }
-        let (_, recovered) =
-            DiskJournal::open(copy.path(), 0, MAX_RECEIVED_BYTES).expect("journal copy");
-        if !stored_keyframes_for(&recovered, peer).is_empty() {
+        if !stored_keyframes_for(&journal_copy(out), peer).is_empty() {
             return;
         }
         assert!(
@@ -960,4 +993,155 @@ fn a_base_killed_and_restarted_keeps_the_keyframes_it_acknowledged() {
             map.keyframes.len()
         );
     }
+}
+
+/// A child process killed (SIGKILL) when dropped, so that a failing test leaves no
+/// robot running.
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Ids of the keyframes from robot `source` in a journal's received messages (what
+/// a restarted robot publishes again as its peers' maps).
+fn received_keyframes_from(recovered: &Recovered, source: u32) -> BTreeSet<u32> {
+    recovered
+        .received
+        .iter()
+        .filter(|m| {
+            m.source == source
+                && wire::decode(&m.bytes).is_ok_and(|e| matches!(e.payload, Payload::Keyframe(_)))
+        })
+        .map(|m| m.id)
+        .collect()
+}
+
+/// Issue 45 item 2, with real processes: a member of the team (robot 2, played by the
+/// Python zenoh client, unauthenticated as `troupe launch` without `--tls` leaves it)
+/// sends robot 1 ten valid 3.9 MB keyframes asking for acknowledgement, 39 MB against
+/// the journal's 32 MiB of received messages. Robot 1, killed with SIGKILL right
+/// after, still holds every keyframe of robot 0's it had journaled before the flood
+/// (the flooder lost its own oldest instead), and once restarted it publishes them
+/// again as robot 0's map.
+#[test]
+fn a_member_flooding_a_journal_evicts_its_own_messages_not_a_peers_keyframes() {
+    let python = match zenoh_python() {
+        Ok(p) => p,
+        Err(why) => return eprintln!("skipped: {why}"),
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let team = team_scenario(dir.path(), "name = \"journal_flood\"\nrobots = 3\n")
+        .robot
+        .link
+        .team;
+    let ports = free_ports(3);
+    let files = write_team(
+        dir.path(),
+        Path::new("team.toml"),
+        &loopback_endpoints(&ports),
+        None,
+    )
+    .expect("robot files");
+    for f in &files {
+        let text = std::fs::read_to_string(f).expect("robot file");
+        std::fs::write(f, text.replacen("record = true", "record = false", 1)).expect("file");
+    }
+    let out1 = dir.path().join("robot1");
+    let robot0 = KillOnDrop(spawn_robot(&files[0], None));
+    let robot1 = KillOnDrop(spawn_robot(&files[1], None));
+    // Robot 1 has journaled a few of robot 0's keyframes.
+    let started = Instant::now();
+    let before = loop {
+        let held = received_keyframes_from(&journal_copy(&out1), 0);
+        if held.len() >= 3 {
+            break held;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(90),
+            "robot 1 journaled only {held:?} of robot 0's keyframes"
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    };
+    // Ten valid keyframes of 97 000 components (3.9 MB each), far from the cave.
+    let n = 97_000;
+    let flood: Vec<(String, PathBuf)> = (0..10u32)
+        .flat_map(|k| {
+            let keyframe = Payload::Keyframe(Keyframe {
+                keyframe_id: 50_000 + k,
+                sensor_pose: SensorPose {
+                    position_m: [1_000.0, 0.0, 0.0],
+                    orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+                },
+                support_size: n,
+                mixture: Mixture::Spatial(vec![
+                    Component3 {
+                        mean: [1_000.0, 0.0, 0.0],
+                        covariance: [0.01, 0.0, 0.0, 0.01, 0.0, 0.01],
+                        weight: 1.0 / n as f32,
+                    };
+                    n as usize
+                ]),
+            });
+            let envelope = wire::encode(&Envelope::new(team, 2, u64::from(k) + 1, 1, keyframe))
+                .expect("encode");
+            assert!(envelope.len() > 3_800_000, "{} bytes", envelope.len());
+            data_fragments(Class::Keyframe, 0xF100_0000 + k, true, &envelope)
+        })
+        .enumerate()
+        .map(|(n, frame)| {
+            let file = dir.path().join(format!("flood-{n}.frame"));
+            std::fs::write(&file, frame).expect("frame");
+            (format!("troupe/{team}/2/keyframe"), file)
+        })
+        .collect();
+    let hostile = Hostile {
+        name: "member flooding robot 1's journal".into(),
+        credentials: Vec::new(),
+        puts: flood,
+    };
+    // 650 fragments 4 ms apart (39 MB in about 3 s, as the issue's attacker sent),
+    // so that the robot's receive queue drops none.
+    let attacker = spawn_hostile(
+        &python,
+        &format!("tcp/127.0.0.1:{}", ports[1]),
+        &hostile,
+        &["--count", "1", "--gap-ms", "4"],
+    );
+    eprintln!("{}", finish_hostile(&hostile, attacker));
+    std::thread::sleep(Duration::from_secs(3));
+    let peak_mb = |r: &KillOnDrop| proc_status_bytes(r.0.id(), "VmHWM:").map(|b| b / 1_000_000);
+    let peaks_mb = (peak_mb(&robot1), peak_mb(&robot0));
+    drop((robot1, robot0));
+    let (opened, after) =
+        DiskJournal::open(&out1.join("state"), 0, MAX_RECEIVED_BYTES).expect("journal");
+    let kept = received_keyframes_from(&after, 0);
+    let flooder = received_keyframes_from(&after, 2);
+    eprintln!(
+        "robot 1: robot 0's keyframes {} before the flood, {} after; the flooder's {} kept, \
+         {} evicted; peak RSS (MB) of robot 1 and of its unattacked peer {:?}",
+        before.len(),
+        kept.len(),
+        flooder.len(),
+        opened.received_evicted(),
+        peaks_mb
+    );
+    // The flood overflowed the journal, and only the flooder paid for it.
+    assert!(opened.received_evicted() > 0, "the flood evicted nothing");
+    assert!(!flooder.is_empty() && flooder.len() < 10, "{flooder:?}");
+    let lost: Vec<&u32> = before.difference(&kept).collect();
+    assert!(lost.is_empty(), "robot 0's keyframes {lost:?} were evicted");
+    // Restarted alone, robot 1 publishes robot 0's keyframes again.
+    let mut robot1 = KillOnDrop(spawn_robot(&files[1], Some(5.0)));
+    assert!(wait_exit(&mut robot1.0, "robot 1", Duration::from_secs(60)).success());
+    let summary = read_json(&out1.join("summary.json"));
+    assert!(
+        messages(&summary, "peer/keyframe") >= kept.len() as u64,
+        "the restarted robot 1 published {} of robot 0's {} keyframes",
+        messages(&summary, "peer/keyframe"),
+        kept.len()
+    );
 }

@@ -1,8 +1,9 @@
-"""A hostile zenoh client (eclipse-zenoh from PyPI) for sims/tests/security.rs.
+"""A hostile zenoh client (eclipse-zenoh from PyPI) for sims/tests/transport/security.rs.
 
 Connects in client mode to ENDPOINT with the credentials given (none, TLS files,
 user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY (and each
---put-file KEY=FILE's bytes on its key), 20 ms apart; or (with --size-mb) one
+--put-file KEY=FILE's bytes on its key), 20 ms apart (and --gap-ms apart within a
+round); or (with --size-mb) one
 payload of that many megabytes; or (with --flood N) N copies of PAYLOAD_FILE on
 the first KEY as fast as zenoh takes them. Prints one JSON line: whether the
 session opened, and how many puts zenoh accepted locally.
@@ -30,6 +31,7 @@ def main():
     ap.add_argument("--size-mb", type=int)
     ap.add_argument("--put-file", action="append", default=[], metavar="KEY=FILE")
     ap.add_argument("--flood", type=int)
+    ap.add_argument("--gap-ms", type=float, default=0.0)
     a = ap.parse_args()
 
     conf = zenoh.Config()
@@ -76,6 +78,7 @@ def main():
             for key, body in frames:
                 session.put(key, body, congestion_control=block)
                 puts += 1
+                time.sleep(a.gap_ms / 1000)
             time.sleep(0.02)
         time.sleep(0.5)
     session.close()

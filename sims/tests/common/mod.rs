@@ -6,9 +6,13 @@ use std::net::TcpListener;
 /// kernel's ephemeral range (32768 and up by default): a port picked from that range
 /// could be handed to one robot's outgoing connection before the robot meant to
 /// listen on it has bound it. Test binaries that run at the same time use disjoint
-/// ranges.
+/// ranges; within a binary each call starts 30 ports after the previous one, so that
+/// tests running side by side do not pick the same ports before their robots bind
+/// them.
 pub fn free_ports_from(first: u16, n: usize) -> Vec<u16> {
-    let start = first + (std::process::id() % 3_000) as u16 * 3;
+    static CALLS: std::sync::atomic::AtomicU16 = std::sync::atomic::AtomicU16::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed) % 300;
+    let start = first + ((std::process::id() % 3_000) as u16 * 3 + call * 30) % 9_000;
     (0..3_000u16)
         .map(|k| first + (start - first + k * 3) % 9_000)
         .find_map(|base| {

@@ -2,7 +2,7 @@
 //! `troupe_comms::zenoh`).
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};

@@ -3,7 +3,7 @@
 //! its status lines every second and, stopped by SIGTERM, writes the merged map and
 //! the per-robot maps.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;

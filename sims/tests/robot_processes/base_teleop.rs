@@ -6,7 +6,7 @@
 //! plans and moves again; `robot0 return` and it ends its exploring and flies home (the
 //! status lines show the phase the robot reports over the link).
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;

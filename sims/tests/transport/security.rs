@@ -3,9 +3,9 @@
 //! peer is a real zenoh client (`eclipse-zenoh` from PyPI, `.venv-ros2`,
 //! `sims/tests/zenoh_hostile.py`); without it the tests that need it skip (saying
 //! why). The same against `troupe robot` processes, memory under a flood and a
-//! 200 MB message, and `kill -9`: `security_processes.rs`.
+//! 200 MB message, and `kill -9`: `../security_processes.rs`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

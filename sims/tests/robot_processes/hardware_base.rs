@@ -14,7 +14,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -22,7 +22,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 /// The robot's flight (after its topics appeared), wall seconds.
-const FLY_S: f64 = 30.0;
+const FLY_S: f64 = 20.0;
 /// How long the test waits for the robot to say that its base is absent (its ROS 2
 /// topics appear, then its link runs `peer_timeout_s` without the base) before it
 /// starts the base anyway, seconds.

@@ -7,7 +7,7 @@
 //! `link.lanes`), and the base's list and robot 0's equal the union of the robots'
 //! lists.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
