@@ -214,11 +214,25 @@ pub fn write_panels(charts: &[Chart], columns: usize, dir: &Path, stem: &str) ->
         charts,
         columns,
     )?;
+    // Drawn into memory and encoded with `png`, so that plotters needs no image crate.
+    let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
     draw_all(
-        &BitMapBackend::new(&png, size).into_drawing_area(),
+        &BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area(),
         charts,
         columns,
-    )
+    )?;
+    write_rgb_png(&png, size, &rgb)
+}
+
+/// Writes 8-bit RGB pixels, row by row, as a PNG file.
+fn write_rgb_png(path: &Path, (width, height): (u32, u32), rgb: &[u8]) -> io::Result<()> {
+    let file = io::BufWriter::new(std::fs::File::create(path)?);
+    let mut encoder = png::Encoder::new(file, width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(io::Error::other)?;
+    writer.write_image_data(rgb).map_err(io::Error::other)?;
+    writer.finish().map_err(io::Error::other)
 }
 
 #[cfg(test)]
@@ -243,8 +257,20 @@ mod tests {
         write_chart(&chart, dir.path(), "c").expect("chart written");
         let svg = std::fs::read_to_string(dir.path().join("c.svg")).expect("svg");
         assert!(svg.contains("coverage") && svg.contains("gmm"));
-        let png = std::fs::read(dir.path().join("c.png")).expect("png");
-        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        // The PNG decodes to the chart: a white page with the lines and text drawn on it.
+        let file = std::fs::File::open(dir.path().join("c.png")).expect("png");
+        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+            .read_info()
+            .expect("png header");
+        let mut rgb = vec![0; reader.output_buffer_size().expect("size")];
+        let info = reader.next_frame(&mut rgb).expect("png pixels");
+        assert_eq!((info.width, info.height), SIZE_PX);
+        let white = rgb.chunks(3).filter(|p| p == &[255, 255, 255]).count();
+        let pixels = rgb.len() / 3;
+        assert!(
+            white > pixels / 2 && white < pixels,
+            "{white} of {pixels} white"
+        );
         // An empty chart still draws its axes.
         write_chart(&Chart::default(), dir.path(), "empty").expect("empty chart written");
         // Panels: three charts, two to a row, make a figure two charts wide and tall.
