@@ -2,7 +2,8 @@
 //! `transport/security.rs`): a team launched with `troupe launch --tls` keeps hostile zenoh
 //! clients (`eclipse-zenoh` from PyPI, `sims/tests/zenoh_hostile.py`) out; a robot
 //! flooded with junk and sent a 200 MB message keeps its memory and its log; a robot
-//! killed with SIGKILL three times loses no keyframe and reuses no message id.
+//! killed with SIGKILL three times loses no keyframe and reuses no message id; a
+//! member flooding a robot's journal pushes out its own messages, not a peer's.
 //! Without the Python client the hostile tests skip, saying why.
 
 mod common;
@@ -864,15 +865,7 @@ fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
             }
         } else {
             // Robot 1's keyframes (its mission status is journalled too).
-            team_keyframes = now
-                .received
-                .iter()
-                .filter(|m| {
-                    m.source == 1
-                        && wire::decode(&m.bytes)
-                            .is_ok_and(|e| matches!(e.payload, Payload::Keyframe(_)))
-                })
-                .count();
+            team_keyframes = received_keyframes_from(&now, 1).len();
             assert!(team_keyframes >= 1, "robot 0 received nothing from robot 1");
         }
         accepted.extend(stored);
