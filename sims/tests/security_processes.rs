@@ -783,6 +783,22 @@ fn at_or_after(id: u32, ceiling: u32) -> bool {
     id.wrapping_sub(ceiling) < u32::MAX / 2
 }
 
+/// The robot files of `dir/team.toml` on loopback `ports`, recording nothing.
+fn unrecorded_robot_files(dir: &Path, ports: &[u16]) -> Vec<PathBuf> {
+    let files = write_team(
+        dir,
+        Path::new("team.toml"),
+        &loopback_endpoints(ports),
+        None,
+    )
+    .expect("robot files");
+    for f in &files {
+        let text = std::fs::read_to_string(f).expect("robot file");
+        std::fs::write(f, text.replacen("record = true", "record = false", 1)).expect("file");
+    }
+    files
+}
+
 fn spawn_robot(file: &Path, duration_s: Option<f64>) -> Child {
     let mut c = Command::new(env!("CARGO_BIN_EXE_troupe"));
     c.args(["robot", "--config"]).arg(file);
@@ -807,17 +823,7 @@ fn spawn_robot(file: &Path, duration_s: Option<f64>) -> Child {
 fn a_robot_process_killed_three_times_loses_no_keyframe_and_reuses_no_id() {
     let dir = tempfile::tempdir().expect("tempdir");
     two_robot_team(dir.path(), "killed");
-    let files = write_team(
-        dir.path(),
-        Path::new("team.toml"),
-        &loopback_endpoints(&free_ports(2)),
-        None,
-    )
-    .expect("robot files");
-    for f in &files {
-        let text = std::fs::read_to_string(f).expect("robot file");
-        std::fs::write(f, text.replacen("record = true", "record = false", 1)).expect("file");
-    }
+    let files = unrecorded_robot_files(dir.path(), &free_ports(2));
     let out0 = dir.path().join("robot0");
     let out1 = dir.path().join("robot1");
     // Together, then robot 1 leaves (a clean exit) and robot 0 flies on alone.
@@ -1032,17 +1038,7 @@ fn a_member_flooding_a_journal_evicts_its_own_messages_not_a_peers_keyframes() {
         .link
         .team;
     let ports = free_ports(3);
-    let files = write_team(
-        dir.path(),
-        Path::new("team.toml"),
-        &loopback_endpoints(&ports),
-        None,
-    )
-    .expect("robot files");
-    for f in &files {
-        let text = std::fs::read_to_string(f).expect("robot file");
-        std::fs::write(f, text.replacen("record = true", "record = false", 1)).expect("file");
-    }
+    let files = unrecorded_robot_files(dir.path(), &ports);
     let out1 = dir.path().join("robot1");
     let robot0 = KillOnDrop(spawn_robot(&files[0], None));
     let robot1 = KillOnDrop(spawn_robot(&files[1], None));
