@@ -799,14 +799,17 @@ fn unrecorded_robot_files(dir: &Path, ports: &[u16]) -> Vec<PathBuf> {
     files
 }
 
+/// A `troupe robot` process on `file`, its log in `file` with the extension `log`
+/// (written anew by each start).
 fn spawn_robot(file: &Path, duration_s: Option<f64>) -> Child {
     let mut c = Command::new(env!("CARGO_BIN_EXE_troupe"));
     c.args(["robot", "--config"]).arg(file);
     if let Some(d) = duration_s {
         c.args(["--duration-s", &d.to_string()]);
     }
+    let log = std::fs::File::create(file.with_extension("log")).expect("log");
     c.stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(log)
         .spawn()
         .expect("troupe robot")
 }
@@ -1105,21 +1108,36 @@ fn a_member_flooding_a_journal_evicts_its_own_messages_not_a_peers_keyframes() {
     let peak_mb = |r: &KillOnDrop| proc_status_bytes(r.0.id(), "VmHWM:").map(|b| b / 1_000_000);
     let peaks_mb = (peak_mb(&robot1), peak_mb(&robot0));
     drop((robot1, robot0));
+    let log_lines = |i: usize| {
+        std::fs::read_to_string(files[i].with_extension("log"))
+            .expect("log")
+            .lines()
+            .count()
+    };
+    let log_lines = (log_lines(1), log_lines(0));
+    let full = std::fs::read_to_string(files[1].with_extension("log"))
+        .expect("log")
+        .lines()
+        .filter(|l| l.contains("link journal full"))
+        .count();
     let (opened, after) =
         DiskJournal::open(&out1.join("state"), 0, MAX_RECEIVED_BYTES).expect("journal");
     let kept = received_keyframes_from(&after, 0);
     let flooder = received_keyframes_from(&after, 2);
     eprintln!(
         "robot 1: robot 0's keyframes {} before the flood, {} after; the flooder's {} kept, \
-         {} evicted; peak RSS (MB) of robot 1 and of its unattacked peer {:?}",
+         {} evicted; robot 1 and its unattacked peer: peak RSS {:?} MB, {:?} log lines ({full} saying the journal is full)",
         before.len(),
         kept.len(),
         flooder.len(),
         opened.received_evicted(),
-        peaks_mb
+        peaks_mb,
+        log_lines
     );
     // The flood overflowed the journal, and only the flooder paid for it.
     assert!(opened.received_evicted() > 0, "the flood evicted nothing");
+    // Said in a line or two (one per status tick with evictions), not one per message.
+    assert!((1..=3).contains(&full), "{full} 'link journal full' lines");
     assert!(!flooder.is_empty() && flooder.len() < 10, "{flooder:?}");
     let lost: Vec<&u32> = before.difference(&kept).collect();
     assert!(lost.is_empty(), "robot 0's keyframes {lost:?} were evicted");

@@ -180,6 +180,8 @@ pub struct LinkCore {
     transport: Option<TransportStats>,
     /// Where the durable part of the link is kept ([`LinkJournal`]).
     journal: LinkJournal,
+    /// The journal's evictions of received messages already logged.
+    journal_evicted_logged: u64,
     /// Shared topics by name, and unknown names that arrived.
     shared: BTreeMap<String, SharedEntry>,
     /// Lanes added so far, in order (what the journal keeps).
@@ -231,6 +233,7 @@ impl LinkCore {
             rejection_log: RateLimitedLog::new(Duration::from_secs(1)),
             transport: None,
             journal: LinkJournal::default(),
+            journal_evicted_logged: 0,
             journaled_generation: None,
             shared: BTreeMap::new(),
             lanes: Vec::new(),
@@ -269,6 +272,8 @@ impl LinkCore {
             }
         }
         self.sequence = sequence;
+        // Evictions replayed while reading the journal back happened before the restart.
+        self.journal_evicted_logged = journal.received_evicted();
         self.journal = journal;
         self.journaled_generation = None;
         Ok(self)
@@ -414,10 +419,28 @@ impl LinkCore {
                 self.send_heartbeat_if_idle()?;
                 self.expire_peers();
                 self.flush_rejection_log();
+                self.log_journal_evictions();
                 let status = self.status();
                 self.outbox.push(LinkOutput::Status(Box::new(status)));
                 Ok(())
             }
+        }
+    }
+
+    /// Says once per status tick how many received messages the journal dropped for
+    /// room since the last line (each from the sender holding the most bytes): a
+    /// restart would not publish them again.
+    fn log_journal_evictions(&mut self) {
+        let evicted = self.journal.received_evicted();
+        if evicted > self.journal_evicted_logged {
+            tracing::warn!(
+                robot = self.robot_name(),
+                evicted = evicted - self.journal_evicted_logged,
+                total = evicted,
+                "link journal full: dropped received messages of the sender holding the most \
+                 bytes; a restart will not publish them again"
+            );
+            self.journal_evicted_logged = evicted;
         }
     }
 
