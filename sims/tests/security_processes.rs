@@ -68,14 +68,26 @@ fn messages(summary: &Value, topic: &str) -> u64 {
 /// A data frame of one fragment in the link's documented layout
 /// (`troupe_comms::shaping::frame`), as a hostile peer writes it by hand.
 fn data_frame(class: Class, message_id: u32, ack_requested: bool, body: &[u8]) -> Vec<u8> {
+    fragment_frame(class, message_id, ack_requested, (0, 1), body)
+}
+
+/// A data frame carrying fragment `index` of a message announced as `count`
+/// fragments, in the link's documented layout.
+fn fragment_frame(
+    class: Class,
+    message_id: u32,
+    ack_requested: bool,
+    (index, count): (u16, u16),
+    body: &[u8],
+) -> Vec<u8> {
     let class_byte = Class::ALL
         .iter()
         .position(|c| *c == class)
         .expect("a class") as u8;
     let mut f = vec![0, class_byte, u8::from(ack_requested)];
     f.extend_from_slice(&message_id.to_le_bytes());
-    f.extend_from_slice(&0u16.to_le_bytes());
-    f.extend_from_slice(&1u16.to_le_bytes());
+    f.extend_from_slice(&index.to_le_bytes());
+    f.extend_from_slice(&count.to_le_bytes());
     f.extend_from_slice(body);
     match frame::parse(&f) {
         Ok(ParsedFrame::Data(h, _)) => assert_eq!(h.class, class),
@@ -93,10 +105,7 @@ fn data_fragments(class: Class, message_id: u32, ack_requested: bool, body: &[u8
         .iter()
         .enumerate()
         .map(|(k, chunk)| {
-            let mut f = data_frame(class, message_id, ack_requested, chunk);
-            f[7..9].copy_from_slice(&(k as u16).to_le_bytes());
-            f[9..11].copy_from_slice(&count.to_le_bytes());
-            f
+            fragment_frame(class, message_id, ack_requested, (k as u16, count), chunk)
         })
         .collect()
 }
@@ -612,12 +621,10 @@ fn a_flood_and_a_200_mb_message_leave_a_robot_process_as_it_was() {
     peaks(&robots, &mut peak);
     // 60 kB junk bodies: a stranger's, and robot 1's announcing 65 535 fragments.
     let junk = dirs[1].path().join("junk.frame");
-    let mut stranger = data_frame(Class::Bulk, 1, false, &[0xEE; 60_000]);
-    stranger[7..11].copy_from_slice(&[0, 0, 1, 0]);
+    let stranger = data_frame(Class::Bulk, 1, false, &[0xEE; 60_000]);
     std::fs::write(&junk, &stranger).expect("junk");
     let fragments = dirs[1].path().join("fragments.frame");
-    let mut announced = data_frame(Class::Bulk, 1, true, &[0xEE; 60_000]);
-    announced[7..11].copy_from_slice(&[0, 0, 0xFF, 0xFF]);
+    let announced = fragment_frame(Class::Bulk, 1, true, (0, u16::MAX), &[0xEE; 60_000]);
     std::fs::write(&fragments, &announced).expect("junk");
     let floods: Vec<Child> = [(9, &junk), (1, &fragments)]
         .into_iter()

@@ -3,9 +3,8 @@
 Connects in client mode to ENDPOINT with the credentials given (none, TLS files,
 user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY (and each
 --put-file KEY=FILE's bytes on its key), 20 ms apart (and --gap-ms apart within a
-round); or (with --size-mb) one
-payload of that many megabytes; or (with --flood N) N copies of PAYLOAD_FILE on
-the first KEY as fast as zenoh takes them. Prints one JSON line: whether the
+round); or (with --size-mb) one payload of that many megabytes; or (with --flood N)
+N copies of PAYLOAD_FILE on the first KEY as fast as zenoh takes them. Prints one JSON line: whether the
 session opened, and how many puts zenoh accepted locally.
 """
 
