@@ -308,9 +308,10 @@ impl Guide {
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
     /// `robot_m` or of the frontier it is `looking_at` from a viewpoint (the robot
     /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away); a frontier
-    /// watched for [`GuidanceConfig::give_up_after_s`] in all is given up. The count survives a frontier's flicker (the window's frontier mask
-    /// drops and restores cells at a surface's edge as rays accumulate); cells the
-    /// memory forgets are forgotten here too, so both stay bounded by the memory.
+    /// watched for [`GuidanceConfig::give_up_after_s`] in all is given up. The count
+    /// survives a frontier's flicker (the window's frontier mask drops and restores
+    /// cells at a surface's edge as rays accumulate); cells the memory forgets are
+    /// forgotten here too, so both stay bounded by the memory.
     fn watch(&mut self, robot_m: &Point3<f64>, looking_at: Option<Point3<f64>>, now: Time) {
         let dt_s = self.last_field.map_or(0.0, |last| {
             now.saturating_since(last).as_secs_f64().min(2.0)
