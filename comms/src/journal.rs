@@ -14,7 +14,10 @@
 //! returned never acknowledges something a crash can lose. Reading stops at the
 //! first record that is short or fails its checksum — the torn tail of a write
 //! cut by `kill -9` or a power loss — and truncates the file there: everything
-//! before it was fsync'd, and nothing after it was promised to anyone.
+//! before it was fsync'd, and nothing after it was promised to anyone. A change
+//! cut in the middle reads back as a prefix of its records; releases are written
+//! before additions, so that prefix holds every message that both the last synced
+//! state and the state being synced hold.
 //!
 //! **Message ids** are reserved in blocks of [`ID_BLOCK`]: a record says "ids
 //! from here on were never used", written before any id past the previous one is
