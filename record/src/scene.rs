@@ -187,12 +187,9 @@ pub fn frontier_cloud(snapshot: &GridSnapshot, stamp: Timestamp) -> PointCloud {
     PointCloud::xyzi(
         stamp,
         "world",
-        snapshot
-            .frontier_distance_m
-            .iter()
-            .enumerate()
-            .filter(|(_, d)| **d == 0.0)
-            .map(|(k, _)| {
+        (0..snapshot.frontier_distance_m.len())
+            .filter(|k| snapshot.frontier_distance_m.is_source(*k))
+            .map(|k| {
                 let p = geometry.cell_centre(grid.cell_at(k));
                 (p, p.z - geometry.origin.z)
             }),

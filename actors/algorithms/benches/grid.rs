@@ -11,7 +11,12 @@
 //!   four SOGMM keyframes fitted to 160×120 frames, for the default 20 m window and
 //!   an 8 m one (the counts of candidates, traced components and rays are printed).
 //!
-//! Throughput is in rays. Grids are cloned outside the timed part.
+//! - `distance/unsafe` and `distance/frontier`: the two distance fields of a grid
+//!   snapshot (exact Euclidean transforms, DESIGN §6) on the default window after
+//!   eight frames of the room, one every 45° of yaw.
+//!
+//! Throughput is in rays (in cells for `distance`). Grids are cloned outside the
+//! timed part.
 #![allow(missing_docs)]
 
 use std::hint::black_box;
@@ -20,6 +25,8 @@ use std::time::Duration;
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use troupe_algorithms::frame::DepthFrame;
+use troupe_algorithms::grid::distance::unsafe_distance;
+use troupe_algorithms::grid::frontier::frontier_distance;
 use troupe_algorithms::grid::{
     ComponentStore, EndVoxelScratch, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch,
     UpdateRule,
@@ -199,12 +206,33 @@ fn window_move(c: &mut Criterion) {
     group.finish();
 }
 
+fn distance(c: &mut Criterion) {
+    let base = room_pose();
+    let origin = Point3::from(base.translation.vector);
+    let mut grid = window(&origin);
+    for i in 0..8 {
+        let yaw =
+            UnitQuaternion::from_euler_angles(0.0, 0.0, f64::from(i) * std::f64::consts::FRAC_PI_4);
+        let f = frame(Isometry3::from_parts(base.translation, yaw * base.rotation));
+        for e in end_points(&f) {
+            grid.insert_ray(&origin, &e, true, None);
+        }
+    }
+    let mut group = c.benchmark_group("grid/distance");
+    group.throughput(Throughput::Elements(grid.values().len() as u64));
+    group.bench_function("unsafe", |b| b.iter(|| black_box(unsafe_distance(&grid))));
+    group.bench_function("frontier", |b| {
+        b.iter(|| black_box(frontier_distance(&grid)))
+    });
+    group.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default()
         .sample_size(20)
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(4));
-    targets = insert, window_move
+    targets = insert, window_move, distance
 }
 criterion_main!(benches);

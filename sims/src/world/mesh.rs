@@ -229,7 +229,7 @@ impl MeshWorld {
         // `far + band − 2·step` is a safe lower bound.
         let in_band: Vec<bool> = unsigned.iter().map(|d| *d <= band_m).collect();
         let to_band = distance_to(&in_band, dims, step);
-        for (u, far) in unsigned.iter_mut().zip(&to_band) {
+        for (u, far) in unsigned.iter_mut().zip(to_band.iter_m()) {
             if *u > band_m {
                 *u = band_m.max(far + band_m - 2.0 * step);
             }

@@ -290,14 +290,10 @@ impl FrontierMemory {
                         }
                         CellState::Occupied => t.known += 1,
                     }
-                    if snapshot
-                        .frontier_distance_m
-                        .get(i)
-                        .is_some_and(|d| *d == 0.0)
-                    {
+                    if snapshot.frontier_distance_m.is_source(i) {
                         t.frontier += 1;
                     }
-                    let clearance = snapshot.unsafe_distance_m.get(i).copied().unwrap_or(0.0);
+                    let clearance = snapshot.unsafe_distance_m.get(i).unwrap_or(0.0);
                     t.max_clearance_m = t.max_clearance_m.max(clearance);
                 }
             }

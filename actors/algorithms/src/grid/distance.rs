@@ -1,19 +1,30 @@
 //! Exact Euclidean distance transform (Felzenszwalb & Huttenlocher, 2012): linear
 //! time, separable over the three axes, on squared distances.
+//!
+//! The squared distances between cell centres are integers (in cells²), so the
+//! transform runs on `u32`s and a [`DistanceField`] keeps them: half the memory of
+//! metres in `f64`, and no pass over the grid to take square roots. Reading a cell
+//! gives `sqrt(d²) · cell_m`, the same number a transform in metres would give.
 
 use rayon::prelude::*;
 
 use super::{CellState, LocalGrid};
 
-/// Squared-distance transform along one line: `f` holds 0 at sources and `INF`
-/// elsewhere on entry, squared distances (in cells², along this and earlier axes) on
-/// exit. `v`, `z` and `out` are scratch buffers of at least `f.len()` (+1 for `z`).
-fn transform_line(f: &mut [f64], v: &mut [usize], z: &mut [f64], out: &mut [f64]) {
+/// The squared distance of a cell with no source on its lines so far (∞).
+const NO_SOURCE: u32 = u32::MAX;
+
+/// Squared-distance transform along one line: `f` holds 0 at sources and
+/// [`NO_SOURCE`] elsewhere on entry, squared distances (in cells², along this and
+/// earlier axes) on exit. `v`, `z` and `out` are scratch buffers of at least
+/// `f.len()` (+1 for `z`). The parabolas' intersections are computed in `f64` from
+/// integers below 2⁵³, so every comparison is the exact one.
+fn transform_line(f: &mut [u32], v: &mut [usize], z: &mut [f64], out: &mut [u32]) {
     let n = f.len();
     let mut k = 0usize;
     let mut found = false;
+    let height = |q: usize, fq: u32| f64::from(fq) + (q * q) as f64;
     for q in 0..n {
-        if f[q].is_infinite() {
+        if f[q] == NO_SOURCE {
             continue;
         }
         if !found {
@@ -26,8 +37,7 @@ fn transform_line(f: &mut [f64], v: &mut [usize], z: &mut [f64], out: &mut [f64]
         // z[0] = −∞, so the loop never pops the first parabola.
         loop {
             let p = v[k];
-            let s =
-                ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+            let s = (height(q, f[q]) - height(p, f[p])) / (2.0 * (q as f64 - p as f64));
             if s <= z[k] {
                 k -= 1;
             } else {
@@ -47,23 +57,32 @@ fn transform_line(f: &mut [f64], v: &mut [usize], z: &mut [f64], out: &mut [f64]
         while z[k + 1] < q as f64 {
             k += 1;
         }
-        let d = q as f64 - v[k] as f64;
-        *o = d * d + f[v[k]];
+        let d = q.abs_diff(v[k]) as u64;
+        *o = saturate(d * d + u64::from(f[v[k]]));
     }
     f[..n].copy_from_slice(&out[..n]);
 }
 
+/// A squared distance as stored: beyond `u32` (lines of over 46 000 cells) it
+/// saturates just below [`NO_SOURCE`].
+fn saturate(d2: u64) -> u32 {
+    u32::try_from(d2)
+        .unwrap_or(NO_SOURCE - 1)
+        .min(NO_SOURCE - 1)
+}
+
 /// Squared distance (in cells²) from each cell of a line of `n` cells to the nearest
-/// source along it (`INFINITY` when the line has none): the first pass of the
+/// source along it ([`NO_SOURCE`] when the line has none): the first pass of the
 /// transform on the binary input, by one scan each way. Equal to [`transform_line`] on
-/// the same line (the squares of small integers are exact).
-fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [f64]) {
+/// the same line.
+fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [u32]) {
+    let square = |a: usize| saturate((a as u64) * (a as u64));
     let mut last: Option<usize> = None;
     for (q, o) in out.iter_mut().enumerate() {
         if sources(q) {
             last = Some(q);
         }
-        *o = last.map_or(f64::INFINITY, |p| ((q - p) * (q - p)) as f64);
+        *o = last.map_or(NO_SOURCE, |p| square(q - p));
     }
     let mut next: Option<usize> = None;
     for (q, o) in out.iter_mut().enumerate().rev() {
@@ -71,70 +90,127 @@ fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [f64]) {
             next = Some(q);
         }
         if let Some(p) = next {
-            *o = o.min(((p - q) * (p - q)) as f64);
+            *o = (*o).min(square(p - q));
         }
     }
 }
 
+/// Distance from each cell centre of a grid to the nearest source cell centre
+/// ([`distance_to`]), kept as exact squared distances in cells and read in metres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DistanceField {
+    squared_cells: Vec<u32>,
+    cell_m: f64,
+}
+
+impl DistanceField {
+    /// Cells in the field.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.squared_cells.len()
+    }
+
+    /// Whether the field has no cells.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.squared_cells.is_empty()
+    }
+
+    /// Distance from cell `i` to the nearest source, metres (`f64::INFINITY` when
+    /// there is no source). Panics if `i` is not a cell of the field.
+    #[inline]
+    #[must_use]
+    pub fn metres(&self, i: usize) -> f64 {
+        match self.squared_cells[i] {
+            NO_SOURCE => f64::INFINITY,
+            d2 => f64::from(d2).sqrt() * self.cell_m,
+        }
+    }
+
+    /// [`metres`](Self::metres), or `None` if `i` is not a cell of the field.
+    #[must_use]
+    pub fn get(&self, i: usize) -> Option<f64> {
+        (i < self.len()).then(|| self.metres(i))
+    }
+
+    /// Whether cell `i` is a source (distance 0); `false` outside the field.
+    #[must_use]
+    pub fn is_source(&self, i: usize) -> bool {
+        self.squared_cells.get(i) == Some(&0)
+    }
+
+    /// Every cell's distance in metres, in cell order.
+    pub fn iter_m(&self) -> impl ExactSizeIterator<Item = f64> + '_ {
+        (0..self.len()).map(|i| self.metres(i))
+    }
+
+    /// Bytes the field holds.
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        4 * self.squared_cells.len()
+    }
+}
+
 /// Distance in metres from each cell centre to the nearest source cell centre
-/// (`f64::INFINITY` everywhere if there is no source). `dims` as in
-/// [`LocalGrid::dims`], cells row-major with x fastest.
+/// (infinite everywhere if there is no source). `dims` as in [`LocalGrid::dims`],
+/// cells row-major with x fastest.
 ///
 /// Lines whose values are all 0 (every cell a source, common in a grid that is mostly
 /// unknown) or all infinite (no source yet) are left as they are: the transform maps
 /// them to themselves. The lines are transformed on the rayon pool, each on its own, so
 /// the result does not depend on the thread count.
 #[must_use]
-pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> Vec<f64> {
+pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> DistanceField {
     let [nx, ny, nz] = dims;
-    let mut d = vec![0.0; sources.len()];
-    if d.is_empty() {
-        return d;
-    }
-    // Along x: each row on its own.
-    d.par_chunks_mut(nx)
-        .zip(sources.par_chunks(nx))
-        .for_each(|(out, src)| binary_line(|q| src[q], out));
-    // Along y: each z-slab (contiguous) on its own.
-    d.par_chunks_mut(nx * ny).for_each_init(
-        || Scratch::new(ny, nx),
-        |scratch, plane| {
-            scratch.transform(plane, ny, nx);
-        },
-    );
-    // Along z: each y-row of the volume is gathered, transformed and written back.
-    let planes: Vec<Option<Vec<f64>>> = (0..ny)
-        .into_par_iter()
-        .map_init(
-            || Scratch::new(nz, nx),
-            |scratch, y| {
-                let mut columns = vec![0.0; nx * nz];
+    let mut d = vec![0u32; sources.len()];
+    if !d.is_empty() {
+        // Along x: each row on its own.
+        d.par_chunks_mut(nx)
+            .zip(sources.par_chunks(nx))
+            .for_each(|(out, src)| binary_line(|q| src[q], out));
+        // Along y: each z-slab (contiguous) on its own.
+        d.par_chunks_mut(nx * ny).for_each_init(
+            || Scratch::new(ny, nx),
+            |scratch, plane| {
+                scratch.transform(plane, ny, nx);
+            },
+        );
+        // Along z: each y-row of the volume is gathered, transformed and written back.
+        let planes: Vec<Option<Vec<u32>>> = (0..ny)
+            .into_par_iter()
+            .map_init(
+                || Scratch::new(nz, nx),
+                |scratch, y| {
+                    let mut columns = vec![0; nx * nz];
+                    for q in 0..nz {
+                        let row = y * nx + q * nx * ny;
+                        columns[q * nx..(q + 1) * nx].copy_from_slice(&d[row..row + nx]);
+                    }
+                    scratch.transform(&mut columns, nz, nx).then_some(columns)
+                },
+            )
+            .collect();
+        for (y, columns) in planes.into_iter().enumerate() {
+            if let Some(columns) = columns {
                 for q in 0..nz {
                     let row = y * nx + q * nx * ny;
-                    columns[q * nx..(q + 1) * nx].copy_from_slice(&d[row..row + nx]);
+                    d[row..row + nx].copy_from_slice(&columns[q * nx..(q + 1) * nx]);
                 }
-                scratch.transform(&mut columns, nz, nx).then_some(columns)
-            },
-        )
-        .collect();
-    for (y, columns) in planes.into_iter().enumerate() {
-        if let Some(columns) = columns {
-            for q in 0..nz {
-                let row = y * nx + q * nx * ny;
-                d[row..row + nx].copy_from_slice(&columns[q * nx..(q + 1) * nx]);
             }
         }
     }
-    d.par_iter_mut().for_each(|x| *x = x.sqrt() * cell_m);
-    d
+    DistanceField {
+        squared_cells: d,
+        cell_m,
+    }
 }
 
 /// Scratch buffers for the lines of one plane.
 struct Scratch {
     v: Vec<usize>,
     z: Vec<f64>,
-    out: Vec<f64>,
-    slab: Vec<f64>,
+    out: Vec<u32>,
+    slab: Vec<u32>,
 }
 
 impl Scratch {
@@ -143,15 +219,15 @@ impl Scratch {
         Scratch {
             v: vec![0; n],
             z: vec![0.0; n + 1],
-            out: vec![0.0; n],
-            slab: vec![0.0; nx * n],
+            out: vec![0; n],
+            slab: vec![0; nx * n],
         }
     }
 
     /// Transforms the `nx` lines of `plane`, which holds `n` rows of `nx` cells (line
     /// `a` is cell `a` of every row), in place; `false` if no line changed. Lines all
-    /// 0 or all infinite map to themselves and are skipped.
-    fn transform(&mut self, plane: &mut [f64], n: usize, nx: usize) -> bool {
+    /// 0 or all [`NO_SOURCE`] map to themselves and are skipped.
+    fn transform(&mut self, plane: &mut [u32], n: usize, nx: usize) -> bool {
         for q in 0..n {
             for (a, x) in plane[q * nx..(q + 1) * nx].iter().enumerate() {
                 self.slab[a * n + q] = *x;
@@ -159,8 +235,8 @@ impl Scratch {
         }
         let mut changed = false;
         for line in self.slab[..nx * n].chunks_mut(n.max(1)) {
-            let all_zero = line.iter().all(|x| *x == 0.0);
-            if !all_zero && !line.iter().all(|x| x.is_infinite()) {
+            let all_zero = line.iter().all(|x| *x == 0);
+            if !all_zero && !line.iter().all(|x| *x == NO_SOURCE) {
                 transform_line(line, &mut self.v, &mut self.z, &mut self.out);
                 changed = true;
             }
@@ -179,7 +255,7 @@ impl Scratch {
 /// Distance from each cell to the nearest unsafe (occupied or unknown) cell, metres
 /// — what the planner and the collision checker read (DESIGN §6).
 #[must_use]
-pub fn unsafe_distance(grid: &LocalGrid) -> Vec<f64> {
+pub fn unsafe_distance(grid: &LocalGrid) -> DistanceField {
     let sources: Vec<bool> = grid
         .values()
         .iter()
@@ -198,13 +274,13 @@ mod tests {
     /// The plain separable transform: [`transform_line`] along every line of every axis.
     fn plain(sources: &[bool], dims: [usize; 3], cell_m: f64) -> Vec<f64> {
         let [nx, ny, nz] = dims;
-        let mut d: Vec<f64> = sources
+        let mut d: Vec<u32> = sources
             .iter()
-            .map(|s| if *s { 0.0 } else { f64::INFINITY })
+            .map(|s| if *s { 0 } else { super::NO_SOURCE })
             .collect();
         let n = nx.max(ny).max(nz);
         let (mut line, mut v, mut z, mut out) =
-            (vec![0.0; n], vec![0; n], vec![0.0; n + 1], vec![0.0; n]);
+            (vec![0; n], vec![0; n], vec![0.0; n + 1], vec![0; n]);
         let index = |x: usize, y: usize, zz: usize| x + nx * (y + ny * zz);
         for axis in 0..3 {
             let (len, others) = [(nx, [ny, nz]), (ny, [nx, nz]), (nz, [nx, ny])][axis];
@@ -221,7 +297,12 @@ mod tests {
                 }
             }
         }
-        d.iter().map(|s| s.sqrt() * cell_m).collect()
+        d.iter()
+            .map(|s| match *s {
+                super::NO_SOURCE => f64::INFINITY,
+                s => f64::from(s).sqrt() * cell_m,
+            })
+            .collect()
     }
 
     #[test]
@@ -240,7 +321,7 @@ mod tests {
             let fast = distance_to(&sources, dims, 0.2);
             let slow = plain(&sources, dims, 0.2);
             let same = fast
-                .iter()
+                .iter_m()
                 .zip(&slow)
                 .all(|(a, b)| a.to_bits() == b.to_bits());
             assert!(same, "case {case} {dims:?} density {density}");

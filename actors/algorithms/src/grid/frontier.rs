@@ -1,6 +1,6 @@
 //! Frontiers (free cells next to unknown space) and map entropy.
 
-use super::distance::distance_to;
+use super::distance::{DistanceField, distance_to};
 use super::{CellState, LocalGrid};
 
 /// Frontier cells: free cells with an unknown neighbour across a vertical face (in x
@@ -121,7 +121,7 @@ fn drop_small_clusters(mask: &mut [bool], d: [usize; 3], min_cells: usize) {
 /// Distance from each cell to the nearest frontier cell, metres (infinite when there
 /// is no frontier): the field behind the frontier reward V = d(ξ0) − d(ξτ) (paper V-B).
 #[must_use]
-pub fn frontier_distance(grid: &LocalGrid) -> Vec<f64> {
+pub fn frontier_distance(grid: &LocalGrid) -> DistanceField {
     distance_to(&frontier_mask(grid), grid.dims(), grid.resolution_m())
 }
 

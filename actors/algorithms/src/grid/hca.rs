@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use troupe_core::ConfigError;
 
-use super::distance::unsafe_distance;
+use super::distance::{DistanceField, unsafe_distance};
 use super::{CellBox, ComponentStore, KeyframeSource, LocalGrid, LogOddsParams, UpdateRule};
 use crate::keyframe::Keyframe;
 
@@ -166,8 +166,8 @@ pub struct HcaRound {
     pub level: u32,
     /// The last map generated, and its unsafe-distance field.
     pub grid: LocalGrid,
-    /// Distance to unsafe space per cell of `grid`, metres.
-    pub unsafe_distance_m: Vec<f64>,
+    /// Distance to unsafe space per cell of `grid`.
+    pub unsafe_distance_m: DistanceField,
     /// Maps generated this round (1 to `max_levels`).
     pub levels_tried: u32,
     /// Whether the motion was collision-free in the last map (Alg. 1 line 21); if not,
@@ -184,7 +184,7 @@ pub fn hca_round(
     config: &HcaConfig,
     prev_level: u32,
     mut local_map: impl FnMut(f64) -> LocalGrid,
-    mut in_collision: impl FnMut(&LocalGrid, &[f64]) -> bool,
+    mut in_collision: impl FnMut(&LocalGrid, &DistanceField) -> bool,
 ) -> HcaRound {
     let mut level = prev_level.saturating_add(1).min(config.top_level());
     let mut tried = 0;
@@ -210,13 +210,13 @@ pub fn hca_round(
 
 /// Whether the straight motion from `start` along `direction` for `length_m` comes
 /// closer than `clearance_m` to unsafe space (occupied or unknown) in `grid`, whose
-/// unsafe-distance field is `distance_m`. Points are checked every half cell; a point
+/// unsafe-distance field is `distance`. Points are checked every half cell; a point
 /// outside the map is in collision (unknown). The clearance of a point is its cell's
 /// distance less half a cell (the distance field runs between cell centres).
 #[must_use]
 pub fn straight_path_in_collision(
     grid: &LocalGrid,
-    distance_m: &[f64],
+    distance: &DistanceField,
     start: &Point3<f64>,
     direction: &Vector3<f64>,
     length_m: f64,
@@ -232,7 +232,7 @@ pub fn straight_path_in_collision(
     (0..=steps).any(|i| {
         let p = start + dir * (length_m * i as f64 / steps.max(1) as f64);
         grid.cell_of(&p).is_none_or(|c| {
-            distance_m
+            distance
                 .get(grid.index(c))
                 .is_none_or(|d| d - half_cell < clearance_m)
         })

@@ -3,6 +3,7 @@
 use troupe_core::{Message, Time};
 
 use super::LocalGrid;
+use super::distance::DistanceField;
 
 /// The local grid and its distance fields, as the planner and collision checker read
 /// them. Published shared (one `Arc`, no copies per subscriber).
@@ -12,17 +13,18 @@ pub struct GridSnapshot {
     pub stamp: Time,
     /// The grid.
     pub grid: LocalGrid,
-    /// Distance from each cell to unsafe (occupied or unknown) space, metres.
-    pub unsafe_distance_m: Vec<f64>,
-    /// Distance from each cell to the nearest frontier, metres (∞ without one).
-    pub frontier_distance_m: Vec<f64>,
+    /// Distance from each cell to unsafe (occupied or unknown) space.
+    pub unsafe_distance_m: DistanceField,
+    /// Distance from each cell to the nearest frontier (∞ without one).
+    pub frontier_distance_m: DistanceField,
 }
 
 impl Message for GridSnapshot {
     fn payload_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + 4 * self.grid.values().len()
-            + 8 * (self.unsafe_distance_m.len() + self.frontier_distance_m.len())
+            + self.unsafe_distance_m.heap_bytes()
+            + self.frontier_distance_m.heap_bytes()
     }
 }
 
@@ -39,14 +41,14 @@ impl GridSnapshot {
     pub fn clearance_m(&self, p: &nalgebra::Point3<f64>) -> f64 {
         self.grid
             .cell_of(p)
-            .map_or(0.0, |c| self.unsafe_distance_m[self.grid.index(c)])
+            .map_or(0.0, |c| self.unsafe_distance_m.metres(self.grid.index(c)))
     }
 
     /// Distance to the nearest frontier at a world point (∞ outside the grid).
     #[must_use]
     pub fn frontier_distance(&self, p: &nalgebra::Point3<f64>) -> f64 {
         self.grid.cell_of(p).map_or(f64::INFINITY, |c| {
-            self.frontier_distance_m[self.grid.index(c)]
+            self.frontier_distance_m.metres(self.grid.index(c))
         })
     }
 }
