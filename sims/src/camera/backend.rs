@@ -10,7 +10,7 @@ use troupe_algorithms::frame::DepthFrame;
 use troupe_core::Time;
 
 use super::CameraParams;
-use super::gpu::{GpuCamera, GpuContext, GpuError};
+use super::gpu::{self, GpuCamera, GpuContext, GpuError};
 use crate::world::World;
 
 /// Where the camera renders: `[camera] backend = "cpu" | "gpu" | "auto"`.
@@ -88,12 +88,13 @@ pub enum GpuUnavailable {
 /// Whether this process's GPU adapter will do; a software adapter counts only if
 /// `allow_software`.
 fn check_adapter(allow_software: bool) -> Result<(), GpuUnavailable> {
-    let ctx = GpuContext::shared()?;
-    if ctx.is_software() && !allow_software {
+    let adapter = GpuContext::adapter_info()?;
+    if gpu::is_software(adapter) && !allow_software {
         return Err(GpuUnavailable::SoftwareAdapter {
-            adapter: ctx.adapter_name(),
+            adapter: gpu::adapter_name(adapter),
         });
     }
+    GpuContext::shared()?;
     Ok(())
 }
 

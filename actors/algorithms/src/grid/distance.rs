@@ -2,9 +2,11 @@
 //! time, separable over the three axes, on squared distances.
 //!
 //! The squared distances between cell centres are integers (in cells²), so the
-//! transform runs on `u32`s and a [`DistanceField`] keeps them: half the memory of
-//! metres in `f64`, and no pass over the grid to take square roots. Reading a cell
-//! gives `sqrt(d²) · cell_m`, the same number a transform in metres would give.
+//! transform runs on `u32`s and a [`DistanceField`] keeps them, as `u16`s when the
+//! grid is small enough (the default 100 × 100 × 60 window is): a quarter of the
+//! memory of metres in `f64`, and no pass over the grid to take square roots.
+//! Reading a cell gives `sqrt(d²) · cell_m`, the same number a transform in metres
+//! would give.
 
 use rayon::prelude::*;
 
@@ -99,21 +101,55 @@ fn binary_line(sources: impl Fn(usize) -> bool, out: &mut [u32]) {
 /// ([`distance_to`]), kept as exact squared distances in cells and read in metres.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DistanceField {
-    squared_cells: Vec<u32>,
+    squared_cells: SquaredCells,
     cell_m: f64,
 }
 
+/// Squared distances in cells², `MAX` for no source.
+#[derive(Clone, Debug, PartialEq)]
+enum SquaredCells {
+    /// Every finite value is below `u16::MAX`.
+    Narrow(Vec<u16>),
+    Wide(Vec<u32>),
+}
+
 impl DistanceField {
+    /// The field of `squared` (in cells², [`NO_SOURCE`] for none), narrowed when a
+    /// grid of `dims` cannot hold a squared distance of `u16::MAX` or more.
+    fn new(squared: Vec<u32>, dims: [usize; 3], cell_m: f64) -> Self {
+        let widest = dims
+            .iter()
+            .map(|n| n.saturating_sub(1).pow(2))
+            .sum::<usize>();
+        let squared_cells = if widest < usize::from(u16::MAX) {
+            SquaredCells::Narrow(
+                squared
+                    .iter()
+                    .map(|d2| u16::try_from(*d2).unwrap_or(u16::MAX))
+                    .collect(),
+            )
+        } else {
+            SquaredCells::Wide(squared)
+        };
+        DistanceField {
+            squared_cells,
+            cell_m,
+        }
+    }
+
     /// Cells in the field.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.squared_cells.len()
+        match &self.squared_cells {
+            SquaredCells::Narrow(d) => d.len(),
+            SquaredCells::Wide(d) => d.len(),
+        }
     }
 
     /// Whether the field has no cells.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.squared_cells.is_empty()
+        self.len() == 0
     }
 
     /// Distance from cell `i` to the nearest source, metres (`f64::INFINITY` when
@@ -121,10 +157,17 @@ impl DistanceField {
     #[inline]
     #[must_use]
     pub fn metres(&self, i: usize) -> f64 {
-        match self.squared_cells[i] {
-            NO_SOURCE => f64::INFINITY,
-            d2 => f64::from(d2).sqrt() * self.cell_m,
-        }
+        let d2 = match &self.squared_cells {
+            SquaredCells::Narrow(d) => match d[i] {
+                u16::MAX => return f64::INFINITY,
+                d2 => u32::from(d2),
+            },
+            SquaredCells::Wide(d) => match d[i] {
+                NO_SOURCE => return f64::INFINITY,
+                d2 => d2,
+            },
+        };
+        f64::from(d2).sqrt() * self.cell_m
     }
 
     /// [`metres`](Self::metres), or `None` if `i` is not a cell of the field.
@@ -136,7 +179,10 @@ impl DistanceField {
     /// Whether cell `i` is a source (distance 0); `false` outside the field.
     #[must_use]
     pub fn is_source(&self, i: usize) -> bool {
-        self.squared_cells.get(i) == Some(&0)
+        match &self.squared_cells {
+            SquaredCells::Narrow(d) => d.get(i) == Some(&0),
+            SquaredCells::Wide(d) => d.get(i) == Some(&0),
+        }
     }
 
     /// Every cell's distance in metres, in cell order.
@@ -147,7 +193,10 @@ impl DistanceField {
     /// Bytes the field holds.
     #[must_use]
     pub fn heap_bytes(&self) -> usize {
-        4 * self.squared_cells.len()
+        match &self.squared_cells {
+            SquaredCells::Narrow(d) => 2 * d.len(),
+            SquaredCells::Wide(d) => 4 * d.len(),
+        }
     }
 }
 
@@ -199,10 +248,7 @@ pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> DistanceF
             }
         }
     }
-    DistanceField {
-        squared_cells: d,
-        cell_m,
-    }
+    DistanceField::new(d, dims, cell_m)
 }
 
 /// Scratch buffers for the lines of one plane.
@@ -303,6 +349,23 @@ mod tests {
                 s => f64::from(s).sqrt() * cell_m,
             })
             .collect()
+    }
+
+    /// A grid too long for `u16` squared distances keeps `u32`s, with the same
+    /// metres.
+    #[test]
+    fn a_long_grid_keeps_wide_squared_distances() {
+        let dims = [300, 1, 1];
+        let mut sources = vec![false; 300];
+        sources[0] = true;
+        let field = distance_to(&sources, dims, 0.1);
+        assert_eq!(field.heap_bytes(), 4 * 300);
+        assert_eq!(field.metres(299).to_bits(), (299.0f64 * 0.1).to_bits());
+        let short = distance_to(&sources[..200], [200, 1, 1], 0.1);
+        assert_eq!(short.heap_bytes(), 2 * 200);
+        assert_eq!(short.metres(199).to_bits(), (199.0f64 * 0.1).to_bits());
+        let none = distance_to(&[false; 4], [2, 2, 1], 0.1);
+        assert!(none.iter_m().all(f64::is_infinite));
     }
 
     #[test]

@@ -63,17 +63,35 @@ impl GpuContext {
             .map_err(Clone::clone)
     }
 
-    fn open() -> Result<GpuContext, GpuError> {
+    /// What the shared context's adapter is, found without opening a device: on a
+    /// machine whose only adapter is a software rasteriser, opening one takes 64 MiB
+    /// that a CPU camera never uses.
+    ///
+    /// # Errors
+    ///
+    /// [`GpuError::NoAdapter`].
+    pub fn adapter_info() -> Result<&'static wgpu::AdapterInfo, GpuError> {
+        static INFO: OnceLock<Result<wgpu::AdapterInfo, GpuError>> = OnceLock::new();
+        INFO.get_or_init(|| Self::adapter().map(|a| a.get_info()))
+            .as_ref()
+            .map_err(Clone::clone)
+    }
+
+    fn adapter() -> Result<wgpu::Adapter, GpuError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::VULKAN;
         // No validation layers (they are rarely installed and slow every call).
         desc.flags = wgpu::InstanceFlags::empty();
         let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             ..wgpu::RequestAdapterOptions::default()
         }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))
+    }
+
+    fn open() -> Result<GpuContext, GpuError> {
+        let adapter = Self::adapter()?;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("troupe camera"),
             required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
@@ -91,15 +109,27 @@ impl GpuContext {
     /// but slower than the CPU path (see the `camera` bench), so `auto` passes it over.
     #[must_use]
     pub fn is_software(&self) -> bool {
-        self.adapter.device_type == wgpu::DeviceType::Cpu
+        is_software(&self.adapter)
     }
 
     /// The adapter in words, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Cpu, Vulkan)"`.
     #[must_use]
     pub fn adapter_name(&self) -> String {
-        let a = &self.adapter;
-        format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend)
+        adapter_name(&self.adapter)
     }
+}
+
+/// Whether `adapter` is a software rasteriser ([`GpuContext::is_software`]).
+#[must_use]
+pub fn is_software(adapter: &wgpu::AdapterInfo) -> bool {
+    adapter.device_type == wgpu::DeviceType::Cpu
+}
+
+/// `adapter` in words ([`GpuContext::adapter_name`]).
+#[must_use]
+pub fn adapter_name(adapter: &wgpu::AdapterInfo) -> String {
+    let a = adapter;
+    format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend)
 }
 
 /// The shader source: the constants of `render.rs`, then `trace.wgsl`.
