@@ -461,9 +461,16 @@ fn no_autopilot_is_one_error_after_the_wait() {
     );
     assert_eq!(robot.status.code(), Some(1), "{stderr}");
     assert!(wall_s < 20.0, "it waited {wall_s:.1} s");
+    // troupe's error lines; zenoh's own (e.g. data racing ahead of its key's
+    // declaration from the ROS 2 camera's session, seen under load) are not the
+    // robot's to count.
     let errors: Vec<&str> = stderr
         .lines()
-        .filter(|l| l.contains("ERROR") || l.starts_with("troupe-robot:"))
+        .filter(|l| {
+            let plain = l.replace("\u{1b}[2m", "").replace("\u{1b}[0m", "");
+            (l.contains("ERROR") && !plain.contains("ERROR zenoh::"))
+                || l.starts_with("troupe-robot:")
+        })
         .collect();
     assert_eq!(errors.len(), 1, "{stderr}");
     assert!(

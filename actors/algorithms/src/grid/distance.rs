@@ -204,12 +204,73 @@ impl DistanceField {
 /// (infinite everywhere if there is no source). `dims` as in [`LocalGrid::dims`],
 /// cells row-major with x fastest.
 ///
-/// Lines whose values are all 0 (every cell a source, common in a grid that is mostly
-/// unknown) or all infinite (no source yet) are left as they are: the transform maps
-/// them to themselves. The lines are transformed on the rayon pool, each on its own, so
-/// the result does not depend on the thread count.
+/// Only the box around the cells that are not sources, one cell wider, is
+/// transformed: every cell outside that box is a source (distance 0), and for a cell
+/// inside it a source beyond the box is never nearer than the box's border cell
+/// between them (clamping the source's coordinates into the box moves it closer on
+/// every axis, onto a cell outside the inner box, a source). In a window that is
+/// mostly unknown, the unsafe-distance field's box is the free space's, often a
+/// fraction of the window.
 #[must_use]
 pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> DistanceField {
+    let squared = match non_source_box(sources, dims) {
+        None => vec![0; sources.len()],
+        Some((lo, hi)) => {
+            let lo = lo.map(|v| v.saturating_sub(1));
+            let hi = [0, 1, 2].map(|k| (hi[k] + 1).min(dims[k] - 1));
+            if lo == [0; 3] && hi == dims.map(|n| n - 1) {
+                squared_distances(sources, dims)
+            } else {
+                let sub = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
+                let row = |y: usize, z: usize, nx: usize, ny: usize| nx * (y + ny * z);
+                let mut inner = Vec::with_capacity(sub.iter().product());
+                for z in 0..sub[2] {
+                    for y in 0..sub[1] {
+                        let at = row(lo[1] + y, lo[2] + z, dims[0], dims[1]) + lo[0];
+                        inner.extend_from_slice(&sources[at..at + sub[0]]);
+                    }
+                }
+                let inner = squared_distances(&inner, sub);
+                let mut d = vec![0; sources.len()];
+                for z in 0..sub[2] {
+                    for y in 0..sub[1] {
+                        let at = row(lo[1] + y, lo[2] + z, dims[0], dims[1]) + lo[0];
+                        let from = row(y, z, sub[0], sub[1]);
+                        d[at..at + sub[0]].copy_from_slice(&inner[from..from + sub[0]]);
+                    }
+                }
+                d
+            }
+        }
+    };
+    DistanceField::new(squared, dims, cell_m)
+}
+
+/// The smallest box (first and last cell on each axis) holding every cell that is
+/// not a source; `None` if every cell is one.
+fn non_source_box(sources: &[bool], dims: [usize; 3]) -> Option<([usize; 3], [usize; 3])> {
+    let nx = dims[0].max(1);
+    let mut bounds: Option<([usize; 3], [usize; 3])> = None;
+    for (r, row) in sources.chunks(nx).enumerate() {
+        let Some(first) = row.iter().position(|s| !s) else {
+            continue;
+        };
+        let last = row.iter().rposition(|s| !s).unwrap_or(first);
+        let (y, z) = (r % dims[1], r / dims[1]);
+        let (lo, hi) = bounds.get_or_insert(([first, y, z], [last, y, z]));
+        *lo = [lo[0].min(first), lo[1].min(y), lo[2].min(z)];
+        *hi = [hi[0].max(last), hi[1].max(y), hi[2].max(z)];
+    }
+    bounds
+}
+
+/// Squared distances in cells² ([`NO_SOURCE`] for none) by the separable transform.
+///
+/// Lines whose values are all 0 (every cell a source) or all [`NO_SOURCE`] (no
+/// source yet) are left as they are: the transform maps them to themselves. The lines
+/// are transformed on the rayon pool, each on its own, so the result does not depend
+/// on the thread count.
+fn squared_distances(sources: &[bool], dims: [usize; 3]) -> Vec<u32> {
     let [nx, ny, nz] = dims;
     let mut d = vec![0u32; sources.len()];
     if !d.is_empty() {
@@ -248,7 +309,7 @@ pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> DistanceF
             }
         }
     }
-    DistanceField::new(d, dims, cell_m)
+    d
 }
 
 /// Scratch buffers for the lines of one plane.
