@@ -19,7 +19,8 @@ const NO_SOURCE: u32 = u32::MAX;
 /// [`NO_SOURCE`] elsewhere on entry, squared distances (in cells², along this and
 /// earlier axes) on exit. `v`, `z` and `out` are scratch buffers of at least
 /// `f.len()` (+1 for `z`). The parabolas' intersections are computed in `f64` from
-/// integers below 2⁵³, so every comparison is the exact one.
+/// the same exact integers a transform in `f64` would hold, so the envelope and the
+/// result are the same.
 fn transform_line(f: &mut [u32], v: &mut [usize], z: &mut [f64], out: &mut [u32]) {
     let n = f.len();
     let mut k = 0usize;

@@ -128,8 +128,13 @@ pub fn is_software(adapter: &wgpu::AdapterInfo) -> bool {
 /// `adapter` in words ([`GpuContext::adapter_name`]).
 #[must_use]
 pub fn adapter_name(adapter: &wgpu::AdapterInfo) -> String {
-    let a = adapter;
-    format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend)
+    let wgpu::AdapterInfo {
+        name,
+        device_type,
+        backend,
+        ..
+    } = adapter;
+    format!("{name} ({device_type:?}, {backend:?})")
 }
 
 /// The shader source: the constants of `render.rs`, then `trace.wgsl`.
