@@ -89,9 +89,9 @@ pub enum GpuUnavailable {
 /// `allow_software`.
 fn check_adapter(allow_software: bool) -> Result<(), GpuUnavailable> {
     let adapter = GpuContext::adapter_info()?;
-    if gpu::is_software(adapter) && !allow_software {
+    if gpu::is_software(&adapter) && !allow_software {
         return Err(GpuUnavailable::SoftwareAdapter {
-            adapter: gpu::adapter_name(adapter),
+            adapter: gpu::adapter_name(&adapter),
         });
     }
     GpuContext::shared()?;

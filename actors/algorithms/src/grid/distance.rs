@@ -223,22 +223,21 @@ pub fn distance_to(sources: &[bool], dims: [usize; 3], cell_m: f64) -> DistanceF
                 squared_distances(sources, dims)
             } else {
                 let sub = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-                let row = |y: usize, z: usize, nx: usize, ny: usize| nx * (y + ny * z);
-                let mut inner = Vec::with_capacity(sub.iter().product());
-                for z in 0..sub[2] {
-                    for y in 0..sub[1] {
-                        let at = row(lo[1] + y, lo[2] + z, dims[0], dims[1]) + lo[0];
-                        inner.extend_from_slice(&sources[at..at + sub[0]]);
-                    }
-                }
-                let inner = squared_distances(&inner, sub);
+                // Where each of the box's rows starts in the grid, in the box's order.
+                let rows: Vec<usize> = (lo[2]..=hi[2])
+                    .flat_map(|z| (lo[1]..=hi[1]).map(move |y| lo[0] + dims[0] * (y + dims[1] * z)))
+                    .collect();
+                let inner: Vec<bool> = rows
+                    .iter()
+                    .flat_map(|&at| &sources[at..at + sub[0]])
+                    .copied()
+                    .collect();
                 let mut d = vec![0; sources.len()];
-                for z in 0..sub[2] {
-                    for y in 0..sub[1] {
-                        let at = row(lo[1] + y, lo[2] + z, dims[0], dims[1]) + lo[0];
-                        let from = row(y, z, sub[0], sub[1]);
-                        d[at..at + sub[0]].copy_from_slice(&inner[from..from + sub[0]]);
-                    }
+                for (&at, row) in rows
+                    .iter()
+                    .zip(squared_distances(&inner, sub).chunks(sub[0]))
+                {
+                    d[at..at + sub[0]].copy_from_slice(row);
                 }
                 d
             }

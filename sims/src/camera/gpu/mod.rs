@@ -70,14 +70,20 @@ impl GpuContext {
     /// # Errors
     ///
     /// [`GpuError::NoAdapter`].
-    pub fn adapter_info() -> Result<&'static wgpu::AdapterInfo, GpuError> {
-        static INFO: OnceLock<Result<wgpu::AdapterInfo, GpuError>> = OnceLock::new();
-        INFO.get_or_init(|| Self::adapter().map(|a| a.get_info()))
+    pub fn adapter_info() -> Result<wgpu::AdapterInfo, GpuError> {
+        Self::adapter().map(wgpu::Adapter::get_info)
+    }
+
+    /// The process's adapter, found once: the context's device is opened on it.
+    fn adapter() -> Result<&'static wgpu::Adapter, GpuError> {
+        static ADAPTER: OnceLock<Result<wgpu::Adapter, GpuError>> = OnceLock::new();
+        ADAPTER
+            .get_or_init(Self::find_adapter)
             .as_ref()
             .map_err(Clone::clone)
     }
 
-    fn adapter() -> Result<wgpu::Adapter, GpuError> {
+    fn find_adapter() -> Result<wgpu::Adapter, GpuError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::VULKAN;
         // No validation layers (they are rarely installed and slow every call).
