@@ -187,12 +187,10 @@ pub fn frontier_cloud(snapshot: &GridSnapshot, stamp: Timestamp) -> PointCloud {
     PointCloud::xyzi(
         stamp,
         "world",
-        (0..snapshot.frontier_distance_m.len())
-            .filter(|k| snapshot.frontier_distance_m.is_source(*k))
-            .map(|k| {
-                let p = geometry.cell_centre(grid.cell_at(k));
-                (p, p.z - geometry.origin.z)
-            }),
+        snapshot.frontiers.indices().map(|k| {
+            let p = geometry.cell_centre(grid.cell_at(k));
+            (p, p.z - geometry.origin.z)
+        }),
     )
 }
 

@@ -25,8 +25,9 @@ use std::time::Duration;
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use troupe_algorithms::frame::DepthFrame;
+use troupe_algorithms::grid::FrontierSet;
 use troupe_algorithms::grid::distance::unsafe_distance;
-use troupe_algorithms::grid::frontier::frontier_distance;
+use troupe_algorithms::grid::frontier::frontier_mask;
 use troupe_algorithms::grid::{
     ComponentStore, EndVoxelScratch, KeyframeSource, LocalGrid, LogOddsParams, ScanScratch,
     UpdateRule,
@@ -221,8 +222,9 @@ fn distance(c: &mut Criterion) {
     let mut group = c.benchmark_group("grid/distance");
     group.throughput(Throughput::Elements(grid.values().len() as u64));
     group.bench_function("unsafe", |b| b.iter(|| black_box(unsafe_distance(&grid))));
-    group.bench_function("frontier", |b| {
-        b.iter(|| black_box(frontier_distance(&grid)))
+    group.bench_function("frontier", |b| b.iter(|| black_box(FrontierSet::of(&grid))));
+    group.bench_function("frontier_mask", |b| {
+        b.iter(|| black_box(frontier_mask(&grid)))
     });
     group.finish();
 }

@@ -290,7 +290,7 @@ impl FrontierMemory {
                         }
                         CellState::Occupied => t.known += 1,
                     }
-                    if snapshot.frontier_distance_m.is_source(i) {
+                    if snapshot.frontiers.contains(i) {
                         t.frontier += 1;
                     }
                     let clearance = snapshot.unsafe_distance_m.get(i).unwrap_or(0.0);

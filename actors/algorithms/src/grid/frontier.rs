@@ -1,6 +1,5 @@
 //! Frontiers (free cells next to unknown space) and map entropy.
 
-use super::distance::{DistanceField, distance_to};
 use super::{CellState, LocalGrid};
 
 /// Frontier cells: free cells with an unknown neighbour across a vertical face (in x
@@ -116,13 +115,6 @@ fn drop_small_clusters(mask: &mut [bool], d: [usize; 3], min_cells: usize) {
             }
         }
     }
-}
-
-/// Distance from each cell to the nearest frontier cell, metres (infinite when there
-/// is no frontier): the field behind the frontier reward V = d(ξ0) − d(ξτ) (paper V-B).
-#[must_use]
-pub fn frontier_distance(grid: &LocalGrid) -> DistanceField {
-    distance_to(&frontier_mask(grid), grid.dims(), grid.resolution_m())
 }
 
 /// Shannon entropy of the grid in bits: Σ H(p) with H(p) = −p log₂ p − (1−p) log₂(1−p).

@@ -14,7 +14,8 @@
 //!   centre ([`UpdateRule::PerEndVoxel`], OctoMap's `discretize`), on one thread.
 //! - [`hca`]: variable resolution and Hierarchical Collision Avoidance (§5.1).
 //! - [`distance`]: exact Euclidean distance transform over unsafe space.
-//! - [`frontier`]: frontier cells and map entropy.
+//! - [`frontier`]: frontier cells and map entropy; [`FrontierSet`]: the distance to
+//!   the nearest frontier, found on demand.
 //! - [`meter`]: the bytes that baseline would send for a robot's frames at any
 //!   resolution, without flying it (§8.2.6, Table 8.1).
 
@@ -22,6 +23,7 @@ mod config;
 pub mod distance;
 mod endvoxel;
 pub mod frontier;
+mod frontier_set;
 pub mod hca;
 mod insert;
 mod local;
@@ -33,6 +35,7 @@ pub mod window_scene;
 
 pub use config::GridConfig;
 pub use endvoxel::EndVoxelScratch;
+pub use frontier_set::FrontierSet;
 pub use insert::{
     FrameScans, frame_scans, free_range_m, insert_frame, insert_frame_with, insert_keyframe,
 };

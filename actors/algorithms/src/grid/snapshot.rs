@@ -4,6 +4,7 @@ use troupe_core::{Message, Time};
 
 use super::LocalGrid;
 use super::distance::DistanceField;
+use super::frontier_set::FrontierSet;
 
 /// The local grid and its distance fields, as the planner and collision checker read
 /// them. Published shared (one `Arc`, no copies per subscriber).
@@ -15,8 +16,8 @@ pub struct GridSnapshot {
     pub grid: LocalGrid,
     /// Distance from each cell to unsafe (occupied or unknown) space.
     pub unsafe_distance_m: DistanceField,
-    /// Distance from each cell to the nearest frontier (∞ without one).
-    pub frontier_distance_m: DistanceField,
+    /// The frontier cells, and the distance to the nearest one.
+    pub frontiers: FrontierSet,
 }
 
 impl Message for GridSnapshot {
@@ -24,7 +25,7 @@ impl Message for GridSnapshot {
         std::mem::size_of::<Self>()
             + 4 * self.grid.values().len()
             + self.unsafe_distance_m.heap_bytes()
-            + self.frontier_distance_m.heap_bytes()
+            + self.frontiers.heap_bytes()
     }
 }
 
@@ -47,8 +48,8 @@ impl GridSnapshot {
     /// Distance to the nearest frontier at a world point (∞ outside the grid).
     #[must_use]
     pub fn frontier_distance(&self, p: &nalgebra::Point3<f64>) -> f64 {
-        self.grid.cell_of(p).map_or(f64::INFINITY, |c| {
-            self.frontier_distance_m.metres(self.grid.index(c))
-        })
+        self.grid
+            .cell_of(p)
+            .map_or(f64::INFINITY, |c| self.frontiers.distance_m(c))
     }
 }

@@ -4,9 +4,8 @@
 use nalgebra::{Point3, Vector3};
 
 use crate::camera::PinholeIntrinsics;
-use crate::grid::GridSnapshot;
 use crate::grid::distance::unsafe_distance;
-use crate::grid::frontier::frontier_distance;
+use crate::grid::{FrontierSet, GridSnapshot};
 use crate::grid::{LocalGrid, LogOddsParams};
 use troupe_core::Time;
 
@@ -34,7 +33,7 @@ pub fn snapshot_of(grid: LocalGrid) -> GridSnapshot {
     GridSnapshot {
         stamp: Time::ZERO,
         unsafe_distance_m: unsafe_distance(&grid),
-        frontier_distance_m: frontier_distance(&grid),
+        frontiers: FrontierSet::of(&grid),
         grid,
     }
 }

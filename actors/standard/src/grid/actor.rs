@@ -21,15 +21,14 @@ use crate::msgs::{
     PEER_KEYFRAME,
 };
 use troupe_algorithms::frame::Odometry;
-use troupe_algorithms::grid::GridSnapshot;
 use troupe_algorithms::grid::distance::unsafe_distance;
-use troupe_algorithms::grid::frontier::frontier_distance;
 use troupe_algorithms::grid::hca::{
     KeyframePair, hca_round, regenerate, straight_path_in_collision,
 };
 use troupe_algorithms::grid::{
     CellBox, ComponentStore, GridConfig, KeyframeSource, LocalGrid, ScanScratch, insert_frame_with,
 };
+use troupe_algorithms::grid::{FrontierSet, GridSnapshot};
 use troupe_algorithms::keyframe::Keyframe;
 use troupe_runtime::{Actor, ActorError, ActorResult, Context, Event, QueuePolicy, TimerId};
 
@@ -195,7 +194,7 @@ impl GridActor {
         self.hca_level = round.level;
         Some(GridSnapshot {
             stamp,
-            frontier_distance_m: frontier_distance(&round.grid),
+            frontiers: FrontierSet::of(&round.grid),
             unsafe_distance_m: round.unsafe_distance_m,
             grid: round.grid,
         })
@@ -278,12 +277,12 @@ impl Actor for GridActor {
                 if let Some(snapshot) = self.hca_snapshot(ctx.now()) {
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
                 } else if let Some(grid) = &self.grid {
-                    let (unsafe_distance_m, frontier_distance_m) =
-                        rayon::join(|| unsafe_distance(grid), || frontier_distance(grid));
+                    let (unsafe_distance_m, frontiers) =
+                        rayon::join(|| unsafe_distance(grid), || FrontierSet::of(grid));
                     let snapshot = GridSnapshot {
                         stamp: ctx.now(),
                         unsafe_distance_m,
-                        frontier_distance_m,
+                        frontiers,
                         grid: grid.clone(),
                     };
                     ctx.publish_arc(&GRID_SNAPSHOT, Arc::new(snapshot));
