@@ -63,6 +63,8 @@ struct StoredKeyframe {
     /// Its components' range in [`ComponentStore::components`].
     first: usize,
     end: usize,
+    /// Largest `|mean − origin| + radius` over its components, metres.
+    reach_m: f64,
 }
 
 /// What a rebuild did (for logs and benchmarks).
@@ -226,6 +228,7 @@ impl ComponentStore {
             origin,
             first,
             end: self.components.len(),
+            reach_m: 0.0,
         });
         for c in first..self.components.len() {
             self.index_component(c);
@@ -235,19 +238,40 @@ impl ComponentStore {
 
     fn index_component(&mut self, c: usize) {
         let component = &self.components[c];
-        let origin = self.keyframes[component.keyframe].origin;
-        let reach = (component.mean - origin).norm() + component.radius_m;
+        let keyframe = &mut self.keyframes[component.keyframe];
+        let reach = (component.mean - keyframe.origin).norm() + component.radius_m;
+        keyframe.reach_m = keyframe.reach_m.max(reach);
         self.max_reach_m = self.max_reach_m.max(reach);
         let bucket = self.bucket(&component.mean);
         self.index.entry(bucket).or_default().push(c as u32);
     }
 
+    /// Drops the oldest keyframe and its components. The index is mended in place, to
+    /// what indexing the remaining components afresh would give: each bucket lists its
+    /// components in storage order, so the dropped ones (the first `n`) lead their
+    /// buckets' lists, and the rest move down by `n`.
     fn evict_oldest(&mut self) {
         if self.keyframes.is_empty() {
             return;
         }
         let dropped = self.keyframes.remove(0);
         let n = dropped.end - dropped.first;
+        for c in dropped.first..dropped.end {
+            let bucket = self.bucket(&self.components[c].mean);
+            if let Some(ids) = self.index.get_mut(&bucket) {
+                let kept = ids.partition_point(|&id| (id as usize) < dropped.end);
+                ids.drain(..kept);
+                if ids.is_empty() {
+                    self.index.remove(&bucket);
+                }
+            }
+        }
+        let shift = u32::try_from(n).unwrap_or(u32::MAX);
+        for ids in self.index.values_mut() {
+            for id in ids {
+                *id -= shift;
+            }
+        }
         self.components.drain(dropped.first..dropped.end);
         for c in &mut self.components {
             c.keyframe -= 1;
@@ -256,11 +280,7 @@ impl ComponentStore {
             k.first -= n;
             k.end -= n;
         }
-        self.index.clear();
-        self.max_reach_m = 0.0;
-        for c in 0..self.components.len() {
-            self.index_component(c);
-        }
+        self.max_reach_m = self.keyframes.iter().map(|k| k.reach_m).fold(0.0, f64::max);
     }
 
     /// Ray-traces every sample of stored keyframe `k` (as returned by
@@ -393,6 +413,13 @@ impl ComponentStore {
             }
         }
         out
+    }
+
+    /// The spatial index (bucket → components in storage order) and the largest reach,
+    /// for tests that compare a mended index with a fresh one.
+    #[cfg(test)]
+    pub(super) fn index_state(&self) -> (&HashMap<[i64; 3], Vec<u32>>, f64) {
+        (&self.index, self.max_reach_m)
     }
 
     /// The source and id of stored keyframe `k`.

@@ -174,6 +174,21 @@ fn the_oldest_keyframe_is_evicted_and_the_index_follows() {
         only_newer.trace_keyframe(&mut expected, k);
     }
     assert!(rebuilt.values() == expected.values());
+    assert_eq!(store.index_state(), only_newer.index_state());
+    // Evicting again and again mends the index to what the newest keyframes alone
+    // index: buckets, their order and the largest reach.
+    let more: Vec<Keyframe> = (3..9)
+        .map(|i| random_keyframe(&mut rng, i, 7 + i as usize))
+        .collect();
+    for kf in &more {
+        store.insert(KeyframeSource::Own, kf).unwrap();
+    }
+    let mut newest = ComponentStore::new(300, 2, 2.0);
+    for kf in &more[4..] {
+        newest.insert(KeyframeSource::Own, kf).unwrap();
+    }
+    assert_eq!(store.component_count(), newest.component_count());
+    assert_eq!(store.index_state(), newest.index_state());
     // A keyframe with a non-finite pose is refused.
     let mut bad = keyframes[0].clone();
     bad.pose.translation.vector.x = f64::NAN;
