@@ -177,15 +177,6 @@ impl DistanceField {
         (i < self.len()).then(|| self.metres(i))
     }
 
-    /// Whether cell `i` is a source (distance 0); `false` outside the field.
-    #[must_use]
-    pub fn is_source(&self, i: usize) -> bool {
-        match &self.squared_cells {
-            SquaredCells::Narrow(d) => d.get(i) == Some(&0),
-            SquaredCells::Wide(d) => d.get(i) == Some(&0),
-        }
-    }
-
     /// Every cell's distance in metres, in cell order.
     pub fn iter_m(&self) -> impl ExactSizeIterator<Item = f64> + '_ {
         (0..self.len()).map(|i| self.metres(i))

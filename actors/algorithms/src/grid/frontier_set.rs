@@ -38,13 +38,11 @@ impl FrontierSet {
     }
 
     /// The cells set in `mask` (`dims` as in [`LocalGrid::dims`], cells row-major
-    /// with x fastest) of a grid of `cell_m` cells.
-    ///
-    /// # Panics
-    /// If `mask` does not hold `dims`' cells.
+    /// with x fastest) of a grid of `cell_m` cells; entries of `mask` beyond the grid's
+    /// cells are ignored.
     #[must_use]
     pub fn from_mask(mask: &[bool], dims: [usize; 3], cell_m: f64) -> Self {
-        assert_eq!(mask.len(), dims.iter().product::<usize>(), "mask size");
+        let mask = &mask[..mask.len().min(dims.iter().product())];
         let blocks = dims.map(|n| n.div_ceil(BLOCK_CELLS));
         let block_of = |c: [usize; 3]| {
             let b = c.map(|v| v / BLOCK_CELLS);
