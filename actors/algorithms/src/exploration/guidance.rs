@@ -560,7 +560,8 @@ impl GuidanceField {
     #[must_use]
     pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
         let cell_m = memory.cell_m();
-        let passable = |key| memory.on_trail(key) || memory.record(key).passable;
+        let passable_cells = passable_in(memory);
+        let passable = |key| memory.on_trail(key) || passable_cells.contains(&key);
         let distance_m = routes_from(memory, goal_m, &passable);
         let goal = memory
             .key_of(goal_m)

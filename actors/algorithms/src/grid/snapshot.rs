@@ -6,8 +6,8 @@ use super::LocalGrid;
 use super::distance::DistanceField;
 use super::frontier_set::FrontierSet;
 
-/// The local grid and its distance fields, as the planner and collision checker read
-/// them. Published shared (one `Arc`, no copies per subscriber).
+/// The local grid, its distance to unsafe space and its frontier cells, as the planner
+/// and collision checker read them. Published shared (one `Arc`, no copies per subscriber).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GridSnapshot {
     /// When it was taken.
