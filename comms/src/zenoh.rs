@@ -16,6 +16,10 @@
 //!   a robot the cells it did not ask for.
 //! - **Addressing**: a frame for one robot (acks, store-and-forward catch-up)
 //!   carries the addressee as a 4-byte attachment; other robots drop it.
+//! - **Signatures** ([`signing`]): with `[zenoh.signing]` every frame carries its
+//!   sender's ECDSA P-256 signature in the attachment (after the addressee), and
+//!   frames not signed by the robot their key expression names are refused, so a
+//!   router, which may forward every id, cannot pose as one.
 //! - **Checks on receipt** (each counted in [`ZenohStats`]): the key expression
 //!   must parse, name our team and a known class, and agree with the frame's
 //!   class; the frame must parse and be at most the largest MTU long. The link
@@ -56,9 +60,13 @@ use crate::transport::{
     PacketSink, PacketTransport, ReceivedPacket, TransportError, TransportStats,
 };
 use crate::wire::Class;
+use signing::{FrameSigner, FrameVerifier};
 
 pub mod refusals;
 pub mod security;
+pub mod signing;
+
+pub use signing::{ZenohSigner, ZenohSigning};
 
 /// Session mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -165,6 +173,9 @@ pub struct ZenohConfig {
     pub auth: Option<ZenohAuth>,
     /// Who may publish under which id (zenoh's access control).
     pub access: Option<ZenohAccess>,
+    /// Sign every frame sent and accept only frames signed by their sender's key
+    /// ([`signing`]: what keeps a router from posing as a robot).
+    pub signing: Option<ZenohSigning>,
     /// Accept a listening endpoint off loopback without authentication or access
     /// control (anyone who reaches the port can pose as any robot).
     pub insecure: bool,
@@ -227,7 +238,7 @@ fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
 }
 
 impl ZenohConfig {
-    /// Makes the relative TLS and dictionary paths relative to `dir` (the
+    /// Makes the relative TLS, dictionary and signing-key paths relative to `dir` (the
     /// directory of the file the settings were read from).
     pub fn resolve_paths(&mut self, dir: &Path) {
         if let Some(tls) = &mut self.tls {
@@ -237,6 +248,9 @@ impl ZenohConfig {
         }
         if let Some(dictionary) = self.auth.as_mut().and_then(|a| a.dictionary_path.as_mut()) {
             *dictionary = dir.join(&*dictionary);
+        }
+        if let Some(signing) = &mut self.signing {
+            signing.key_path = dir.join(&signing.key_path);
         }
     }
 
@@ -375,6 +389,9 @@ impl ZenohConfig {
                      (the default)"
                 ),
             ));
+        }
+        if let Some(signing) = &self.signing {
+            signing.validate()?;
         }
         security::check(self)
     }
@@ -604,6 +621,9 @@ pub struct ZenohStats {
     /// Rejected: a key expression naming one of this process's own robots as
     /// the sender (someone else is using its key).
     pub rejected_sender: u64,
+    /// Rejected under `[zenoh.signing]`: no signature, or not the named sender's
+    /// ([`signing`]).
+    pub rejected_signature: u64,
     /// Cells subscribed to now (scope `neighbourhood`; [`crate::scope`]).
     pub subscribed_cells: u64,
     /// Times the cell subscriptions changed because a local robot moved.
@@ -627,6 +647,9 @@ struct Counters {
     rejected_frame: AtomicU64,
     rejected_class: AtomicU64,
     rejected_sender: AtomicU64,
+    rejected_signature: AtomicU64,
+    /// Unix second of the last warning about unsigned frames (one per 10 s).
+    signature_warned_s: AtomicU64,
     subscribed_cells: AtomicU64,
     resubscriptions: AtomicU64,
 }
@@ -650,6 +673,7 @@ impl Counters {
             rejected_frame: l(&self.rejected_frame),
             rejected_class: l(&self.rejected_class),
             rejected_sender: l(&self.rejected_sender),
+            rejected_signature: l(&self.rejected_signature),
             subscribed_cells: l(&self.subscribed_cells),
             resubscriptions: l(&self.resubscriptions),
             refused_connections: refusals::refused_connections(),
@@ -660,6 +684,8 @@ impl Counters {
 /// A frame waiting for the sender thread.
 struct Outgoing {
     key: String,
+    from: u32,
+    class: Class,
     to: Option<u32>,
     bytes: Vec<u8>,
 }
@@ -689,6 +715,8 @@ pub struct ZenohTransport {
     subscription: SubscriptionConfig,
     subscriptions: Mutex<Subscriptions>,
     counters: Arc<Counters>,
+    /// The signers' keys, with `[zenoh.signing]`.
+    verifier: Option<Arc<FrameVerifier>>,
 }
 
 impl ZenohTransport {
@@ -703,6 +731,13 @@ impl ZenohTransport {
                 open.join(", ")
             );
         }
+        let (signer, verifier) = match &config.signing {
+            Some(signing) => {
+                let (signer, verifier) = signing.open(&local)?;
+                (Some(signer), Some(Arc::new(verifier)))
+            }
+            None => (None, None),
+        };
         let session = ::zenoh::open(zc)
             .wait()
             .map_err(|e| TransportError::Network {
@@ -720,7 +755,15 @@ impl ZenohTransport {
         let thread_counters = counters.clone();
         let sender = std::thread::Builder::new()
             .name(format!("troupe-zenoh-tx-{team}"))
-            .spawn(move || send_loop(&thread_session, &rx, &thread_counters))
+            .spawn(move || {
+                send_loop(
+                    &thread_session,
+                    &rx,
+                    &thread_counters,
+                    team,
+                    signer.as_ref(),
+                );
+            })
             .map_err(|e| TransportError::Network {
                 context: "starting the zenoh sender thread".into(),
                 source: Box::new(e),
@@ -734,6 +777,7 @@ impl ZenohTransport {
             subscription: SubscriptionConfig::default(),
             subscriptions: Mutex::new(Subscriptions::default()),
             counters,
+            verifier,
         })
     }
 
@@ -848,7 +892,13 @@ impl Drop for ZenohTransport {
     }
 }
 
-fn send_loop(session: &::zenoh::Session, rx: &Receiver<Outgoing>, counters: &Counters) {
+fn send_loop(
+    session: &::zenoh::Session,
+    rx: &Receiver<Outgoing>,
+    counters: &Counters,
+    team: u32,
+    signer: Option<&FrameSigner>,
+) {
     let mut publishers: std::collections::HashMap<String, ::zenoh::pubsub::Publisher<'static>> =
         std::collections::HashMap::new();
     while let Ok(out) = rx.recv() {
@@ -871,11 +921,26 @@ fn send_loop(session: &::zenoh::Session, rx: &Receiver<Outgoing>, counters: &Cou
         let Some(publisher) = publishers.get(&out.key) else {
             continue;
         };
+        // The addressee (4 bytes) if any, then the signature if signing.
+        let mut attachment = out
+            .to
+            .map(|to| to.to_le_bytes().to_vec())
+            .unwrap_or_default();
+        if let Some(signer) = signer {
+            let message = signing::signed_bytes(team, out.from, out.class, out.to, &out.bytes);
+            let Some(signature) = signer.sign(&message) else {
+                bump(&counters.send_errors);
+                tracing::warn!(key = %out.key, "zenoh: cannot sign a frame (no randomness)");
+                continue;
+            };
+            attachment.extend_from_slice(&signature);
+        }
         let len = out.bytes.len() as u64;
         let put = publisher.put(out.bytes);
-        let put = match out.to {
-            Some(to) => put.attachment(to.to_le_bytes().to_vec()),
-            None => put,
+        let put = if attachment.is_empty() {
+            put
+        } else {
+            put.attachment(attachment)
         };
         match put.wait() {
             Ok(()) => {
@@ -890,8 +955,52 @@ fn send_loop(session: &::zenoh::Session, rx: &Receiver<Outgoing>, counters: &Cou
     }
 }
 
+/// The addressee and the signature of a sample's attachment: none, the addressee
+/// (4 bytes), a signature, or both in that order; `Err` for anything else.
+fn read_attachment(attachment: &[u8]) -> Result<(Option<u32>, Option<&[u8]>), ()> {
+    let (to, signature) = match attachment.len() {
+        0 | signing::SIGNATURE_BYTES => attachment.split_at(0),
+        4 | 68 => attachment.split_at(4),
+        _ => return Err(()),
+    };
+    let to = <[u8; 4]>::try_from(to).ok().map(u32::from_le_bytes);
+    Ok((to, (!signature.is_empty()).then_some(signature)))
+}
+
+/// What a session receives with: its team and robots, its counters, and the
+/// signers' keys with `[zenoh.signing]`.
+struct Receiving {
+    team: u32,
+    local: Vec<u32>,
+    counters: Arc<Counters>,
+    verifier: Option<Arc<FrameVerifier>>,
+}
+
+/// Counts a frame refused for its signature and warns at most once per 10 s.
+fn refuse_signature(counters: &Counters, from: u32, key: &str) {
+    bump(&counters.rejected_signature);
+    let now_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let last = counters.signature_warned_s.load(Ordering::Relaxed);
+    if now_s >= last + 10
+        && counters
+            .signature_warned_s
+            .compare_exchange(last, now_s, Ordering::Relaxed, Ordering::Relaxed)
+            .is_ok()
+    {
+        tracing::warn!(
+            claimed = from,
+            key,
+            refused = counters.rejected_signature.load(Ordering::Relaxed),
+            "zenoh: refused frames not signed by the robot they name (one line per 10 s)"
+        );
+    }
+}
+
 /// Checks one received sample and hands it to the sink.
-fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink: &PacketSink) {
+fn receive(sample: &Sample, r: &Receiving, sink: &PacketSink) {
+    let (team, local, counters) = (r.team, r.local.as_slice(), &*r.counters);
     let (from, class) = match parse_key_expr(sample.key_expr().as_str(), team) {
         Ok(parsed) => parsed,
         Err(KeyError::Malformed) => return bump(&counters.rejected_key),
@@ -902,15 +1011,12 @@ fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink:
         // subscribers only): someone else is using a local robot's key.
         return bump(&counters.rejected_sender);
     }
-    let to = match sample.attachment() {
-        None => None,
-        Some(a) => {
-            let a = a.to_bytes();
-            let Ok(b) = <[u8; 4]>::try_from(a.as_ref()) else {
-                return bump(&counters.rejected_frame);
-            };
-            Some(u32::from_le_bytes(b))
-        }
+    let attachment = sample
+        .attachment()
+        .map(|a| a.to_bytes())
+        .unwrap_or_default();
+    let Ok((to, signature)) = read_attachment(&attachment) else {
+        return bump(&counters.rejected_frame);
     };
     if to.is_some_and(|to| !local.contains(&to)) {
         return bump(&counters.not_for_us);
@@ -925,6 +1031,12 @@ fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink:
         Ok(_) => return bump(&counters.rejected_class),
         Err(_) => return bump(&counters.rejected_frame),
     }
+    if let Some(verifier) = &r.verifier {
+        let message = signing::signed_bytes(team, from, class, to, &bytes);
+        if !signature.is_some_and(|s| verifier.verify(from, &message, s)) {
+            return refuse_signature(counters, from, sample.key_expr().as_str());
+        }
+    }
     bump(&counters.received_frames);
     sink(ReceivedPacket {
         from,
@@ -935,9 +1047,15 @@ fn receive(sample: &Sample, team: u32, local: &[u32], counters: &Counters, sink:
 
 impl PacketTransport for ZenohTransport {
     fn start(&self, sink: PacketSink) -> Result<(), TransportError> {
-        let (team, local, counters) = (self.team, self.local.clone(), self.counters.clone());
+        let team = self.team;
+        let receiving = Receiving {
+            team,
+            local: self.local.clone(),
+            counters: self.counters.clone(),
+            verifier: self.verifier.clone(),
+        };
         let handler: SampleHandler =
-            Arc::new(move |sample: &Sample| receive(sample, team, &local, &counters, &sink));
+            Arc::new(move |sample: &Sample| receive(sample, &receiving, &sink));
         let key = match self.subscription.scope {
             Scope::All => format!("troupe/{team}/**"),
             Scope::Neighbourhood | Scope::Base => format!("troupe/{team}/*/*"),
@@ -973,7 +1091,8 @@ impl PacketTransport for ZenohTransport {
                 + z.rejected_team
                 + z.rejected_frame
                 + z.rejected_class
-                + z.rejected_sender,
+                + z.rejected_sender
+                + z.rejected_signature,
         }
     }
 
@@ -993,6 +1112,8 @@ impl PacketTransport for ZenohTransport {
         }
         let out = Outgoing {
             key,
+            from,
+            class,
             to,
             bytes: frame.to_vec(),
         };

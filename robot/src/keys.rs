@@ -12,8 +12,10 @@
 //!   usable as TLS server and client;
 //! - `robot<i>.zenoh.toml`, `base.zenoh.toml` (and `router.zenoh.toml`): the `[zenoh]`
 //!   tables that use them (`tls/` endpoints to fill in, `[zenoh.tls]` with
-//!   `mutual = true`, `[zenoh.access]` naming every id and the router, if any), with paths relative to the
-//!   snippet itself (a router runs on `router.zenoh.toml` as it is; in a robot file
+//!   `mutual = true`, `[zenoh.access]` naming every id and the router, if any, and,
+//!   for the robots and the base, `[zenoh.signing]`: every frame signed with the
+//!   member's key and only frames signed by their sender accepted, each id's public
+//!   key listed), with paths relative to the snippet itself (a router runs on `router.zenoh.toml` as it is; in a robot file
 //!   elsewhere, prefix the keys directory).
 //!
 //! Private keys are written with mode 0600 (on Unix).
@@ -25,7 +27,9 @@ use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair,
     KeyUsagePurpose,
 };
+use troupe_comms::zenoh::ZenohSigner;
 use troupe_comms::zenoh::security::identity_name;
+use troupe_comms::zenoh::signing::to_hex;
 
 /// The name (certificate common name) of the router that `troupe keys` writes.
 pub const ROUTER_NAME: &str = "router";
@@ -68,12 +72,17 @@ pub struct TeamKeys {
     pub robots: u32,
     /// Every file written.
     pub files: Vec<PathBuf>,
+    /// The public key that signs each id's frames (robots and base; not the router,
+    /// which signs nothing: `[zenoh.signing]`).
+    pub signers: Vec<ZenohSigner>,
 }
 
-/// One member of the team: its file stem and its certificate's common name.
+/// One member of the team: its file stem, its certificate's common name and its
+/// link id (none for the router, which sends nothing of its own).
 struct Member {
     stem: String,
     name: String,
+    id: Option<u32>,
 }
 
 fn members(robots: u32, router: bool) -> Vec<Member> {
@@ -81,16 +90,19 @@ fn members(robots: u32, router: bool) -> Vec<Member> {
         .map(|i| Member {
             stem: identity_name(i),
             name: identity_name(i),
+            id: Some(i),
         })
         .collect();
     members.push(Member {
         stem: "base".into(),
         name: identity_name(robots),
+        id: Some(robots),
     });
     if router {
         members.push(Member {
             stem: ROUTER_NAME.into(),
             name: ROUTER_NAME.into(),
+            id: None,
         });
     }
     members
@@ -151,8 +163,31 @@ pub fn write_team_keys(dir: &Path, robots: u32, router: bool) -> Result<TeamKeys
     } else {
         String::new()
     };
-    for member in members(robots, router) {
-        let key = KeyPair::generate().map_err(cert_error(&member.name))?;
+    let members = members(robots, router);
+    let keys = members
+        .iter()
+        .map(|m| KeyPair::generate().map_err(cert_error(&m.name)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let signers: Vec<ZenohSigner> = members
+        .iter()
+        .zip(&keys)
+        .filter_map(|(m, key)| {
+            Some(ZenohSigner {
+                id: m.id?,
+                public_key: to_hex(key.public_key_raw()),
+            })
+        })
+        .collect();
+    let signer_lines: String = signers
+        .iter()
+        .map(|s| {
+            format!(
+                "  {{ id = {}, public_key = \"{}\" }},\n",
+                s.id, s.public_key
+            )
+        })
+        .collect();
+    for (member, key) in members.iter().zip(keys) {
         let mut p = params(&member.name, year).map_err(cert_error(&member.name))?;
         p.key_usages = vec![KeyUsagePurpose::DigitalSignature];
         p.extended_key_usages = vec![
@@ -187,9 +222,19 @@ pub fn write_team_keys(dir: &Path, robots: u32, router: bool) -> Result<TeamKeys
              \n\
              [zenoh.access]  # robot<id> may publish only as <id>\n\
              ids = [{ids}]\n\
-             {routers}",
+             {routers}{signing}",
             name = member.name,
             ids = ids.join(", "),
+            signing = if member.id.is_some() {
+                format!(
+                    "\n[zenoh.signing]  # frames signed with this key; only frames signed by \
+                     their sender accepted\n\
+                     key_path = \"{stem}.key\"\n\
+                     signers = [\n{signer_lines}]\n"
+                )
+            } else {
+                String::new()
+            },
         );
         write(
             dir,
@@ -203,6 +248,7 @@ pub fn write_team_keys(dir: &Path, robots: u32, router: bool) -> Result<TeamKeys
         dir: dir.to_path_buf(),
         robots,
         files,
+        signers,
     })
 }
 
@@ -277,6 +323,18 @@ mod tests {
         assert_eq!(access.ids, vec![0, 1, 2]);
         assert!(file.zenoh.tls.as_ref().unwrap().mutual);
         assert_eq!(access.routers, vec![ROUTER_NAME.to_owned()]);
+        // Robots and the base sign with their own keys; the router signs nothing.
+        let signing = file.zenoh.signing.as_ref().unwrap();
+        assert_eq!(signing.key_path, keys_dir.join("base.key"));
+        assert_eq!(signing.signers, keys.signers);
+        assert_eq!(
+            keys.signers.iter().map(|s| s.id).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+        let router: File =
+            toml::from_str(&std::fs::read_to_string(keys_dir.join("router.zenoh.toml")).unwrap())
+                .unwrap();
+        assert!(router.zenoh.signing.is_none());
         assert!(matches!(
             write_team_keys(&keys_dir, 0, false),
             Err(KeysError::EmptyTeam)

@@ -28,7 +28,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use troupe_comms::zenoh::security::identity_name;
-use troupe_comms::zenoh::{ZenohAccess, ZenohConfig, ZenohMode, ZenohTls};
+use troupe_comms::zenoh::{
+    ZenohAccess, ZenohConfig, ZenohMode, ZenohSigner, ZenohSigning, ZenohTls,
+};
 
 use crate::harness::read_trajectory;
 use crate::keys::{ROUTER_NAME, write_team_keys};
@@ -147,14 +149,16 @@ pub const KEYS_DIR: &str = "keys";
 /// The secure form of `zenoh` for the member `name` (`robot<i>`, `router`) of a
 /// team of `robots` whose keys `troupe keys` wrote into `keys` (relative to the
 /// file the table is written in): `tls/` endpoints, mutual TLS with the member's
-/// certificate, and access control naming every id (the robots' and the base's)
-/// and the router.
+/// certificate, access control naming every id (the robots' and the base's)
+/// and the router, and, given the team's `signers` (a robot, not the router),
+/// frames signed with the member's key.
 fn with_team_keys(
     mut zenoh: ZenohConfig,
     keys: &Path,
     name: &str,
     robots: u32,
     router: bool,
+    signers: Option<&[ZenohSigner]>,
 ) -> ZenohConfig {
     let tls = |endpoints: &mut Vec<String>| {
         for e in endpoints {
@@ -178,6 +182,10 @@ fn with_team_keys(
         } else {
             Vec::new()
         },
+    });
+    zenoh.signing = signers.map(|signers| ZenohSigning {
+        key_path: keys.join(format!("{name}.key")),
+        signers: signers.to_vec(),
     });
     zenoh
 }
@@ -257,12 +265,13 @@ pub fn min_distance_between(trajectories: &[Vec<[f64; 4]>]) -> Option<f64> {
 /// A router this process runs for its robots, and its endpoint.
 type RunningRouter = (Router, String);
 
-/// The sessions of the team's robots (see [`LaunchOptions`]), and the router this
-/// process runs for them.
+/// The sessions of the team's robots (see [`LaunchOptions`]; `signers`: the
+/// team's keys, with `tls`), and the router this process runs for them.
 fn sessions(
     robots: u32,
     dir: &Path,
     options: &LaunchOptions,
+    signers: &[ZenohSigner],
 ) -> Result<(Vec<ZenohConfig>, Option<RunningRouter>), LaunchError> {
     let mut sessions = if options.router {
         let mut router_settings = settings(loopback_endpoints(&[options.base_port]), Vec::new());
@@ -273,6 +282,7 @@ fn sessions(
                 ROUTER_NAME,
                 robots,
                 true,
+                None,
             );
         }
         let endpoint = router_settings.listen.clone();
@@ -298,6 +308,7 @@ fn sessions(
                 &identity_name(i),
                 robots,
                 options.router,
+                Some(signers),
             );
             *zenoh = secure;
         }
@@ -379,10 +390,14 @@ pub fn launch(
 ) -> Result<LaunchReport, LaunchError> {
     let io = |what: &str, e: std::io::Error| LaunchError::Io(format!("{what}: {e}"));
     let robots = team.robots();
-    if options.tls {
-        write_team_keys(&dir.join(KEYS_DIR), robots, options.router).map_err(LaunchError::Keys)?;
-    }
-    let (sessions, router) = sessions(robots, dir, options)?;
+    let signers = if options.tls {
+        write_team_keys(&dir.join(KEYS_DIR), robots, options.router)
+            .map_err(LaunchError::Keys)?
+            .signers
+    } else {
+        Vec::new()
+    };
+    let (sessions, router) = sessions(robots, dir, options, &signers)?;
     std::fs::create_dir_all(dir).map_err(|e| io(&dir.display().to_string(), e))?;
     let files = (0..robots)
         .zip(sessions)
@@ -446,6 +461,7 @@ mod tests {
             "robot0",
             2,
             false,
+            Some(&[]),
         );
         assert_eq!(zenoh.listen, ["tls/127.0.0.1:9000"]);
         assert_eq!(zenoh.connect, ["tls/127.0.0.1:9001"]);
@@ -455,6 +471,8 @@ mod tests {
         let access = zenoh.access.expect("access");
         assert_eq!(access.ids, [0, 1, 2]);
         assert!(access.routers.is_empty(), "no router, no router identity");
+        let signing = zenoh.signing.expect("signing");
+        assert_eq!(signing.key_path, Path::new("keys/robot0.key"));
     }
 
     #[test]

@@ -24,6 +24,7 @@ use troupe_comms::wire::{
     self, Class, Component3, Envelope, Keyframe, Mixture, Odometry, Payload, Plan, PlanKnot,
     SensorPose,
 };
+use troupe_comms::zenoh::signing::{FrameSigner, signed_bytes};
 use troupe_robot::launch::loopback_endpoints;
 use troupe_sims::process::write_team;
 use troupe_sims::scenario::Scenario;
@@ -201,11 +202,34 @@ fn forged_frames(team: u32, claimed: u32, at: [f32; 3]) -> Vec<(&'static str, Ve
     ]
 }
 
-/// A hostile client: its name, its zenoh credentials, and `(key, frame file)` pairs.
+/// A hostile client: its name, its zenoh credentials, and what it puts: `(key,
+/// frame file, attachment file)` (the attachment: a frame signature).
 struct Hostile {
     name: String,
     credentials: Vec<String>,
-    puts: Vec<(String, PathBuf)>,
+    puts: Vec<(String, PathBuf, Option<PathBuf>)>,
+}
+
+/// The `(key, frame file, signature file)` of `frame` sent as `from` under `key`,
+/// signed with the private key at `key_path` as a member's session signs it
+/// (`[zenoh.signing]`): what a hostile client holding that key can put.
+fn signed_put(
+    key_path: &Path,
+    team: u32,
+    from: u32,
+    key: String,
+    frame: Vec<u8>,
+    file: PathBuf,
+) -> (String, PathBuf, Option<PathBuf>) {
+    let signer = FrameSigner::from_pem_file(key_path).expect("signing key");
+    let class = troupe_comms::zenoh::frame_class(&frame).expect("frame");
+    let signature = signer
+        .sign(&signed_bytes(team, from, class, None, &frame))
+        .expect("sign");
+    let signature_file = file.with_extension("sig");
+    std::fs::write(&file, frame).expect("frame");
+    std::fs::write(&signature_file, signature).expect("signature");
+    (key, file, Some(signature_file))
 }
 
 fn spawn_hostile(python: &Path, endpoint: &str, h: &Hostile, options: &[&str]) -> Child {
@@ -214,8 +238,13 @@ fn spawn_hostile(python: &Path, endpoint: &str, h: &Hostile, options: &[&str]) -
         .arg(endpoint)
         .args(&h.credentials)
         .args(options);
-    for (key, file) in &h.puts {
-        c.arg("--put-file").arg(format!("{key}={}", file.display()));
+    for (key, file, attachment) in &h.puts {
+        let attachment = attachment
+            .as_ref()
+            .map(|a| format!("={}", a.display()))
+            .unwrap_or_default();
+        c.arg("--put-file")
+            .arg(format!("{key}={}{attachment}", file.display()));
     }
     c.stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -320,17 +349,27 @@ fn tls_team_under_attack(router: bool) {
         String::from_utf8_lossy(&out.stderr)
     );
     let r = |f: &str| rogue.join(f).display().to_string();
-    // Against robot `victim`, frames forged in the name of `claimed` and of 9.
-    let forged = |victim: u32, claimed: u32| -> Vec<(String, PathBuf)> {
+    // Against robot `victim`, frames forged in the name of `claimed` and of 9,
+    // signed with the private key `sign` if any.
+    let forged = |victim: u32, claimed: u32, sign: Option<&Path>| {
         let mut puts = Vec::new();
         for who in [claimed, 9] {
             for (n, (class, bytes)) in forged_frames(team, who, start(victim as usize))
                 .into_iter()
                 .enumerate()
             {
-                let file = dir.path().join(format!("forged-{victim}-{who}-{n}.frame"));
-                std::fs::write(&file, bytes).expect("frame");
-                puts.push((format!("troupe/{team}/{who}/{class}"), file));
+                let signed = if sign.is_some() { "-signed" } else { "" };
+                let file = dir
+                    .path()
+                    .join(format!("forged-{victim}-{who}-{n}{signed}.frame"));
+                let key = format!("troupe/{team}/{who}/{class}");
+                puts.push(match sign {
+                    Some(key_path) => signed_put(key_path, team, who, key, bytes, file),
+                    None => {
+                        std::fs::write(&file, bytes).expect("frame");
+                        (key, file, None)
+                    }
+                });
             }
         }
         puts
@@ -345,7 +384,7 @@ fn tls_team_under_attack(router: bool) {
     ];
     let mut attacks: Vec<(u16, Hostile)> = Vec::new();
     for (victim, claimed) in [(0u32, 1u32), (1, 0)] {
-        let puts = forged(victim, claimed);
+        let puts = forged(victim, claimed, None);
         let port = if router {
             ports[0]
         } else {
@@ -384,6 +423,28 @@ fn tls_team_under_attack(router: bool) {
                 puts,
             },
         ));
+        // Issue 45 item 2: the router's identity may put every id's keys (it
+        // forwards), but it holds no robot's signing key. It signs with its own.
+        if router {
+            attacks.push((
+                port,
+                Hostile {
+                    name: format!(
+                        "the router's certificate claiming {claimed} and 9, against robot \
+                         {victim}"
+                    ),
+                    credentials: vec![
+                        "--ca".into(),
+                        k("ca.pem"),
+                        "--cert".into(),
+                        k("router.pem"),
+                        "--key".into(),
+                        k("router.key"),
+                    ],
+                    puts: forged(victim, claimed, Some(&keys.join("router.key"))),
+                },
+            ));
+        }
     }
     // The control: robot 2's certificate under its own id, a frame of another team.
     let control_file = dir.path().join("control.frame");
@@ -392,23 +453,37 @@ fn tls_team_under_attack(router: bool) {
         2,
         Payload::Heartbeat(wire::Heartbeat { uptime_s: 1.0 }),
     );
-    std::fs::write(&control_file, data_frame(Class::Odometry, 7, false, &junk)).expect("frame");
+    // Whoever holds the base's certificate holds its key, and signs as the base.
+    let base_key = keys.join("base.key");
     let control = Hostile {
         name: "control: robot 2 as itself".into(),
         credentials: as_robot2.clone(),
-        puts: vec![(format!("troupe/{team}/2/odometry"), control_file)],
+        puts: vec![signed_put(
+            &base_key,
+            team,
+            2,
+            format!("troupe/{team}/2/odometry"),
+            data_frame(Class::Odometry, 7, false, &junk),
+            control_file,
+        )],
     };
     // The base station's certificate under its own id, sending a robot's messages
     // (odometry, a keyframe, a plan parked on robot 0's start): zenoh lets them
     // through (the key is its own), the robots' links refuse them by role.
-    let as_base: Vec<(String, PathBuf)> = forged_frames(team, 2, start(0))
+    let as_base = forged_frames(team, 2, start(0))
         .into_iter()
         .take(3)
         .enumerate()
         .map(|(n, (class, bytes))| {
             let file = dir.path().join(format!("base-as-robot-{n}.frame"));
-            std::fs::write(&file, bytes).expect("frame");
-            (format!("troupe/{team}/2/{class}"), file)
+            signed_put(
+                &base_key,
+                team,
+                2,
+                format!("troupe/{team}/2/{class}"),
+                bytes,
+                file,
+            )
         })
         .collect();
     let base_as_robot = Hostile {
@@ -490,13 +565,27 @@ fn tls_team_under_attack(router: bool) {
             "rejected_team",
             "rejected_frame",
             "rejected_class",
-            "rejected_sender",
         ] {
             assert_eq!(
                 s["zenoh"][key].as_u64(),
                 Some(0),
                 "robot{i} {key}: {context}"
             );
+        }
+        // Through a router, the router's identity reached every robot (zenoh lets it
+        // put every id's keys) and each frame was refused for its signature, or, in
+        // the robot's own name, as its own key used by another.
+        let (signature, sender) = (
+            s["zenoh"]["rejected_signature"].as_u64().unwrap_or(0),
+            s["zenoh"]["rejected_sender"].as_u64().unwrap_or(0),
+        );
+        if router {
+            assert!(
+                signature > 0 && sender > 0,
+                "robot{i}: the router's forgeries never arrived: {context}"
+            );
+        } else {
+            assert_eq!((signature, sender), (0, 0), "robot{i}: {context}");
         }
         // No more messages of the peer than the peer published: none was forged.
         for (mine, theirs) in [
@@ -1067,7 +1156,7 @@ fn a_member_flooding_a_journal_evicts_its_own_messages_not_a_peers_keyframes() {
     };
     // Ten valid keyframes of 97 000 components (3.9 MB each), far from the cave.
     let n = 97_000;
-    let flood: Vec<(String, PathBuf)> = (0..10u32)
+    let flood: Vec<(String, PathBuf, Option<PathBuf>)> = (0..10u32)
         .flat_map(|k| {
             let keyframe = Payload::Keyframe(Keyframe {
                 keyframe_id: 50_000 + k,
@@ -1094,7 +1183,7 @@ fn a_member_flooding_a_journal_evicts_its_own_messages_not_a_peers_keyframes() {
         .map(|(n, frame)| {
             let file = dir.path().join(format!("flood-{n}.frame"));
             std::fs::write(&file, frame).expect("frame");
-            (format!("troupe/{team}/2/keyframe"), file)
+            (format!("troupe/{team}/2/keyframe"), file, None)
         })
         .collect();
     let hostile = Hostile {

@@ -2,7 +2,8 @@
 
 Connects in client mode to ENDPOINT with the credentials given (none, TLS files,
 user/password), then puts PAYLOAD_FILE's bytes COUNT times on each KEY (and each
---put-file KEY=FILE's bytes on its key), 20 ms apart (and --gap-ms apart within a
+--put-file KEY=FILE[=ATTACHMENT]'s bytes on its key, with ATTACHMENT's bytes as
+the zenoh attachment: a frame signature), 20 ms apart (and --gap-ms apart within a
 round); or (with --size-mb) one payload of that many megabytes; or (with --flood N)
 N copies of PAYLOAD_FILE on the first KEY as fast as zenoh takes them. Prints one JSON line: whether the
 session opened, and how many puts zenoh accepted locally.
@@ -28,7 +29,7 @@ def main():
     ap.add_argument("--payload-file")
     ap.add_argument("--count", type=int, default=50)
     ap.add_argument("--size-mb", type=int)
-    ap.add_argument("--put-file", action="append", default=[], metavar="KEY=FILE")
+    ap.add_argument("--put-file", action="append", default=[], metavar="KEY=FILE[=ATTACHMENT]")
     ap.add_argument("--flood", type=int)
     ap.add_argument("--gap-ms", type=float, default=0.0)
     a = ap.parse_args()
@@ -69,13 +70,14 @@ def main():
         time.sleep(0.5)
     else:
         payload = open(a.payload_file, "rb").read() if a.payload_file else b""
-        frames = [(key, payload) for key in a.put]
-        for pair in a.put_file:
-            key, path = pair.split("=", 1)
-            frames.append((key, open(path, "rb").read()))
+        frames = [(key, payload, None) for key in a.put]
+        for spec in a.put_file:
+            key, path, *attachment = spec.split("=", 2)
+            attachment = open(attachment[0], "rb").read() if attachment else None
+            frames.append((key, open(path, "rb").read(), attachment))
         for _ in range(a.count):
-            for key, body in frames:
-                session.put(key, body, congestion_control=block)
+            for key, body, attachment in frames:
+                session.put(key, body, congestion_control=block, attachment=attachment)
                 puts += 1
                 time.sleep(a.gap_ms / 1000)
             time.sleep(0.02)
