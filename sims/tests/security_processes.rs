@@ -532,6 +532,19 @@ fn tls_team_under_attack(router: bool) {
         .map(|i| read_json(&launched.join(format!("robot{i}/summary.json"))))
         .collect();
     let context = format!("{reports:#?}\n{}\n{}", summaries[0], summaries[1]);
+    // What the attack cost (beside an unattacked twin: `docs/security.md`).
+    let usage = read_json(&launched.join("launch.json"));
+    eprintln!(
+        "attacked team{}: peak RSS (MiB) and CPU (%) per robot {:?}, {} log lines",
+        if router { " through a router" } else { "" },
+        usage["robot_usage"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|u| (u["peak_rss_mib"].as_f64(), u["cpu_percent"].as_f64()))
+            .collect::<Vec<_>>(),
+        log.lines().count()
+    );
     for (i, s) in summaries.iter().enumerate() {
         let peer = &summaries[1 - i];
         // Nothing hostile reached a link but the control (another team's frame) and
