@@ -233,4 +233,4 @@ impl FrameVerifier {
 
 #[cfg(test)]
 #[path = "signing_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -5,6 +5,8 @@ use std::time::{Duration, Instant};
 
 use super::*;
 use crate::shaping::{LinkShaper, ShaperConfig};
+use signing::tests::{member_key, signing};
+use signing::{SIGNATURE_BYTES, signed_bytes};
 
 #[test]
 fn settings_read_from_toml_and_bad_ones_name_the_key() {
@@ -389,4 +391,89 @@ fn accept_limits_reach_zenohs_configuration() {
 #[test]
 fn this_build_lowers_zenohs_pause_after_a_failed_tls_handshake() {
     assert_eq!(super::TLS_ACCEPT_THROTTLE_US, Some("100"));
+}
+
+/// Issue 45 item 2: frame signatures between two sessions, and a session with a
+/// router's rights (it may put any key) that holds no robot's key.
+#[test]
+fn signing_sessions_accept_their_peers_and_refuse_frames_their_sender_did_not_sign() {
+    let dir = tempfile::tempdir().unwrap();
+    let (k0, p0) = member_key(dir.path(), "robot0");
+    let (k1, p1) = member_key(dir.path(), "robot1");
+    let (k2, p2) = member_key(dir.path(), "router");
+    let signers = [(0, p0.as_str()), (1, p1.as_str())];
+    let p = port(7);
+    let listen = ZenohConfig {
+        listen: vec![format!("tcp/127.0.0.1:{p}")],
+        signing: Some(signing(&k0, &signers)),
+        ..ZenohConfig::default()
+    };
+    let connect = |signing: Option<ZenohSigning>| ZenohConfig {
+        connect: vec![format!("tcp/127.0.0.1:{p}")],
+        signing,
+        ..ZenohConfig::default()
+    };
+    let a = ZenohTransport::open(&listen, 1, vec![0]).unwrap();
+    let b = ZenohTransport::open(&connect(Some(signing(&k1, &signers))), 1, vec![1]).unwrap();
+    let (seen_a, seen_b): (Seen, Seen) = Default::default();
+    a.start(sink(&seen_a)).unwrap();
+    b.start(sink(&seen_b)).unwrap();
+    let [frame, forged]: [Vec<u8>; 2] = frames(2).try_into().unwrap();
+    wait_for("a signed frame", || {
+        a.send(0, None, &frame).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+        !seen_b.lock().unwrap().is_empty()
+    });
+    b.send(1, Some(0), &frame).unwrap();
+    wait_for("an addressed signed frame", || {
+        !seen_a.lock().unwrap().is_empty()
+    });
+    assert_eq!(seen_a.lock().unwrap()[0], (1, Some(0), frame.clone()));
+    // A session that may put any key (a router's rights), without robot 1's key:
+    // unsigned, junk-signed, signed by another key, or robot 1's real signature of
+    // another frame. None reaches A.
+    let raw = ::zenoh::open(connect(None).to_zenoh().unwrap())
+        .wait()
+        .unwrap();
+    let (other, _) = signing(&k2, &[(1, &p2)]).open(&[1]).unwrap();
+    let (real, _) = signing(&k1, &signers).open(&[1]).unwrap();
+    let message = signed_bytes(1, 1, Class::Plan, None, &forged);
+    let attachments: Vec<Vec<u8>> = vec![
+        vec![],
+        vec![0; SIGNATURE_BYTES],
+        other.sign(&message).unwrap().to_vec(),
+        real.sign(&signed_bytes(1, 1, Class::Plan, None, &frame))
+            .unwrap()
+            .to_vec(),
+        [
+            0u32.to_le_bytes().to_vec(),
+            real.sign(&message).unwrap().to_vec(),
+        ]
+        .concat(),
+    ];
+    let received = a.stats().received_frames;
+    wait_for("the forgeries to be refused", || {
+        for attachment in &attachments {
+            let put = raw.put("troupe/1/1/plan", forged.clone());
+            let put = if attachment.is_empty() {
+                put
+            } else {
+                put.attachment(attachment.clone())
+            };
+            put.wait().unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        a.stats().rejected_signature >= 5
+    });
+    // The control: the same session with robot 1's true signature is accepted.
+    raw.put("troupe/1/1/plan", forged.clone())
+        .attachment(real.sign(&message).unwrap().to_vec())
+        .wait()
+        .unwrap();
+    wait_for("the control", || a.stats().received_frames > received);
+    assert_eq!(a.stats().received_frames, received + 1);
+    assert!(seen_a.lock().unwrap().iter().all(|(from, _, _)| *from == 1));
+    raw.close().wait().unwrap();
+    a.close().unwrap();
+    b.close().unwrap();
 }
