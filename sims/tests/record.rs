@@ -8,15 +8,12 @@
 
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::{Command, Output};
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
+use common::root;
 
 fn troupe(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_troupe"))
@@ -178,16 +175,6 @@ fn replay_rejects_what_is_not_a_recording_with_one_clear_error() {
     }
 }
 
-fn free_ports(n: usize) -> Vec<u16> {
-    let sockets: Vec<std::net::TcpListener> = (0..n)
-        .map(|_| std::net::TcpListener::bind("127.0.0.1:0").unwrap())
-        .collect();
-    sockets
-        .iter()
-        .map(|s| s.local_addr().unwrap().port())
-        .collect()
-}
-
 /// Channels (and message counts) of a process or base recording, read and
 /// checked by `check_run.py FILE.mcap` (schemas; `/world` and depth images where
 /// present), and the compressions its chunks name; `None` without the venv.
@@ -247,8 +234,11 @@ fn robot_processes_and_the_base_station_record_what_they_did() {
         "name = \"rec\"\nrobots = 3\n\n[metrics]\nrecord_depth_hz = 1.0\nrecord_compression = \"lz4\"\n",
     )
     .unwrap();
-    let ports = free_ports(4);
-    // `troupe launch` puts robot i on BASE_PORT + i.
+    // Four consecutive free ports below the kernel's ephemeral range: `troupe launch`
+    // puts robot i on the first + i, the base listens on the last. (Ports the kernel
+    // handed out for port 0 were not consecutive, and the ones after them could be
+    // taken: once in a full test run, robot 1's was.)
+    let ports = common::free_ports_from(5_000, 4);
     let robots: Vec<String> = (0..3)
         .map(|i| format!("\"tcp/127.0.0.1:{}\"", ports[0] + i))
         .collect();
