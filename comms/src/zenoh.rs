@@ -955,12 +955,16 @@ fn send_loop(
     }
 }
 
+/// Bytes of the addressee in an attachment (a robot id, little-endian).
+const ADDRESSEE_BYTES: usize = 4;
+
 /// The addressee and the signature of a sample's attachment: none, the addressee
 /// (4 bytes), a signature, or both in that order; `Err` for anything else.
 fn read_attachment(attachment: &[u8]) -> Result<(Option<u32>, Option<&[u8]>), ()> {
+    let signed = ADDRESSEE_BYTES + signing::SIGNATURE_BYTES;
     let (to, signature) = match attachment.len() {
         0 | signing::SIGNATURE_BYTES => attachment.split_at(0),
-        4 | 68 => attachment.split_at(4),
+        n if n == ADDRESSEE_BYTES || n == signed => attachment.split_at(ADDRESSEE_BYTES),
         _ => return Err(()),
     };
     let to = <[u8; 4]>::try_from(to).ok().map(u32::from_le_bytes);
