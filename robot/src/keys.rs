@@ -15,8 +15,9 @@
 //!   `mutual = true`, `[zenoh.access]` naming every id and the router, if any, and,
 //!   for the robots and the base, `[zenoh.signing]`: every frame signed with the
 //!   member's key and only frames signed by their sender accepted, each id's public
-//!   key listed), with paths relative to the snippet itself (a router runs on `router.zenoh.toml` as it is; in a robot file
-//!   elsewhere, prefix the keys directory).
+//!   key listed), with paths relative to the snippet itself (a router runs on
+//!   `router.zenoh.toml` as it is; in a robot file elsewhere, prefix the keys
+//!   directory).
 //!
 //! Private keys are written with mode 0600 (on Unix).
 
