@@ -157,23 +157,35 @@ fn secular_root_solves_its_equation() {
     }
 }
 
+/// A ball robot (radius 0.05–0.5 m, centre within 1 m of the origin) and an
+/// ellipsoid surface (semi-axes 0.05–0.6 m, centre within 1.5 m), drawn from `rng`.
+fn ball_and_ellipsoid(rng: &mut ChaCha8Rng) -> (Ellipsoid<3>, Ellipsoid<3>) {
+    let r = rng.random_range(0.05..0.5);
+    let robot = Ellipsoid::<3>::from_axes(
+        random_point(rng, 1.0),
+        Matrix3::identity(),
+        Vector3::repeat(r),
+    )
+    .expect("ball");
+    (robot, random_ellipsoid(rng, 1.5, (0.05, 0.6)))
+}
+
+/// An ellipsoid centred within `half` of the origin (each coordinate) with semi-axes
+/// in `axes_m`, drawn from `rng`.
+fn random_ellipsoid(rng: &mut ChaCha8Rng, half: f64, axes_m: (f64, f64)) -> Ellipsoid<3> {
+    Ellipsoid::from_shape(
+        random_point(rng, half),
+        &random_shape::<3, _>(rng, axes_m.0, axes_m.1),
+    )
+    .expect("ellipsoid")
+}
+
 #[test]
 fn estimate_is_exact_for_ball_robot() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut worst: f64 = 0.0;
     for _ in 0..300 {
-        let r = rng.random_range(0.05..0.5);
-        let robot = Ellipsoid::<3>::from_axes(
-            random_point(&mut rng, 1.0),
-            Matrix3::identity(),
-            Vector3::repeat(r),
-        )
-        .expect("ball");
-        let surface = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.5),
-            &random_shape::<3, _>(&mut rng, 0.05, 0.6),
-        )
-        .expect("ellipsoid");
+        let (robot, surface) = ball_and_ellipsoid(&mut rng);
         let fast = Proximity::between(&robot, &surface);
         if fast.status() != PairStatus::Separated || fast.distance() < 1e-3 {
             continue;
@@ -192,11 +204,7 @@ fn estimate_is_exact_for_point_obstacle() {
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let mut worst: f64 = 0.0;
     for _ in 0..300 {
-        let robot = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.05, 0.6),
-        )
-        .expect("ellipsoid");
+        let robot = random_ellipsoid(&mut rng, 1.0, (0.05, 0.6));
         // Semi-axes of 1e-11 m: a point to within the tolerance.
         let point = Ellipsoid::from_axes(
             random_point(&mut rng, 1.5),
@@ -220,16 +228,8 @@ fn estimate_is_an_upper_bound_on_the_exact_distance() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let (mut count, mut mean_gap, mut max_gap) = (0, 0.0, 0.0f64);
     for _ in 0..300 {
-        let robot = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
-        let surface = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
+        let robot = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
+        let surface = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
         let fast = Proximity::between(&robot, &surface);
         if fast.status() != PairStatus::Separated || fast.distance() < 1e-2 {
             continue;
@@ -256,43 +256,28 @@ fn estimate_is_an_upper_bound_on_the_exact_distance() {
     assert!(count > 100);
 }
 
+/// An axis-aligned ellipse centred at `centre_m` with semi-axes `axes_m`.
+fn ellipse(centre_m: [f64; 2], axes_m: [f64; 2]) -> Ellipsoid2 {
+    Ellipsoid2::from_axes(centre_m.into(), Matrix2::identity(), axes_m.into()).expect("ellipse")
+}
+
 #[test]
 fn contact_statuses_give_zero_distance_and_gradient() {
-    let robot = Ellipsoid2::from_axes(
-        Vector2::zeros(),
-        Matrix2::identity(),
-        Vector2::new(0.3, 0.1),
-    )
-    .expect("robot");
+    let robot = ellipse([0.0, 0.0], [0.3, 0.1]);
     // Robot centre inside the surface ellipse.
-    let big = Ellipsoid2::from_axes(
-        Vector2::new(0.2, 0.0),
-        Matrix2::identity(),
-        Vector2::new(0.5, 0.5),
-    )
-    .expect("big");
+    let big = ellipse([0.2, 0.0], [0.5, 0.5]);
     let p = Proximity::between(&robot, &big);
     assert_eq!(p.status(), PairStatus::CenterInside);
     assert_eq!((p.distance(), p.gradient()), (0.0, Vector2::zeros()));
     assert_eq!(p.lambda(), None);
     // Overlapping, centre outside.
-    let near = Ellipsoid2::from_axes(
-        Vector2::new(0.35, 0.0),
-        Matrix2::identity(),
-        Vector2::new(0.1, 0.1),
-    )
-    .expect("near");
+    let near = ellipse([0.35, 0.0], [0.1, 0.1]);
     let p = Proximity::between(&robot, &near);
     assert_eq!(p.status(), PairStatus::Intersecting);
     assert_eq!(p.distance(), 0.0);
     assert!(p.lambda().expect("outside") < 0.0);
     // Axis-aligned separation: exact by symmetry.
-    let far = Ellipsoid2::from_axes(
-        Vector2::new(1.0, 0.0),
-        Matrix2::identity(),
-        Vector2::new(0.2, 0.1),
-    )
-    .expect("far");
+    let far = ellipse([1.0, 0.0], [0.2, 0.1]);
     let p = Proximity::between(&robot, &far);
     assert_eq!(p.status(), PairStatus::Separated);
     assert!((p.distance() - 0.5).abs() < 1e-12);
@@ -317,18 +302,7 @@ fn gradient_matches_central_differences_where_exact() {
     let mut rng = ChaCha8Rng::seed_from_u64(6);
     let mut worst: f64 = 0.0;
     for _ in 0..2000 {
-        let r = rng.random_range(0.05..0.5);
-        let robot = Ellipsoid::<3>::from_axes(
-            random_point(&mut rng, 1.0),
-            Matrix3::identity(),
-            Vector3::repeat(r),
-        )
-        .expect("ball");
-        let surface = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.5),
-            &random_shape::<3, _>(&mut rng, 0.05, 0.6),
-        )
-        .expect("ellipsoid");
+        let (robot, surface) = ball_and_ellipsoid(&mut rng);
         let fast = Proximity::between(&robot, &surface);
         if fast.status() != PairStatus::Separated || fast.distance() < 1e-2 {
             continue;
@@ -375,16 +349,8 @@ fn gradient_approximates_central_differences_in_general() {
 fn collision_probability_stays_in_unit_interval() {
     let mut rng = ChaCha8Rng::seed_from_u64(8);
     for _ in 0..5000 {
-        let robot = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
-        let surface = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
+        let robot = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
+        let surface = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
         let cov = random_spd::<3, _>(&mut rng, 1e-4, 0.2);
         let p = Proximity::between(&robot, &surface).collision_probability(&cov);
         assert!((0.0..=1.0).contains(&p.probability), "{p:?}");
@@ -402,24 +368,9 @@ fn collision_probability_stays_in_unit_interval() {
 
 #[test]
 fn collision_probability_deterministic_limit() {
-    let robot = Ellipsoid2::from_axes(
-        Vector2::zeros(),
-        Matrix2::identity(),
-        Vector2::new(0.3, 0.1),
-    )
-    .expect("robot");
-    let far = Ellipsoid2::from_axes(
-        Vector2::new(1.0, 0.0),
-        Matrix2::identity(),
-        Vector2::new(0.2, 0.1),
-    )
-    .expect("far");
-    let near = Ellipsoid2::from_axes(
-        Vector2::new(0.35, 0.0),
-        Matrix2::identity(),
-        Vector2::new(0.1, 0.1),
-    )
-    .expect("near");
+    let robot = ellipse([0.0, 0.0], [0.3, 0.1]);
+    let far = ellipse([1.0, 0.0], [0.2, 0.1]);
+    let near = ellipse([0.35, 0.0], [0.1, 0.1]);
     let zero = Matrix2::zeros();
     assert_eq!(
         Proximity::between(&robot, &far)
@@ -441,16 +392,8 @@ fn collision_probability_increases_with_noise() {
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let mut pairs = 0;
     while pairs < 2000 {
-        let robot = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
-        let surface = Ellipsoid::from_shape(
-            random_point(&mut rng, 1.0),
-            &random_shape::<3, _>(&mut rng, 0.1, 0.5),
-        )
-        .expect("ellipsoid");
+        let robot = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
+        let surface = random_ellipsoid(&mut rng, 1.0, (0.1, 0.5));
         let pair = Proximity::between(&robot, &surface);
         if pair.status() != PairStatus::Separated {
             continue;
