@@ -30,7 +30,7 @@ fn launch_tls_team(dir: &Path, name: &str, ports: &[u16], duration_s: f64) -> Ch
         .env(
             "RUST_LOG",
             format!(
-                "{},troupe_actors::link=info",
+                "{},troupe_actors::link=info,zenoh::net::runtime::orchestrator=debug",
                 troupe_robot::harness::DEFAULT_LOG_FILTER
             ),
         )
@@ -82,8 +82,24 @@ fn now_seconds_of_day() -> f64 {
 /// zenoh's 100 ms pause after a failed TLS handshake, the flooded team never did);
 /// the attacked robots count every refused connection, log at most one line per
 /// kind of refusal per 10 s, and stay within 1.5× the twin's peak memory.
+///
+/// The twin is the control: in one CI run (2026-11-29) its robots did not find
+/// each other again within the 19 s left, with no flood at all (zenoh's connector
+/// lines, at debug in the log, say why next time). A trial whose control does not
+/// rejoin says nothing about the flood, so it is flown once more.
 #[test]
 fn a_tls_team_rejoins_after_a_dropout_under_a_connection_flood() {
+    if let Err(control) = flood_trial() {
+        eprintln!("the unflooded twin did not rejoin; flying the trial again:\n{control}");
+        if let Err(control) = flood_trial() {
+            panic!("the unflooded twin did not rejoin in two trials:\n{control}");
+        }
+    }
+}
+
+/// One trial of the test above; `Err` (with the twin's log) when the control team
+/// did not rejoin, panics when anything else fails.
+fn flood_trial() -> Result<(), String> {
     let duration_s = 40.0;
     let ports = common::free_ports_from(11_000, 4);
     let teams: Vec<(tempfile::TempDir, &str, Vec<u16>)> = ["flooded", "twin"]
@@ -126,18 +142,26 @@ fn a_tls_team_rejoins_after_a_dropout_under_a_connection_flood() {
     let flood_report = String::from_utf8_lossy(&flood.stdout).into_owned()
         + &String::from_utf8_lossy(&flood.stderr);
     assert!(flood.status.success(), "{flood_report}");
-    let mut peak_rss_mib = Vec::new();
+    let mut logs = Vec::new();
     for ((dir, name, _), launch) in teams.iter().zip(&mut launches) {
         let status = wait_exit(launch, "troupe launch", Duration::from_secs(120));
         let log = strip_ansi(&std::fs::read_to_string(dir.path().join("launch.log")).expect("log"));
         assert!(status.success(), "{name}: {log}");
-        // Robot 0 hears robot 1 again once a new session carries its messages.
-        let rejoined = log
-            .lines()
+        logs.push(log);
+    }
+    // Robot 0 hears robot 1 again once a new session carries its messages.
+    let rejoined_at = |log: &str| {
+        log.lines()
             .filter(|l| l.contains("peer heard again") && l.contains("robot=\"robot0\""))
             .filter_map(|l| seconds_of_day(l.split_whitespace().next()?))
-            .find(|t| *t > back_at - 0.5);
-        let Some(rejoined) = rejoined else {
+            .find(|t| *t > back_at - 0.5)
+    };
+    if rejoined_at(&logs[1]).is_none() {
+        return Err(logs[1].clone());
+    }
+    let mut peak_rss_mib = Vec::new();
+    for ((dir, name, _), log) in teams.iter().zip(&logs) {
+        let Some(rejoined) = rejoined_at(log) else {
             panic!("{name}: robot 0 never heard robot 1 again ({flood_report}):\n{log}");
         };
         let rejoin_s = rejoined - back_at;
@@ -216,4 +240,5 @@ fn a_tls_team_rejoins_after_a_dropout_under_a_connection_flood() {
         peak_rss_mib[0] <= 1.5 * peak_rss_mib[1],
         "peak RSS {peak_rss_mib:?} MiB"
     );
+    Ok(())
 }
