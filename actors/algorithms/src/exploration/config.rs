@@ -62,7 +62,10 @@ pub struct GuidanceConfig {
     /// within [`Self::give_up_radius_m`] of it is given up by this robot (no longer
     /// pulls it), seconds: what the camera cannot see from anywhere the robot can fly —
     /// pockets under the floor, crevices behind boulders — would otherwise hold the
-    /// robot for the rest of the run. `None` never gives up.
+    /// robot for the rest of the run. Time counts only once the robot has looked around
+    /// (turned a full circle or flown [`Self::give_up_radius_m`] from its start: at
+    /// the start every frontier is near, most where the camera has not yet turned).
+    /// `None` never gives up.
     pub give_up_after_s: Option<f64>,
     /// A goal (the remembered frontier the robot's route leads to) whose route has not
     /// got 0.5 m shorter for this long is given up, seconds (a progress timeout, as in

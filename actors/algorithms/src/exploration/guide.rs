@@ -42,6 +42,46 @@ pub struct Guide {
     view: Option<ViewCone>,
     /// The route distance from the robot to its target at the last [`Self::field`].
     last_route_m: f64,
+    /// How the robot has looked around since its first round, until it has
+    /// ([`LookAround`]): no frontier is given up before.
+    look_around: LookAround,
+}
+
+/// Whether a robot has looked around since it started: turned through a full circle
+/// or flown [`GuidanceConfig::give_up_radius_m`] from where it started. Before, a
+/// frontier near it may simply lie where the camera has not yet turned (at the start
+/// every frontier is near), so time near frontiers does not count towards giving them
+/// up.
+#[derive(Clone, Copy, Debug, Default)]
+struct LookAround {
+    /// Where the robot started.
+    start_m: Option<Point3<f64>>,
+    /// Its last heading, radians.
+    last_yaw_rad: Option<f64>,
+    /// The heading it turned through so far, radians.
+    turned_rad: f64,
+    /// It has looked around.
+    done: bool,
+}
+
+impl LookAround {
+    /// Folds the robot's position and heading in; whether it has now looked around.
+    fn update(&mut self, robot_m: &Point3<f64>, yaw_rad: f64, radius_m: f64) -> bool {
+        if self.done {
+            return true;
+        }
+        let start_m = *self.start_m.get_or_insert(*robot_m);
+        if let Some(last) = self.last_yaw_rad.replace(yaw_rad) {
+            let step = (yaw_rad - last + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            if step.is_finite() {
+                self.turned_rad += step.abs();
+            }
+        }
+        self.done =
+            self.turned_rad >= std::f64::consts::TAU || (robot_m - start_m).norm() >= radius_m;
+        self.done
+    }
 }
 
 /// How much shorter the route to a goal must get to count as progress, metres.
@@ -78,6 +118,7 @@ impl Guide {
             last_position_m: None,
             view: None,
             last_route_m: f64::INFINITY,
+            look_around: LookAround::default(),
         }
     }
 
@@ -203,14 +244,23 @@ impl Guide {
 
     /// Marks the robot's own cell passable and the way from its last position on its
     /// trail ([`FrontierMemory::mark_trail`]), counts the time since the last call
-    /// towards the frontiers near `robot_m` (giving up those watched too long) and
-    /// builds the field for robot `own` there at `now`, with the peers' claims.
-    pub fn field(&mut self, (own, robot_m): (RobotId, &Point3<f64>), now: Time) -> GuidanceField {
+    /// towards the frontiers near `robot_m` (giving up those watched too long, once
+    /// the robot has looked around: turned a full circle or flown
+    /// [`GuidanceConfig::give_up_radius_m`] from its start) and builds the field for
+    /// robot `own` there, heading `yaw_rad`, at `now`, with the peers' claims.
+    pub fn field(
+        &mut self,
+        (own, robot_m, yaw_rad): (RobotId, &Point3<f64>, f64),
+        now: Time,
+    ) -> GuidanceField {
         self.memory.mark_body(robot_m);
         let from = self.last_position_m.replace(*robot_m).unwrap_or(*robot_m);
         self.memory.mark_trail(&from, robot_m);
         let looking_at = self.looking_at();
-        self.watch(robot_m, looking_at, now);
+        let looked_around = self
+            .look_around
+            .update(robot_m, yaw_rad, self.config.give_up_radius_m);
+        self.watch(robot_m, looking_at, looked_around, now);
         let field = GuidanceField::build(
             &self.memory,
             (own, robot_m),
@@ -307,12 +357,19 @@ impl Guide {
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
     /// `robot_m` or of the frontier it is `looking_at` from a viewpoint (the robot
-    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away); a frontier
+    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away), while
+    /// `counting` (the robot has looked around); a frontier
     /// watched for [`GuidanceConfig::give_up_after_s`] in all is given up. The count
     /// survives a frontier's flicker (the window's frontier mask drops and restores
     /// cells at a surface's edge as rays accumulate); cells the memory forgets are
     /// forgotten here too, so both stay bounded by the memory.
-    fn watch(&mut self, robot_m: &Point3<f64>, looking_at: Option<Point3<f64>>, now: Time) {
+    fn watch(
+        &mut self,
+        robot_m: &Point3<f64>,
+        looking_at: Option<Point3<f64>>,
+        counting: bool,
+        now: Time,
+    ) {
         let dt_s = self.last_field.map_or(0.0, |last| {
             now.saturating_since(last).as_secs_f64().min(2.0)
         });
@@ -336,6 +393,9 @@ impl Guide {
             }
             keep
         });
+        if !counting {
+            return;
+        }
         let mut watched_out = Vec::new();
         for f in memory.frontiers() {
             let near =

@@ -172,7 +172,7 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     let mut own = Guide::new(sharing);
     let here = Point3::new(-1.5, 0.0, 0.0);
     assert!(
-        !own.field((RobotId(0), &here), Time::ZERO)
+        !own.field((RobotId(0), &here, 0.0), Time::ZERO)
             .distance_m(&here)
             .is_finite()
     );
@@ -184,7 +184,7 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
     let frontiers: Vec<CellKey> = own.memory().frontiers().collect();
     assert_eq!(frontiers, peer.memory().frontiers().collect::<Vec<_>>());
     // The peer's passable cells lead this robot to them.
-    let field = own.field((RobotId(0), &here), second(1.0));
+    let field = own.field((RobotId(0), &here, 0.0), second(1.0));
     let route_m = field.distance_m(&here);
     assert!(route_m.is_finite() && route_m > 5.0, "{route_m}");
     // What came from the peer is not sent back: only this robot's own marks (its body).
@@ -368,7 +368,7 @@ fn fly(
         let margin_m = config.margin_m(snapshot.resolution_m());
         let field = guide.as_mut().map(|g| {
             g.observe_snapshot(&snapshot, margin_m);
-            g.field((RobotId(0), &here), now)
+            g.field((RobotId(0), &here, 0.0), now)
         });
         let mut problem = PlanningProblem::new(&config, &snapshot, &camera);
         let mut candidates = problem.children(&state);
@@ -429,7 +429,7 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
         for x in [4.0, 14.0, 24.0, 34.0] {
             let here = Point3::new(x, 0.0, 0.0);
             g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
-            g.field((RobotId(0), &here), Time::ZERO);
+            g.field((RobotId(0), &here, 0.0), Time::ZERO);
         }
         assert!(g.memory().frontiers().all(|k| k[0] == -1 || k[0] == 0));
         assert!(g.memory().frontiers().count() > 0);
@@ -459,7 +459,7 @@ fn the_route_to_a_remembered_frontier_follows_passable_cells_and_is_as_long_as_t
         guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
     }
     let robot = Point3::new(37.2, 0.3, 0.1);
-    let field = guide.field((RobotId(0), &robot), Time::ZERO);
+    let field = guide.field((RobotId(0), &robot, 0.0), Time::ZERO);
     let route = field.route_from(&robot);
     let memory = guide.memory();
     let target = field
@@ -521,7 +521,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     // Robot 0 leads, robot 1 follows; alone, both would take the left branch.
     let (lead, follow) = (Point3::new(8.5, 0.5, 0.0), Point3::new(4.0, 0.0, 0.0));
     let target = |g: &mut Guide, id: u32, at: &Point3<f64>| {
-        g.field((RobotId(id), at), Time::ZERO)
+        g.field((RobotId(id), at, 0.0), Time::ZERO)
             .target_of(at)
             .expect("a route")
     };
@@ -603,15 +603,21 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     assert!(left(target(&mut maps_only, 1, &follow)));
 }
 
-#[test]
-fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
-    // The tunnel of the dead-end test: seen from x = 0 on, the frontier at x ≈ 0.
-    let world = dead_end_tunnel();
+/// A guide whose memory holds the tunnel of the dead-end test seen from `near`
+/// (x = 2 m; seen from x = 0 on, the frontier at x ≈ 0), and its `give_up_after_s`.
+fn beside_dead_end() -> (Guide, Point3<f64>, f64) {
     let config = GuidanceConfig::default();
     let limit_s = config.give_up_after_s.expect("on by default");
     let mut guide = Guide::new(config);
     let near = Point3::new(2.0, 0.0, 0.0);
-    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], dead_end_tunnel()), 0.67);
+    (guide, near, limit_s)
+}
+
+#[test]
+fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
+    let world = dead_end_tunnel();
+    let (mut guide, near, limit_s) = beside_dead_end();
     let frontiers = guide.memory().frontiers().count();
     assert!(frontiers > 0);
     // Far away, time does not count.
@@ -619,7 +625,7 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     for s in 0..30 {
         assert!(
             guide
-                .field((RobotId(0), &far), second(f64::from(s)))
+                .field((RobotId(0), &far, 0.0), second(f64::from(s)))
                 .distance_m(&far)
                 .is_finite()
         );
@@ -629,7 +635,7 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     // lasts `give_up_after_s`, then the frontiers within reach stop pulling.
     let mut when = None;
     for s in 30..60 {
-        let field = guide.field((RobotId(0), &near), second(f64::from(s)));
+        let field = guide.field((RobotId(0), &near, 0.0), second(f64::from(s)));
         if when.is_none() && field.frontier_count() < frontiers {
             when = Some(f64::from(s) - 30.0);
         }
@@ -646,11 +652,46 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     let given_up = guide.given_up().clone();
     let seen_all = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |_| true);
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67);
-    guide.field((RobotId(0), &near), second(61.0));
+    guide.field((RobotId(0), &near, 0.0), second(61.0));
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
-    let field = guide.field((RobotId(0), &near), second(62.0));
+    let field = guide.field((RobotId(0), &near, 0.0), second(62.0));
     assert_eq!(guide.given_up(), &given_up);
     assert!(field.frontier_count() < frontiers);
+}
+
+/// The robot at `at` turns through a full circle in no time: it has looked around.
+fn look_around(guide: &mut Guide, at: &Point3<f64>) {
+    for yaw_rad in [0.0, 3.0, 6.0, 9.0] {
+        guide.field((RobotId(0), at, yaw_rad), Time::ZERO);
+    }
+}
+
+#[test]
+fn nothing_is_given_up_before_the_robot_has_looked_around() {
+    let (mut guide, near, limit_s) = beside_dead_end();
+    // Started beside the frontier, facing one way (the camera has not turned to it):
+    // however long it hovers, nothing is given up.
+    for s in 0..30 {
+        guide.field((RobotId(0), &near, 0.0), second(f64::from(s)));
+    }
+    assert!(guide.given_up().is_empty());
+    // Turning on the spot at 1 rad/s (headings wrap at ±π): the clock starts once the
+    // turn is complete, at about 2π s.
+    let mut when = None;
+    for s in 30..60 {
+        let yaw_rad = (f64::from(s - 30) + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        guide.field((RobotId(0), &near, yaw_rad), second(f64::from(s)));
+        if when.is_none() && !guide.given_up().is_empty() {
+            when = Some(f64::from(s - 30));
+        }
+    }
+    let when = when.expect("never given up");
+    let turned_s = std::f64::consts::TAU.ceil();
+    assert!(
+        (turned_s + limit_s - 1.0..=turned_s + limit_s + 1.0).contains(&when),
+        "given up {when} s into the turn"
+    );
 }
 
 #[test]
@@ -662,10 +703,11 @@ fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
     let (near, far) = (Point3::new(2.0, 0.0, 0.0), Point3::new(10.0, 0.0, 0.0));
     guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
     let frontiers = guide.memory().frontiers().count();
+    look_around(&mut guide, &near);
     // Hovering beside it: given up (the rule of the test above) at about 4 s; until
     // then it is work for the robot's mission.
     for s in 0..10 {
-        let field = guide.field((RobotId(0), &near), second(f64::from(s)));
+        let field = guide.field((RobotId(0), &near, 0.0), second(f64::from(s)));
         assert_eq!(guide.has_work(&field, &near), s < 4, "at {s} s");
     }
     assert!(!guide.given_up().is_empty());
@@ -673,7 +715,7 @@ fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
     // Away from it, it stays given up until the retry time has passed, then pulls again.
     let mut back = None;
     for s in 10..150 {
-        let field = guide.field((RobotId(0), &far), second(f64::from(s)));
+        let field = guide.field((RobotId(0), &far, 0.0), second(f64::from(s)));
         if back.is_none() && field.frontier_count() == frontiers {
             back = Some(f64::from(s));
         }
@@ -688,7 +730,7 @@ fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
     assert!(guide.given_up().is_empty());
     // Still not seen into: hovering beside it gives it up again.
     for s in 150..160 {
-        guide.field((RobotId(0), &near), second(f64::from(s)));
+        guide.field((RobotId(0), &near, 0.0), second(f64::from(s)));
     }
     assert!(!guide.given_up().is_empty());
 }
@@ -707,7 +749,7 @@ fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_neare
             .enumerate()
             .map(|(s, x)| {
                 let here = Point3::new(*x, 0.0, 0.0);
-                let field = guide.field((RobotId(0), &here), Time::from_nanos(s as u64));
+                let field = guide.field((RobotId(0), &here, 0.0), Time::from_nanos(s as u64));
                 let target = field.target_of(&here).expect("a goal");
                 guide.memory().centre(target).x
             })
@@ -754,7 +796,7 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
     let mut guide = fresh();
     for s in 0..8 {
         let here = Point3::new(12.0 - f64::from(s), 0.0, 0.0);
-        guide.field((RobotId(0), &here), second(f64::from(s)));
+        guide.field((RobotId(0), &here, 0.0), second(f64::from(s)));
     }
     assert!(guide.given_up().is_empty());
     // Held 10 m away (a wall, a peer, a pocket out of view): given up after 6 s.
@@ -762,7 +804,7 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
     let here = Point3::new(10.0, 0.0, 0.0);
     let mut when = None;
     for s in 0..12 {
-        guide.field((RobotId(0), &here), second(f64::from(s)));
+        guide.field((RobotId(0), &here, 0.0), second(f64::from(s)));
         if when.is_none() && !guide.given_up().is_empty() {
             when = Some(s);
         }
@@ -780,7 +822,7 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     for x in [2.0, 12.0, 22.0, 32.0, 37.0] {
         let here = Point3::new(x, 0.0, 0.0);
         guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
-        guide.field((RobotId(0), &here), Time::ZERO);
+        guide.field((RobotId(0), &here, 0.0), Time::ZERO);
     }
     let field = GuidanceField::towards(guide.memory(), &home, 1.0);
     assert_eq!(field.distance_m(&home), 0.0, "least at home itself");

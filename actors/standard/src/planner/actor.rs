@@ -536,7 +536,10 @@ impl<S: ActionSelection> PlannerActor<S> {
         let root = replanning_root(self.committed.as_ref(), start, &odometry.pose);
         let here = nalgebra::Point3::from(root.position_m());
         let own = ctx.robot();
-        let field = self.guide.as_mut().map(|g| g.field((own, &here), now));
+        let field = self
+            .guide
+            .as_mut()
+            .map(|g| g.field((own, &here, root.yaw_rad()), now));
         let phase = self.advance_mission(ctx, now, &here, field.as_ref());
         let home_field = self.home_field(ctx, phase, &here);
         self.publish_memory(ctx, now, &here, home_field.as_ref().or(field.as_ref()));
