@@ -156,12 +156,13 @@ fn flood_trial() -> Result<(), String> {
             .filter_map(|l| seconds_of_day(l.split_whitespace().next()?))
             .find(|t| *t > back_at - 0.5)
     };
-    if rejoined_at(&logs[1]).is_none() {
+    let rejoined: Vec<Option<f64>> = logs.iter().map(|log| rejoined_at(log)).collect();
+    if rejoined[1].is_none() {
         return Err(logs[1].clone());
     }
     let mut peak_rss_mib = Vec::new();
-    for ((dir, name, _), log) in teams.iter().zip(&logs) {
-        let Some(rejoined) = rejoined_at(log) else {
+    for (((dir, name, _), log), rejoined) in teams.iter().zip(&logs).zip(rejoined) {
+        let Some(rejoined) = rejoined else {
             panic!("{name}: robot 0 never heard robot 1 again ({flood_report}):\n{log}");
         };
         let rejoin_s = rejoined - back_at;

@@ -696,12 +696,11 @@ fn nothing_is_given_up_before_the_robot_has_looked_around() {
 
 #[test]
 fn a_given_up_frontier_is_looked_for_again_after_the_retry_time() {
-    let world = dead_end_tunnel();
-    let config = GuidanceConfig::default();
-    let retry_s = config.retry_given_up_after_s.expect("on by default");
-    let mut guide = Guide::new(config);
-    let (near, far) = (Point3::new(2.0, 0.0, 0.0), Point3::new(10.0, 0.0, 0.0));
-    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    let retry_s = GuidanceConfig::default()
+        .retry_given_up_after_s
+        .expect("on by default");
+    let (mut guide, near, _) = beside_dead_end();
+    let far = Point3::new(10.0, 0.0, 0.0);
     let frontiers = guide.memory().frontiers().count();
     look_around(&mut guide, &near);
     // Hovering beside it: given up (the rule of the test above) at about 4 s; until
