@@ -99,6 +99,15 @@ pub struct GuidanceConfig {
     /// Farthest a viewpoint may be from its frontier, metres (capped at the camera's
     /// range).
     pub viewpoint_range_m: f64,
+    /// End missions sooner: two kinds of frontier still pull the robot but no longer
+    /// keep its [`Mission`](super::Mission) going — frontiers in cells a peer's
+    /// keyframe rays (or change sets) showed, which this robot's window shows again
+    /// when it is rebuilt from the peer's sparser keyframe samples, and pockets within
+    /// [`Self::give_up_radius_m`] of its start, above or below what its camera sees
+    /// from there, once it has looked around. Off by default: at 700 s (seeds 1–10)
+    /// every robot was home on 7 seeds against 3, but two seeds ended at 96.0 and
+    /// 94.6 % coverage against 100 % (docs/exploration.md).
+    pub quick_end: bool,
 }
 
 impl Default for GuidanceConfig {
@@ -124,6 +133,7 @@ impl Default for GuidanceConfig {
             share_memory: false,
             viewpoints: false,
             viewpoint_range_m: 4.0,
+            quick_end: false,
         }
     }
 }

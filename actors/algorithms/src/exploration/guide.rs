@@ -40,6 +40,8 @@ pub struct Guide {
     last_position_m: Option<Point3<f64>>,
     /// What the robot's camera sees, when frontiers are judged by their viewpoints.
     view: Option<ViewCone>,
+    /// What the robot's camera sees, when it has one ([`Self::seeing_with`]).
+    camera: Option<ViewCone>,
     /// The route distance from the robot to its target at the last [`Self::field`].
     last_route_m: f64,
     /// How the robot has looked around since its first round, until it has
@@ -99,14 +101,16 @@ impl Guide {
     /// An empty guide.
     #[must_use]
     pub fn new(config: GuidanceConfig) -> Self {
-        let memory = FrontierMemory::new(config.cell_m, config.max_cells);
+        let mut memory = FrontierMemory::new(config.cell_m, config.max_cells);
+        if config.share_memory {
+            memory = memory.tracking_changes();
+        }
+        if config.quick_end {
+            memory = memory.tracking_peer_sight();
+        }
         Guide {
             config,
-            memory: if config.share_memory {
-                memory.tracking_changes()
-            } else {
-                memory
-            },
+            memory,
             peers: BTreeMap::new(),
             retired_by_peers: 0,
             watched_s: BTreeMap::new(),
@@ -117,6 +121,7 @@ impl Guide {
             progress: None,
             last_position_m: None,
             view: None,
+            camera: None,
             last_route_m: f64::INFINITY,
             look_around: LookAround::default(),
         }
@@ -129,10 +134,9 @@ impl Guide {
     /// cells beside a frontier seed it.
     #[must_use]
     pub fn seeing_with(mut self, camera: &PinholeIntrinsics) -> Self {
-        self.view = self
-            .config
-            .viewpoints
-            .then(|| ViewCone::of_camera(camera, self.config.viewpoint_range_m));
+        let cone = ViewCone::of_camera(camera, self.config.viewpoint_range_m);
+        self.camera = Some(cone);
+        self.view = self.config.viewpoints.then_some(cone);
         self
     }
 
@@ -347,11 +351,42 @@ impl Guide {
     /// [`Mission`](super::Mission) going: the camera could not see into them before.
     #[must_use]
     pub fn has_work(&self, field: &GuidanceField, robot_m: &Point3<f64>) -> bool {
-        let memory = &self.memory;
-        field.distance_m(robot_m).is_finite()
-            && memory
-                .frontiers()
-                .any(|f| !self.ever_given_up.contains(&f) && field.seeds(f))
+        field.distance_m(robot_m).is_finite() && self.unexplored_count(field) > 0
+    }
+
+    /// How many remembered frontiers seed `field` that this robot never gave up (and,
+    /// with [`GuidanceConfig::quick_end`], that lie neither in space a peer's keyframes
+    /// showed nor in a pocket beside its start): the ones that keep its mission going
+    /// ([`Self::has_work`]).
+    #[must_use]
+    pub fn unexplored_count(&self, field: &GuidanceField) -> usize {
+        let quick_end = self.config.quick_end;
+        self.memory
+            .frontiers()
+            .filter(|f| {
+                !self.ever_given_up.contains(f)
+                    && !(quick_end && (self.memory.seen_by_peers(*f) || self.hidden_from_start(*f)))
+                    && field.seeds(*f)
+            })
+            .count()
+    }
+
+    /// Whether the frontier `f` lies within [`GuidanceConfig::give_up_radius_m`] of
+    /// where the robot started, under or above it beyond what its camera sees
+    /// ([`Self::seeing_with`]), once the robot has looked around: turning there could
+    /// not show it. Such a pocket still pulls the robot, but does not keep its mission
+    /// going ([`GuidanceConfig::quick_end`]; no time near it counted before the look
+    /// around, so it is seldom given up, and on seeds 1 and 3 at 700 s these pockets
+    /// alone kept the missions going).
+    fn hidden_from_start(&self, f: CellKey) -> bool {
+        let (Some(camera), Some(start_m), true) =
+            (self.camera, self.look_around.start_m, self.look_around.done)
+        else {
+            return false;
+        };
+        let centre_m = self.memory.centre(f);
+        (centre_m - start_m).norm() <= self.config.give_up_radius_m
+            && !camera.reaches(&start_m, &centre_m)
     }
 
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to

@@ -92,6 +92,11 @@ pub struct FrontierMemory {
     /// them (a window's clearance decides `passable` anew at every look, and may break
     /// the chain of passable cells behind a robot). At most `max_cells` of them.
     trail: BTreeSet<CellKey>,
+    /// Cells a peer's keyframe rays or change sets showed ([`Self::observe_keyframe`],
+    /// [`Self::observe_cells`]), at most `max_cells` of them, when
+    /// [`Self::tracking_peer_sight`]: a frontier this robot's window shows there later
+    /// lies in space its peer has looked through.
+    seen_by_peers: Option<BTreeSet<CellKey>>,
 }
 
 /// Per-cell tallies of the fine cells of a window.
@@ -119,6 +124,7 @@ impl FrontierMemory {
             changed: BTreeSet::new(),
             track_changes: false,
             trail: BTreeSet::new(),
+            seen_by_peers: None,
         }
     }
 
@@ -127,6 +133,14 @@ impl FrontierMemory {
     #[must_use]
     pub fn tracking_changes(mut self) -> Self {
         self.track_changes = true;
+        self
+    }
+
+    /// The same memory keeping the cells its peers' keyframes and change sets showed,
+    /// for [`Self::seen_by_peers`].
+    #[must_use]
+    pub fn tracking_peer_sight(mut self) -> Self {
+        self.seen_by_peers = Some(BTreeSet::new());
         self
     }
 
@@ -405,6 +419,11 @@ impl FrontierMemory {
         keys.sort_unstable();
         keys.dedup();
         for key in keys {
+            if let Some(seen) = &mut self.seen_by_peers
+                && seen.len() < self.max_cells
+            {
+                seen.insert(key);
+            }
             let old = self.record(key);
             let seen = CellRecord {
                 seen: true,
@@ -488,6 +507,15 @@ impl FrontierMemory {
     #[must_use]
     pub fn on_trail(&self, key: CellKey) -> bool {
         self.trail.contains(&key)
+    }
+
+    /// Whether a peer's keyframe rays or change set showed the cell (before or after
+    /// this robot's own windows did); `false` unless [`Self::tracking_peer_sight`].
+    #[must_use]
+    pub fn seen_by_peers(&self, key: CellKey) -> bool {
+        self.seen_by_peers
+            .as_ref()
+            .is_some_and(|seen| seen.contains(&key))
     }
 
     /// Marks the cell of a body position passable and seen (a robot is there: own or a

@@ -97,6 +97,16 @@ fn keyframe_towards(
     }
 }
 
+/// Keyframe `id` of robot 1 at x = 3 m looking at `surface` ([`keyframe_towards`]).
+fn peer_at_3_m(id: u32, surface: Point3<f64>, spread_m: [f64; 3]) -> PeerKeyframe {
+    PeerKeyframe {
+        robot: RobotId(1),
+        keyframe: keyframe_towards(id, Point3::new(3.0, 0.0, 0.0), surface, spread_m),
+        made_ns: 0,
+        received_at: Time::ZERO,
+    }
+}
+
 /// The window (20 × 20 × 4 m, at the origin) of a tunnel along x that is seen up to
 /// x = 6 m and open (unknown) beyond.
 fn tunnel_seen_to_6_m() -> GridSnapshot {
@@ -116,37 +126,47 @@ fn memory_retires_a_frontier_a_peers_keyframe_sees() {
         "{frontiers:?}"
     );
     // A peer looking the other way (at the tunnel's closed start) retires nothing.
-    let behind = PeerKeyframe {
-        robot: RobotId(1),
-        keyframe: keyframe_towards(
-            0,
-            Point3::new(3.0, 0.0, 0.0),
-            Point3::new(-2.5, 0.0, 0.0),
-            [0.2, 1.0, 0.6],
-        ),
-        made_ns: 0,
-        received_at: Time::ZERO,
-    };
+    let behind = peer_at_3_m(0, Point3::new(-2.5, 0.0, 0.0), [0.2, 1.0, 0.6]);
     assert_eq!(guide.observe_peer_keyframe(&behind).retired, 0);
     assert_eq!(guide.memory().frontiers().count(), frontiers.len());
     // A peer looking down the tunnel, at its walls beyond x = 6 m, sees them all.
-    let ahead = PeerKeyframe {
-        robot: RobotId(1),
-        keyframe: keyframe_towards(
-            1,
-            Point3::new(3.0, 0.0, 0.0),
-            Point3::new(9.0, 0.0, 0.0),
-            [1.0, 1.2, 0.7],
-        ),
-        made_ns: 0,
-        received_at: Time::ZERO,
-    };
+    let ahead = peer_at_3_m(1, Point3::new(9.0, 0.0, 0.0), [1.0, 1.2, 0.7]);
     let update = guide.observe_peer_keyframe(&ahead);
     assert_eq!(update.retired, frontiers.len());
     assert_eq!(guide.memory().frontiers().count(), 0);
     assert_eq!(guide.retired_by_peers(), frontiers.len() as u64);
     // The cells it looked through are remembered as seen.
     assert!(guide.memory().record([8, 0, 0]).seen);
+}
+
+#[test]
+fn with_quick_end_frontiers_where_a_peer_looked_keep_no_mission_going() {
+    let snapshot = tunnel_seen_to_6_m();
+    let ahead = peer_at_3_m(1, Point3::new(9.0, 0.0, 0.0), [1.0, 1.2, 0.7]);
+    let here = Point3::new(2.0, 0.0, 0.0);
+    let has_work = |config: GuidanceConfig, peer_looked: bool| {
+        let mut guide = Guide::new(config);
+        guide.observe_snapshot(&snapshot, 0.67);
+        let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
+        if peer_looked {
+            assert_eq!(guide.observe_peer_keyframe(&ahead).retired, frontiers.len());
+            // A window rebuilt over that space (from the peer's keyframes, sparser than
+            // the frames that first filled it) shows the frontiers again.
+            guide.observe_snapshot(&snapshot, 0.67);
+        }
+        let field = guide.field((RobotId(0), &here, 0.0), Time::ZERO);
+        // They pull the robot either way.
+        assert!(!frontiers.is_empty() && frontiers.iter().all(|f| field.seeds(*f)));
+        assert!(field.distance_m(&here).is_finite());
+        guide.has_work(&field, &here)
+    };
+    let quick = GuidanceConfig {
+        quick_end: true,
+        ..GuidanceConfig::default()
+    };
+    assert!(!has_work(quick, true));
+    assert!(has_work(quick, false));
+    assert!(has_work(GuidanceConfig::default(), true));
 }
 
 #[test]
@@ -692,6 +712,57 @@ fn nothing_is_given_up_before_the_robot_has_looked_around() {
         (turned_s + limit_s - 1.0..=turned_s + limit_s + 1.0).contains(&when),
         "given up {when} s into the turn"
     );
+}
+
+#[test]
+fn with_quick_end_a_pocket_under_the_start_keeps_no_mission_going_once_the_robot_has_looked_around()
+{
+    // A corridor of passable cells along x at z = 0 and, under the start cell, a
+    // frontier (a pocket in the floor) straight below the camera's ±29.6° view.
+    let passable = CellRecord {
+        seen: true,
+        passable: true,
+        ..CellRecord::default()
+    };
+    let pocket = CellRecord {
+        seen: true,
+        frontier: true,
+        ..CellRecord::default()
+    };
+    let cells: Vec<(CellKey, CellRecord)> = (-3..=8)
+        .map(|x| ([x, 0, 0], passable))
+        .chain(std::iter::once(([0, 0, -1], pocket)))
+        .collect();
+    let start = Point3::new(0.5, 0.5, 0.5);
+    let guide_from = |started: Point3<f64>, quick_end: bool| {
+        let config = GuidanceConfig {
+            quick_end,
+            ..GuidanceConfig::default()
+        };
+        let mut guide = Guide::new(config).seeing_with(&crate::planner::scenes::forward_camera());
+        guide.observe_peer_memory(cells.clone(), None);
+        guide.field((RobotId(0), &started, 0.0), Time::ZERO);
+        guide
+    };
+    let has_work = |started: Point3<f64>, quick_end: bool, looked_around: bool| {
+        let mut guide = guide_from(started, quick_end);
+        if looked_around {
+            look_around(&mut guide, &started);
+        }
+        let field = guide.field((RobotId(0), &start, 0.0), Time::ZERO);
+        assert!(guide.given_up().is_empty());
+        // It pulls the robot either way.
+        assert!(field.seeds([0, 0, -1]));
+        guide.has_work(&field, &start)
+    };
+    // Once the robot has looked around at its start, the pocket keeps no mission going;
+    // before, it does.
+    assert!(!has_work(start, true, true));
+    assert!(has_work(start, true, false));
+    // A robot that started 6 m away and comes by has it as work.
+    assert!(has_work(Point3::new(6.5, 0.5, 0.5), true, true));
+    // Without `quick_end`, it is work.
+    assert!(has_work(start, false, true));
 }
 
 #[test]

@@ -429,6 +429,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             reward = choice.map(|i| candidates[i].reward),
             guided,
             frontiers = field.map(|f| f.frontier_count()),
+            unexplored = field.zip(self.guide.as_ref()).map(|(f, g)| g.unexplored_count(f)),
+            idle = self.mission.status().idle,
             route_m = field.map(|f| f.distance_m(&here)),
             target = ?field.and_then(|f| f.target_of(&here)).zip(self.guide.as_ref()).map(|(k, g)| g.memory().centre(k).coords.as_slice().to_vec()),
             position = ?root.position_m().as_slice(), yaw = root.yaw_rad(), action = ?choice.map(|i| candidates[i].primitive.action()), "planning round"
