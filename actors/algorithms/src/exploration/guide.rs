@@ -38,8 +38,6 @@ pub struct Guide {
     progress: Option<(Point3<f64>, f64, Time)>,
     /// Where the robot was at the last [`Self::field`].
     last_position_m: Option<Point3<f64>>,
-    /// What the robot's camera sees, when frontiers are judged by their viewpoints.
-    view: Option<ViewCone>,
     /// What the robot's camera sees, when it has one ([`Self::seeing_with`]).
     camera: Option<ViewCone>,
     /// The route distance from the robot to its target at the last [`Self::field`].
@@ -120,7 +118,6 @@ impl Guide {
             last_target: None,
             progress: None,
             last_position_m: None,
-            view: None,
             camera: None,
             last_route_m: f64::INFINITY,
             look_around: LookAround::default(),
@@ -134,10 +131,14 @@ impl Guide {
     /// cells beside a frontier seed it.
     #[must_use]
     pub fn seeing_with(mut self, camera: &PinholeIntrinsics) -> Self {
-        let cone = ViewCone::of_camera(camera, self.config.viewpoint_range_m);
-        self.camera = Some(cone);
-        self.view = self.config.viewpoints.then_some(cone);
+        self.camera = Some(ViewCone::of_camera(camera, self.config.viewpoint_range_m));
         self
+    }
+
+    /// The camera's cone when frontiers are judged by their viewpoints
+    /// ([`GuidanceConfig::viewpoints`]).
+    fn view(&self) -> Option<ViewCone> {
+        self.camera.filter(|_| self.config.viewpoints)
     }
 
     /// The memory.
@@ -279,7 +280,7 @@ impl Guide {
                 claim_penalty_m: self.config.claim_penalty_m,
                 switch_penalty_m: self.config.switch_penalty_m,
                 look_ahead_m: self.config.look_ahead_m,
-                view: self.view,
+                view: self.view(),
             },
         );
         let (route_m, target) = field.distance_at(robot_m);
@@ -296,7 +297,7 @@ impl Guide {
     /// robot is at one of its viewpoints, or on the line of sight from it). `None`
     /// without viewpoints.
     fn looking_at(&self) -> Option<Point3<f64>> {
-        let view = self.view?;
+        let view = self.view()?;
         let target = self.last_target?;
         (self.last_route_m <= view.range_m).then(|| self.memory.centre(target))
     }
@@ -351,7 +352,11 @@ impl Guide {
     /// [`Mission`](super::Mission) going: the camera could not see into them before.
     #[must_use]
     pub fn has_work(&self, field: &GuidanceField, robot_m: &Point3<f64>) -> bool {
-        field.distance_m(robot_m).is_finite() && self.unexplored_count(field) > 0
+        field.distance_m(robot_m).is_finite()
+            && self
+                .memory
+                .frontiers()
+                .any(|f| self.keeps_mission_going(f, field))
     }
 
     /// How many remembered frontiers seed `field` that this robot never gave up (and,
@@ -360,15 +365,18 @@ impl Guide {
     /// ([`Self::has_work`]).
     #[must_use]
     pub fn unexplored_count(&self, field: &GuidanceField) -> usize {
-        let quick_end = self.config.quick_end;
         self.memory
             .frontiers()
-            .filter(|f| {
-                !self.ever_given_up.contains(f)
-                    && !(quick_end && (self.memory.seen_by_peers(*f) || self.hidden_from_start(*f)))
-                    && field.seeds(*f)
-            })
+            .filter(|f| self.keeps_mission_going(*f, field))
             .count()
+    }
+
+    /// Whether the frontier `f` keeps the mission going ([`Self::unexplored_count`]).
+    fn keeps_mission_going(&self, f: CellKey, field: &GuidanceField) -> bool {
+        !self.ever_given_up.contains(&f)
+            && !(self.config.quick_end
+                && (self.memory.seen_by_peers(f) || self.hidden_from_start(f)))
+            && field.seeds(f)
     }
 
     /// Whether the frontier `f` lies within [`GuidanceConfig::give_up_radius_m`] of

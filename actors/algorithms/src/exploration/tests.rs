@@ -97,6 +97,22 @@ fn keyframe_towards(
     }
 }
 
+/// A memory cell seen and passable.
+const PASSABLE_CELL: CellRecord = CellRecord {
+    seen: true,
+    passable: true,
+    frontier: false,
+    settled: false,
+};
+
+/// A memory cell seen and holding a frontier.
+const FRONTIER_CELL: CellRecord = CellRecord {
+    seen: true,
+    passable: false,
+    frontier: true,
+    settled: false,
+};
+
 /// Keyframe `id` of robot 1 at x = 3 m looking at `surface` ([`keyframe_towards`]).
 fn peer_at_3_m(id: u32, surface: Point3<f64>, spread_m: [f64; 3]) -> PeerKeyframe {
     PeerKeyframe {
@@ -246,12 +262,7 @@ fn a_peers_memory_cells_in_its_own_world_frame_land_where_they_are_in_ours() {
         Vector3::new(10.0, 0.0, 0.0),
         Vector3::z() * std::f64::consts::FRAC_PI_2,
     );
-    let frontier = CellRecord {
-        seen: true,
-        passable: false,
-        frontier: true,
-        settled: false,
-    };
+    let frontier = FRONTIER_CELL;
     let mut guide = Guide::new(GuidanceConfig::default());
     let update = guide.observe_peer_memory([([3, 0, 0], frontier)], Some(&frame));
     assert_eq!(update.cells, 1);
@@ -719,19 +730,9 @@ fn with_quick_end_a_pocket_under_the_start_keeps_no_mission_going_once_the_robot
 {
     // A corridor of passable cells along x at z = 0 and, under the start cell, a
     // frontier (a pocket in the floor) straight below the camera's ±29.6° view.
-    let passable = CellRecord {
-        seen: true,
-        passable: true,
-        ..CellRecord::default()
-    };
-    let pocket = CellRecord {
-        seen: true,
-        frontier: true,
-        ..CellRecord::default()
-    };
     let cells: Vec<(CellKey, CellRecord)> = (-3..=8)
-        .map(|x| ([x, 0, 0], passable))
-        .chain(std::iter::once(([0, 0, -1], pocket)))
+        .map(|x| ([x, 0, 0], PASSABLE_CELL))
+        .chain(std::iter::once(([0, 0, -1], FRONTIER_CELL)))
         .collect();
     let start = Point3::new(0.5, 0.5, 0.5);
     let guide_from = |started: Point3<f64>, quick_end: bool| {
@@ -962,16 +963,7 @@ fn a_frontier_is_a_goal_only_where_the_level_camera_can_see_it_from_a_passable_p
     // The default camera (±29.6° vertically), viewpoints within 4 m.
     let view = ViewCone::of_camera(&forward_camera(), 4.0);
     assert!((view.up_rad.to_degrees() - 29.6).abs() < 1.0, "{view:?}");
-    let passable = CellRecord {
-        seen: true,
-        passable: true,
-        ..CellRecord::default()
-    };
-    let frontier = CellRecord {
-        seen: true,
-        frontier: true,
-        ..CellRecord::default()
-    };
+    let (passable, frontier) = (PASSABLE_CELL, FRONTIER_CELL);
     let wall = CellRecord {
         seen: true,
         ..CellRecord::default()
