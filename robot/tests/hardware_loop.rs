@@ -16,60 +16,15 @@
 //! (`.ci/run` installs them). A simulated peer (`troupe robot`) is not part of this
 //! test: troupe-sims is not a dependency of troupe-robot.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use serde_json::Value;
+use troupe_testkit as kit;
 
 const RUN_S: f64 = 20.0;
 const FENCE_MIN: [f64; 3] = [-2.5, -2.5, 0.5];
 const FENCE_MAX: [f64; 3] = [4.5, 2.5, 2.5];
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("robot/ has a parent")
-        .to_path_buf()
-}
-
-/// The venv's Python if it imports `modules`, or why not.
-fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
-    let python = root().join(venv).join("bin/python");
-    let ok = Command::new(&python)
-        .args(["-c", &format!("import {modules}")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(python)
-    } else {
-        Err(format!(
-            "{} cannot import {modules} (run .ci/run)",
-            python.display()
-        ))
-    }
-}
-
-fn free_port(udp: bool) -> u16 {
-    if udp {
-        std::net::UdpSocket::bind("127.0.0.1:0").and_then(|s| s.local_addr())
-    } else {
-        std::net::TcpListener::bind("127.0.0.1:0").and_then(|s| s.local_addr())
-    }
-    .expect("a free loopback port")
-    .port()
-}
-
-/// An empty directory `name` under the test's target directory (a previous run's
-/// files removed), kept after the test to look at.
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("the test directory");
-    dir
-}
 
 fn robot_file(ros_port: u16, team_port: u16, mavlink_port: u16) -> String {
     format!(
@@ -113,46 +68,22 @@ fn children_cpu_s() -> Option<f64> {
     Some((ticks(13)? + ticks(14)?) / 100.0)
 }
 
-fn finish(child: Child, name: &str) -> Output {
-    let output = child.wait_with_output().expect("wait");
-    assert!(
-        output.status.success(),
-        "{name} failed: {}\n{}",
-        output.status,
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
-
 fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
 #[test]
 fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
-    let (ros_python, mav_python) = match (
-        python(
-            ".venv-ros2",
-            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
-        ),
-        python(".venv-pymavlink", "pymavlink"),
-    ) {
-        (Ok(r), Ok(m)) => (r, m),
-        (r, m) => {
-            eprintln!(
-                "SKIPPED hardware loop test: {}",
-                [r.err(), m.err()]
-                    .into_iter()
-                    .flatten()
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            );
+    let (ros_python, mav_python) = match kit::hardware_pythons() {
+        Ok(pythons) => pythons,
+        Err(why) => {
+            eprintln!("SKIPPED hardware loop test: {why}");
             return;
         }
     };
-    let dir = fresh_dir("hardware_loop");
-    let (ros_port, team_port) = (free_port(false), free_port(false));
-    let (mavlink_port, state_port) = (free_port(true), free_port(true));
+    let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_loop");
+    let (ros_port, team_port) = (kit::free_tcp_port(), kit::free_tcp_port());
+    let (mavlink_port, state_port) = (kit::free_udp_port(), kit::free_udp_port());
     let config = dir.join("robot.toml");
     std::fs::write(&config, robot_file(ros_port, team_port, mavlink_port)).unwrap();
 
@@ -169,52 +100,20 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
         .expect("start troupe-robot");
     let cpu_before = children_cpu_s();
     let started = Instant::now();
-    let peers_s = (RUN_S + 12.0).to_string();
+    let peers_s = RUN_S + 12.0;
     let report = dir.join("autopilot.json");
-    let autopilot = Command::new(mav_python)
-        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
-        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
-        .args([
-            "--report",
-            report.to_str().unwrap(),
-            "--duration-s",
-            &peers_s,
-        ])
-        .args([
-            "--start-ned",
-            "0,0,-1.2",
-            "--state-to",
-            &format!("127.0.0.1:{state_port}"),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the autopilot");
-    let camera = Command::new(ros_python)
-        .arg(root().join("scripts/ros2/box_room_camera.py"))
-        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
-        .args(["--team-connect", &format!("tcp/127.0.0.1:{team_port}")])
-        .args([
-            "--state-port",
-            &state_port.to_string(),
-            "--duration-s",
-            &peers_s,
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the camera");
+    let autopilot = kit::spawn_autopilot(&mav_python, mavlink_port, state_port, &report, peers_s);
+    let camera =
+        kit::spawn_box_room_camera(&ros_python, ros_port, state_port, Some(team_port), peers_s);
 
-    let robot_out = finish(robot, "troupe-robot");
+    let robot_out = kit::finish(robot, "troupe-robot");
     let robot_wall_s = started.elapsed().as_secs_f64();
     let cpu_s = cpu_before.zip(children_cpu_s()).map(|(a, b)| b - a);
-    let camera_out = finish(camera, "the camera");
-    finish(autopilot, "the autopilot");
+    let camera_out = kit::finish(camera, "the camera");
+    kit::finish(autopilot, "the autopilot");
     println!("{}", String::from_utf8_lossy(&robot_out.stdout));
 
-    let summary: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap())
-            .unwrap();
+    let summary: Value = kit::read_json(&dir.join("out/summary.json"));
     let camera: Value = serde_json::from_str(
         String::from_utf8_lossy(&camera_out.stdout)
             .lines()
@@ -222,8 +121,7 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
             .expect("the camera's report"),
     )
     .unwrap();
-    let autopilot: Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let autopilot: Value = kit::read_json(&report);
     let n = |v: &Value| v.as_u64().unwrap_or(0);
     println!(
         "frames {} keyframes {} plans {} vehicle {} ros2 inputs {}",
@@ -258,7 +156,7 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
 
     // The vehicle's state reached the ROS side as diagnostic_msgs/DiagnosticArray,
     // decoded by rclpy: in control while flying, at the setpoint rate.
-    if python(".venv-ros2", "diagnostic_msgs.msg").is_ok() {
+    if kit::venv_python(".venv-ros2", "diagnostic_msgs.msg").is_ok() {
         let arrays = camera["diagnostics"].as_array().unwrap();
         println!(
             "{} diagnostic arrays; last {:?}",
@@ -365,22 +263,22 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
 /// topic, before it ever talks to the autopilot.
 #[test]
 fn a_silent_topic_stops_the_robot_before_any_setpoint() {
-    let mav_python = match python(".venv-pymavlink", "pymavlink") {
+    let mav_python = match kit::pymavlink_python() {
         Ok(p) => p,
         Err(e) => {
             eprintln!("SKIPPED silent-topic test: {e}");
             return;
         }
     };
-    let dir = fresh_dir("hardware_silent");
-    let mavlink_port = free_port(true);
+    let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_silent");
+    let mavlink_port = kit::free_udp_port();
     let config = dir.join("robot.toml");
-    let text = robot_file(free_port(false), free_port(false), mavlink_port)
+    let text = robot_file(kit::free_tcp_port(), kit::free_tcp_port(), mavlink_port)
         .replace("startup_timeout_s = 15.0", "startup_timeout_s = 1.0");
     std::fs::write(&config, text).unwrap();
     let report = dir.join("autopilot.json");
     let autopilot = Command::new(mav_python)
-        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .arg(kit::root().join("scripts/mavlink/px4_like_autopilot.py"))
         .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
         .args(["--report", report.to_str().unwrap(), "--duration-s", "4"])
         .stdout(Stdio::null())
@@ -390,7 +288,7 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
         .args(["--config", config.to_str().unwrap()])
         .output()
         .expect("run troupe-robot");
-    finish(autopilot, "the autopilot");
+    kit::finish(autopilot, "the autopilot");
     assert!(!robot.status.success());
     let stderr = String::from_utf8_lossy(&robot.stderr);
     let last = stderr.lines().last().unwrap_or_default();
@@ -400,8 +298,7 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
         ),
         "{stderr}"
     );
-    let autopilot: Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let autopilot: Value = kit::read_json(&report);
     assert_eq!(
         autopilot["received_types"],
         serde_json::json!({}),
@@ -419,7 +316,7 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
 /// `gave_up` in the summary).
 #[test]
 fn no_autopilot_is_one_error_after_the_wait() {
-    let ros_python = match python(
+    let ros_python = match kit::venv_python(
         ".venv-ros2",
         "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
     ) {
@@ -429,19 +326,19 @@ fn no_autopilot_is_one_error_after_the_wait() {
             return;
         }
     };
-    let dir = fresh_dir("hardware_no_autopilot");
-    let ros_port = free_port(false);
+    let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_no_autopilot");
+    let ros_port = kit::free_tcp_port();
     let config = dir.join("robot.toml");
-    let text = robot_file(ros_port, free_port(false), free_port(true)).replace(
+    let text = robot_file(ros_port, kit::free_tcp_port(), kit::free_udp_port()).replace(
         "odometry_source = \"external\"\n",
         "odometry_source = \"external\"\nautopilot_wait_s = 4.0\n",
     );
     std::fs::write(&config, text).unwrap();
     // A vehicle standing 1.2 m up: odometry and depth, no autopilot.
     let camera = Command::new(ros_python)
-        .arg(root().join("scripts/ros2/box_room_camera.py"))
+        .arg(kit::root().join("scripts/ros2/box_room_camera.py"))
         .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
-        .args(["--state-port", &free_port(true).to_string()])
+        .args(["--state-port", &kit::free_udp_port().to_string()])
         .args(["--static-ned", "0,0,-1.2", "--duration-s", "25"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -480,9 +377,7 @@ fn no_autopilot_is_one_error_after_the_wait() {
         errors[0]
     );
     assert!(!stderr.contains("autopilot heartbeat lost"), "{stderr}");
-    let summary: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap())
-            .unwrap();
+    let summary: Value = kit::read_json(&dir.join("out/summary.json"));
     let vehicle = &summary["vehicle"];
     assert_eq!(vehicle["setpoints"], 0, "{vehicle}");
     assert!(

@@ -8,7 +8,6 @@
 //! (`.venv-pymavlink/`, or `TROUPE_PYMAVLINK_PYTHON`); skips, saying why, without it.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -30,43 +29,7 @@ use troupe_runtime::{
     Actor, ActorResult, ActorSpec, Context, Event, QueuePolicy, RealtimeExecutor, RobotSpec,
     TimerId,
 };
-
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("robot/ has a parent")
-        .to_path_buf()
-}
-
-/// The Python with pymavlink, or why there is none.
-fn pymavlink_python() -> Result<PathBuf, String> {
-    let python = std::env::var_os("TROUPE_PYMAVLINK_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join(".venv-pymavlink/bin/python"));
-    let ok = Command::new(&python)
-        .args(["-c", "import pymavlink"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(python)
-    } else {
-        Err(format!(
-            "{} cannot import pymavlink (run .ci/run, or: python3 -m venv .venv-pymavlink && \
-             .venv-pymavlink/bin/pip install pymavlink)",
-            python.display()
-        ))
-    }
-}
-
-/// A loopback UDP port nobody uses right now.
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .expect("a free loopback port")
-        .port()
-}
+use troupe_testkit as kit;
 
 fn unix_now_s() -> f64 {
     SystemTime::now()
@@ -269,14 +232,14 @@ fn wait_ready(child: &mut Child) -> f64 {
 
 /// Runs a scenario, or returns `None` (after saying why) without pymavlink.
 async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
-    let python = match pymavlink_python() {
+    let python = match kit::pymavlink_python() {
         Ok(p) => p,
         Err(reason) => {
             eprintln!("skipping {name}: {reason}");
             return None;
         }
     };
-    let port = free_udp_port();
+    let port = kit::free_udp_port();
     let report_path = std::env::temp_dir().join(format!(
         "troupe-mavlink-{name}-{}-{port}.json",
         std::process::id()
@@ -284,7 +247,7 @@ async fn run(name: &str, scenario: Scenario) -> Option<Outcome> {
     let autopilot_s = scenario.run_s + 1.0;
     let mut command = Command::new(python);
     command
-        .arg(workspace_root().join("scripts/mavlink/px4_like_autopilot.py"))
+        .arg(kit::root().join("scripts/mavlink/px4_like_autopilot.py"))
         .args(["--connection", &format!("udpout:127.0.0.1:{port}")])
         .args(["--report", &report_path.to_string_lossy()])
         .args(["--duration-s", &autopilot_s.to_string()])

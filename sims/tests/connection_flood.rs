@@ -4,7 +4,7 @@
 //! together. In a test binary of its own: its four robots and the flood would
 //! otherwise share the machine with the other process tests.
 
-mod common;
+use troupe_testkit as common;
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};

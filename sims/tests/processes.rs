@@ -3,7 +3,7 @@
 //! keyframes, and the robots keep apart; the same through a `troupe router`,
 //! with a neighbourhood subscription, and in network namespaces (issue 22).
 
-mod common;
+use troupe_testkit as common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

@@ -8,7 +8,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use troupe_testkit as common;
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -11,7 +11,7 @@
 //! robot 1 ignored them, flying on towards it; now robot 1 announces the restart and
 //! stops short of robot 0 as soon as its candidates reach robot 0's cylinder.
 
-mod common;
+use troupe_testkit as common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

@@ -6,7 +6,7 @@
 //! member flooding a robot's journal pushes out its own messages, not a peer's.
 //! Without the Python client the hostile tests skip, saying why.
 
-mod common;
+use troupe_testkit as common;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

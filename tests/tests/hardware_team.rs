@@ -19,70 +19,17 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
-use serde_json::Value;
 use troupe_robot::base::BaseStation;
 use troupe_robot::hardware::HardwareRobot;
 use troupe_runtime::TopicStats;
 use troupe_sims::process::RobotProcess;
+use troupe_testkit as kit;
 
 const FLY_S: f64 = 22.0;
 const FENCE_MIN: [f64; 3] = [-2.5, -2.5, 0.5];
 const FENCE_MAX: [f64; 3] = [4.5, 2.5, 2.5];
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ has a parent")
-        .to_path_buf()
-}
-
-/// The venv's Python if it imports `modules`, or why not.
-fn python(venv: &str, modules: &str) -> Result<PathBuf, String> {
-    let python = root().join(venv).join("bin/python");
-    let ok = Command::new(&python)
-        .args(["-c", &format!("import {modules}")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        Ok(python)
-    } else {
-        Err(format!(
-            "{} cannot import {modules} (run .ci/run)",
-            python.display()
-        ))
-    }
-}
-
-fn free_port(udp: bool) -> u16 {
-    if udp {
-        std::net::UdpSocket::bind("127.0.0.1:0").and_then(|s| s.local_addr())
-    } else {
-        std::net::TcpListener::bind("127.0.0.1:0").and_then(|s| s.local_addr())
-    }
-    .expect("a free loopback port")
-    .port()
-}
-
-fn finish(child: Child, name: &str) -> Output {
-    let output = child.wait_with_output().expect("wait");
-    assert!(
-        output.status.success(),
-        "{name} failed: {}\n{}",
-        output.status,
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
-
-fn read_json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("json file")).expect("json")
-}
 
 /// A zenoh table listening on `me` and connecting to the `others`.
 fn zenoh(me: &str, others: &[&str]) -> String {
@@ -91,34 +38,21 @@ fn zenoh(me: &str, others: &[&str]) -> String {
 
 #[test]
 fn hardware_robot_a_simulated_peer_and_the_base_share_one_map() {
-    let (ros_python, mav_python) = match (
-        python(
-            ".venv-ros2",
-            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
-        ),
-        python(".venv-pymavlink", "pymavlink"),
-    ) {
-        (Ok(r), Ok(m)) => (r, m),
-        (r, m) => {
-            eprintln!(
-                "SKIPPED hardware team test: {}",
-                [r.err(), m.err()]
-                    .into_iter()
-                    .flatten()
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            );
+    let (ros_python, mav_python) = match kit::hardware_pythons() {
+        Ok(pythons) => pythons,
+        Err(why) => {
+            eprintln!("SKIPPED hardware team test: {why}");
             return;
         }
     };
     let dir = tempfile::tempdir().expect("tempdir");
     let dir = dir.path();
-    let ros_port = free_port(false);
+    let ros_port = kit::free_tcp_port();
     let team: Vec<String> = (0..3)
-        .map(|_| format!("tcp/127.0.0.1:{}", free_port(false)))
+        .map(|_| format!("tcp/127.0.0.1:{}", kit::free_tcp_port()))
         .collect();
     let (hw, sim, base) = (team[0].as_str(), team[1].as_str(), team[2].as_str());
-    let (mavlink_port, state_port) = (free_port(true), free_port(true));
+    let (mavlink_port, state_port) = (kit::free_udp_port(), kit::free_udp_port());
 
     // The team: robot 0 on hardware, robot 1 simulated, the base as id 2.
     std::fs::write(
@@ -182,32 +116,10 @@ max_m = {FENCE_MAX:?}
         .expect("base.toml");
 
     // The Python ends run past the robot's flight (it starts once their topics appear).
-    let peers_s = (FLY_S + 15.0).to_string();
+    let peers_s = FLY_S + 15.0;
     let report = dir.join("autopilot.json");
-    let autopilot = Command::new(mav_python)
-        .arg(root().join("scripts/mavlink/px4_like_autopilot.py"))
-        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
-        .args([
-            "--report",
-            report.to_str().unwrap(),
-            "--duration-s",
-            &peers_s,
-        ])
-        .args(["--start-ned", "0,0,-1.2"])
-        .args(["--state-to", &format!("127.0.0.1:{state_port}")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the autopilot");
-    let camera = Command::new(ros_python)
-        .arg(root().join("scripts/ros2/box_room_camera.py"))
-        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
-        .args(["--state-port", &state_port.to_string()])
-        .args(["--duration-s", &peers_s])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the camera");
+    let autopilot = kit::spawn_autopilot(&mav_python, mavlink_port, state_port, &report, peers_s);
+    let camera = kit::spawn_box_room_camera(&ros_python, ros_port, state_port, None, peers_s);
 
     // The base and the simulated peer run until the hardware robot is done.
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
@@ -237,8 +149,8 @@ max_m = {FENCE_MAX:?}
     let peer_summary = peer_thread.join().unwrap().expect("the simulated peer");
     let base_summary = base_thread.join().unwrap().expect("the base");
     let hw_summary = flown.expect("the hardware robot");
-    finish(camera, "the camera");
-    finish(autopilot, "the autopilot");
+    kit::finish(camera, "the camera");
+    kit::finish(autopilot, "the autopilot");
 
     // The hardware robot mapped and planned, and no committed plan left the fence.
     println!(
@@ -256,7 +168,7 @@ max_m = {FENCE_MAX:?}
     assert!(hw_summary.collision.is_some(), "no collision actor status");
 
     // It flew ≥ 20 s: setpoints over that span, none outside the fence.
-    let autopilot = read_json(&report);
+    let autopilot = kit::read_json(&report);
     let setpoints = autopilot["setpoints"].as_array().unwrap();
     let times: Vec<f64> = setpoints.iter().map(|s| s["t"].as_f64().unwrap()).collect();
     let span_s = times.last().unwrap_or(&0.0) - times.first().unwrap_or(&0.0);

@@ -18,7 +18,7 @@ use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// The robot's flight (after its topics appeared), wall seconds.
@@ -28,40 +28,15 @@ const FLY_S: f64 = 20.0;
 /// starts the base anyway, seconds.
 const ABSENT_WITHIN_S: f64 = 60.0;
 
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .expect("a free loopback port")
-        .port()
-}
-
-fn finish(child: Child, name: &str) -> Output {
-    let output = child.wait_with_output().expect("wait");
-    assert!(
-        output.status.success(),
-        "{name} failed: {}\n{}",
-        output.status,
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
-
 #[test]
 fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
     let troupe_robot = Path::new(env!("CARGO_BIN_EXE_troupe")).with_file_name("troupe-robot");
-    let pythons = (
-        common::venv_python(
-            ".venv-ros2",
-            "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
-        ),
-        common::venv_python(".venv-pymavlink", "pymavlink"),
-    );
-    let (ros_python, mav_python) = match pythons {
-        (Ok(r), Ok(m)) if troupe_robot.exists() => (r, m),
-        (r, m) => {
+    let (ros_python, mav_python) = match common::hardware_pythons() {
+        Ok(pythons) if troupe_robot.exists() => pythons,
+        pythons => {
             let built = (!troupe_robot.exists())
                 .then(|| format!("{} is not built", troupe_robot.display()));
-            let why: Vec<String> = [r.err(), m.err(), built].into_iter().flatten().collect();
+            let why: Vec<String> = [pythons.err(), built].into_iter().flatten().collect();
             eprintln!("SKIPPED hardware robot + base test: {}", why.join("; "));
             return;
         }
@@ -71,7 +46,7 @@ fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
     let [ros_port, robot_port, base_port] = common::free_ports_from(26_000, 3)[..] else {
         unreachable!()
     };
-    let (mavlink_port, state_port) = (free_udp_port(), free_udp_port());
+    let (mavlink_port, state_port) = (common::free_udp_port(), common::free_udp_port());
 
     // The team as the base reads it: one robot, the base as id 1.
     std::fs::write(
@@ -121,26 +96,11 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
     )
     .unwrap();
 
-    let peers_s = (FLY_S + 30.0).to_string();
-    let autopilot = Command::new(mav_python)
-        .arg(common::root().join("scripts/mavlink/px4_like_autopilot.py"))
-        .args(["--connection", &format!("udpout:127.0.0.1:{mavlink_port}")])
-        .args(["--report", dir.join("autopilot.json").to_str().unwrap()])
-        .args(["--duration-s", &peers_s, "--start-ned", "0,0,-1.2"])
-        .args(["--state-to", &format!("127.0.0.1:{state_port}")])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the autopilot");
-    let camera = Command::new(ros_python)
-        .arg(common::root().join("scripts/ros2/box_room_camera.py"))
-        .args(["--connect", &format!("tcp/127.0.0.1:{ros_port}")])
-        .args(["--state-port", &state_port.to_string()])
-        .args(["--duration-s", &peers_s])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start the camera");
+    let peers_s = FLY_S + 30.0;
+    let report = dir.join("autopilot.json");
+    let autopilot =
+        common::spawn_autopilot(&mav_python, mavlink_port, state_port, &report, peers_s);
+    let camera = common::spawn_box_room_camera(&ros_python, ros_port, state_port, None, peers_s);
     let started = Instant::now();
     let mut robot = Command::new(&troupe_robot)
         .args(["--config", dir.join("robot0.toml").to_str().unwrap()])
@@ -189,7 +149,7 @@ listen = ["tcp/127.0.0.1:{robot_port}"]
         .status()
         .expect("kill");
     assert!(stopped.success());
-    let base_out = finish(base, "troupe base");
+    let base_out = common::finish(base, "troupe base");
     let _ = (camera.wait_with_output(), autopilot.wait_with_output());
 
     let summary = common::read_json(&dir.join("hw0/summary.json"));

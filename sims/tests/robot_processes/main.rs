@@ -3,8 +3,7 @@
 //! zenoh. One test binary, so that its tests, which mostly wait on real time, run
 //! side by side (one build and link instead of four).
 
-#[path = "../common/mod.rs"]
-mod common;
+use troupe_testkit as common;
 
 mod artifacts;
 mod base;

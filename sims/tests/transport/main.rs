@@ -2,8 +2,7 @@
 //! (`security`) and subscription scopes over a zenoh router (`subscriptions`). One
 //! test binary, so that zenoh's generic code is built and linked once for both.
 
-#[path = "../common/mod.rs"]
-mod common;
+use troupe_testkit as common;
 
 mod security;
 mod subscriptions;
