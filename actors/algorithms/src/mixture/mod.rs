@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 mod merge;
 
-pub use merge::{merge_gmm3, merge_gmm4, merge_weights};
+pub use merge::{merge_gmm, merge_gmm3, merge_gmm4, merge_weights};
 
 /// Why a mixture is not valid.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
