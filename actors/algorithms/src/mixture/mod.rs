@@ -112,8 +112,8 @@ impl<const D: usize> Chol<D> {
         let mut y = [0.0; D];
         for i in 0..D {
             let mut r = x[i] - self.mean[i];
-            for j in 0..i {
-                r -= self.l[i][j] * y[j];
+            for (l, yj) in self.l[i][..i].iter().zip(&y[..i]) {
+                r -= l * yj;
             }
             y[i] = r * self.inv_diag[i];
         }
@@ -125,8 +125,8 @@ impl<const D: usize> Chol<D> {
     fn transform(&self, z: [f64; D]) -> SVector<f64, D> {
         SVector::from_fn(|i, _| {
             let mut v = self.mean[i];
-            for j in 0..=i {
-                v += self.l[i][j] * z[j];
+            for (l, zj) in self.l[i][..=i].iter().zip(&z[..=i]) {
+                v += l * zj;
             }
             v
         })
