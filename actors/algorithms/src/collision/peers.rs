@@ -41,6 +41,13 @@ pub fn must_yield(me: RobotId, mine: u16, peer: RobotId, theirs: Option<u16>) ->
     }
 }
 
+/// Stores `message` in `held` unless what is held has a later `stamp`.
+fn keep_latest<T: Clone>(held: &mut Option<T>, message: &T, stamp: impl Fn(&T) -> Time) {
+    if held.as_ref().is_none_or(|h| stamp(h) <= stamp(message)) {
+        *held = Some(message.clone());
+    }
+}
+
 /// Latest odometry and plan per peer, keyed by robot.
 ///
 /// Stamps are on the team clock (`troupe_core::TeamClock`), so they keep increasing
@@ -69,29 +76,15 @@ impl PeerTable {
     /// Records a peer's odometry (an older stamp than the one held is ignored: the link
     /// may reorder).
     pub fn update_odometry(&mut self, odometry: &PeerOdometry) {
-        let Some(track) = self.track_of_run(odometry.robot, odometry.run_start_ns) else {
-            return;
-        };
-        if track
-            .odometry
-            .as_ref()
-            .is_none_or(|o| o.odometry.stamp <= odometry.odometry.stamp)
-        {
-            track.odometry = Some(odometry.clone());
+        if let Some(track) = self.track_of_run(odometry.robot, odometry.run_start_ns) {
+            keep_latest(&mut track.odometry, odometry, |o| o.odometry.stamp);
         }
     }
 
     /// Records a peer's plan (an older plan than the one held is ignored).
     pub fn update_plan(&mut self, plan: &PeerPlan) {
-        let Some(track) = self.track_of_run(plan.robot, plan.run_start_ns) else {
-            return;
-        };
-        if track
-            .plan
-            .as_ref()
-            .is_none_or(|p| p.plan.stamp <= plan.plan.stamp)
-        {
-            track.plan = Some(plan.clone());
+        if let Some(track) = self.track_of_run(plan.robot, plan.run_start_ns) {
+            keep_latest(&mut track.plan, plan, |p| p.plan.stamp);
         }
     }
 

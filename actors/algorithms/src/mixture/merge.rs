@@ -7,7 +7,7 @@
 //! to all parts ([`merge_weights`]); the merged density is the support-weighted average
 //! `p*(x) = Σ_i (N_i / N*) p_i(x)`.
 
-use super::{Gmm3, Gmm4, MixtureError};
+use super::{Gmm, Gmm3, Gmm4, MixtureError};
 
 /// Eqs. 3.4–3.5 for any number of parts: `supports[i]` is `N_i`, `weights[i]` the
 /// weights of part `i`. Parts with zero support contribute nothing (their weights are
@@ -42,28 +42,26 @@ pub fn merge_weights(supports: &[f64], weights: &[&[f64]]) -> Result<Vec<f64>, M
     Ok(out)
 }
 
-/// Merge 4D mixtures `(N_i, G_i)` by Eqs. 3.4–3.5; components of zero weight are
+/// Merge mixtures `(N_i, G_i)` by Eqs. 3.4–3.5; components of zero weight are
 /// dropped.
-pub fn merge_gmm4(parts: &[(f64, &Gmm4)]) -> Result<Gmm4, MixtureError> {
+pub fn merge_gmm<const D: usize>(parts: &[(f64, &Gmm<D>)]) -> Result<Gmm<D>, MixtureError> {
     let supports: Vec<f64> = parts.iter().map(|(n, _)| *n).collect();
     let params: Vec<_> = parts
         .iter()
         .map(|(_, g)| (g.weights(), g.means(), g.covariances()))
         .collect();
     let (w, mu, cov) = merged_parameters(&supports, &params)?;
-    Gmm4::new(w, mu, cov)
+    Gmm::new(w, mu, cov)
 }
 
-/// Merge 3D mixtures `(N_i, G_i)` by Eqs. 3.4–3.5; components of zero weight are
-/// dropped.
+/// [`merge_gmm`] of 4D mixtures.
+pub fn merge_gmm4(parts: &[(f64, &Gmm4)]) -> Result<Gmm4, MixtureError> {
+    merge_gmm(parts)
+}
+
+/// [`merge_gmm`] of 3D mixtures.
 pub fn merge_gmm3(parts: &[(f64, &Gmm3)]) -> Result<Gmm3, MixtureError> {
-    let supports: Vec<f64> = parts.iter().map(|(n, _)| *n).collect();
-    let params: Vec<_> = parts
-        .iter()
-        .map(|(_, g)| (g.weights(), g.means(), g.covariances()))
-        .collect();
-    let (w, mu, cov) = merged_parameters(&supports, &params)?;
-    Gmm3::new(w, mu, cov)
+    merge_gmm(parts)
 }
 
 /// Weights (Eq. 3.5), means and covariances of merged mixtures given as

@@ -6,13 +6,13 @@
 //! Covariances are never inverted: every Mahalanobis distance is a forward substitution
 //! with the lower Cholesky factor `L` (`Σ = L Lᵀ`), and `ln |Σ| = 2 Σ ln L_jj`.
 
-use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rand::Rng;
 use rayon::prelude::*;
 
 mod merge;
 
-pub use merge::{merge_gmm3, merge_gmm4, merge_weights};
+pub use merge::{merge_gmm, merge_gmm3, merge_gmm4, merge_weights};
 
 /// Why a mixture is not valid.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -69,122 +69,67 @@ const SYMMETRY_TOLERANCE: f64 = 1e-9;
 /// split does not change any value).
 const BATCH: usize = 1024;
 
-/// One 4D component in the form the hot loops use: mean, packed lower Cholesky factor
-/// and the log normaliser `−(D/2) ln 2π − Σ ln L_jj` (Eq. A.3, without the weight).
+/// One `D`-dimensional component in the form the hot loops use: mean, lower Cholesky
+/// factor (row by row, upper triangle zero), the reciprocals of its diagonal and the
+/// log normaliser `−(D/2) ln 2π − Σ ln L_jj` (Eq. A.3, without the weight).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Chol4 {
-    pub(crate) mean: [f64; 4],
-    /// Row-major packed lower triangle: l00, l10, l11, l20, l21, l22, l30, l31, l32, l33.
-    l: [f64; 10],
-    inv_diag: [f64; 4],
+pub(crate) struct Chol<const D: usize> {
+    pub(crate) mean: [f64; D],
+    /// `l[i][j] = L_ij` for `j ≤ i`, zero above the diagonal.
+    l: [[f64; D]; D],
+    inv_diag: [f64; D],
     pub(crate) log_norm: f64,
 }
 
-impl Chol4 {
+/// A 3D component (the spatial marginal, the gates and the global map use it).
+pub(crate) type Chol3 = Chol<3>;
+
+impl<const D: usize> Chol<D> {
     /// Factor `cov`; `None` if it is not positive definite (or not finite).
-    pub(crate) fn new(mean: &Vector4<f64>, cov: &Matrix4<f64>) -> Option<Self> {
+    pub(crate) fn new(mean: &SVector<f64, D>, cov: &SMatrix<f64, D, D>) -> Option<Self> {
         if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
             return None;
         }
         let l = cov.cholesky()?.l();
-        let packed = [
-            l[(0, 0)],
-            l[(1, 0)],
-            l[(1, 1)],
-            l[(2, 0)],
-            l[(2, 1)],
-            l[(2, 2)],
-            l[(3, 0)],
-            l[(3, 1)],
-            l[(3, 2)],
-            l[(3, 3)],
-        ];
-        let diag = [l[(0, 0)], l[(1, 1)], l[(2, 2)], l[(3, 3)]];
+        let diag: [f64; D] = std::array::from_fn(|i| l[(i, i)]);
         if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
             return None;
         }
         let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
         Some(Self {
-            mean: [mean[0], mean[1], mean[2], mean[3]],
-            l: packed,
+            mean: (*mean).into(),
+            l: std::array::from_fn(|i| {
+                std::array::from_fn(|j| if j <= i { l[(i, j)] } else { 0.0 })
+            }),
             inv_diag: diag.map(|d| 1.0 / d),
-            log_norm: -2.0 * LN_2PI - log_det_half,
+            log_norm: -(D as f64 / 2.0) * LN_2PI - log_det_half,
         })
     }
 
     /// Squared Mahalanobis distance `|L⁻¹ (x − μ)|²` by forward substitution (Eq. A.3).
     #[inline(always)]
-    pub(crate) fn mahalanobis2(&self, x: &[f64; 4]) -> f64 {
-        let l = &self.l;
-        let d0 = x[0] - self.mean[0];
-        let d1 = x[1] - self.mean[1];
-        let d2 = x[2] - self.mean[2];
-        let d3 = x[3] - self.mean[3];
-        let y0 = d0 * self.inv_diag[0];
-        let y1 = (d1 - l[1] * y0) * self.inv_diag[1];
-        let y2 = (d2 - l[3] * y0 - l[4] * y1) * self.inv_diag[2];
-        let y3 = (d3 - l[6] * y0 - l[7] * y1 - l[8] * y2) * self.inv_diag[3];
-        y0 * y0 + y1 * y1 + y2 * y2 + y3 * y3
-    }
-}
-
-/// One 3D component: mean, packed lower Cholesky factor, log normaliser.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Chol3 {
-    pub(crate) mean: [f64; 3],
-    l: [f64; 6],
-    inv_diag: [f64; 3],
-    pub(crate) log_norm: f64,
-}
-
-impl Chol3 {
-    pub(crate) fn new(mean: &Vector3<f64>, cov: &Matrix3<f64>) -> Option<Self> {
-        if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
-            return None;
+    pub(crate) fn mahalanobis2(&self, x: &[f64; D]) -> f64 {
+        let mut y = [0.0; D];
+        for i in 0..D {
+            let mut r = x[i] - self.mean[i];
+            for (l, yj) in self.l[i][..i].iter().zip(&y[..i]) {
+                r -= l * yj;
+            }
+            y[i] = r * self.inv_diag[i];
         }
-        let l = cov.cholesky()?.l();
-        let diag = [l[(0, 0)], l[(1, 1)], l[(2, 2)]];
-        if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
-            return None;
-        }
-        let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
-        Some(Self {
-            mean: [mean[0], mean[1], mean[2]],
-            l: [
-                l[(0, 0)],
-                l[(1, 0)],
-                l[(1, 1)],
-                l[(2, 0)],
-                l[(2, 1)],
-                l[(2, 2)],
-            ],
-            inv_diag: diag.map(|d| 1.0 / d),
-            log_norm: -1.5 * LN_2PI - log_det_half,
-        })
-    }
-
-    /// Squared Mahalanobis distance by forward substitution.
-    #[inline(always)]
-    pub(crate) fn mahalanobis2(&self, x: &[f64; 3]) -> f64 {
-        let l = &self.l;
-        let d0 = x[0] - self.mean[0];
-        let d1 = x[1] - self.mean[1];
-        let d2 = x[2] - self.mean[2];
-        let y0 = d0 * self.inv_diag[0];
-        let y1 = (d1 - l[1] * y0) * self.inv_diag[1];
-        let y2 = (d2 - l[3] * y0 - l[4] * y1) * self.inv_diag[2];
-        y0 * y0 + y1 * y1 + y2 * y2
+        y.iter().fold(0.0, |sum, v| sum + v * v)
     }
 
     /// `μ + L z`.
     #[inline]
-    fn transform(&self, z: [f64; 3]) -> Vector3<f64> {
-        let l = &self.l;
-        Vector3::new(
-            self.mean[0] + l[0] * z[0],
-            self.mean[1] + l[1] * z[0] + l[2] * z[1],
-            self.mean[2] + l[3] * z[0] + l[4] * z[1] + l[5] * z[2],
-        )
+    fn transform(&self, z: [f64; D]) -> SVector<f64, D> {
+        SVector::from_fn(|i, _| {
+            let mut v = self.mean[i];
+            for (l, zj) in self.l[i][..=i].iter().zip(&z[..=i]) {
+                v += l * zj;
+            }
+            v
+        })
     }
 }
 
@@ -218,15 +163,13 @@ fn check_weights(weights: &[f64]) -> Result<(), MixtureError> {
     Ok(())
 }
 
-/// The invariants [`Gmm4::new`] and [`Gmm3::new`] share (matching lengths, valid
-/// weights, symmetric positive-definite covariances), with each covariance factored by
-/// `factor`.
-fn checked_factors<const D: usize, F>(
+/// The invariants [`Gmm::new`] checks (matching lengths, valid weights, symmetric
+/// positive-definite covariances), with each covariance factored.
+fn checked_factors<const D: usize>(
     weights: &[f64],
-    means: &[nalgebra::SVector<f64, D>],
-    covariances: &[nalgebra::SMatrix<f64, D, D>],
-    factor: impl Fn(&nalgebra::SVector<f64, D>, &nalgebra::SMatrix<f64, D, D>) -> Option<F>,
-) -> Result<Vec<F>, MixtureError> {
+    means: &[SVector<f64, D>],
+    covariances: &[SMatrix<f64, D, D>],
+) -> Result<Vec<Chol<D>>, MixtureError> {
     if means.len() != weights.len() || covariances.len() != weights.len() {
         return Err(MixtureError::LengthMismatch {
             weights: weights.len(),
@@ -243,33 +186,48 @@ fn checked_factors<const D: usize, F>(
             if asymmetry(cov) > SYMMETRY_TOLERANCE {
                 return Err(MixtureError::NotPositiveDefinite { component });
             }
-            factor(mean, cov).ok_or(MixtureError::NotPositiveDefinite { component })
+            Chol::new(mean, cov).ok_or(MixtureError::NotPositiveDefinite { component })
         })
         .collect()
 }
 
-fn asymmetry<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
+fn asymmetry<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
     let scale = m.amax().max(f64::MIN_POSITIVE);
     (m - m.transpose()).amax() / scale
+}
+
+/// A Gaussian mixture in `D` dimensions: weights `π_m`, means `μ_m ∈ ℝᴰ`, full
+/// covariances `Σ_m ∈ ℝᴰˣᴰ`, with the Cholesky factors and log-determinants cached at
+/// construction. Used as [`Gmm4`] (the joint model, thesis Eq. 6.1) and [`Gmm3`] (its
+/// spatial marginal, Eq. 6.11).
+///
+/// Invariants (checked by [`Gmm::new`]): at least one component, weights finite,
+/// non-negative and summing to 1 within [`WEIGHT_SUM_TOLERANCE`], means finite,
+/// covariances symmetric and positive definite.
+#[derive(Clone, Debug)]
+pub struct Gmm<const D: usize> {
+    weights: Vec<f64>,
+    means: Vec<SVector<f64, D>>,
+    covariances: Vec<SMatrix<f64, D, D>>,
+    chol: Vec<Chol<D>>,
+    log_weights: Vec<f64>,
 }
 
 /// A Gaussian mixture over (x, y, z, intensity) (thesis Eq. 6.1): weights `π_m`, means
 /// `μ_m ∈ ℝ⁴`, full covariances `Σ_m ∈ ℝ⁴ˣ⁴`, with the Cholesky factors and
 /// log-determinants cached at construction.
 ///
-/// Invariants (checked by [`Gmm4::new`]): at least one component, weights finite,
+/// Invariants (checked by [`Gmm::new`]): at least one component, weights finite,
 /// non-negative and summing to 1 within [`WEIGHT_SUM_TOLERANCE`], means finite,
 /// covariances symmetric and positive definite.
-#[derive(Clone, Debug)]
-pub struct Gmm4 {
-    weights: Vec<f64>,
-    means: Vec<Vector4<f64>>,
-    covariances: Vec<Matrix4<f64>>,
-    chol: Vec<Chol4>,
-    log_weights: Vec<f64>,
-}
+pub type Gmm4 = Gmm<4>;
 
-impl PartialEq for Gmm4 {
+/// A Gaussian mixture over (x, y, z): the spatial marginal of a [`Gmm4`] (Eq. 6.11),
+/// used to sample the reconstructed surface (§6.1.5) and, later, the relevant-subset
+/// test (Eq. 6.9). Same invariants as [`Gmm4`].
+pub type Gmm3 = Gmm<3>;
+
+impl<const D: usize> PartialEq for Gmm<D> {
     /// Equal parameters (the caches follow from them).
     fn eq(&self, other: &Self) -> bool {
         self.weights == other.weights
@@ -278,14 +236,14 @@ impl PartialEq for Gmm4 {
     }
 }
 
-impl Gmm4 {
+impl<const D: usize> Gmm<D> {
     /// A validated mixture; fails on any broken invariant (see the type doc).
     pub fn new(
         weights: Vec<f64>,
-        means: Vec<Vector4<f64>>,
-        covariances: Vec<Matrix4<f64>>,
+        means: Vec<SVector<f64, D>>,
+        covariances: Vec<SMatrix<f64, D, D>>,
     ) -> Result<Self, MixtureError> {
-        let chol = checked_factors(&weights, &means, &covariances, Chol4::new)?;
+        let chol = checked_factors(&weights, &means, &covariances)?;
         let log_weights = weights.iter().map(|w| w.ln()).collect();
         Ok(Self {
             weights,
@@ -314,22 +272,22 @@ impl Gmm4 {
         &self.weights
     }
 
-    /// Means `μ_m` (x, y, z in metres, intensity).
+    /// Means `μ_m` (x, y, z in metres, then intensity in a [`Gmm4`]).
     #[must_use]
-    pub fn means(&self) -> &[Vector4<f64>] {
+    pub fn means(&self) -> &[SVector<f64, D>] {
         &self.means
     }
 
-    /// Covariances `Σ_m`.
+    /// Covariances `Σ_m` (m² in the spatial block).
     #[must_use]
-    pub fn covariances(&self) -> &[Matrix4<f64>] {
+    pub fn covariances(&self) -> &[SMatrix<f64, D, D>] {
         &self.covariances
     }
 
     /// `ln |Σ_m|` from the cached Cholesky factor (`2 Σ ln L_jj`).
     #[must_use]
     pub fn ln_determinant(&self, m: usize) -> f64 {
-        -2.0 * (self.chol[m].log_norm + 2.0 * LN_2PI)
+        -2.0 * (self.chol[m].log_norm + (D as f64 / 2.0) * LN_2PI)
     }
 
     /// Re-check every invariant of the type doc (weights sum to 1, covariances PD).
@@ -347,10 +305,10 @@ impl Gmm4 {
     /// global one, "appending the parameters and re-normalizing the weights" (thesis
     /// §6.1.4.2). The cached Cholesky factors are reused, so the cost is linear in the
     /// number of components with a small constant. On error (wrong length, weights not
-    /// summing to 1, see [`Gmm4::new`]) `self` is left unchanged.
+    /// summing to 1, see [`Gmm::new`]) `self` is left unchanged.
     pub fn append_reweighted(
         &mut self,
-        other: &Gmm4,
+        other: &Self,
         weights: Vec<f64>,
     ) -> Result<(), MixtureError> {
         let n = self.len() + other.len();
@@ -372,16 +330,16 @@ impl Gmm4 {
 
     /// `ln π_m + ln N(x | μ_m, Σ_m)` (Eq. A.2 numerator, Eq. A.3).
     #[must_use]
-    pub fn log_component(&self, m: usize, x: &Vector4<f64>) -> f64 {
+    pub fn log_component(&self, m: usize, x: &SVector<f64, D>) -> f64 {
         let c = &self.chol[m];
-        self.log_weights[m] + c.log_norm - 0.5 * c.mahalanobis2(&[x[0], x[1], x[2], x[3]])
+        self.log_weights[m] + c.log_norm - 0.5 * c.mahalanobis2(&(*x).into())
     }
 
     /// `ln p(x) = ln Σ_m π_m N(x | μ_m, Σ_m)` by log-sum-exp over all components (exact,
     /// dense).
     #[must_use]
-    pub fn log_likelihood(&self, x: &Vector4<f64>) -> f64 {
-        let xs = [x[0], x[1], x[2], x[3]];
+    pub fn log_likelihood(&self, x: &SVector<f64, D>) -> f64 {
+        let xs: [f64; D] = (*x).into();
         let mut buf = Vec::with_capacity(self.len());
         buf.extend(
             self.chol
@@ -392,24 +350,26 @@ impl Gmm4 {
         log_sum_exp(&buf)
     }
 
-    /// [`Gmm4::log_likelihood`] of many points, in parallel (values do not depend on the
+    /// [`Gmm::log_likelihood`] of many points, in parallel (values do not depend on the
     /// thread count).
     #[must_use]
-    pub fn log_likelihoods(&self, xs: &[Vector4<f64>]) -> Vec<f64> {
+    pub fn log_likelihoods(&self, xs: &[SVector<f64, D>]) -> Vec<f64> {
         xs.par_chunks(BATCH)
             .flat_map_iter(|chunk| chunk.iter().map(|x| self.log_likelihood(x)))
             .collect()
     }
 
-    /// Mean of [`Gmm4::log_likelihoods`], summed in point order.
+    /// Mean of [`Gmm::log_likelihoods`], summed in point order.
     #[must_use]
-    pub fn mean_log_likelihood(&self, xs: &[Vector4<f64>]) -> f64 {
+    pub fn mean_log_likelihood(&self, xs: &[SVector<f64, D>]) -> f64 {
         if xs.is_empty() {
             return f64::NAN;
         }
         self.log_likelihoods(xs).iter().sum::<f64>() / xs.len() as f64
     }
+}
 
+impl Gmm<4> {
     /// The spatial marginal `p(x, y, z)` (Eq. 6.11): same weights, the first three mean
     /// entries and the top-left 3×3 covariance block.
     #[must_use]
@@ -450,85 +410,13 @@ fn unreachable_block() -> Chol3 {
     // cannot happen; return a harmless, far-away unit component rather than panic.
     Chol3 {
         mean: [f64::MAX; 3],
-        l: [1.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+        l: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         inv_diag: [1.0; 3],
         log_norm: f64::NEG_INFINITY,
     }
 }
 
-/// A Gaussian mixture over (x, y, z): the spatial marginal of a [`Gmm4`] (Eq. 6.11),
-/// used to sample the reconstructed surface (§6.1.5) and, later, the relevant-subset
-/// test (Eq. 6.9).
-#[derive(Clone, Debug)]
-pub struct Gmm3 {
-    weights: Vec<f64>,
-    log_weights: Vec<f64>,
-    means: Vec<Vector3<f64>>,
-    covariances: Vec<Matrix3<f64>>,
-    chol: Vec<Chol3>,
-}
-
-impl Gmm3 {
-    /// A validated 3D mixture (same invariants as [`Gmm4::new`]).
-    pub fn new(
-        weights: Vec<f64>,
-        means: Vec<Vector3<f64>>,
-        covariances: Vec<Matrix3<f64>>,
-    ) -> Result<Self, MixtureError> {
-        let chol = checked_factors(&weights, &means, &covariances, Chol3::new)?;
-        let log_weights = weights.iter().map(|w| w.ln()).collect();
-        Ok(Self {
-            weights,
-            log_weights,
-            means,
-            covariances,
-            chol,
-        })
-    }
-
-    /// Number of components.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        self.weights.len()
-    }
-
-    /// Never true for a constructed mixture.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.weights.is_empty()
-    }
-
-    /// Weights.
-    #[must_use]
-    pub fn weights(&self) -> &[f64] {
-        &self.weights
-    }
-
-    /// Means, metres.
-    #[must_use]
-    pub fn means(&self) -> &[Vector3<f64>] {
-        &self.means
-    }
-
-    /// Covariances, m².
-    #[must_use]
-    pub fn covariances(&self) -> &[Matrix3<f64>] {
-        &self.covariances
-    }
-
-    /// `ln p(x)` by log-sum-exp over all components.
-    #[must_use]
-    pub fn log_likelihood(&self, x: &Vector3<f64>) -> f64 {
-        let xs = [x[0], x[1], x[2]];
-        let buf: Vec<f64> = self
-            .chol
-            .iter()
-            .zip(&self.log_weights)
-            .map(|(c, lw)| lw + c.log_norm - 0.5 * c.mahalanobis2(&xs))
-            .collect();
-        log_sum_exp(&buf)
-    }
-
+impl Gmm<3> {
     /// Draw `n` points (§6.1.5): component by its weight, then `μ + L z` with `z` standard
     /// normal from the Box–Muller transform. Deterministic for a given `rng` state.
     pub fn sample<R: Rng + ?Sized>(&self, n: usize, rng: &mut R) -> Vec<Vector3<f64>> {

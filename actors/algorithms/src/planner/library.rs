@@ -92,30 +92,27 @@ const fn spec(heading: Heading, speed: SpeedBound, n_omega: usize, n_z: usize) -
 /// Thesis Table 4.2a, the large library (186 primitives).
 #[must_use]
 pub fn large() -> Vec<LibrarySpec> {
-    use Heading::*;
-    use SpeedBound::*;
-    vec![
-        spec(Yaw, Zero, 1, 1),
-        spec(Forward, Perpendicular, 9, 5),
-        spec(Forward, Max, 9, 5),
-        spec(Left, Max, 9, 5),
-        spec(Right, Max, 9, 5),
-        spec(Vertical, Zero, 1, 5),
-    ]
+    table_4_2(9, 5)
 }
 
 /// Thesis Table 4.2b, the minimal library (40 primitives).
 #[must_use]
 pub fn minimal() -> Vec<LibrarySpec> {
+    table_4_2(3, 3)
+}
+
+/// The rows of thesis Table 4.2, which its two libraries share: `n_omega` yaw rates
+/// and `n_z` vertical speeds per moving row.
+fn table_4_2(n_omega: usize, n_z: usize) -> Vec<LibrarySpec> {
     use Heading::*;
     use SpeedBound::*;
     vec![
         spec(Yaw, Zero, 1, 1),
-        spec(Forward, Perpendicular, 3, 3),
-        spec(Forward, Max, 3, 3),
-        spec(Left, Max, 3, 3),
-        spec(Right, Max, 3, 3),
-        spec(Vertical, Zero, 1, 3),
+        spec(Forward, Perpendicular, n_omega, n_z),
+        spec(Forward, Max, n_omega, n_z),
+        spec(Left, Max, n_omega, n_z),
+        spec(Right, Max, n_omega, n_z),
+        spec(Vertical, Zero, 1, n_z),
     ]
 }
 

@@ -623,8 +623,21 @@ mod tests {
         .unwrap()
     }
 
-    /// Publishes one round per second: candidates ending at x = 3, 2, 1.
-    struct Rounds(u64);
+    /// What a test round offers: its candidates, stopping trajectory and reference.
+    type Offer = (Vec<CandidatePlan>, Trajectory, Option<Committed>);
+
+    /// Publishes one planning round per second with what `offer(round, now)` gives
+    /// (rounds counted from 1; nothing when it gives `None`).
+    struct Rounds {
+        round: u64,
+        offer: fn(u64, Time) -> Option<Offer>,
+    }
+
+    impl Rounds {
+        fn spec(offer: fn(u64, Time) -> Option<Offer>) -> ActorSpec {
+            ActorSpec::new("rounds", move || Rounds { round: 0, offer })
+        }
+    }
 
     impl Actor for Rounds {
         fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
@@ -632,28 +645,37 @@ mod tests {
             Ok(())
         }
         fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-            self.0 += 1;
+            self.round += 1;
             let now = ctx.now();
+            let Some((candidates, stop, stop_reference)) = (self.offer)(self.round, now) else {
+                return Ok(());
+            };
             ctx.publish(
                 &PLAN_CANDIDATES,
                 PlanCandidates {
-                    round: self.0,
+                    round: self.round,
                     stamp: now,
-                    candidates: [3.0, 2.0, 1.0]
-                        .iter()
-                        .map(|&x| CandidatePlan {
-                            trajectory: line(now, x),
-                            reference: None,
-                            switch_at: now + Duration::from_secs(1),
-                            reward: x,
-                        })
-                        .collect(),
-                    stop: line(now, 0.0),
-                    stop_reference: None,
+                    candidates,
+                    stop,
+                    stop_reference,
                 },
             );
             Ok(())
         }
+    }
+
+    /// Every round: candidates ending at x = 3, 2, 1.
+    fn lines(_round: u64, now: Time) -> Option<Offer> {
+        let candidates = [3.0, 2.0, 1.0]
+            .iter()
+            .map(|&x| CandidatePlan {
+                trajectory: line(now, x),
+                reference: None,
+                switch_at: now + Duration::from_secs(1),
+                reward: x,
+            })
+            .collect();
+        Some((candidates, line(now, 0.0), None))
     }
 
     type Log = (Vec<PlanDecision>, Vec<Plan>, Option<CollisionStatus>);
@@ -665,7 +687,7 @@ mod tests {
     /// Runs the rounds through a collision actor with `config` and a [`Wall`] at
     /// `x_max`, with `extra` beside them, for 3.5 s.
     fn run_with(config: CollisionActorConfig, x_max: f64, extra: Option<ActorSpec>) -> Log {
-        run_rounds(ActorSpec::new("rounds", || Rounds(0)), config, x_max, extra)
+        run_rounds(Rounds::spec(lines), config, x_max, extra)
     }
 
     /// [`run_with`] with another source of planning rounds.
@@ -704,48 +726,29 @@ mod tests {
         (log.0.clone(), log.1.clone(), log.2.clone())
     }
 
-    /// Publishes a round at 1 s whose plans take over at 1.2 s, then one at 2 s whose
-    /// plans should have taken over at 1.7 s (a planner that overran).
-    struct LateRounds(u64);
-
-    impl Actor for LateRounds {
-        fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
-            ctx.set_timer(TimerId(0), Duration::from_secs(1));
-            Ok(())
-        }
-        fn handle(&mut self, _event: &Event, ctx: &mut Context<'_>) -> ActorResult {
-            use troupe_algorithms::planner::primitives::FlatState;
-            self.0 += 1;
-            let now = ctx.now();
-            let start = match self.0 {
-                1 => now + Duration::from_millis(200),
-                2 => Time::from_secs_f64(1.7),
-                _ => return Ok(()),
-            };
-            let hover = FlatState::at_rest(nalgebra::Vector3::new(0.0, 0.0, 1.0), 0.0);
-            let stop = Committed::braking(&DynamicLimits::default(), &hover, start).unwrap();
-            ctx.publish(
-                &PLAN_CANDIDATES,
-                PlanCandidates {
-                    round: self.0,
-                    stamp: now,
-                    candidates: vec![CandidatePlan {
-                        trajectory: stop.trajectory(0.1),
-                        reference: Some(stop.clone()),
-                        switch_at: start,
-                        reward: 1.0,
-                    }],
-                    stop: stop.trajectory(0.1),
-                    stop_reference: Some(stop),
-                },
-            );
-            Ok(())
-        }
+    /// A round at 1 s whose plans take over at 1.2 s, then one at 2 s whose plans
+    /// should have taken over at 1.7 s (a planner that overran).
+    fn late(round: u64, now: Time) -> Option<Offer> {
+        use troupe_algorithms::planner::primitives::FlatState;
+        let start = match round {
+            1 => now + Duration::from_millis(200),
+            2 => Time::from_secs_f64(1.7),
+            _ => return None,
+        };
+        let hover = FlatState::at_rest(nalgebra::Vector3::new(0.0, 0.0, 1.0), 0.0);
+        let stop = Committed::braking(&DynamicLimits::default(), &hover, start).unwrap();
+        let candidates = vec![CandidatePlan {
+            trajectory: stop.trajectory(0.1),
+            reference: Some(stop.clone()),
+            switch_at: start,
+            reward: 1.0,
+        }];
+        Some((candidates, stop.trajectory(0.1), Some(stop)))
     }
 
     #[test]
     fn a_round_decided_after_its_plans_should_have_taken_over_is_refused() {
-        let rounds = ActorSpec::new("rounds", || LateRounds(0));
+        let rounds = Rounds::spec(late);
         let (_, plans, status) = run_rounds(rounds, CollisionActorConfig::default(), 100.0, None);
         let status = status.unwrap();
         assert_eq!(plans.len(), 1, "only the round on time commits");
@@ -899,7 +902,7 @@ mod tests {
     #[test]
     fn a_vehicle_hold_commits_hovering_where_it_holds() {
         let robot = RobotSpec::new("r0")
-            .with(ActorSpec::new("rounds", || Rounds(0)))
+            .with(Rounds::spec(lines))
             .with(ActorSpec::new("holder", || Holder))
             .with(ActorSpec::new("collision", move || {
                 CollisionActor::new(CollisionActorConfig::default(), Wall { x_max: 10.0 })
