@@ -69,16 +69,32 @@ const SYMMETRY_TOLERANCE: f64 = 1e-9;
 /// split does not change any value).
 const BATCH: usize = 1024;
 
-/// One `D`-dimensional component in the form the hot loops use: mean, lower Cholesky
-/// factor (row by row, upper triangle zero), the reciprocals of its diagonal and the
-/// log normaliser `−(D/2) ln 2π − Σ ln L_jj` (Eq. A.3, without the weight).
+/// One `D`-dimensional component (`D ≤ 4`) in the form the hot loops use: mean, packed
+/// lower Cholesky factor, the reciprocals of its diagonal and the log normaliser
+/// `−(D/2) ln 2π − Σ ln L_jj` (Eq. A.3, without the weight).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Chol<const D: usize> {
     pub(crate) mean: [f64; D],
-    /// `l[i][j] = L_ij` for `j ≤ i`, zero above the diagonal.
-    l: [[f64; D]; D],
+    /// The lower triangle row by row (`L_ij` at `i (i + 1) / 2 + j`, `j ≤ i`), in an
+    /// array sized for the largest `D` (4), so that a 4D factor keeps its packed size.
+    l: [f64; PACKED_MAX],
     inv_diag: [f64; D],
     pub(crate) log_norm: f64,
+}
+
+/// Entries of the packed lower triangle of a 4×4 factor, the largest [`Chol`] holds.
+const PACKED_MAX: usize = 10;
+
+/// Where row `i` of a packed lower triangle starts.
+#[inline(always)]
+const fn row(i: usize) -> usize {
+    i * (i + 1) / 2
+}
+
+/// The `(i, j)` of packed entry `k` of a `D`×`D` lower triangle, `None` past its end.
+fn packed_entry<const D: usize>(k: usize) -> Option<(usize, usize)> {
+    let i = (0..D).find(|&i| k < row(i + 1))?;
+    Some((i, k - row(i)))
 }
 
 /// A 3D component (the spatial marginal, the gates and the global map use it).
@@ -90,6 +106,7 @@ impl<const D: usize> Chol<D> {
         if !cov.iter().all(|v| v.is_finite()) || !mean.iter().all(|v| v.is_finite()) {
             return None;
         }
+        const { assert!(D <= 4, "a Chol holds factors of at most 4 dimensions") };
         let l = cov.cholesky()?.l();
         let diag: [f64; D] = std::array::from_fn(|i| l[(i, i)]);
         if diag.iter().any(|d| !d.is_finite() || *d <= 0.0) {
@@ -98,9 +115,7 @@ impl<const D: usize> Chol<D> {
         let log_det_half: f64 = diag.iter().map(|d| d.ln()).sum();
         Some(Self {
             mean: (*mean).into(),
-            l: std::array::from_fn(|i| {
-                std::array::from_fn(|j| if j <= i { l[(i, j)] } else { 0.0 })
-            }),
+            l: std::array::from_fn(|k| packed_entry::<D>(k).map_or(0.0, |ij| l[ij])),
             inv_diag: diag.map(|d| 1.0 / d),
             log_norm: -(D as f64 / 2.0) * LN_2PI - log_det_half,
         })
@@ -112,7 +127,7 @@ impl<const D: usize> Chol<D> {
         let mut y = [0.0; D];
         for i in 0..D {
             let mut r = x[i] - self.mean[i];
-            for (l, yj) in self.l[i][..i].iter().zip(&y[..i]) {
+            for (l, yj) in self.l[row(i)..row(i) + i].iter().zip(&y[..i]) {
                 r -= l * yj;
             }
             y[i] = r * self.inv_diag[i];
@@ -125,7 +140,7 @@ impl<const D: usize> Chol<D> {
     fn transform(&self, z: [f64; D]) -> SVector<f64, D> {
         SVector::from_fn(|i, _| {
             let mut v = self.mean[i];
-            for (l, zj) in self.l[i][..=i].iter().zip(&z[..=i]) {
+            for (l, zj) in self.l[row(i)..=row(i) + i].iter().zip(&z[..=i]) {
                 v += l * zj;
             }
             v
@@ -410,7 +425,7 @@ fn unreachable_block() -> Chol3 {
     // cannot happen; return a harmless, far-away unit component rather than panic.
     Chol3 {
         mean: [f64::MAX; 3],
-        l: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        l: [1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
         inv_diag: [1.0; 3],
         log_norm: f64::NEG_INFINITY,
     }
