@@ -6,12 +6,7 @@ use std::path::Path;
 use std::process::Command;
 
 fn troupe(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "off")
-        .output()
-        .expect("run troupe")
+    troupe_testkit::run_quiet(env!("CARGO_BIN_EXE_troupe"), args, dir)
 }
 
 fn rejected(scenario: &str, key: &str) {

@@ -3,7 +3,6 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use rand::SeedableRng;
@@ -14,12 +13,7 @@ use troupe_sims::sequence::record_camera;
 use troupe_sims::world::{Aabb, BoxRoom, World};
 
 fn troupe(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "off")
-        .output()
-        .unwrap()
+    troupe_testkit::run_quiet(env!("CARGO_BIN_EXE_troupe"), args, dir)
 }
 
 fn room() -> BoxRoom {

@@ -16,12 +16,7 @@ use std::process::{Command, Output};
 use common::root;
 
 fn troupe(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_troupe"))
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "off")
-        .output()
-        .expect("run troupe")
+    troupe_testkit::run_quiet(env!("CARGO_BIN_EXE_troupe"), args, dir)
 }
 
 fn ok(out: Output) -> String {

@@ -12,12 +12,7 @@ use std::time::{Duration, Instant};
 const TROUPE: &str = env!("CARGO_BIN_EXE_troupe");
 
 fn troupe(args: &[&str], dir: &Path) -> Output {
-    Command::new(TROUPE)
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "off")
-        .output()
-        .expect("run troupe")
+    troupe_testkit::run_quiet(TROUPE, args, dir)
 }
 
 fn succeeded(out: &Output) -> String {

@@ -208,6 +208,22 @@ pub fn fresh_dir(parent: &str, name: &str) -> PathBuf {
     dir
 }
 
+/// Runs `binary` (a test's `env!("CARGO_BIN_EXE_…")`) with `args` in `dir`, its
+/// tracing off (`RUST_LOG=off`), and returns what it wrote.
+///
+/// # Panics
+///
+/// When the binary cannot be started.
+#[must_use]
+pub fn run_quiet(binary: &str, args: &[&str], dir: &Path) -> Output {
+    Command::new(binary)
+        .args(args)
+        .current_dir(dir)
+        .env("RUST_LOG", "off")
+        .output()
+        .unwrap_or_else(|e| panic!("run {binary}: {e}"))
+}
+
 /// Waits for `child` (stdout and stderr piped) and returns what it wrote; fails the
 /// test with its stderr unless it exited with success.
 ///
