@@ -115,6 +115,19 @@ pub trait Actor: Send + 'static {
     fn stop(&mut self, ctx: &mut Context<'_>) {
         let _ = ctx;
     }
+
+    /// Whether the sim-time executor may run this call of [`Actor::handle`] beside
+    /// the robot's later events while the call's modelled latency passes (default:
+    /// never). Only for calls that neither subscribe, set nor cancel timers, nor call
+    /// [`Context::bookkeeping_only`]: such a call's outputs appear only once its
+    /// latency has passed and nothing else of the robot reads the actor meanwhile, so
+    /// running it on another core gives the same run, bit for bit. Heavy calls — a
+    /// frame rendered, a keyframe fitted — then leave no core idle while the robots'
+    /// other work waits for them. The real-time executor ignores it.
+    fn overlaps(&self, event: &Event) -> bool {
+        let _ = event;
+        false
+    }
 }
 
 impl Actor for Box<dyn Actor> {
@@ -126,6 +139,9 @@ impl Actor for Box<dyn Actor> {
     }
     fn stop(&mut self, ctx: &mut Context<'_>) {
         (**self).stop(ctx);
+    }
+    fn overlaps(&self, event: &Event) -> bool {
+        (**self).overlaps(event)
     }
 }
 
@@ -149,5 +165,8 @@ impl<A: Actor> Actor for Result<A, ActorError> {
         if let Ok(actor) = self {
             actor.stop(ctx);
         }
+    }
+    fn overlaps(&self, event: &Event) -> bool {
+        self.as_ref().is_ok_and(|actor| actor.overlaps(event))
     }
 }

@@ -14,11 +14,17 @@
 //! [`LatencyModel`](crate::LatencyModel): its outputs appear after that latency and the
 //! actor is busy until then. A call that only stored what arrived
 //! ([`Context::bookkeeping_only`](crate::Context::bookkeeping_only)) is charged nothing.
+//!
+//! A call whose actor lets it overlap ([`Actor::overlaps`](crate::Actor::overlaps): a
+//! keyframe fit) runs on a pool of its own while the robot's later events go on; its
+//! outcome is applied, and its outputs delivered, when its latency has passed, exactly
+//! where the call run in place would have delivered them. The run is the same, bit for
+//! bit; the cores are busier.
 
 use std::any::TypeId;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock, mpsc};
 
 use rayon::prelude::*;
 
@@ -51,6 +57,22 @@ enum Kind {
         from: RobotId,
         bytes: Arc<[u8]>,
     },
+    /// The latency of a call run beside the robot's events has passed (see
+    /// [`InFlight`]).
+    Complete {
+        slot: u32,
+    },
+}
+
+/// A handler call the actor let run beside its robot's later events
+/// ([`Actor::overlaps`](crate::Actor::overlaps)), on the offload pool: its slot is there
+/// until the call is joined, and its outcome is applied when its latency has passed
+/// (the [`Kind::Complete`] event, where the synchronous path would deliver its outputs).
+enum InFlight {
+    Idle,
+    Running(mpsc::Receiver<(Slot, HookOutcome)>),
+    /// Joined (the slot is back), its latency not yet passed.
+    Joined(HookOutcome),
 }
 
 struct Scheduled {
@@ -120,6 +142,7 @@ struct SimRobot {
     id: RobotId,
     name: Arc<str>,
     slots: Vec<Slot>,
+    in_flight: Vec<InFlight>,
     inputs: Vec<Inputs>,
     schedule: Vec<SlotSchedule>,
     registry: TopicRegistry,
@@ -218,7 +241,9 @@ impl SimRobot {
         while self.clock.next_time().is_some_and(|t| t <= limit) {
             if let Some(event) = self.clock.heap.pop() {
                 self.clock.now = event.time;
-                self.events += 1;
+                // A completion counts only where the synchronous path has an event
+                // (its delivery), so that the count is the same either way.
+                self.events += u64::from(!matches!(event.kind, Kind::Complete { .. }));
                 self.dispatch(event.kind);
             }
         }
@@ -251,6 +276,7 @@ impl SimRobot {
                 self.wake(slot as usize);
             }
             Kind::Deliver { mut outputs } => self.route(&mut outputs),
+            Kind::Complete { slot } => self.complete(slot as usize),
             Kind::Network { from, bytes } => {
                 let message = Arc::new(LinkRx { from, bytes });
                 self.route(&mut vec![Outgoing::new(&LINK_RX, message)]);
@@ -266,6 +292,26 @@ impl SimRobot {
         let slot = &mut self.slots[s];
         let now = self.clock.now;
         let latency = slot.options.latency.sample(&mut slot.latency_rng);
+        if !latency.is_zero()
+            && slot.overlaps(&event)
+            && let Some(pool) = offload_pool()
+        {
+            let mut slot = slot.take();
+            let (id, name) = (self.id, self.name.clone());
+            let (done_tx, done_rx) = mpsc::channel();
+            pool.spawn(move || {
+                let outcome = slot.run_hook(Hook::Handle(&event), now, id, &name);
+                drop(event);
+                // The executor waits for this; if it is gone, so is the run.
+                let _ = done_tx.send((slot, outcome));
+            });
+            self.in_flight[s] = InFlight::Running(done_rx);
+            let done = now + latency;
+            self.clock.schedule(done, Kind::Complete { slot: s as u32 });
+            self.schedule[s].busy_until = done;
+            self.wake(s);
+            return;
+        }
         let outcome = slot.run_hook(Hook::Handle(&event), now, self.id, &self.name);
         let latency = if slot.bookkeeping {
             std::time::Duration::ZERO
@@ -290,6 +336,78 @@ impl SimRobot {
         self.schedule[s].busy_until = done;
         self.wake(s);
     }
+
+    /// Waits for the call in flight in slot `s`, if any, and puts its slot back.
+    fn join(&mut self, s: usize) {
+        let done = match std::mem::replace(&mut self.in_flight[s], InFlight::Idle) {
+            InFlight::Running(done) => done,
+            other => {
+                self.in_flight[s] = other;
+                return;
+            }
+        };
+        let Ok((slot, outcome)) = done.recv() else {
+            tracing::error!(robot = %self.name, actor = %self.slots[s].name,
+                "a handler call run beside the robot's events was lost; the actor stops");
+            self.slots[s].stats.stopped = true;
+            self.in_flight[s] = InFlight::Joined(HookOutcome::Stopped);
+            return;
+        };
+        self.slots[s] = slot;
+        let slot = &self.slots[s];
+        if slot.bookkeeping || !slot.commands.is_empty() {
+            tracing::error!(robot = %self.name, actor = %slot.name,
+                "a handler call the actor let run beside the robot's events subscribed, set \
+                 timers or stored only what arrived (see Actor::overlaps); its commands \
+                 take effect late");
+        }
+        self.in_flight[s] = InFlight::Joined(outcome);
+    }
+
+    /// Waits for every call in flight (their outcomes still wait for their latency).
+    fn join_all(&mut self) {
+        for s in 0..self.in_flight.len() {
+            self.join(s);
+        }
+    }
+
+    /// The latency of slot `s`'s call in flight has passed: what the synchronous path
+    /// did at the call (stop, commands) and at its delivery (outputs), now.
+    fn complete(&mut self, s: usize) {
+        self.join(s);
+        let InFlight::Joined(outcome) = std::mem::replace(&mut self.in_flight[s], InFlight::Idle)
+        else {
+            return;
+        };
+        if outcome == HookOutcome::Stopped {
+            self.inputs[s].stop();
+        }
+        self.apply_commands(s);
+        if outcome != HookOutcome::Stopped && !self.slots[s].outbox.is_empty() {
+            self.events += 1;
+            let mut outputs = std::mem::take(&mut self.slots[s].outbox);
+            self.route(&mut outputs);
+            self.slots[s].outbox = outputs;
+        }
+    }
+}
+
+/// The threads that run the calls in flight, as many as the cores: a pool of their
+/// own, so that what such a call runs on rayon (a frame's tiles, a fit's chunks) never
+/// waits behind a robot's window on a thread that waits for the call (a thread of the
+/// robots' pool blocks while it waits).
+fn offload_pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .thread_name(|i| format!("troupe-offload-{i}"))
+            .build()
+            .map_err(|e| {
+                tracing::warn!("no threads for handler calls in flight ({e}); they run in turn")
+            })
+            .ok()
+    })
+    .as_ref()
 }
 
 /// The taps and the network, which see the robots' publications between windows.
@@ -425,6 +543,7 @@ impl SimExecutor {
                     id,
                     name: spec.name,
                     schedule: vec![SlotSchedule::default(); slots.len()],
+                    in_flight: slots.iter().map(|_| InFlight::Idle).collect(),
                     inputs: slots.iter().map(|_| Inputs::default()).collect(),
                     slots,
                     registry: TopicRegistry::default(),
@@ -543,6 +662,8 @@ impl SimExecutor {
         self.now = self.now.max(end);
         for robot in &mut self.robots {
             robot.clock.now = robot.clock.now.max(self.now);
+            // Reports and the stop hooks read the slots.
+            robot.join_all();
         }
     }
 

@@ -34,6 +34,15 @@ pub(crate) enum HookOutcome {
     Stopped,
 }
 
+/// What a [`Slot`] holds while its slot is elsewhere ([`Slot::take`]): nothing runs.
+struct Shell;
+
+impl Actor for Shell {
+    fn handle(&mut self, _: &Event, _: &mut Context<'_>) -> ActorResult {
+        Ok(())
+    }
+}
+
 /// Stable 64-bit FNV-1a hash, used to derive per-actor seeds.
 pub(crate) fn stable_hash(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
@@ -107,6 +116,33 @@ impl Slot {
 
     pub(crate) fn is_running(&self) -> bool {
         !self.stats.stopped
+    }
+
+    /// Whether the actor lets this call run beside the robot's later events
+    /// ([`Actor::overlaps`]).
+    pub(crate) fn overlaps(&self, event: &Event) -> bool {
+        self.actor.as_ref().is_some_and(|a| a.overlaps(event))
+    }
+
+    /// Moves the slot out for a call run elsewhere, leaving a shell with no actor in
+    /// its place until the slot is put back.
+    pub(crate) fn take(&mut self) -> Slot {
+        let shell = Slot {
+            name: self.name.clone(),
+            factory: Box::new(|| Box::new(Shell) as Box<dyn Actor>),
+            actor: None,
+            options: self.options,
+            stats: ActorStats::default(),
+            restart_times: VecDeque::new(),
+            rng: ChaCha8Rng::seed_from_u64(0),
+            latency_rng: ChaCha8Rng::seed_from_u64(0),
+            outbox: Vec::new(),
+            commands: Vec::new(),
+            bookkeeping: false,
+            clock: self.clock,
+            time_source: self.time_source,
+        };
+        std::mem::replace(self, shell)
     }
 
     /// Runs a hook with panic containment and supervision. Outputs and commands are

@@ -651,3 +651,104 @@ fn a_team_runs_the_same_on_one_thread_and_on_several() {
     assert_eq!(one, gossip_run(4));
     assert_eq!(one, gossip_run(2));
 }
+
+const DIGEST: Topic<Number> = Topic::new("digest");
+
+/// Digests what its robot hears, with a modelled latency, publishing every other
+/// digest; its calls overlap the robot's later events when `overlap` is set.
+struct Digest {
+    heard: u64,
+    calls: u64,
+    overlap: bool,
+}
+
+impl Actor for Digest {
+    fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
+        ctx.subscribe(&LINK_RX, QueuePolicy::LATEST);
+        Ok(())
+    }
+    fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
+        if let Some(rx) = event.message().and_then(|m| m.get(&LINK_RX)) {
+            for b in rx.bytes.iter() {
+                self.heard = (self.heard ^ u64::from(*b)).wrapping_mul(0x100_0000_01b3);
+            }
+            self.calls += 1;
+            if self.calls.is_multiple_of(2) {
+                let salt: u64 = ctx.rng().random();
+                ctx.publish(&DIGEST, Number(self.heard ^ salt));
+            }
+        }
+        Ok(())
+    }
+    fn overlaps(&self, _: &Event) -> bool {
+        self.overlap
+    }
+}
+
+/// Every publication the taps saw, as (time, robot, topic, bytes).
+type Seen = Vec<(Time, RobotId, String, Vec<u8>)>;
+
+/// A gossiping team whose digests overlap or not: every publication the taps saw,
+/// the events processed and each actor's handled count.
+fn digest_run(overlap: bool) -> (Seen, u64, Vec<u64>) {
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let s = seen.clone();
+    let robots = (0..3)
+        .map(|i| {
+            RobotSpec::new(format!("r{i}"))
+                .with(
+                    ActorSpec::new("gossip", || Gossip { heard: 0 }).with_latency(
+                        LatencyModel::Uniform {
+                            min_s: 0.001,
+                            max_s: 0.02,
+                        },
+                    ),
+                )
+                .with(
+                    ActorSpec::new("digest", move || Digest {
+                        heard: 0,
+                        calls: 0,
+                        overlap,
+                    })
+                    .with_latency(LatencyModel::fixed(0.03)),
+                )
+        })
+        .collect();
+    let mut sim = SimExecutor::new(robots, 9).with_network(IdealNetwork {
+        latency: Duration::from_millis(5),
+    });
+    sim.add_tap(move |p: &Publication<'_>| {
+        let bytes = p
+            .get(&DIGEST)
+            .map(|d| d.0.to_le_bytes().to_vec())
+            .or_else(|| p.get(&LINK_TX).map(|tx| tx.bytes.to_vec()))
+            .unwrap_or_default();
+        s.lock()
+            .unwrap()
+            .push((p.time, p.robot, p.topic.to_string(), bytes));
+    });
+    // Steps shorter than a digest's latency and not a multiple of it: calls are in
+    // flight when a step ends.
+    for step in 1..=7 {
+        sim.run_until(Time::from_secs_f64(0.07 * f64::from(step)));
+    }
+    let events = sim.events_processed();
+    let handled = sim
+        .finish()
+        .iter()
+        .flat_map(|r| r.actors.iter().map(|a| a.stats.handled))
+        .collect();
+    let seen = seen.lock().unwrap().clone();
+    (seen, events, handled)
+}
+
+#[test]
+fn calls_that_overlap_the_robots_events_give_the_same_run() {
+    let (in_place, events, handled) = digest_run(false);
+    let digests = in_place.iter().filter(|p| p.2 == "digest").count();
+    assert!(digests > 20, "{digests} digests");
+    let (overlapped, overlapped_events, overlapped_handled) = digest_run(true);
+    assert_eq!(in_place, overlapped);
+    assert_eq!(events, overlapped_events);
+    assert_eq!(handled, overlapped_handled);
+}

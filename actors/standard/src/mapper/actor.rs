@@ -295,6 +295,11 @@ impl Actor for MapperActor {
         Ok(())
     }
 
+    /// Every call: a frame offered, perhaps a keyframe fitted and published.
+    fn overlaps(&self, _: &Event) -> bool {
+        true
+    }
+
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         let Some(frame) = event.message().and_then(|m| m.get(&DEPTH_FRAME)) else {
             return Ok(());
