@@ -597,8 +597,27 @@ impl Actor for Gossip {
     }
 }
 
+/// Every publication the taps saw, as (time, robot, topic, bytes).
+type Seen = Vec<(Time, RobotId, String, Vec<u8>)>;
+
+/// A tap that records every publication into `seen`, with the bytes of link frames
+/// and digests.
+fn recorder(seen: Arc<Mutex<Seen>>) -> impl Tap {
+    move |p: &Publication<'_>| {
+        let bytes = p
+            .get(&DIGEST)
+            .map(|d| d.0.to_le_bytes().to_vec())
+            .or_else(|| p.get(&LINK_TX).map(|tx| tx.bytes.to_vec()))
+            .or_else(|| p.get(&LINK_RX).map(|rx| rx.bytes.to_vec()))
+            .unwrap_or_default();
+        seen.lock()
+            .unwrap()
+            .push((p.time, p.robot, p.topic.to_string(), bytes));
+    }
+}
+
 /// Every publication of a gossiping team, as its taps saw them, run on `threads`.
-fn gossip_run(threads: usize) -> Vec<(Time, RobotId, String, Vec<u8>)> {
+fn gossip_run(threads: usize) -> Seen {
     let seen = Arc::new(Mutex::new(Vec::new()));
     let s = seen.clone();
     rayon::ThreadPoolBuilder::new()
@@ -621,16 +640,7 @@ fn gossip_run(threads: usize) -> Vec<(Time, RobotId, String, Vec<u8>)> {
             let mut sim = SimExecutor::new(robots, 5).with_network(IdealNetwork {
                 latency: Duration::from_millis(5),
             });
-            sim.add_tap(move |p: &Publication<'_>| {
-                let bytes = p
-                    .get(&LINK_TX)
-                    .map(|tx| tx.bytes.to_vec())
-                    .or_else(|| p.get(&LINK_RX).map(|rx| rx.bytes.to_vec()))
-                    .unwrap_or_default();
-                s.lock()
-                    .unwrap()
-                    .push((p.time, p.robot, p.topic.to_string(), bytes));
-            });
+            sim.add_tap(recorder(s));
             sim.run_until(Time::from_secs_f64(0.5));
             drop(sim.finish());
         });
@@ -685,9 +695,6 @@ impl Actor for Digest {
     }
 }
 
-/// Every publication the taps saw, as (time, robot, topic, bytes).
-type Seen = Vec<(Time, RobotId, String, Vec<u8>)>;
-
 /// A gossiping team whose digests overlap or not: every publication the taps saw,
 /// the events processed and each actor's handled count.
 fn digest_run(overlap: bool) -> (Seen, u64, Vec<u64>) {
@@ -717,16 +724,7 @@ fn digest_run(overlap: bool) -> (Seen, u64, Vec<u64>) {
     let mut sim = SimExecutor::new(robots, 9).with_network(IdealNetwork {
         latency: Duration::from_millis(5),
     });
-    sim.add_tap(move |p: &Publication<'_>| {
-        let bytes = p
-            .get(&DIGEST)
-            .map(|d| d.0.to_le_bytes().to_vec())
-            .or_else(|| p.get(&LINK_TX).map(|tx| tx.bytes.to_vec()))
-            .unwrap_or_default();
-        s.lock()
-            .unwrap()
-            .push((p.time, p.robot, p.topic.to_string(), bytes));
-    });
+    sim.add_tap(recorder(s));
     // Steps shorter than a digest's latency and not a multiple of it: calls are in
     // flight when a step ends.
     for step in 1..=7 {
