@@ -316,10 +316,7 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
 /// `gave_up` in the summary).
 #[test]
 fn no_autopilot_is_one_error_after_the_wait() {
-    let ros_python = match kit::venv_python(
-        ".venv-ros2",
-        "rclpy.serialization, nav_msgs.msg, zenoh, numpy",
-    ) {
+    let ros_python = match kit::ros2_python() {
         Ok(p) => p,
         Err(e) => {
             eprintln!("SKIPPED no-autopilot test: {e}");

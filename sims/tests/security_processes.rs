@@ -10,7 +10,7 @@ use troupe_testkit as common;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{
@@ -253,13 +253,7 @@ fn spawn_hostile(python: &Path, endpoint: &str, h: &Hostile, options: &[&str]) -
 }
 
 fn finish_hostile(h: &Hostile, child: Child) -> String {
-    let out: Output = child.wait_with_output().expect("python");
-    assert!(
-        out.status.success(),
-        "{}: {}",
-        h.name,
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::finish(child, &h.name);
     format!(
         "{}: {}",
         h.name,

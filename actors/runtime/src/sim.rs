@@ -325,11 +325,10 @@ impl SimRobot {
         self.apply_commands(s);
         let done = now + latency;
         if outcome != HookOutcome::Stopped && !self.slots[s].outbox.is_empty() {
-            let mut outputs = std::mem::take(&mut self.slots[s].outbox);
             if latency.is_zero() {
-                self.route(&mut outputs);
-                self.slots[s].outbox = outputs;
+                self.route_outbox(s);
             } else {
+                let outputs = std::mem::take(&mut self.slots[s].outbox);
                 self.clock.schedule(done, Kind::Deliver { outputs });
             }
         }
@@ -385,10 +384,15 @@ impl SimRobot {
         self.apply_commands(s);
         if outcome != HookOutcome::Stopped && !self.slots[s].outbox.is_empty() {
             self.events += 1;
-            let mut outputs = std::mem::take(&mut self.slots[s].outbox);
-            self.route(&mut outputs);
-            self.slots[s].outbox = outputs;
+            self.route_outbox(s);
         }
+    }
+
+    /// Routes what slot `s` published, now (its buffer kept for the next call).
+    fn route_outbox(&mut self, s: usize) {
+        let mut outputs = std::mem::take(&mut self.slots[s].outbox);
+        self.route(&mut outputs);
+        self.slots[s].outbox = outputs;
     }
 }
 
@@ -617,8 +621,7 @@ impl SimExecutor {
                 robot.apply_commands(s);
             }
             for s in 0..robot.slots.len() {
-                let mut outputs = std::mem::take(&mut robot.slots[s].outbox);
-                robot.route(&mut outputs);
+                robot.route_outbox(s);
             }
         }
         self.world.exchange(&mut self.robots);

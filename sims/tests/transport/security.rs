@@ -186,13 +186,7 @@ fn attack_two_robots(
         .collect();
     let mut reports = Vec::new();
     for (h, child) in hostiles.iter().zip(children) {
-        let out = child.wait_with_output().expect("python");
-        assert!(
-            out.status.success(),
-            "{}: {}",
-            h.name,
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = common::finish(child, h.name);
         reports.push(format!(
             "{}: {}",
             h.name,

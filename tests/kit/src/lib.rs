@@ -61,6 +61,16 @@ pub fn zenoh_python() -> Result<PathBuf, String> {
     venv_python(".venv-ros2", "zenoh")
 }
 
+/// `.venv-ros2`'s Python if it imports what [`spawn_box_room_camera`] needs (rclpy's
+/// serialisation, the message packages, zenoh, numpy), or why not.
+///
+/// # Errors
+///
+/// Why the venv's Python cannot be used.
+pub fn ros2_python() -> Result<PathBuf, String> {
+    venv_python(".venv-ros2", ROS2_MODULES)
+}
+
 /// The Python with pymavlink: `TROUPE_PYMAVLINK_PYTHON` if set, else
 /// `.venv-pymavlink`'s; or why there is none.
 ///
@@ -80,7 +90,7 @@ pub fn pymavlink_python() -> Result<PathBuf, String> {
 ///
 /// Why either cannot be used, both reasons joined.
 pub fn hardware_pythons() -> Result<(PathBuf, PathBuf), String> {
-    match (venv_python(".venv-ros2", ROS2_MODULES), pymavlink_python()) {
+    match (ros2_python(), pymavlink_python()) {
         (Ok(ros), Ok(mavlink)) => Ok((ros, mavlink)),
         (ros, mavlink) => Err([ros.err(), mavlink.err()]
             .into_iter()
