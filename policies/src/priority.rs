@@ -17,10 +17,11 @@
 //! stay `2r + (v₁ + v₂) Δt / 2` apart horizontally never overlaps (the thesis picks a
 //! conservative radius for the same reason).
 //!
-//! A peer whose plan is older than [`PriorityConfig::stale_plan_s`], or that never sent
-//! one, is an obstacle at its last known position inflated by its stopping envelope: the
-//! distance it may have flown since (`|v| · age`) plus its braking distance
-//! `|v|² / (2 a)`. Ages count on this robot's clock from the earlier of a message's
+//! A peer whose plan is older than [`PriorityConfig::stale_plan_s`] (counted from when
+//! it was made, not when it arrived), or that never sent one, is an obstacle at its last
+//! known position inflated by its stopping envelope: the distance it may have flown
+//! since (`v · age`) plus its braking distance `v² / (2 a)`, `v` the larger of its
+//! speed then and the fastest its last plan flies. Ages count on this robot's clock from the earlier of a message's
 //! stamp and its arrival (stamps are on the team clock, `troupe_core::TeamClock`, and
 //! the link rejects those more than `max_clock_ahead_s` ahead); a restarted peer's new
 //! run replaces what its earlier run said (`PeerTable`).
@@ -243,24 +244,32 @@ pub fn peer_model<'a>(
     now: Time,
     track: &'a PeerTrack,
 ) -> Option<PeerModel<'a>> {
+    // Ages count from the earlier of the stamp and the arrival: a plan that arrives
+    // late describes the peer as it was when it was made (a link that held it 3 s
+    // made a crossing peer look as if it hovered at the end of a finished plan:
+    // robots 0.7 m apart over a saturated 250 kbit/s link), and a sender's clock a
+    // little ahead of ours (the link rejects more than `max_clock_ahead_s`) must not
+    // make an old position look fresh.
+    let known_at = |stamp: Time, received_at: Time| stamp.min(received_at);
     if let Some(plan) = &track.plan
-        && now.saturating_since(plan.received_at).as_secs_f64() <= config.stale_plan_s
+        && now
+            .saturating_since(known_at(plan.plan.stamp, plan.received_at))
+            .as_secs_f64()
+            <= config.stale_plan_s
     {
         return Some(PeerModel::Plan(&plan.plan.trajectory));
     }
-    // The age counts from the earlier of the stamp and the arrival: a sender's clock
-    // a little ahead of ours (the link rejects more than `max_clock_ahead_s`) must not
-    // make an old position look fresh.
     let from_odometry = track.odometry.as_ref().map(|o| {
         (
-            o.odometry.stamp.min(o.received_at),
+            known_at(o.odometry.stamp, o.received_at),
             nalgebra::Point3::from(o.odometry.pose.translation.vector),
             o.odometry.velocity_mps.norm(),
         )
     });
     let from_plan = track.plan.as_ref().and_then(|p| {
-        let state = p.plan.trajectory.state_at(p.received_at)?;
-        Some((p.received_at, state.position_m, state.velocity_mps.norm()))
+        let at = known_at(p.plan.stamp, p.received_at);
+        let state = p.plan.trajectory.state_at(at)?;
+        Some((at, state.position_m, state.velocity_mps.norm()))
     });
     let (stamp, position_m, speed) = match (from_odometry, from_plan) {
         (Some(a), Some(b)) => {
@@ -273,6 +282,12 @@ pub fn peer_model<'a>(
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => return None,
     };
+    // Since then it may have flown as fast as its last plan said it would (a peer
+    // seen at rest at the start of a plan is not staying there).
+    let speed = track
+        .plan
+        .as_ref()
+        .map_or(speed, |p| speed.max(max_speed(&p.plan.trajectory)));
     let age_s = now.saturating_since(stamp).as_secs_f64();
     let envelope_m = speed * age_s + speed * speed / (2.0 * config.stop_decel_mps2);
     Some(PeerModel::Envelope {
@@ -753,6 +768,49 @@ mod tests {
             ..config
         };
         assert!(check_candidate(&thesis, t(10.0), RobotId(0), 5, &own, &through, &peers).is_none());
+    }
+
+    #[test]
+    fn a_plan_that_arrives_late_is_as_old_as_when_it_was_made() {
+        let config = PriorityConfig::default();
+        // The peer (priority 5) planned at 0 s to fly from (-5, 0) to (-3, 0) and hover
+        // there; the link held that plan and its odometry for 3 s.
+        let made = line(0.0, [-5.0, 0.0, 1.0], [-3.0, 0.0, 1.0], 1.0);
+        let late = |stamp_s: f64| {
+            let mut peers = PeerTable::default();
+            peers.update_plan(&PeerPlan {
+                robot: RobotId(0),
+                priority: 5,
+                plan: Plan::new(t(stamp_s), made.clone()),
+                run_start_ns: 0,
+                received_at: t(3.0),
+            });
+            peers
+        };
+        // Our candidate passes 1.5 m beyond where that plan ends.
+        let own = odom(3.1, [-1.5, -3.0, 1.0], [0.0; 3]);
+        let across = line(3.1, [-1.5, -3.0, 1.0], [-1.5, 3.0, 1.0], 1.0);
+        let check = |peers: &PeerTable| {
+            check_candidate(&config, t(3.1), RobotId(1), 1, &own, &across, peers)
+        };
+        // Made when it arrived, the plan is fresh and the peer hovers 1.5 m away.
+        assert_eq!(check(&late(3.0)), None);
+        // Made 3.1 s ago, it is stale: the peer may have flown on with plans not yet
+        // received, 1 m/s for 3.1 s plus braking from (-5, 0), and the candidate
+        // enters that envelope.
+        let peers = late(0.0);
+        let track = peers.get(RobotId(0)).unwrap();
+        match peer_model(&config, t(3.1), track).unwrap() {
+            PeerModel::Envelope {
+                position_m,
+                envelope_m,
+            } => {
+                assert_eq!(position_m, Point3::new(-5.0, 0.0, 1.0));
+                assert!((envelope_m - 3.6).abs() < 1e-9, "{envelope_m}");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(check(&peers).is_some_and(|c| c.envelope));
     }
 
     #[test]
