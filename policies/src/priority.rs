@@ -67,7 +67,11 @@ pub struct PriorityConfig {
     pub check_radius_m: f64,
     /// Largest number of sample times per pair (≥ 2).
     pub max_samples: usize,
-    /// A peer plan older than this is stale, seconds.
+    /// A peer plan made longer ago than this is stale, seconds (default 1.5: plans are
+    /// shared once a second, and a plan older than a period and half a second of
+    /// delay may have been replaced by one not yet received — at 2.5 s, two robots
+    /// over a saturated 250 kbit/s link each trusted a 2 s old plan in which the other
+    /// hovered, and flew within 0.14 m of each other).
     pub stale_plan_s: f64,
     /// Braking deceleration assumed for a peer's stopping envelope, m/s².
     pub stop_decel_mps2: f64,
@@ -88,7 +92,7 @@ impl Default for PriorityConfig {
             cylinder_height_m: 0.8,
             check_radius_m: 12.0,
             max_samples: 60,
-            stale_plan_s: 2.5,
+            stale_plan_s: 1.5,
             stop_decel_mps2: 1.0,
             clear_of_lower_priority: true,
             lower_priority_react_s: 1.2,

@@ -106,6 +106,36 @@ fn assert_heard_peers(i: usize, summary: &serde_json::Value) {
     );
 }
 
+/// The robots kept more than 0.6 m apart, centre to centre (the avoidance keeps their
+/// 0.4 m cylinders apart, less the vehicles' tracking error). On failure the message
+/// has each robot's collision counters and what it heard from its peers, and the run's
+/// directory is kept for a look at its recordings.
+fn assert_kept_apart(
+    dir: tempfile::TempDir,
+    summaries: &[serde_json::Value],
+    trajectories: &[Vec<[f64; 4]>],
+) {
+    let closest = min_distance_between(trajectories).expect("overlapping trajectories");
+    eprintln!("closest approach: {closest:.3} m");
+    if closest <= 0.6 {
+        let heard: Vec<String> = summaries
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                format!(
+                    "robot{i}: collision {} peers {}",
+                    s["collision"], s["peers"]
+                )
+            })
+            .collect();
+        panic!(
+            "robots came within {closest} m (outputs kept in {}):\n{}",
+            dir.keep().display(),
+            heard.join("\n")
+        );
+    }
+}
+
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -118,7 +148,7 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let files = loopback_team(dir.path(), 3, duration_s);
     let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
     wait_all(&mut children, duration_s);
-    let mut trajectories = Vec::new();
+    let (mut trajectories, mut summaries) = (Vec::new(), Vec::new());
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
         assert_heard_peers(i, &summary);
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");
@@ -139,9 +169,9 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
             assert_eq!(actor["panics"].as_u64(), Some(0), "robot{i}: {actor}");
         }
         trajectories.push(trajectory);
+        summaries.push(summary);
     }
-    let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
-    assert!(closest > 0.6, "robots came within {closest} m");
+    assert_kept_apart(dir, &summaries, &trajectories);
 }
 
 /// Runs a command, failing with its output.
@@ -309,13 +339,13 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
         .map(|(i, f)| spawn_robot(f, Some(&namespaces.ns(i))))
         .collect();
     wait_all(&mut children, duration_s);
-    let mut trajectories = Vec::new();
+    let (mut trajectories, mut summaries) = (Vec::new(), Vec::new());
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
         assert_heard_peers(i, &summary);
         trajectories.push(trajectory);
+        summaries.push(summary);
     }
-    let closest = min_distance_between(&trajectories).expect("overlapping trajectories");
-    assert!(closest > 0.6, "robots came within {closest} m");
+    assert_kept_apart(dir, &summaries, &trajectories);
     drop(namespaces);
     assert_no_namespaces_left(&prefix);
 }
