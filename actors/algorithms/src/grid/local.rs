@@ -599,63 +599,56 @@ impl RayWalk {
     /// `(linear index, local cell, is_end)`: the same cells as the iterator, in a
     /// tight loop without the per-step [`RayStep`].
     #[inline]
-    pub fn for_each_inside(mut self, mut visit: impl FnMut(usize, [usize; 3], bool)) {
-        let dims = self.dims.map(|d| d as u64);
-        // Fast path: when the start and end cells lie two cells or more inside the
-        // window, so does every cell between (rounding at a corner strays at most one
-        // cell from their bounding box), and no step needs the bounds check.
+    pub fn for_each_inside(self, mut visit: impl FnMut(usize, [usize; 3], bool)) {
+        // When the start and end cells lie two cells or more inside the window, so
+        // does every cell between (rounding at a corner strays at most one cell from
+        // their bounding box), and no step needs the bounds check.
         let interior = |c: &[i64; 3]| (0..3).all(|a| c[a] >= 2 && c[a] + 2 < self.dims[a]);
         if interior(&self.local) && interior(&self.end_local) {
-            // The walk state in scalars (not arrays indexed by the axis), so that it
-            // stays in registers; the same comparisons and sums as the slow path.
-            let [mut lx, mut ly, mut lz] = self.local;
-            let [mut tx, mut ty, mut tz] = self.t_next;
-            let [dx, dy, dz] = self.t_delta;
-            let [sx, sy, sz] = self.step;
-            let [ix, iy, iz] = [0, 1, 2].map(|a| self.step[a] * self.stride[a]);
-            let mut index = self.index;
-            for _ in 0..self.remaining {
-                visit(
-                    index as usize,
-                    [lx as usize, ly as usize, lz as usize],
-                    false,
-                );
-                if tx <= ty && tx <= tz {
-                    lx += sx;
-                    index += ix;
-                    tx += dx;
-                } else if ty <= tz {
-                    ly += sy;
-                    index += iy;
-                    ty += dy;
-                } else {
-                    lz += sz;
-                    index += iz;
-                    tz += dz;
-                }
-            }
-            let c = self.end_local;
-            let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
-            visit(i as usize, c.map(|v| v as usize), true);
-            return;
-        }
-        while self.remaining > 0 {
-            let c = self.local;
-            if (c[0] as u64) < dims[0] && (c[1] as u64) < dims[1] && (c[2] as u64) < dims[2] {
-                visit(self.index as usize, c.map(|v| v as usize), false);
-            }
-            let x_first = self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2];
-            let y_not_z = self.t_next[1] <= self.t_next[2];
-            let axis = usize::from(!x_first) * (1 + usize::from(!y_not_z));
-            self.local[axis] += self.step[axis];
-            self.index += self.step[axis] * self.stride[axis];
-            self.t_next[axis] += self.t_delta[axis];
-            self.remaining -= 1;
+            self.walk_cells::<false>(&mut visit);
+        } else {
+            self.walk_cells::<true>(&mut visit);
         }
         let c = self.end_local;
         if self.inside(&c) {
             let i = c[0] + self.stride[1] * c[1] + self.stride[2] * c[2];
             visit(i as usize, c.map(|v| v as usize), true);
+        }
+    }
+
+    /// The cells before the end cell, bounds-checked against the window when `CHECK`.
+    /// The walk's state is kept in scalars (not arrays indexed by the axis) so that it
+    /// stays in registers; the comparisons and sums are the iterator's.
+    #[inline]
+    fn walk_cells<const CHECK: bool>(&self, visit: &mut impl FnMut(usize, [usize; 3], bool)) {
+        let [wx, wy, wz] = self.dims.map(|d| d as u64);
+        let [mut lx, mut ly, mut lz] = self.local;
+        let [mut tx, mut ty, mut tz] = self.t_next;
+        let [dx, dy, dz] = self.t_delta;
+        let [sx, sy, sz] = self.step;
+        let [ix, iy, iz] = [0, 1, 2].map(|a| self.step[a] * self.stride[a]);
+        let mut index = self.index;
+        for _ in 0..self.remaining {
+            if !CHECK || ((lx as u64) < wx && (ly as u64) < wy && (lz as u64) < wz) {
+                visit(
+                    index as usize,
+                    [lx as usize, ly as usize, lz as usize],
+                    false,
+                );
+            }
+            if tx <= ty && tx <= tz {
+                lx += sx;
+                index += ix;
+                tx += dx;
+            } else if ty <= tz {
+                ly += sy;
+                index += iy;
+                ty += dy;
+            } else {
+                lz += sz;
+                index += iz;
+                tz += dz;
+            }
         }
     }
 
