@@ -21,10 +21,10 @@
 //! it was made, not when it arrived), or that never sent one, is an obstacle at its last
 //! known position inflated by its stopping envelope: the distance it may have flown
 //! since (`v · age`) plus its braking distance `v² / (2 a)`, `v` the larger of its
-//! speed then and the fastest its last plan flies. Ages count on this robot's clock from the earlier of a message's
-//! stamp and its arrival (stamps are on the team clock, `troupe_core::TeamClock`, and
-//! the link rejects those more than `max_clock_ahead_s` ahead); a restarted peer's new
-//! run replaces what its earlier run said (`PeerTable`).
+//! speed then and the fastest its last plan flies. Ages count on this robot's clock
+//! from the earlier of a message's stamp and its arrival (stamps are on the team clock,
+//! `troupe_core::TeamClock`, and the link rejects those more than `max_clock_ahead_s`
+//! ahead); a restarted peer's new run replaces what its earlier run said (`PeerTable`).
 //!
 //! Deviation from the thesis (on by default, [`PriorityConfig::clear_of_lower_priority`]):
 //! a robot also keeps its candidates clear of nearby peers of *lower* priority, modelled
