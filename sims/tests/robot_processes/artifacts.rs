@@ -1,11 +1,10 @@
 //! Issue 24 between processes: two `troupe robot` processes running the artifact
-//! reporter and a `troupe base` on loopback over zenoh. Robot 1 (the first to leave
-//! the start) is killed with SIGKILL right after its first reports and started
-//! again on its journal; the base starts late, after that crash. No report is lost:
-//! the reports robot 1 made before the crash reach the base, which was not running
-//! then (they wait in robot 1's journal, `<out>/state/link.journal` and
-//! `link.lanes`), and the base's list and robot 0's equal the union of the robots'
-//! lists.
+//! reporter and a `troupe base` on loopback over zenoh. The robot that reports first
+//! is killed with SIGKILL right after its first reports and started again on its
+//! journal; the base starts late, after that crash. No report is lost: the reports
+//! the crashed robot made before the crash reach the base, which was not running then
+//! (they wait in its journal, `<out>/state/link.journal` and `link.lanes`), and the
+//! base's list and the peer's equal the union of the robots' lists.
 
 use crate::common;
 
@@ -131,7 +130,7 @@ fn same_artifacts(a: &[([f64; 3], u64)], b: &[([f64; 3], u64)]) -> bool {
 #[test]
 fn reports_reach_the_peer_and_a_late_base_through_a_robot_crash() {
     let dir = tempfile::tempdir().expect("tempdir");
-    // Many artifacts, so that robot 0 finds one soon after it starts.
+    // Many artifacts, so that a robot finds one soon after it leaves the start.
     std::fs::write(
         dir.path().join("team.toml"),
         "name = \"artifacts\"\nrobots = 2\n\n[camera]\nrender_stride = 1\n\n[world.artifacts]\ncount = 40\nmin_spacing_m = 2.0\n\n\
@@ -142,28 +141,41 @@ fn reports_reach_the_peer_and_a_late_base_through_a_robot_crash() {
     let endpoints = loopback_endpoints(&common::free_ports_from(23_000, 3));
     // The robots dial each other; the base, when it comes, dials them.
     let robots = &endpoints[..2];
-    let found0 = Arc::new(AtomicUsize::new(0));
-    let found1 = Arc::new(AtomicUsize::new(0));
-    let mut robot0 = spawn_robot(&robot_file(dir.path(), 0, robots, None), &found0);
-    let mut robot1 = spawn_robot(&robot_file(dir.path(), 1, robots, None), &found1);
+    let found = [0, 1].map(|_| Arc::new(AtomicUsize::new(0)));
+    let mut children =
+        [0, 1].map(|i| spawn_robot(&robot_file(dir.path(), i, robots, None), &found[i]));
 
-    // Robot 1 reports; robot 0 acknowledges within a second or so.
+    // The robot that reports first (the one that left the start first; which one
+    // that is depends on timing) is the one that crashes; its peer acknowledges
+    // within a second or so.
     let started = Instant::now();
-    while found1.load(Ordering::SeqCst) == 0 {
+    let crashed = loop {
+        if let Some(i) = (0..2).find(|&i| found[i].load(Ordering::SeqCst) > 0) {
+            break i;
+        }
         assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "robot 1 found no artifact in 60 s"
+            started.elapsed() < Duration::from_secs(90),
+            "neither robot found an artifact in 90 s"
         );
         std::thread::sleep(Duration::from_millis(100));
-    }
+    };
+    let peer = 1 - crashed;
+    eprintln!(
+        "robot {crashed} found an artifact first, after {:.1?}",
+        started.elapsed()
+    );
     std::thread::sleep(Duration::from_secs(3));
-    robot1.kill().expect("SIGKILL robot 1");
-    let _ = robot1.wait();
-    let before_crash = found1.load(Ordering::SeqCst);
+    children[crashed].kill().expect("SIGKILL");
+    let _ = children[crashed].wait();
+    let before_crash = found[crashed].load(Ordering::SeqCst);
 
-    // Robot 1 again on its journal (20 s), and the base, which missed everything so far.
+    // The crashed robot again on its journal (20 s), and the base, which missed
+    // everything so far.
     let restarted = Arc::new(AtomicUsize::new(0));
-    let mut robot1 = spawn_robot(&robot_file(dir.path(), 1, robots, Some(20.0)), &restarted);
+    children[crashed] = spawn_robot(
+        &robot_file(dir.path(), crashed, robots, Some(20.0)),
+        &restarted,
+    );
     std::fs::write(
         dir.path().join("base.toml"),
         format!(
@@ -180,48 +192,56 @@ fn reports_reach_the_peer_and_a_late_base_through_a_robot_crash() {
         .stdout(Stdio::null())
         .spawn()
         .expect("spawn troupe base");
-    wait(&mut robot1, Duration::from_secs(80), "restarted robot 1");
-    // Robot 0 and the base get robot 1's last reports, then stop.
+    wait(
+        &mut children[crashed],
+        Duration::from_secs(80),
+        "restarted robot",
+    );
+    // The peer and the base get the restarted robot's last reports, then stop.
     std::thread::sleep(Duration::from_secs(2));
-    terminate(&mut robot0, "robot 0");
+    terminate(&mut children[peer], "peer robot");
     terminate(&mut base, "base");
 
-    let r0 = summary(&dir.path().join("robot0/summary.json"));
-    let r1 = summary(&dir.path().join("robot1/summary.json"));
+    let summaries = [0, 1].map(|i| summary(&dir.path().join(format!("robot{i}/summary.json"))));
     let station = summary(&dir.path().join("station/summary.json"));
-    let (list0, list1, at_base) = (artifacts(&r0), artifacts(&r1), artifacts(&station));
+    let lists = [0, 1].map(|i| artifacts(&summaries[i]));
+    let at_base = artifacts(&station);
     let mut union: Vec<([f64; 3], u64)> = Vec::new();
-    for a in list0.iter().chain(&list1) {
+    for a in lists.iter().flatten() {
         if !union.iter().any(|(p, _)| near(p, &a.0)) {
             union.push(*a);
         }
     }
     let context = format!(
-        "robot 1 found {before_crash} before the crash, {} after; robot 0 found {}\n\
-         robot0 {list0:?}\nrobot1 {list1:?}\nbase {at_base:?}",
+        "robot {crashed} found {before_crash} before the crash, {} after; robot {peer} found {}\n\
+         robot0 {:?}\nrobot1 {:?}\nbase {at_base:?}",
         restarted.load(Ordering::SeqCst),
-        found0.load(Ordering::SeqCst),
+        found[peer].load(Ordering::SeqCst),
+        lists[0],
+        lists[1],
     );
-    // What robot 1 reported before the crash reached robot 0 ...
-    let early: Vec<_> = list0.iter().filter(|(_, by)| *by == 1).collect();
+    // What the crashed robot reported before the crash reached its peer ...
+    let early: Vec<_> = lists[peer]
+        .iter()
+        .filter(|(_, by)| *by == crashed as u64)
+        .collect();
     assert!(!early.is_empty(), "{context}");
-    // ... and the base, which started after the crash: from robot 1's journal.
+    // ... and the base, which started after the crash: from the crashed robot's journal.
     for (p, _) in &early {
         assert!(at_base.iter().any(|(q, _)| near(p, q)), "{context}");
     }
     assert!(same_artifacts(&at_base, &union), "base: {context}");
-    assert!(same_artifacts(&list0, &union), "robot 0: {context}");
-    // The restarted robot 1 knows what robot 0 reported (its journal replays
-    // what it had received) and what it finds again; its own reports from before
-    // the crash it knows only if it sees them again, so its list is a part of
-    // the union.
+    assert!(same_artifacts(&lists[peer], &union), "peer: {context}");
+    // The restarted robot knows what its peer reported (its journal replays what it
+    // had received) and what it finds again; its own reports from before the crash it
+    // knows only if it sees them again, so its list is a part of the union.
     assert!(
-        list1
+        lists[crashed]
             .iter()
             .all(|(p, _)| union.iter().any(|(q, _)| near(p, q))),
-        "robot 1: {context}"
+        "restarted robot: {context}"
     );
-    for s in [&r0, &r1] {
+    for s in &summaries {
         for actor in s["actors"].as_array().expect("actors") {
             assert_eq!(actor["panics"].as_u64(), Some(0), "{actor}");
         }
