@@ -20,8 +20,9 @@
 //! A peer whose plan is older than [`PriorityConfig::stale_plan_s`] (counted from when
 //! it was made, not when it arrived), or that never sent one, is an obstacle at its last
 //! known position inflated by its stopping envelope: the distance it may have flown
-//! since (`v · age`) plus its braking distance `v² / (2 a)`, `v` the larger of its
-//! speed then and the fastest its last plan flies. Ages count on this robot's clock
+//! since plus its braking distance `v² / (2 a)` from the speed `v` it may have reached,
+//! speeding up from its speed then at [`PriorityConfig::peer_accel_mps2`] to the
+//! fastest its last plan flies. Ages count on this robot's clock
 //! from the earlier of a message's stamp and its arrival (stamps are on the team clock,
 //! `troupe_core::TeamClock`, and the link rejects those more than `max_clock_ahead_s`
 //! ahead); a restarted peer's new run replaces what its earlier run said (`PeerTable`).
@@ -75,6 +76,11 @@ pub struct PriorityConfig {
     pub stale_plan_s: f64,
     /// Braking deceleration assumed for a peer's stopping envelope, m/s².
     pub stop_decel_mps2: f64,
+    /// Largest acceleration assumed for a peer since it was last heard of, m/s² (default
+    /// 3.0: the planner's `max_accel_mps2`). A peer seen hovering a tenth of a second ago
+    /// cannot be flying at its plans' top speed yet; counting it so made two robots that
+    /// started 1.6 m apart block each other for 15 s.
+    pub peer_accel_mps2: f64,
     /// Keep clear of lower-priority peers too (module docs; the thesis ignores them).
     pub clear_of_lower_priority: bool,
     /// How long a lower-priority peer may keep to its plan before it has seen ours and
@@ -94,6 +100,7 @@ impl Default for PriorityConfig {
             max_samples: 60,
             stale_plan_s: 1.5,
             stop_decel_mps2: 1.0,
+            peer_accel_mps2: 3.0,
             clear_of_lower_priority: true,
             lower_priority_react_s: 1.2,
         }
@@ -109,6 +116,7 @@ impl PriorityConfig {
             ("check_radius_m", self.check_radius_m),
             ("stale_plan_s", self.stale_plan_s),
             ("stop_decel_mps2", self.stop_decel_mps2),
+            ("peer_accel_mps2", self.peer_accel_mps2),
             ("lower_priority_react_s", self.lower_priority_react_s),
         ] {
             ConfigError::positive(key, value)?;
@@ -286,18 +294,31 @@ pub fn peer_model<'a>(
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => return None,
     };
-    // Since then it may have flown as fast as its last plan said it would (a peer
-    // seen at rest at the start of a plan is not staying there).
-    let speed = track
+    // Since then it may have sped up to as fast as its last plan said it would fly (a
+    // peer seen at rest at the start of a plan is not staying there).
+    let top_speed = track
         .plan
         .as_ref()
         .map_or(speed, |p| speed.max(max_speed(&p.plan.trajectory)));
     let age_s = now.saturating_since(stamp).as_secs_f64();
-    let envelope_m = speed * age_s + speed * speed / (2.0 * config.stop_decel_mps2);
+    let (flown_m, speed_now) = reach(speed, top_speed, config.peer_accel_mps2, age_s);
+    let envelope_m = flown_m + speed_now * speed_now / (2.0 * config.stop_decel_mps2);
     Some(PeerModel::Envelope {
         position_m,
         envelope_m,
     })
+}
+
+/// How far a body flying at `speed_mps` may get in `age_s` when it accelerates at
+/// most `accel_mps2` up to `top_speed_mps` (at least its speed), and how fast it may
+/// fly then: `(distance_m, speed_mps)`.
+fn reach(speed_mps: f64, top_speed_mps: f64, accel_mps2: f64, age_s: f64) -> (f64, f64) {
+    let top_speed_mps = top_speed_mps.max(speed_mps);
+    let speeding_up_s = ((top_speed_mps - speed_mps) / accel_mps2).min(age_s);
+    let distance_m = speed_mps * speeding_up_s
+        + 0.5 * accel_mps2 * speeding_up_s * speeding_up_s
+        + top_speed_mps * (age_s - speeding_up_s);
+    (distance_m, speed_mps + accel_mps2 * speeding_up_s)
 }
 
 fn max_speed(trajectory: &Trajectory) -> f64 {
@@ -800,8 +821,8 @@ mod tests {
         // Made when it arrived, the plan is fresh and the peer hovers 1.5 m away.
         assert_eq!(check(&late(3.0)), None);
         // Made 3.1 s ago, it is stale: the peer may have flown on with plans not yet
-        // received, 1 m/s for 3.1 s plus braking from (-5, 0), and the candidate
-        // enters that envelope.
+        // received, from rest at (-5, 0) up to 1 m/s at 3 m/s², for 3.1 s, plus
+        // braking, and the candidate enters that envelope.
         let peers = late(0.0);
         let track = peers.get(RobotId(0)).unwrap();
         match peer_model(&config, t(3.1), track).unwrap() {
@@ -810,11 +831,49 @@ mod tests {
                 envelope_m,
             } => {
                 assert_eq!(position_m, Point3::new(-5.0, 0.0, 1.0));
-                assert!((envelope_m - 3.6).abs() < 1e-9, "{envelope_m}");
+                // 1/6 m speeding up, 1 m/s for 3.1 s - 1/3 s, 1² / (2 · 1) braking.
+                assert!(
+                    (envelope_m - (3.1 - 1.0 / 6.0 + 0.5)).abs() < 1e-9,
+                    "{envelope_m}"
+                );
             }
             other => panic!("{other:?}"),
         }
         assert!(check(&peers).is_some_and(|c| c.envelope));
+    }
+
+    #[test]
+    fn a_peer_seen_hovering_a_moment_ago_has_not_sped_up_to_its_plans_speed() {
+        let config = PriorityConfig::default();
+        // The peer (priority 5) flew its last plan at 1.5 m/s and has hovered at (1, 0)
+        // since; its odometry says so, 0.1 s ago or 2 s ago.
+        let flown = line(0.0, [-2.0, 0.0, 1.0], [1.0, 0.0, 1.0], 1.5);
+        let hovering_since = |at: f64| {
+            table_with(
+                0,
+                5,
+                Some((flown.clone(), 0.0)),
+                Some(odom(at, [1.0, 0.0, 1.0], [0.0; 3])),
+            )
+        };
+        // We start 1.6 m away and fly past it, 1.53 m away at the closest.
+        let own = odom(10.0, [2.6, 0.0, 1.0], [0.0; 3]);
+        let away = line(10.0, [2.6, 0.0, 1.0], [2.0, 2.0, 1.0], 1.0);
+        let check = |peers: &PeerTable| {
+            check_candidate(&config, t(10.0), RobotId(1), 1, &own, &away, peers)
+        };
+        // 0.1 s at 3 m/s² from rest: 1.5 cm flown, 0.3 m/s, 4.5 cm of braking. Counted
+        // at its plan's 1.5 m/s, its envelope (1.3 m) reached us where we stand.
+        let fresh = hovering_since(9.9);
+        match peer_model(&config, t(10.0), fresh.get(RobotId(0)).unwrap()).unwrap() {
+            PeerModel::Envelope { envelope_m, .. } => {
+                assert!((envelope_m - 0.06).abs() < 1e-9, "{envelope_m}");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(check(&fresh), None);
+        // Heard of 2 s ago, it may be flying at its plan's speed, 2.6 m from there.
+        assert!(check(&hovering_since(8.0)).is_some_and(|c| c.envelope));
     }
 
     #[test]
