@@ -278,7 +278,18 @@ fn routes_from(
     let Some(start) = memory.key_of(from) else {
         return Reached::default();
     };
-    let seeds = std::iter::once(start)
+    spread(memory, route_seeds(memory, from, start, passable), passable)
+}
+
+/// The seeds of a Dijkstra from the point `from` in cell `start`: that cell and its
+/// passable neighbours, at their straight distance.
+fn route_seeds(
+    memory: &FrontierMemory,
+    from: &Point3<f64>,
+    start: CellKey,
+    passable: &dyn Fn(CellKey) -> bool,
+) -> BinaryHeap<Entry> {
+    std::iter::once(start)
         .chain(neighbours(start).map(|(n, _)| n))
         .filter(|n| passable(*n))
         .map(|n| Entry {
@@ -286,8 +297,7 @@ fn routes_from(
             key: n,
             target: start,
         })
-        .collect();
-    spread(memory, seeds, passable)
+        .collect()
 }
 
 /// The passable cells of `memory`, gathered once for the Dijkstras of a field (a hash
@@ -338,13 +348,21 @@ fn spread(
 /// `memory` that `passable` admits (through one of its `approaches`, as the field seeds
 /// it; plus the frontier's region weight and, for `own`, its cost of switching);
 /// repeatedly the cheapest (robot, frontier) pair whose robot has no frontier yet and
-/// whose frontier is unclaimed is assigned, and the unclaimed frontiers within
-/// `claim_radius_m` of it become that robot's.
+/// whose frontier is unclaimed is assigned (ties by robot, then frontier), and the
+/// unclaimed frontiers within `claim_radius_m` of it become that robot's.
 ///
-/// Time: one Dijkstra per robot, `O(r · c log c)` for `r` robots and `c` passable
-/// cells, plus sorting the `r · f` pairs.
+/// The robots' Dijkstras advance together, the least settled cost first, and a pair is
+/// assigned once no robot still without a frontier can settle a cell below its cost
+/// (no pair is cheaper than the route to its approach, the costs added being ≥ 0); a
+/// robot's Dijkstra stops when it is given a frontier, and all stop once every robot
+/// has one or every frontier is claimed. The result is that of ranking every pair of
+/// full Dijkstras, which a test checks, at the cost of the routes up to each robot's
+/// frontier.
+///
+/// Time: at most one Dijkstra per robot, `O(r · c log c)` for `r` robots and `c`
+/// passable cells.
 fn claimed_by_assignment(
-    (memory, passable): (&FrontierMemory, &(dyn Fn(CellKey) -> bool + Sync)),
+    (memory, passable): (&FrontierMemory, &dyn Fn(CellKey) -> bool),
     open: &[(CellKey, f64)],
     approaches: &[Vec<(CellKey, f64)>],
     (own, own_m): (RobotId, &Point3<f64>),
@@ -360,38 +378,74 @@ fn claimed_by_assignment(
                 .map(|(id, peer)| (*id, peer.position_m)),
         )
         .collect();
-    // The robots' Dijkstras are independent: on the rayon pool, in robot order.
-    let routes: Vec<Reached> = robots
-        .par_iter()
-        .map(|(_, position_m)| routes_from(memory, position_m, passable))
-        .collect();
-    let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
-    for (&(id, _), routes) in robots.iter().zip(&routes) {
-        for (&(f, extra_m), views) in open.iter().zip(approaches) {
-            let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
-            let cost_m = extra_m
-                + mine_m
-                + views
-                    .iter()
-                    .filter_map(|(n, view_m)| routes.get(n).map(|(d, _)| d + view_m))
-                    .fold(f64::INFINITY, f64::min);
-            if cost_m.is_finite() {
-                pairs.push((cost_m, id, f));
-            }
+    // The frontiers each cell is an approach of, with the view's cost.
+    let mut approached: HashMap<CellKey, Vec<(usize, f64)>, Fixed> = HashMap::default();
+    for (i, views) in approaches.iter().enumerate() {
+        for &(n, view_m) in views {
+            approached.entry(n).or_default().push((i, view_m));
         }
     }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // `None` once the robot has a frontier.
+    let mut searches: Vec<Option<RouteSearch>> = robots
+        .iter()
+        .map(|(_, position_m)| Some(RouteSearch::new(memory, position_m, passable)))
+        .collect();
+    // The robots still without a frontier, by the least cost each may settle next.
+    let mut next: BinaryHeap<Cheapest<usize>> = searches
+        .iter()
+        .enumerate()
+        .filter_map(|(r, search)| {
+            let cost_m = search.as_ref()?.next_cost_m()?;
+            Some(Cheapest { cost_m, item: r })
+        })
+        .collect();
+    // (robot, frontier) pairs by cost, then robot id, then frontier, with the robot's
+    // index.
+    let mut pairs: BinaryHeap<Cheapest<(RobotId, CellKey, usize)>> = BinaryHeap::new();
     let mut owner: BTreeMap<CellKey, RobotId> = BTreeMap::new();
-    let mut assigned: BTreeSet<RobotId> = BTreeSet::new();
-    for (_, id, f) in pairs {
-        if assigned.contains(&id) || owner.contains_key(&f) {
+    let mut unassigned = robots.len();
+    while unassigned > 0 && owner.len() < open.len() {
+        if let Some(pair) = pairs.peek()
+            && next.peek().is_none_or(|e| pair.cost_m < e.cost_m)
+        {
+            let (_, f, robot) = pairs.pop().expect("peeked").item;
+            if searches[robot].is_none() || owner.contains_key(&f) {
+                continue;
+            }
+            searches[robot] = None;
+            unassigned -= 1;
+            let id = robots[robot].0;
+            let centre = memory.centre(f);
+            for &(g, _) in open {
+                if (memory.centre(g) - centre).norm() <= claim_radius_m {
+                    owner.entry(g).or_insert(id);
+                }
+            }
             continue;
         }
-        assigned.insert(id);
-        let centre = memory.centre(f);
-        for &(g, _) in open {
-            if (memory.centre(g) - centre).norm() <= claim_radius_m {
-                owner.entry(g).or_insert(id);
+        let Some(Cheapest { item: r, .. }) = next.pop() else {
+            break;
+        };
+        let Some(search) = searches[r].as_mut() else {
+            continue;
+        };
+        let settled = search.settle(memory, passable);
+        if let Some(cost_m) = search.next_cost_m() {
+            next.push(Cheapest { cost_m, item: r });
+        }
+        let Some((n, route_m)) = settled else {
+            continue;
+        };
+        let id = robots[r].0;
+        for &(i, view_m) in approached.get(&n).into_iter().flatten() {
+            let (f, extra_m) = open[i];
+            let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
+            let cost_m = extra_m + mine_m + (route_m + view_m);
+            if cost_m.is_finite() {
+                pairs.push(Cheapest {
+                    cost_m,
+                    item: (id, f, r),
+                });
             }
         }
     }
@@ -400,6 +454,89 @@ fn claimed_by_assignment(
         .filter_map(|(f, id)| (id != own).then_some(f))
         .collect()
 }
+
+/// One robot's Dijkstra of [`claimed_by_assignment`] ([`routes_from`]'s), a settled
+/// cell at a time.
+struct RouteSearch {
+    heap: BinaryHeap<Entry>,
+    reached: HashSet<CellKey, Fixed>,
+}
+
+impl RouteSearch {
+    fn new(
+        memory: &FrontierMemory,
+        from: &Point3<f64>,
+        passable: &dyn Fn(CellKey) -> bool,
+    ) -> Self {
+        let heap = memory
+            .key_of(from)
+            .map(|start| route_seeds(memory, from, start, passable))
+            .unwrap_or_default();
+        RouteSearch {
+            heap,
+            reached: HashSet::default(),
+        }
+    }
+
+    /// A lower bound on the cost of the next settled cell; `None` when none is left.
+    fn next_cost_m(&self) -> Option<f64> {
+        self.heap.peek().map(|e| e.cost_m)
+    }
+
+    /// Settles the next cell: its key and route cost, or `None` when the entry taken was
+    /// of a cell settled before.
+    fn settle(
+        &mut self,
+        memory: &FrontierMemory,
+        passable: &dyn Fn(CellKey) -> bool,
+    ) -> Option<(CellKey, f64)> {
+        let Entry { cost_m, key, .. } = self.heap.pop()?;
+        if !self.reached.insert(key) {
+            return None;
+        }
+        let cell_m = memory.cell_m();
+        for (n, step) in neighbours(key) {
+            if !self.reached.contains(&n) && passable(n) {
+                self.heap.push(Entry {
+                    cost_m: cost_m + step * cell_m,
+                    key: n,
+                    target: key,
+                });
+            }
+        }
+        Some((key, cost_m))
+    }
+}
+
+/// A min-heap entry: `item` ordered by `cost_m`, then by `item`, smallest first.
+#[derive(Clone, Copy, Debug)]
+struct Cheapest<T> {
+    cost_m: f64,
+    item: T,
+}
+
+impl<T: Ord> Ord for Cheapest<T> {
+    fn cmp(&self, other: &Self) -> Ordering {
+        other
+            .cost_m
+            .total_cmp(&self.cost_m)
+            .then_with(|| other.item.cmp(&self.item))
+    }
+}
+
+impl<T: Ord> PartialOrd for Cheapest<T> {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl<T: Ord> PartialEq for Cheapest<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl<T: Ord> Eq for Cheapest<T> {}
 
 /// A heap entry ordered by cost, then key (deterministic ties), smallest first.
 #[derive(Clone, Copy, PartialEq)]
@@ -723,7 +860,124 @@ impl FrontierField for GuidanceField {
 
 #[cfg(test)]
 mod tests {
-    use super::weigh_regions;
+    use super::*;
+    use proptest::prelude::*;
+
+    /// [`claimed_by_assignment`] as first written: every robot's full Dijkstra, every
+    /// pair ranked.
+    fn claimed_by_ranking_every_pair(
+        (memory, passable): (&FrontierMemory, &dyn Fn(CellKey) -> bool),
+        open: &[(CellKey, f64)],
+        approaches: &[Vec<(CellKey, f64)>],
+        robots: &[(RobotId, Point3<f64>)],
+        own_extra_m: &dyn Fn(&CellKey) -> f64,
+        claim_radius_m: f64,
+    ) -> BTreeSet<CellKey> {
+        let own = robots[0].0;
+        let mut pairs: Vec<(f64, RobotId, CellKey)> = Vec::new();
+        for &(id, position_m) in robots {
+            let routes = routes_from(memory, &position_m, passable);
+            for (&(f, extra_m), views) in open.iter().zip(approaches) {
+                let mine_m = if id == own { own_extra_m(&f) } else { 0.0 };
+                let cost_m = extra_m
+                    + mine_m
+                    + views
+                        .iter()
+                        .filter_map(|(n, view_m)| routes.get(n).map(|(d, _)| d + view_m))
+                        .fold(f64::INFINITY, f64::min);
+                if cost_m.is_finite() {
+                    pairs.push((cost_m, id, f));
+                }
+            }
+        }
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let mut owner: BTreeMap<CellKey, RobotId> = BTreeMap::new();
+        let mut assigned: BTreeSet<RobotId> = BTreeSet::new();
+        for (_, id, f) in pairs {
+            if assigned.contains(&id) || owner.contains_key(&f) {
+                continue;
+            }
+            assigned.insert(id);
+            let centre = memory.centre(f);
+            for &(g, _) in open {
+                if (memory.centre(g) - centre).norm() <= claim_radius_m {
+                    owner.entry(g).or_insert(id);
+                }
+            }
+        }
+        owner
+            .into_iter()
+            .filter_map(|(f, id)| (id != own).then_some(f))
+            .collect()
+    }
+
+    fn cell() -> impl Strategy<Value = CellKey> {
+        [0i32..12, 0i32..12, 0i32..3]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        /// Random passable cells (a few walls' worth missing), frontiers with region
+        /// weights and approaches on the lattice (many equal costs), up to six robots,
+        /// a switching cost on some of this robot's frontiers.
+        #[test]
+        fn the_assignment_claims_what_ranking_every_pair_of_full_routes_claims(
+            walls in prop::collection::btree_set(cell(), 0..150),
+            frontiers in prop::collection::btree_map(cell(), prop::sample::select(vec![0.0, 0.0, 5.0, f64::INFINITY]), 1..12),
+            views in prop::collection::vec(prop::collection::vec((cell(), 0usize..3), 0..4), 12),
+            robots in prop::collection::vec(([0.0..12.0f64, 0.0..12.0f64, 0.0..3.0f64], 0u32..8), 1..7),
+            switching in prop::collection::btree_set(cell(), 0..4),
+            claim_radius_m in prop::sample::select(vec![0.0, 1.0, 2.5]),
+        ) {
+            let memory = FrontierMemory::new(1.0, 10_000);
+            let passable = |key: CellKey| {
+                (0..12).contains(&key[0]) && (0..12).contains(&key[1]) && (0..3).contains(&key[2])
+                    && !walls.contains(&key)
+            };
+            let open: Vec<(CellKey, f64)> = frontiers.into_iter().collect();
+            let approaches: Vec<Vec<(CellKey, f64)>> = open
+                .iter()
+                .zip(&views)
+                .map(|(_, v)| v.iter().map(|&(n, k)| (n, [0.0, 0.5, 1.0][k])).collect())
+                .collect();
+            let mut ids = BTreeSet::new();
+            let robots: Vec<(RobotId, Point3<f64>)> = robots
+                .into_iter()
+                .filter(|(_, id)| ids.insert(*id))
+                .map(|(p, id)| (RobotId(id), Point3::from(p)))
+                .collect();
+            let (own, own_m) = robots[0];
+            let peers: BTreeMap<RobotId, PeerIntent> = robots[1..]
+                .iter()
+                .map(|&(id, position_m)| (id, PeerIntent { position_m, goal_m: position_m }))
+                .collect();
+            let own_extra_m = |f: &CellKey| if switching.contains(f) { 3.0 } else { 0.0 };
+            // The reference ranks robots as the assignment lists them: own, then peers.
+            let listed: Vec<(RobotId, Point3<f64>)> = std::iter::once((own, own_m))
+                .chain(peers.iter().map(|(id, p)| (*id, p.position_m)))
+                .collect();
+            prop_assert_eq!(
+                claimed_by_assignment(
+                    (&memory, &passable),
+                    &open,
+                    &approaches,
+                    (own, &own_m),
+                    &own_extra_m,
+                    &peers,
+                    claim_radius_m,
+                ),
+                claimed_by_ranking_every_pair(
+                    (&memory, &passable),
+                    &open,
+                    &approaches,
+                    &listed,
+                    &own_extra_m,
+                    claim_radius_m,
+                )
+            );
+        }
+    }
 
     #[test]
     fn frontier_regions_smaller_than_the_minimum_are_dropped_or_made_longer() {
