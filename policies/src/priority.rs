@@ -78,8 +78,8 @@ pub struct PriorityConfig {
     pub stop_decel_mps2: f64,
     /// Largest acceleration assumed for a peer since it was last heard of, m/s² (default
     /// 3.0: the planner's `max_accel_mps2`). A peer seen hovering a tenth of a second ago
-    /// cannot be flying at its plans' top speed yet; counting it so made two robots that
-    /// started 1.6 m apart block each other for 15 s.
+    /// cannot be flying at its plans' top speed yet (counted so, its envelope was 1.3 m
+    /// at 1.5 m/s).
     pub peer_accel_mps2: f64,
     /// Keep clear of lower-priority peers too (module docs; the thesis ignores them).
     pub clear_of_lower_priority: bool,
