@@ -315,32 +315,60 @@ type Reached = HashMap<CellKey, (f64, CellKey), Fixed>;
 /// Time: `O(c log c)` for `c` passable cells; memory: one entry per reached cell.
 fn spread(
     memory: &FrontierMemory,
-    mut heap: BinaryHeap<Entry>,
+    seeds: BinaryHeap<Entry>,
     passable: &dyn Fn(CellKey) -> bool,
 ) -> Reached {
-    let cell_m = memory.cell_m();
-    let mut reached = Reached::default();
-    while let Some(Entry {
-        cost_m,
-        key,
-        target,
-    }) = heap.pop()
-    {
-        if reached.contains_key(&key) {
-            continue;
+    let mut dijkstra = Dijkstra {
+        heap: seeds,
+        reached: Reached::default(),
+    };
+    while dijkstra.next_cost_m().is_some() {
+        dijkstra.settle(memory, passable);
+    }
+    dijkstra.reached
+}
+
+/// A Dijkstra of [`spread`], a settled cell at a time (the assignment advances the
+/// robots' together).
+struct Dijkstra {
+    heap: BinaryHeap<Entry>,
+    reached: Reached,
+}
+
+impl Dijkstra {
+    /// A lower bound on the cost of the next settled cell; `None` when none is left.
+    fn next_cost_m(&self) -> Option<f64> {
+        self.heap.peek().map(|e| e.cost_m)
+    }
+
+    /// Settles the next cell: its key and route cost, or `None` when the entry taken was
+    /// of a cell settled before (or none was left).
+    fn settle(
+        &mut self,
+        memory: &FrontierMemory,
+        passable: &dyn Fn(CellKey) -> bool,
+    ) -> Option<(CellKey, f64)> {
+        let Entry {
+            cost_m,
+            key,
+            target,
+        } = self.heap.pop()?;
+        if self.reached.contains_key(&key) {
+            return None;
         }
-        reached.insert(key, (cost_m, target));
+        self.reached.insert(key, (cost_m, target));
+        let cell_m = memory.cell_m();
         for (n, step) in neighbours(key) {
-            if !reached.contains_key(&n) && passable(n) {
-                heap.push(Entry {
+            if !self.reached.contains_key(&n) && passable(n) {
+                self.heap.push(Entry {
                     cost_m: cost_m + step * cell_m,
                     key: n,
                     target,
                 });
             }
         }
+        Some((key, cost_m))
     }
-    reached
 }
 
 /// The frontiers of `open` that the greedy assignment ([`Coordination::Assignment`])
@@ -386,9 +414,17 @@ fn claimed_by_assignment(
         }
     }
     // `None` once the robot has a frontier.
-    let mut searches: Vec<Option<RouteSearch>> = robots
+    let mut searches: Vec<Option<Dijkstra>> = robots
         .iter()
-        .map(|(_, position_m)| Some(RouteSearch::new(memory, position_m, passable)))
+        .map(|(_, position_m)| {
+            Some(Dijkstra {
+                heap: memory
+                    .key_of(position_m)
+                    .map(|start| route_seeds(memory, position_m, start, passable))
+                    .unwrap_or_default(),
+                reached: Reached::default(),
+            })
+        })
         .collect();
     // The robots still without a frontier, by the least cost each may settle next.
     let mut next: BinaryHeap<Cheapest<usize>> = searches
@@ -453,59 +489,6 @@ fn claimed_by_assignment(
         .into_iter()
         .filter_map(|(f, id)| (id != own).then_some(f))
         .collect()
-}
-
-/// One robot's Dijkstra of [`claimed_by_assignment`] ([`routes_from`]'s), a settled
-/// cell at a time.
-struct RouteSearch {
-    heap: BinaryHeap<Entry>,
-    reached: HashSet<CellKey, Fixed>,
-}
-
-impl RouteSearch {
-    fn new(
-        memory: &FrontierMemory,
-        from: &Point3<f64>,
-        passable: &dyn Fn(CellKey) -> bool,
-    ) -> Self {
-        let heap = memory
-            .key_of(from)
-            .map(|start| route_seeds(memory, from, start, passable))
-            .unwrap_or_default();
-        RouteSearch {
-            heap,
-            reached: HashSet::default(),
-        }
-    }
-
-    /// A lower bound on the cost of the next settled cell; `None` when none is left.
-    fn next_cost_m(&self) -> Option<f64> {
-        self.heap.peek().map(|e| e.cost_m)
-    }
-
-    /// Settles the next cell: its key and route cost, or `None` when the entry taken was
-    /// of a cell settled before.
-    fn settle(
-        &mut self,
-        memory: &FrontierMemory,
-        passable: &dyn Fn(CellKey) -> bool,
-    ) -> Option<(CellKey, f64)> {
-        let Entry { cost_m, key, .. } = self.heap.pop()?;
-        if !self.reached.insert(key) {
-            return None;
-        }
-        let cell_m = memory.cell_m();
-        for (n, step) in neighbours(key) {
-            if !self.reached.contains(&n) && passable(n) {
-                self.heap.push(Entry {
-                    cost_m: cost_m + step * cell_m,
-                    key: n,
-                    target: key,
-                });
-            }
-        }
-        Some((key, cost_m))
-    }
 }
 
 /// A min-heap entry: `item` ordered by `cost_m`, then by `item`, smallest first.
