@@ -62,14 +62,18 @@ pub struct GuidanceConfig {
     /// within [`Self::give_up_radius_m`] of it is given up by this robot (no longer
     /// pulls it), seconds: what the camera cannot see from anywhere the robot can fly —
     /// pockets under the floor, crevices behind boulders — would otherwise hold the
-    /// robot for the rest of the run. Time counts only once the robot has looked around
-    /// (turned a full circle or flown [`Self::give_up_radius_m`] from its start: at
-    /// the start every frontier is near, most where the camera has not yet turned).
-    /// `None` never gives up.
+    /// robot for the rest of the run. Until the robot has looked around (turned a full
+    /// circle or flown [`Self::give_up_radius_m`] from its start: at the start every
+    /// frontier is near, most where the camera has not yet turned) time counts only
+    /// for frontiers above or below what its camera sees from where it is, which
+    /// turning cannot show. `None` never gives up.
     pub give_up_after_s: Option<f64>,
     /// A goal (the remembered frontier the robot's route leads to) whose route has not
-    /// got 0.5 m shorter for this long is given up, seconds (a progress timeout, as in
-    /// ROS' explore_lite); `None` never.
+    /// got 0.5 m shorter for this long is given up with the frontiers within 2 m of it,
+    /// seconds (a progress timeout, as in ROS' explore_lite); `None` never. A robot
+    /// whose route leads through a gap its primitives cannot pass otherwise hovers at
+    /// the route's local minimum (seed 4 at 700 s with `share_memory`: 460 s in one
+    /// place); 10 s by default.
     pub give_up_without_progress_s: Option<f64>,
     /// A given-up frontier is looked for again this long after it was given up,
     /// seconds; `None`: never. Time near a frontier counts on every pass, so a real
@@ -85,7 +89,10 @@ pub struct GuidanceConfig {
     /// take theirs where this memory knows nothing (their frontiers, passable and
     /// settled cells beyond this robot's window); a peer's cells are moved into this
     /// robot's world frame when its file gives that peer's (`[[link.peer_frames]]`).
-    /// Off by default (docs/exploration.md).
+    /// On by default: a robot whose peer explores beyond its window otherwise has no
+    /// frontier of its own, and a team's mission ends only when no robot knows of one
+    /// (docs/exploration.md). The link studies of §8.2.7, where robots share maps only,
+    /// turn it off.
     pub share_memory: bool,
     /// Judge remembered frontiers by their viewpoints: a frontier seeds the guidance
     /// field at the passable cells within [`Self::viewpoint_range_m`] from which the
@@ -127,10 +134,10 @@ impl Default for GuidanceConfig {
             switch_penalty_m: 0.0,
             look_ahead_m: 1.0,
             give_up_after_s: Some(4.0),
-            give_up_without_progress_s: None,
+            give_up_without_progress_s: Some(10.0),
             give_up_radius_m: 3.0,
             retry_given_up_after_s: Some(100.0),
-            share_memory: false,
+            share_memory: true,
             viewpoints: false,
             viewpoint_range_m: 4.0,
             quick_end: false,

@@ -33,8 +33,9 @@ pub struct Guide {
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
-    /// Progress towards the goal being tracked: its centre, the least route distance
-    /// to it so far, metres, and when the route last got [`PROGRESS_M`] shorter.
+    /// Progress towards the goal being tracked: its centre, the route distance to
+    /// beat, metres (the route when it last got [`PROGRESS_M`] shorter, raised while
+    /// the robot moves away), and when the route last got that much shorter.
     progress: Option<(Point3<f64>, f64, Time)>,
     /// Where the robot was at the last [`Self::field`].
     last_position_m: Option<Point3<f64>>,
@@ -249,9 +250,10 @@ impl Guide {
 
     /// Marks the robot's own cell passable and the way from its last position on its
     /// trail ([`FrontierMemory::mark_trail`]), counts the time since the last call
-    /// towards the frontiers near `robot_m` (giving up those watched too long, once
-    /// the robot has looked around: turned a full circle or flown
-    /// [`GuidanceConfig::give_up_radius_m`] from its start) and builds the field for
+    /// towards the frontiers near `robot_m` (giving up those watched too long; before
+    /// the robot has looked around — turned a full circle or flown
+    /// [`GuidanceConfig::give_up_radius_m`] from its start — only those its camera
+    /// cannot see from there) and builds the field for
     /// robot `own` there, heading `yaw_rad`, at `now`, with the peers' claims.
     pub fn field(
         &mut self,
@@ -308,6 +310,8 @@ impl Guide {
     /// with the frontiers within [`GOAL_RADIUS_M`] of it. The route's end moves between
     /// neighbouring cells of one opening from round to round: a goal within
     /// [`GOAL_RADIUS_M`] of the tracked one is the same goal; a farther one starts afresh.
+    /// The route to beat rises with the route while the robot moves away, so that a
+    /// robot coming back towards a goal it once was nearer to makes progress.
     fn check_progress(&mut self, target: Option<CellKey>, route_m: f64, now: Time, limit_s: f64) {
         let Some(goal) = target.filter(|_| route_m.is_finite()) else {
             self.progress = None;
@@ -316,7 +320,7 @@ impl Guide {
         let goal_m = self.memory.centre(goal);
         let (tracked_m, best_m, since) = match self.progress {
             Some((tracked_m, best_m, since)) if (tracked_m - goal_m).norm() <= GOAL_RADIUS_M => {
-                (tracked_m, best_m, since)
+                (tracked_m, best_m.max(route_m), since)
             }
             _ => (goal_m, route_m, now),
         };
@@ -400,8 +404,9 @@ impl Guide {
     /// Adds the time since the last call (at most 2 s, so a pause does not count) to
     /// every remembered frontier within [`GuidanceConfig::give_up_radius_m`] of
     /// `robot_m` or of the frontier it is `looking_at` from a viewpoint (the robot
-    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away), while
-    /// `counting` (the robot has looked around); a frontier
+    /// attends to it from up to [`GuidanceConfig::viewpoint_range_m`] away) — before
+    /// the robot has looked around (`looked_around` false), only to those above or below
+    /// its camera's view from `robot_m`, which turning cannot show; a frontier
     /// watched for [`GuidanceConfig::give_up_after_s`] in all is given up. The count
     /// survives a frontier's flicker (the window's frontier mask drops and restores
     /// cells at a surface's edge as rays accumulate); cells the memory forgets are
@@ -410,7 +415,7 @@ impl Guide {
         &mut self,
         robot_m: &Point3<f64>,
         looking_at: Option<Point3<f64>>,
-        counting: bool,
+        looked_around: bool,
         now: Time,
     ) {
         let dt_s = self.last_field.map_or(0.0, |last| {
@@ -436,9 +441,7 @@ impl Guide {
             }
             keep
         });
-        if !counting {
-            return;
-        }
+        let camera = self.camera;
         let mut watched_out = Vec::new();
         for f in memory.frontiers() {
             let near =
@@ -446,6 +449,12 @@ impl Guide {
             if !(near(robot_m) || looking_at.as_ref().is_some_and(near))
                 || self.given_up.contains_key(&f)
             {
+                continue;
+            }
+            // Before the look around, only what turning here cannot show counts: cells
+            // above or below the camera's view from where the robot is.
+            let hidden = || camera.is_some_and(|c| !c.reaches(robot_m, &memory.centre(f)));
+            if !looked_around && !hidden() {
                 continue;
             }
             let watched_s = self.watched_s.entry(f).or_insert(0.0);

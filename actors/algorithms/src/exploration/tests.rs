@@ -189,12 +189,13 @@ fn with_quick_end_frontiers_where_a_peer_looked_keep_no_mission_going() {
 fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed() {
     // The peer has seen the tunnel up to x = 6 m; this robot has seen nothing yet.
     let snapshot = tunnel_seen_to_6_m();
-    let sharing = GuidanceConfig {
-        share_memory: true,
-        ..GuidanceConfig::default()
-    };
+    let sharing = GuidanceConfig::default();
+    assert!(sharing.share_memory, "on by default");
     // Without sharing no change is kept.
-    let mut alone = Guide::new(GuidanceConfig::default());
+    let mut alone = Guide::new(GuidanceConfig {
+        share_memory: false,
+        ..sharing
+    });
     alone.observe_snapshot(&snapshot, 0.67);
     assert!(alone.take_memory_changes().is_empty());
     let mut peer = Guide::new(sharing);
@@ -635,9 +636,13 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
 }
 
 /// A guide whose memory holds the tunnel of the dead-end test seen from `near`
-/// (x = 2 m; seen from x = 0 on, the frontier at x ≈ 0), and its `give_up_after_s`.
+/// (x = 2 m; seen from x = 0 on, the frontier at x ≈ 0), and its `give_up_after_s`
+/// (the rule alone: no progress timeout).
 fn beside_dead_end() -> (Guide, Point3<f64>, f64) {
-    let config = GuidanceConfig::default();
+    let config = GuidanceConfig {
+        give_up_without_progress_s: None,
+        ..GuidanceConfig::default()
+    };
     let limit_s = config.give_up_after_s.expect("on by default");
     let mut guide = Guide::new(config);
     let near = Point3::new(2.0, 0.0, 0.0);
@@ -881,6 +886,52 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
         }
     }
     assert_eq!(when, Some(6));
+    // Near it once (x = 3), then 5 s flying away (views elsewhere pay), then back at
+    // 1 m/s: the route shortens again from where the robot turned back, so that is
+    // progress, though the robot is not yet as near as it once was.
+    let mut guide = fresh();
+    let path = (0..=5).map(|s| 3.0 + 2.0 * f64::from(s)); // x = 3 … 13
+    let path = path.chain((1..=8).map(|s| 13.0 - f64::from(s))); // back to x = 5
+    for (s, x) in path.enumerate() {
+        let here = Point3::new(x, 0.0, 0.0);
+        guide.field((RobotId(0), &here, 0.0), second(s as f64));
+    }
+    assert!(guide.given_up().is_empty(), "{:?}", guide.given_up());
+}
+
+#[test]
+fn before_the_look_around_only_frontiers_the_camera_cannot_see_from_here_are_given_up() {
+    // A corridor of passable cells along x at z = 0 with two frontiers beside the
+    // start cell: one straight below it (outside the camera's ±29.6°, whichever way
+    // the robot turns) and one level with it 2 m ahead (in view once it turns there).
+    let cells: Vec<(CellKey, CellRecord)> = (-3..=8)
+        .map(|x| ([x, 0, 0], PASSABLE_CELL))
+        .chain([([0, 0, -1], FRONTIER_CELL), ([2, 1, 0], FRONTIER_CELL)])
+        .collect();
+    let config = GuidanceConfig {
+        give_up_without_progress_s: None,
+        ..GuidanceConfig::default()
+    };
+    let limit_s = config.give_up_after_s.expect("on by default");
+    let mut guide = Guide::new(config).seeing_with(&crate::planner::scenes::forward_camera());
+    guide.observe_peer_memory(cells, None);
+    // Hovering at the start facing one way (it has not looked around).
+    let start = Point3::new(0.5, 0.5, 0.5);
+    for s in 0..=(2 * limit_s as u32) {
+        guide.field((RobotId(0), &start, 0.0), second(f64::from(s)));
+    }
+    let given_up: Vec<CellKey> = guide.given_up().keys().copied().collect();
+    assert_eq!(given_up, vec![[0, 0, -1]]);
+    // Without a camera the guide cannot tell them apart: nothing is given up.
+    let mut blind = Guide::new(config);
+    blind.observe_peer_memory(
+        vec![([0, 0, 0], PASSABLE_CELL), ([0, 0, -1], FRONTIER_CELL)],
+        None,
+    );
+    for s in 0..=(2 * limit_s as u32) {
+        blind.field((RobotId(0), &start, 0.0), second(f64::from(s)));
+    }
+    assert!(blind.given_up().is_empty());
 }
 
 #[test]
