@@ -973,6 +973,65 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     assert!(!nowhere.distance_m(&Point3::new(20.0, 0.0, 0.0)).is_finite());
 }
 
+/// A route home straight along +x to `home_x`, blind to height (as the memory's
+/// 1 m cells are within a cell): the field a return reads.
+#[derive(Debug)]
+struct AlongX {
+    home_x: f64,
+}
+
+impl crate::planner::problem::FrontierField for AlongX {
+    fn pose_distance_m(&self, p: &Point3<f64>, _yaw_rad: f64) -> f64 {
+        (self.home_x - p.x).max(0.0)
+    }
+}
+
+#[test]
+fn a_return_stuck_above_a_low_passage_descends_into_it_and_flies_on() {
+    // A tall room (x < 0) whose only way on is a low passage along x (z from -3 to
+    // -1 m), home 15 m along it; the robot hovers in the room above the passage's
+    // roof. No single primitive gets nearer home: forward ones meet the wall above
+    // the passage, and descending (0.3 m/s) gets no nearer by the field.
+    let world = tunnels(
+        vec![
+            ([-6.0, -3.0, -3.0], [0.0, 3.0, 3.0]),
+            ([-6.0, -1.5, -3.0], [20.0, 1.5, -1.0]),
+        ],
+        |_| true,
+    );
+    let home = AlongX { home_x: 15.0 };
+    let config = RoundConfig::default();
+    let camera = forward_camera();
+    let fly = |escape: bool| {
+        let mut state = FlatState::at_rest(Vector3::new(-1.0, 0.0, -0.3), 0.0);
+        let mut escapes = 0;
+        for _ in 0..40 {
+            let here = Point3::from(state.position_m());
+            let snapshot = window(here, [16.0, 16.0, 8.0], &world);
+            let problem = PlanningProblem::new(&config, &snapshot, &camera).homing(&home);
+            let candidates = problem.children(&state);
+            let out = escape.then(|| problem.route_escape(&candidates)).flatten();
+            escapes += usize::from(out.is_some());
+            let Some(best) = out.map(|i| &candidates[i]).or_else(|| greedy(&candidates)) else {
+                break;
+            };
+            state = best
+                .primitive
+                .state_at(config.planning_period_s.min(best.primitive.duration_s()));
+            assert!(world(&Point3::from(state.position_m())) == CellState::Free);
+        }
+        (state.position_m().x, escapes)
+    };
+    let (stuck_x, _) = fly(false);
+    assert!(
+        stuck_x < 0.0,
+        "without the escape: stuck in the room at x = {stuck_x}"
+    );
+    let (x, escapes) = fly(true);
+    assert!(escapes > 0);
+    assert!(x > 14.0, "with the escape: {x} m along the passage");
+}
+
 #[test]
 fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
     // Two ends of a flight, passable where the body was, nothing known between them

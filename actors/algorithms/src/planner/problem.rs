@@ -26,6 +26,16 @@ pub trait FrontierField: Sync + std::fmt::Debug {
     fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64;
 }
 
+/// A round in which no candidate gets this much nearer along its route field is
+/// stuck ([`PlanningProblem::route_escape`]), metres.
+pub const STUCK_GAIN_M: f64 = 0.05;
+/// The least an escape from a stuck round must get nearer along its route field
+/// ([`PlanningProblem::route_escape`]), metres.
+pub const ESCAPE_GAIN_M: f64 = 0.25;
+/// How many times an escape from a stuck round may repeat its first action
+/// before its last, best step ([`PlanningProblem::route_escape`]).
+pub const ESCAPE_REPEATS: usize = 4;
+
 /// One round's problem: the round's settings, the grid snapshot and the camera, with
 /// the library's actions enumerated once.
 #[derive(Debug)]
@@ -108,6 +118,53 @@ impl<'a> PlanningProblem<'a> {
     #[must_use]
     pub fn is_guided(&self) -> bool {
         self.guidance.is_some()
+    }
+
+    /// A way out of a local minimum of the route field ([`Self::guided`] or
+    /// [`Self::homing`]): when no candidate gets [`STUCK_GAIN_M`] nearer along it
+    /// (the route leads on through a passage no single primitive can enter from
+    /// here, one the robot must first descend, climb, turn or sidestep into; the
+    /// vertical primitives are slow, 0.3 m/s in Table 4.2), the candidate whose
+    /// action, flown up to [`ESCAPE_REPEATS`] times and followed by the best child
+    /// of where that leaves the robot, gets the most nearer, if that is at least
+    /// [`ESCAPE_GAIN_M`] (ties: the first in library order). `None` otherwise, and
+    /// for a problem without a field: the round's own choice stands. Costs up to
+    /// [`ESCAPE_REPEATS`] × [`Self::children`] per candidate, only in the rounds
+    /// that need it.
+    #[must_use]
+    pub fn route_escape(&self, candidates: &[Candidate]) -> Option<usize> {
+        if self.guidance.is_none() || candidates.iter().any(|c| c.frontier_gain_m >= STUCK_GAIN_M) {
+            return None;
+        }
+        let escape_gain_m = |first: &Candidate| {
+            let (mut best_m, mut so_far_m) = (f64::NEG_INFINITY, 0.0);
+            let mut step = Some(first.clone());
+            for _ in 0..ESCAPE_REPEATS {
+                let Some(c) = step.take() else { break };
+                so_far_m += c.frontier_gain_m;
+                let Some(state) = self.continuation(&c) else {
+                    best_m = best_m.max(so_far_m);
+                    break;
+                };
+                let next = self.children(&state);
+                let next_m = next.iter().map(|n| n.frontier_gain_m).fold(0.0, f64::max);
+                best_m = best_m.max(so_far_m + next_m);
+                step = next
+                    .into_iter()
+                    .find(|n| n.action_index == first.action_index);
+            }
+            best_m
+        };
+        candidates
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (i, escape_gain_m(c)))
+            .fold(None, |best: Option<(usize, f64)>, (i, gain_m)| match best {
+                Some((_, b)) if b >= gain_m => best,
+                _ => Some((i, gain_m)),
+            })
+            .filter(|&(_, gain_m)| gain_m >= ESCAPE_GAIN_M)
+            .map(|(i, _)| i)
     }
 
     /// `candidates` (children of `from`, scored by any problem on the same snapshot)

@@ -573,9 +573,20 @@ impl<S: ActionSelection> PlannerActor<S> {
             _ => Vec::new(),
         };
         let guided = problem.is_guided();
-        let choice = self
-            .selection
-            .select_in(&problem, &root, &candidates, ctx.rng());
+        // A round stuck at a local minimum of its route (home, or with
+        // `escape_local_minima` to a frontier) takes the way out; otherwise the round's
+        // selection chooses.
+        let escape = (phase == MissionPhase::Returning
+            || (guided && self.config.guidance.escape_local_minima))
+            .then(|| problem.route_escape(&candidates))
+            .flatten();
+        if let Some(i) = escape {
+            tracing::debug!(robot = ctx.robot_name(), time = %now, action = ?candidates[i].primitive.action(), "no primitive gets nearer along the route; escaping");
+        }
+        let choice = escape.or_else(|| {
+            self.selection
+                .select_in(&problem, &root, &candidates, ctx.rng())
+        });
         self.log_round(ctx, &root, &candidates, choice, guided, field.as_ref());
         let report = PlanningReport {
             stamp: now,
