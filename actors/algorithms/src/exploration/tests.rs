@@ -973,8 +973,8 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     assert!(!nowhere.distance_m(&Point3::new(20.0, 0.0, 0.0)).is_finite());
 }
 
-/// A route home straight along +x to `home_x`, blind to height (as the memory's
-/// 1 m cells are within a cell): the field a return reads.
+/// A route home straight along +x to `home_x`, blind to height as the memory's route
+/// is within its 1 m cells.
 #[derive(Debug)]
 struct AlongX {
     home_x: f64,

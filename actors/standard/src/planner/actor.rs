@@ -581,7 +581,12 @@ impl<S: ActionSelection> PlannerActor<S> {
             .then(|| problem.route_escape(&candidates))
             .flatten();
         if let Some(i) = escape {
-            tracing::debug!(robot = ctx.robot_name(), time = %now, action = ?candidates[i].primitive.action(), "no primitive gets nearer along the route; escaping");
+            tracing::debug!(
+                robot = ctx.robot_name(),
+                time = %now,
+                action = ?candidates[i].primitive.action(),
+                "no primitive gets nearer along the route; escaping"
+            );
         }
         let choice = escape.or_else(|| {
             self.selection
