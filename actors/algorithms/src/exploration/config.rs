@@ -75,16 +75,6 @@ pub struct GuidanceConfig {
     /// the route's local minimum (seed 4 at 700 s with `share_memory`: 460 s in one
     /// place); 10 s by default.
     pub give_up_without_progress_s: Option<f64>,
-    /// In a guided round where no primitive gets 5 cm nearer along the route, fly the
-    /// action that, repeated up to four times and followed by the best next primitive,
-    /// gets the most nearer (at least 0.25 m) instead of the round's own choice
-    /// ([`PlanningProblem::route_escape`](crate::planner::problem::PlanningProblem::route_escape)):
-    /// the way into a passage the robot must first descend or turn into, where the
-    /// route's 1 m cells are blind to height. A return home always does this. Off by
-    /// default: at 120 s it cut the runs with over 30 s unproductive (17 → 10 of 40;
-    /// 14 → 3 on other caves), but at 700 s two of ten teams ended their missions
-    /// early (seed 4 at 61 %) (docs/exploration.md).
-    pub escape_local_minima: bool,
     /// A given-up frontier is looked for again this long after it was given up,
     /// seconds; `None`: never. Time near a frontier counts on every pass, so a real
     /// opening beside a junction the robots cross again and again can be given up
@@ -145,7 +135,6 @@ impl Default for GuidanceConfig {
             look_ahead_m: 1.0,
             give_up_after_s: Some(4.0),
             give_up_without_progress_s: Some(10.0),
-            escape_local_minima: false,
             give_up_radius_m: 3.0,
             retry_given_up_after_s: Some(100.0),
             share_memory: true,

@@ -573,11 +573,9 @@ impl<S: ActionSelection> PlannerActor<S> {
             _ => Vec::new(),
         };
         let guided = problem.is_guided();
-        // A round stuck at a local minimum of its route (home, or with
-        // `escape_local_minima` to a frontier) takes the way out; otherwise the round's
-        // selection chooses.
-        let escape = (phase == MissionPhase::Returning
-            || (guided && self.config.guidance.escape_local_minima))
+        // A return stuck at a local minimum of its route home takes the way out;
+        // otherwise the round's selection chooses.
+        let escape = (phase == MissionPhase::Returning)
             .then(|| problem.route_escape(&candidates))
             .flatten();
         if let Some(i) = escape {
