@@ -537,10 +537,13 @@ pub fn init_logging_with(default_filter: &str) {
 }
 
 /// A binary's exit code: success, or the error with its causes on one line of
-/// standard error (`<prefix>: what: why: …`) and failure.
+/// standard error (`<prefix>: what: why: …`) and failure. An error caused by a closed
+/// pipe (`troupe sweep --dry-run | head`) is success, silently: the reader has all it
+/// wanted.
 pub fn exit_code(prefix: &str, result: Result<(), &(dyn std::error::Error + 'static)>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if closed_pipe(e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("{prefix}: {}", ErrorChain(e));
             ExitCode::FAILURE
@@ -548,9 +551,29 @@ pub fn exit_code(prefix: &str, result: Result<(), &(dyn std::error::Error + 'sta
     }
 }
 
+/// Whether `e` or one of its causes is an I/O error of a closed pipe.
+fn closed_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
+    std::iter::successors(Some(e), |e| e.source()).any(|e| {
+        e.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_closed_pipe_is_success_and_other_errors_fail() {
+        let pipe = std::io::Error::from(std::io::ErrorKind::BrokenPipe);
+        assert_eq!(exit_code("t", Err(&pipe)), ExitCode::SUCCESS);
+        #[derive(Debug, thiserror::Error)]
+        #[error("writing the list")]
+        struct Writing(#[source] std::io::Error);
+        assert_eq!(exit_code("t", Err(&Writing(pipe))), ExitCode::SUCCESS);
+        let other = std::io::Error::from(std::io::ErrorKind::NotFound);
+        assert_eq!(exit_code("t", Err(&other)), ExitCode::FAILURE);
+    }
 
     #[test]
     fn a_trajectory_reads_back_as_written() {

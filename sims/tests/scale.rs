@@ -88,6 +88,25 @@ fn assert_same_tables(whole: &Path, merged: &Path) {
 }
 
 #[test]
+fn a_dry_run_into_a_closed_pipe_ends_quietly_and_successfully() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_study(dir.path(), 3.0);
+    // `troupe sweep study.toml --dry-run | head -0`: the reader is gone before the list.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(TROUPE)
+        .args(["sweep", "study.toml", "--dry-run"])
+        .current_dir(dir.path())
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
 fn a_study_split_in_three_shards_and_merged_equals_the_study_run_whole() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

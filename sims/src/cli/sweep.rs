@@ -1,6 +1,7 @@
 //! `troupe sweep STUDY`: every run of a study, in parallel, and the study's tables;
 //! across machines with `--shard K/N`, collected with `--merge`.
 
+use std::io::Write as _;
 use std::path::PathBuf;
 
 use crate::report::write_run;
@@ -57,8 +58,9 @@ pub(crate) fn run(args: SweepArgs) -> anyhow::Result<()> {
         None => all,
     };
     if args.dry_run {
+        let mut out = std::io::stdout().lock();
         for v in &variants {
-            println!("{}", v.name);
+            writeln!(out, "{}", v.name)?;
         }
         return Ok(());
     }
