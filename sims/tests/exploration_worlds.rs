@@ -178,9 +178,8 @@ fn short_dead_end(dir: &Path) -> PathBuf {
 
 /// Issue 43's mission that ends: once nothing is left to explore, each robot flies home
 /// along its memory's route and holds there, and the reports say when and how far. The
-/// robots start in a line at the closed end: the one whose home is nearer the opening
-/// may hold there first and block the other's way, which then holds where its return
-/// stalled.
+/// robots start in a line at the closed end and share their homes: the first back takes
+/// the deepest start, so neither holds on the other's way and both are home.
 #[test]
 fn a_team_that_has_explored_everything_flies_home_and_holds() {
     const FLOWN_S: f64 = 100.0;
@@ -198,10 +197,32 @@ fn a_team_that_has_explored_everything_flies_home_and_holds() {
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     let number = |row: &[&str], name: &str| row[column(name)].parse::<f64>().unwrap();
 
+    let robots = summary["per_robot"].as_array().unwrap();
+    let starts: Vec<[f64; 3]> = (0..robots.len())
+        .map(|i| {
+            let first = rows
+                .iter()
+                .find(|row| row[column("robot")] == i.to_string())
+                .unwrap();
+            [
+                number(first, "x_m"),
+                number(first, "y_m"),
+                number(first, "z_m"),
+            ]
+        })
+        .collect();
+    let distance = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
     let mut ended = Vec::new();
     let mut home = Vec::new();
     let mut gaps = Vec::new();
-    for (i, r) in summary["per_robot"].as_array().unwrap().iter().enumerate() {
+    let mut taken = Vec::new();
+    for (i, r) in robots.iter().enumerate() {
         assert_eq!(r["unsafe_plans"], 0, "{}", r["name"]);
         let m = &r["mission"];
         assert_eq!(m["phase"], "home", "{}: {m}", r["name"]);
@@ -214,7 +235,7 @@ fn a_team_that_has_explored_everything_flies_home_and_holds() {
         assert!(m["return_distance_m"].as_f64().unwrap() > 0.0, "{m}");
         ended.push(ended_s);
         home.push(home_s);
-        // Home is where the robot began, and it holds there.
+        // Home is where one of the team began, and the robot holds there.
         let own: Vec<&Vec<&str>> = rows
             .iter()
             .filter(|row| row[column("robot")] == i.to_string())
@@ -225,24 +246,14 @@ fn a_team_that_has_explored_everything_flies_home_and_holds() {
             .iter()
             .map(|v| v.as_f64().unwrap())
             .collect();
-        let first = own.first().unwrap();
-        let start = [
-            number(first, "x_m"),
-            number(first, "y_m"),
-            number(first, "z_m"),
-        ];
-        let gap = |p: [f64; 3]| {
-            p.iter()
-                .zip(&home_m)
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        };
+        let gap = |p: [f64; 3]| distance(&p, &home_m);
+        let start = starts.iter().position(|s| gap(*s) < 0.2);
         assert!(
-            gap(start) < 0.2,
-            "{}: home {home_m:?}, start {start:?}",
+            start.is_some(),
+            "{}: home {home_m:?}, starts {starts:?}",
             r["name"]
         );
+        taken.push(start);
         let home_gap_m = m["home_gap_m"].as_f64().unwrap();
         gaps.push(home_gap_m);
         for row in own
@@ -274,9 +285,11 @@ fn a_team_that_has_explored_everything_flies_home_and_holds() {
             r["name"]
         );
     }
-    // At least one robot is home itself; the other holds near it.
-    assert!(gaps.iter().any(|g| *g <= 1.0), "{gaps:?}");
-    assert!(gaps.iter().all(|g| *g < 5.0), "{gaps:?}");
+    // Every robot is home, each at a start of its own.
+    assert!(gaps.iter().all(|g| *g <= 1.0), "{gaps:?}");
+    taken.sort();
+    taken.dedup();
+    assert_eq!(taken.len(), robots.len(), "{taken:?}");
     let team = &summary["mission"];
     let latest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     assert_eq!(team["complete_s"].as_f64(), Some(latest(&ended)));

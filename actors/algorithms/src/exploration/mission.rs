@@ -72,6 +72,14 @@ pub struct MissionConfig {
     /// home in a narrow tunnel, or a route the robot cannot fly, would otherwise keep
     /// it trying for ever, seconds.
     pub stalled_after_s: f64,
+    /// Homes are the team's: a returning robot flies to the deepest home no peer holds
+    /// at (the one with the longest route from where its return began: its own start
+    /// or a peer's, [`Mission::rank_homes`]), so the first robot back fills the place
+    /// farthest in and none holds on another's way home. `false`: each robot flies to
+    /// its own home (robots that start in a line in a narrow tunnel then come home in
+    /// any order, and one holding at its home can block the way of one whose home lies
+    /// behind it).
+    pub share_homes: bool,
 }
 
 impl Default for MissionConfig {
@@ -82,6 +90,7 @@ impl Default for MissionConfig {
             home_m: None,
             home_radius_m: 1.0,
             stalled_after_s: 15.0,
+            share_homes: true,
         }
     }
 }
@@ -126,7 +135,9 @@ pub struct MissionStatus {
     /// How far from home the robot holds, metres (above `home_radius_m` when its return
     /// stalled; `None` before it holds).
     pub home_gap_m: Option<f64>,
-    /// Home, world frame, metres (`None` before the first round).
+    /// Home, world frame, metres (`None` before the first round): its own until its
+    /// return chooses one of the team's ([`MissionConfig::share_homes`]), so the first
+    /// status a peer gets gives the robot's own.
     pub home_m: Option<[f64; 3]>,
 }
 
@@ -137,7 +148,14 @@ impl Message for MissionStatus {}
 pub struct Mission {
     config: MissionConfig,
     phase: MissionPhase,
+    /// Where the robot flies home to: its own home, or while returning with
+    /// [`MissionConfig::share_homes`] the team's home it chose.
     home_m: Option<Point3<f64>>,
+    /// Its own home (the configured one, or its start).
+    own_home_m: Option<Point3<f64>>,
+    /// The team's homes ranked for this return, deepest first
+    /// ([`Self::rank_homes`]); empty before.
+    home_order: Vec<Point3<f64>>,
     /// A frontier was left at some round: exploring may end only after one was.
     had_work: bool,
     /// Since when no frontier has been left.
@@ -157,6 +175,14 @@ pub struct Mission {
 /// How much shorter the route home must get to count as progress, metres.
 const RETURN_PROGRESS_M: f64 = 0.5;
 
+/// Homes this close are the same place (a peer's home moved into this robot's
+/// frame carries rounding), metres.
+const SAME_HOME_M: f64 = 1e-3;
+
+fn same_place(a: &Point3<f64>, b: &Point3<f64>) -> bool {
+    (a - b).norm() <= SAME_HOME_M
+}
+
 impl Mission {
     /// A mission that has not begun: home is fixed at the first [`Self::update`].
     #[must_use]
@@ -165,6 +191,8 @@ impl Mission {
             config,
             phase: MissionPhase::Exploring,
             home_m: config.home_m.map(Point3::from),
+            own_home_m: config.home_m.map(Point3::from),
+            home_order: Vec::new(),
             had_work: false,
             idle_since: None,
             idle: false,
@@ -183,10 +211,67 @@ impl Mission {
         self.phase
     }
 
-    /// Home (`None` before the first update when the config gives none).
+    /// Where the robot flies home to (`None` before the first update when the config
+    /// gives none).
     #[must_use]
     pub fn home_m(&self) -> Option<Point3<f64>> {
         self.home_m
+    }
+
+    /// Its own home: the configured one, or its start (`None` before the first update
+    /// when the config gives none).
+    #[must_use]
+    pub fn own_home_m(&self) -> Option<Point3<f64>> {
+        self.own_home_m
+    }
+
+    /// Whether the return needs the team's homes ranked: returning with
+    /// [`MissionConfig::share_homes`] and not yet [`Self::rank_homes`]ed.
+    #[must_use]
+    pub fn wants_home_ranking(&self) -> bool {
+        self.config.share_homes
+            && self.phase == MissionPhase::Returning
+            && self.home_order.is_empty()
+    }
+
+    /// Ranks the team's homes (`homes`: each with its route length from where the
+    /// robot is as its return begins, ∞ without a known route) deepest first: by
+    /// route length, longest first, ties in the order given. Homes without a route are
+    /// left out; its own home is always a choice (last, when it has no route).
+    pub fn rank_homes(&mut self, homes: &[(Point3<f64>, f64)]) {
+        let mut ranked: Vec<(Point3<f64>, f64)> = homes
+            .iter()
+            .copied()
+            .filter(|(_, route_m)| route_m.is_finite())
+            .collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+        self.home_order = ranked.into_iter().map(|(home, _)| home).collect();
+        if let Some(own) = self.own_home_m
+            && !self.home_order.iter().any(|h| same_place(h, &own))
+        {
+            self.home_order.push(own);
+        }
+    }
+
+    /// Flies to the first of the ranked homes ([`Self::rank_homes`]) that is not in
+    /// `occupied` (where peers hold, home), or to its own home when all are. Returns
+    /// whether where it flies to changed (its return's progress then starts afresh).
+    pub fn choose_home(&mut self, occupied: &[Point3<f64>]) -> bool {
+        if self.phase != MissionPhase::Returning {
+            return false;
+        }
+        let free = self
+            .home_order
+            .iter()
+            .find(|h| !occupied.iter().any(|o| same_place(h, o)))
+            .copied()
+            .or(self.own_home_m);
+        if free.is_none() || free == self.home_m {
+            return false;
+        }
+        self.home_m = free;
+        self.return_progress = None;
+        true
     }
 
     /// One planning round with the robot at `position_m` (non-finite positions are
@@ -206,6 +291,7 @@ impl Mission {
             return self.phase;
         }
         let home_m = *self.home_m.get_or_insert(*position_m);
+        self.own_home_m.get_or_insert(home_m);
         if self.phase == MissionPhase::Returning
             && let Some(last) = self.last_position_m
         {
@@ -361,6 +447,49 @@ mod tests {
         assert_eq!(status.home_m, Some([1.0, 2.0, 0.5]));
         // 10 m to halfway, 9.1 m to home; what is flown after home is not the return's.
         assert!((status.return_distance_m - 19.1).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_return_flies_to_the_deepest_home_no_peer_holds_at() {
+        // Robot 1 of a line in a tunnel: robot 0's start, 1.6 m farther in, is deeper.
+        let own = Point3::new(2.6, 0.0, 0.0);
+        let deeper = Point3::new(1.0, 0.0, 0.0);
+        let unreachable = Point3::new(-9.0, 0.0, 0.0);
+        let mut m = Mission::new(MissionConfig::default());
+        m.update(at(0.0), &own, true, true);
+        m.update(at(10.0), &Point3::new(30.0, 0.0, 0.0), true, true);
+        assert!(!m.wants_home_ranking(), "not while exploring");
+        m.command_return(at(20.0));
+        assert!(m.wants_home_ranking());
+        m.rank_homes(&[(own, 27.4), (unreachable, f64::INFINITY), (deeper, 29.0)]);
+        assert!(!m.wants_home_ranking());
+        assert!(m.choose_home(&[]));
+        assert_eq!(m.home_m(), Some(deeper));
+        assert_eq!(m.status().home_m, Some([1.0, 0.0, 0.0]));
+        // A peer holds there now: the next deepest, its own; no change after.
+        assert!(m.choose_home(&[deeper]));
+        assert_eq!(m.home_m(), Some(own));
+        assert!(!m.choose_home(&[deeper]));
+        // Every home held: its own (the home without a route was never a choice).
+        assert!(!m.choose_home(&[deeper, own]));
+        assert_eq!(m.home_m(), Some(own));
+        assert_eq!(
+            m.update(at(60.0), &Point3::new(2.9, 0.0, 0.0), false, true),
+            MissionPhase::Home
+        );
+        assert_eq!(m.own_home_m(), Some(own));
+
+        // Not shared: its own home, whatever is ranked.
+        let config = MissionConfig {
+            share_homes: false,
+            ..MissionConfig::default()
+        };
+        let mut m = Mission::new(config);
+        m.update(at(0.0), &own, true, true);
+        m.command_return(at(1.0));
+        assert!(!m.wants_home_ranking());
+        assert!(!m.choose_home(&[]));
+        assert_eq!(m.home_m(), Some(own));
     }
 
     #[test]

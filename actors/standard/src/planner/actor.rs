@@ -29,7 +29,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
 
 use super::memory_share::{MEMORY_CELLS, MemoryCells};
@@ -194,10 +194,12 @@ pub struct PlannerActor<S> {
     mission: Mission,
     /// The mission's route home is unknown (warned once per return).
     no_route_home: bool,
-    /// The phase and idleness last published on [`MISSION_STATUS`].
-    published_phase: Option<(MissionPhase, bool)>,
+    /// The phase, idleness and home last published on [`MISSION_STATUS`].
+    published_status: Option<(MissionPhase, bool, Option<[f64; 3]>)>,
     /// The peers' missions as they last reported them.
     peer_missions: BTreeMap<RobotId, MissionStatus>,
+    /// Each peer's own home (the first its missions reported), in this robot's frame.
+    peer_homes: BTreeMap<RobotId, Point3<f64>>,
     /// Where the link publishes the peers' memory cells.
     peer_memory: Topic<Peer<MemoryCells>>,
     /// Where the link publishes the peers' missions.
@@ -239,8 +241,9 @@ impl<S: ActionSelection> PlannerActor<S> {
                 .then(|| Guide::new(config.guidance).seeing_with(&camera)),
             mission: Mission::new(config.mission),
             no_route_home: false,
-            published_phase: None,
+            published_status: None,
             peer_missions: BTreeMap::new(),
+            peer_homes: BTreeMap::new(),
             peer_memory: MEMORY_CELLS.peer_topic(),
             peer_mission: MISSION_STATUS.peer_topic(),
             peer_frames: BTreeMap::new(),
@@ -468,10 +471,14 @@ impl<S: ActionSelection> PlannerActor<S> {
             .values()
             .all(|m| m.idle || m.phase != MissionPhase::Exploring);
         let phase = self.mission.update(now, here, work, peers_done);
+        if phase == MissionPhase::Returning {
+            self.choose_home(ctx, here);
+        }
         let status = self.mission.status();
-        if self.published_phase != Some((phase, status.idle)) {
-            let changed_phase = self.published_phase.map(|(p, _)| p) != Some(phase);
-            self.published_phase = Some((phase, status.idle));
+        let published = (phase, status.idle, status.home_m);
+        if self.published_status != Some(published) {
+            let changed_phase = self.published_status.map(|(p, ..)| p) != Some(phase);
+            self.published_status = Some(published);
             if changed_phase && phase != MissionPhase::Exploring {
                 tracing::info!(
                     robot = ctx.robot_name(),
@@ -491,6 +498,51 @@ impl<S: ActionSelection> PlannerActor<S> {
             ctx.publish(&MISSION_STATUS.topic(), status);
         }
         phase
+    }
+
+    /// While returning with [`MissionConfig::share_homes`]: ranks the team's homes
+    /// once, by their routes over the frontier memory from where the return begins
+    /// ([`Mission::rank_homes`]), then each round flies to the deepest one no peer
+    /// holds at ([`Mission::choose_home`]).
+    fn choose_home(&mut self, ctx: &Context<'_>, here: &Point3<f64>) {
+        let Some(guide) = &self.guide else {
+            return;
+        };
+        if self.mission.wants_home_ranking() {
+            let look_ahead_m = self.config.guidance.look_ahead_m;
+            let homes: Vec<(Point3<f64>, f64)> = self
+                .mission
+                .own_home_m()
+                .into_iter()
+                .chain(self.peer_homes.values().copied())
+                .map(|home| {
+                    let route_m = GuidanceField::towards(guide.memory(), &home, look_ahead_m)
+                        .distance_m(here);
+                    (home, route_m)
+                })
+                .collect();
+            self.mission.rank_homes(&homes);
+        }
+        let occupied: Vec<Point3<f64>> = self
+            .peer_missions
+            .iter()
+            .filter(|(_, m)| m.phase == MissionPhase::Home)
+            .filter_map(|(peer, m)| m.home_m.map(|h| self.peer_point(*peer, h)))
+            .collect();
+        if self.mission.choose_home(&occupied) {
+            tracing::info!(
+                robot = ctx.robot_name(),
+                time = %ctx.now(),
+                home = ?self.mission.home_m().map(|p| [p.x, p.y, p.z]),
+                "mission: flying to the deepest home no peer holds at"
+            );
+        }
+    }
+
+    /// A point a peer reported in its world frame, in this robot's.
+    fn peer_point(&self, peer: RobotId, p: [f64; 3]) -> Point3<f64> {
+        let p = Point3::from(p);
+        self.peer_frames.get(&peer).map_or(p, |frame| frame * p)
     }
 
     /// While returning: the route distance home over the frontier memory
@@ -731,6 +783,14 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 } else if m.get(&MISSION_RETURN).is_some() {
                     self.mission.command_return(ctx.now());
                 } else if let Some(peer) = m.get(&self.peer_mission) {
+                    if let Some(home) = peer
+                        .message
+                        .home_m
+                        .filter(|h| h.iter().all(|v| v.is_finite()))
+                    {
+                        let home = self.peer_point(peer.robot, home);
+                        self.peer_homes.entry(peer.robot).or_insert(home);
+                    }
                     self.peer_missions.insert(peer.robot, peer.message);
                 }
                 // Stored for the next round (the frontier memory's update included):
