@@ -471,7 +471,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             .values()
             .all(|m| m.idle || m.phase != MissionPhase::Exploring);
         let phase = self.mission.update(now, here, work, peers_done);
-        if phase == MissionPhase::Returning {
+        if phase == MissionPhase::Returning && self.config.mission.share_homes {
             self.choose_home(ctx, here);
         }
         let status = self.mission.status();
