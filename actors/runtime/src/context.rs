@@ -154,7 +154,8 @@ impl Context<'_> {
     }
 
     /// Marks this handler call as bookkeeping — it only stored what arrived (the
-    /// latest odometry, a peer's plan) — so that the sim-time executor charges it no
+    /// latest odometry, a peer's plan) or merged it at a cost far below the modelled
+    /// one (a peer's grid change set) — so that the sim-time executor charges it no
     /// compute latency. The modelled latency ([`LatencyModel`](crate::LatencyModel))
     /// stands for the actor's real work (a planning round: thesis Table 4.1); charged
     /// to every stored message, it would keep a planner that hears many peers busy

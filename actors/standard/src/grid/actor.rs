@@ -260,6 +260,12 @@ impl Actor for GridActor {
                         }
                     }
                 } else if let Some(peer) = m.get(&PEER_GRID_CHANGES) {
+                    // Fusing a peer's set is one log-odds addition per cell its frame
+                    // changed, far less work than tracing a depth frame's rays, which
+                    // the modelled latency stands for. Charged that latency, a peer's
+                    // sets at the camera's rate kept this actor busy: it dropped its
+                    // own odometry and frames, and its frontiers vanished.
+                    ctx.bookkeeping_only();
                     let Some(grid) = self.grid.as_mut() else {
                         return Ok(());
                     };
