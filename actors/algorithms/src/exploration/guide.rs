@@ -156,9 +156,23 @@ impl Guide {
 
     /// Folds the robot's own grid snapshot in; `margin_m` is the clearance a robot
     /// centre needs (the planner's [`margin_m`](crate::planner::round::RoundConfig::margin_m)).
-    pub fn observe_snapshot(&mut self, snapshot: &GridSnapshot, margin_m: f64) -> MemoryUpdate {
-        self.memory
-            .observe_window(snapshot, margin_m, self.config.min_frontier_cells)
+    pub fn observe_snapshot(
+        &mut self,
+        snapshot: &GridSnapshot,
+        margin_m: f64,
+        position: Option<&Point3<f64>>,
+    ) -> MemoryUpdate {
+        let retire_within = self
+            .config
+            .retire_radius_m
+            .zip(position)
+            .map(|(r, p)| (*p, r));
+        self.memory.observe_window(
+            snapshot,
+            margin_m,
+            self.config.min_frontier_cells,
+            retire_within,
+        )
     }
 
     /// Folds a peer's keyframe in: its rays retire the frontiers they cross.

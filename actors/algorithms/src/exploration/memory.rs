@@ -88,9 +88,8 @@ pub struct FrontierMemory {
     changed: BTreeSet<CellKey>,
     track_changes: bool,
     /// Cells this robot's body has passed through, joined without gaps
-    /// ([`Self::mark_trail`]): the way it came, passable whatever later windows say of
-    /// them (a window's clearance decides `passable` anew at every look, and may break
-    /// the chain of passable cells behind a robot). At most `max_cells` of them.
+    /// ([`Self::mark_trail`]): the way it came, a way for routes even where no window
+    /// showed a robot centre the clearance it needs. At most `max_cells` of them.
     trail: BTreeSet<CellKey>,
     /// Cells a peer's keyframe rays or change sets showed ([`Self::observe_keyframe`],
     /// [`Self::observe_cells`]), at most `max_cells` of them, when
@@ -241,16 +240,22 @@ impl FrontierMemory {
     /// Folds a grid snapshot into the memory. Every memory cell that lies wholly inside
     /// the window takes the window's view of it (the window holds the robot's own
     /// frames and the peers' keyframes near it, so it is the best knowledge there):
-    /// seen if any fine cell is known, passable if a fine cell keeps `margin_m` from
-    /// unsafe space, a frontier if it holds at least `min_frontier_cells` fine frontier
+    /// seen if any fine cell is known, passable once a window shows a fine cell that
+    /// keeps `margin_m` from unsafe space (a later window does not take that back: one
+    /// rebuilt from keyframe samples has unknown gaps, which count as unsafe, and on
+    /// seed 14 such windows cut the team's route to its last frontier), a frontier if
+    /// it holds at least `min_frontier_cells` fine frontier
     /// cells ([`frontier_mask`](crate::grid::frontier::frontier_mask)) and was never
     /// [`settled`](CellRecord::settled). A remembered frontier the window no longer
-    /// shows is retired. Cells beyond the window keep what the memory knew.
+    /// shows is retired. With `retire_within` (the robot's position and a radius), only
+    /// cells within it are retired or settled: farther ones may become frontiers but
+    /// keep those they are. Cells beyond the window keep what the memory knew.
     pub fn observe_window(
         &mut self,
         snapshot: &GridSnapshot,
         margin_m: f64,
         min_frontier_cells: usize,
+        retire_within: Option<(Point3<f64>, f64)>,
     ) -> MemoryUpdate {
         let grid = &snapshot.grid;
         let geometry = grid.geometry();
@@ -322,11 +327,14 @@ impl FrontierMemory {
                         (rz.0 + z as i64) as i32,
                     ];
                     let old = self.record(key);
-                    let settled = old.settled || (t.free > 0 && t.frontier == 0);
+                    let near =
+                        retire_within.is_none_or(|(p, r)| (self.centre(key) - p).norm() <= r);
+                    let settled = old.settled || (near && t.free > 0 && t.frontier == 0);
+                    let shown = t.frontier as usize >= min_frontier_cells;
                     let record = CellRecord {
-                        seen: t.known > 0 || settled,
-                        passable: t.max_clearance_m >= margin_m,
-                        frontier: !settled && t.frontier as usize >= min_frontier_cells,
+                        seen: t.known > 0 || settled || (!near && old.seen),
+                        passable: old.passable || t.max_clearance_m >= margin_m,
+                        frontier: !settled && (shown || (!near && old.frontier)),
                         settled,
                     };
                     if record == CellRecord::default() {

@@ -134,7 +134,7 @@ fn tunnel_seen_to_6_m() -> GridSnapshot {
 fn memory_retires_a_frontier_a_peers_keyframe_sees() {
     let snapshot = tunnel_seen_to_6_m();
     let mut guide = Guide::new(GuidanceConfig::default());
-    guide.observe_snapshot(&snapshot, 0.67);
+    guide.observe_snapshot(&snapshot, 0.67, None);
     let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
     assert!(!frontiers.is_empty());
     assert!(
@@ -162,13 +162,13 @@ fn with_quick_end_frontiers_where_a_peer_looked_keep_no_mission_going() {
     let here = Point3::new(2.0, 0.0, 0.0);
     let has_work = |config: GuidanceConfig, peer_looked: bool| {
         let mut guide = Guide::new(config);
-        guide.observe_snapshot(&snapshot, 0.67);
+        guide.observe_snapshot(&snapshot, 0.67, None);
         let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
         if peer_looked {
             assert_eq!(guide.observe_peer_keyframe(&ahead).retired, frontiers.len());
             // A window rebuilt over that space (from the peer's keyframes, sparser than
             // the frames that first filled it) shows the frontiers again.
-            guide.observe_snapshot(&snapshot, 0.67);
+            guide.observe_snapshot(&snapshot, 0.67, None);
         }
         let field = guide.field((RobotId(0), &here, 0.0), Time::ZERO);
         // They pull the robot either way.
@@ -196,15 +196,15 @@ fn a_peers_memory_cells_give_its_frontiers_and_the_way_there_and_are_not_echoed(
         share_memory: false,
         ..sharing
     });
-    alone.observe_snapshot(&snapshot, 0.67);
+    alone.observe_snapshot(&snapshot, 0.67, None);
     assert!(alone.take_memory_changes().is_empty());
     let mut peer = Guide::new(sharing);
-    peer.observe_snapshot(&snapshot, 0.67);
+    peer.observe_snapshot(&snapshot, 0.67, None);
     let changes = peer.take_memory_changes();
     assert_eq!(changes.len(), peer.memory().cell_count());
     assert!(peer.take_memory_changes().is_empty(), "each change once");
     // The same view again changes no record, so there is nothing to send.
-    peer.observe_snapshot(&snapshot, 0.67);
+    peer.observe_snapshot(&snapshot, 0.67, None);
     assert!(peer.take_memory_changes().is_empty());
     let mut own = Guide::new(sharing);
     let here = Point3::new(-1.5, 0.0, 0.0);
@@ -279,7 +279,7 @@ fn a_peers_memory_cells_in_its_own_world_frame_land_where_they_are_in_ours() {
 }
 
 #[test]
-fn explored_space_stays_explored_when_a_rebuilt_window_shows_gaps_in_it() {
+fn explored_space_stays_explored_and_passable_when_a_rebuilt_window_shows_gaps_in_it() {
     let tunnel = || vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])];
     // First look: the tunnel known up to x = 8 m.
     let first = window(
@@ -301,19 +301,53 @@ fn explored_space_stays_explored_when_a_rebuilt_window_shows_gaps_in_it() {
     let in_gaps = |k: &CellKey| (1..5).contains(&k[0]);
     let ahead = |k: &CellKey| (7..=8).contains(&k[0]);
 
-    // Seen only sparsely, the gaps are frontiers (so the check below can fail) ...
+    // Seen only sparsely, the gaps are frontiers, and their unknown cells leave no
+    // robot centre the clearance it needs there (so the checks below can fail) ...
     let mut fresh = Guide::new(GuidanceConfig::default());
-    fresh.observe_snapshot(&rebuilt, 0.67);
+    fresh.observe_snapshot(&rebuilt, 0.67, None);
     assert!(fresh.memory().frontiers().any(|k| in_gaps(&k)));
+    assert!(!fresh.memory().passable().any(|k| in_gaps(&k)));
     // ... but not where the memory already saw everything; the open end stays one.
     let mut guide = Guide::new(GuidanceConfig::default());
-    guide.observe_snapshot(&first, 0.67);
+    guide.observe_snapshot(&first, 0.67, None);
     assert!(!guide.memory().frontiers().any(|k| in_gaps(&k)));
-    guide.observe_snapshot(&rebuilt, 0.67);
+    let passable: Vec<CellKey> = guide.memory().passable().filter(in_gaps).collect();
+    assert!(!passable.is_empty());
+    guide.observe_snapshot(&rebuilt, 0.67, None);
     let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
     assert!(!frontiers.iter().any(in_gaps), "{frontiers:?}");
     assert!(frontiers.iter().any(ahead), "{frontiers:?}");
     assert!(guide.memory().record([2, 0, 0]).settled);
+    // The route through the flown tunnel stays open: a window rebuilt with gaps
+    // does not take passable cells back (on seed 14 such windows cut the way to the
+    // team's last frontier, and its mission ended at 97 s with 25.6 % seen).
+    assert!(passable.iter().all(|k| guide.memory().record(*k).passable));
+}
+
+#[test]
+fn a_window_retires_remembered_frontiers_only_near_the_robot() {
+    let tunnel = || vec![([-3.0, -2.0, -1.0], [30.0, 2.0, 1.0])];
+    let window_m = [20.0, 20.0, 4.0];
+    let first = window(Point3::origin(), window_m, tunnels(tunnel(), |p| p.x < 8.0));
+    // The same window rebuilt from samples that missed everything beyond x = 5 m.
+    let thin = window(Point3::origin(), window_m, tunnels(tunnel(), |p| p.x < 5.0));
+    let opening = |k: &CellKey| (7..=8).contains(&k[0]);
+    // The opening is 9.5 m from a robot at x = -2 m, beyond the 6 m within which a
+    // window retires frontiers; 3.5 m from one at x = 4 m.
+    assert_eq!(GuidanceConfig::default().retire_radius_m, Some(6.0));
+    for (robot_x, kept) in [(-2.0, true), (4.0, false)] {
+        let robot = Point3::new(robot_x, 0.0, 0.0);
+        let mut guide = Guide::new(GuidanceConfig::default());
+        guide.observe_snapshot(&first, 0.67, Some(&robot));
+        assert!(guide.memory().frontiers().any(|k| opening(&k)));
+        guide.observe_snapshot(&thin, 0.67, Some(&robot));
+        let frontiers: Vec<CellKey> = guide.memory().frontiers().collect();
+        assert_eq!(
+            frontiers.iter().any(opening),
+            kept,
+            "{robot_x}: {frontiers:?}"
+        );
+    }
 }
 
 #[test]
@@ -322,7 +356,7 @@ fn memory_retires_a_frontier_a_peers_change_set_sees() {
     // rays updated.
     let snapshot = tunnel_seen_to_6_m();
     let mut guide = Guide::new(GuidanceConfig::default());
-    guide.observe_snapshot(&snapshot, 0.67);
+    guide.observe_snapshot(&snapshot, 0.67, None);
     let frontiers = guide.memory().frontiers().count();
     assert!(frontiers > 0);
     let cells = |x: std::ops::Range<i32>| {
@@ -362,7 +396,7 @@ fn memory_retires_a_frontier_a_peers_change_set_sees() {
 fn a_full_memory_keeps_its_bound_and_counts_what_it_drops() {
     let snapshot = tunnel_seen_to_6_m();
     let mut memory = FrontierMemory::new(1.0, 50);
-    let update = memory.observe_window(&snapshot, 0.67, 4);
+    let update = memory.observe_window(&snapshot, 0.67, 4, None);
     assert_eq!(memory.cell_count(), 50);
     assert!(update.dropped > 0);
     assert_eq!(memory.dropped_cells(), update.dropped as u64);
@@ -399,7 +433,7 @@ fn fly(
         let snapshot = window(here, [20.0, 20.0, 4.0], world);
         let margin_m = config.margin_m(snapshot.resolution_m());
         let field = guide.as_mut().map(|g| {
-            g.observe_snapshot(&snapshot, margin_m);
+            g.observe_snapshot(&snapshot, margin_m, None);
             g.field((RobotId(0), &here, 0.0), now)
         });
         let mut problem = PlanningProblem::new(&config, &snapshot, &camera);
@@ -460,7 +494,7 @@ fn guidance_leaves_a_dead_end_window_and_reaches_a_remembered_frontier() {
     if let Some(g) = guide.as_mut() {
         for x in [4.0, 14.0, 24.0, 34.0] {
             let here = Point3::new(x, 0.0, 0.0);
-            g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+            g.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67, None);
             g.field((RobotId(0), &here, 0.0), Time::ZERO);
         }
         assert!(g.memory().frontiers().all(|k| k[0] == -1 || k[0] == 0));
@@ -488,7 +522,7 @@ fn the_route_to_a_remembered_frontier_follows_passable_cells_and_is_as_long_as_t
     let mut guide = Guide::new(GuidanceConfig::default());
     for x in [4.0, 14.0, 24.0, 34.0] {
         let here = Point3::new(x, 0.0, 0.0);
-        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67, None);
     }
     let robot = Point3::new(37.2, 0.3, 0.1);
     let field = guide.field((RobotId(0), &robot, 0.0), Time::ZERO);
@@ -544,6 +578,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
         g.observe_snapshot(
             &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
             0.67,
+            None,
         );
     }
     let left = |k: CellKey| k[1] >= 5;
@@ -607,6 +642,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
             g.observe_snapshot(
                 &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
                 0.67,
+                None,
             );
         }
         pair[0].observe_peer_plan(&plan(1, beside, towards));
@@ -630,6 +666,7 @@ fn coordination_sends_two_robots_at_a_fork_into_different_branches() {
     maps_only.observe_snapshot(
         &window(Point3::new(8.0, 0.0, 0.0), [24.0, 24.0, 4.0], &world),
         0.67,
+        None,
     );
     maps_only.observe_peer_plan(&plan(0, lead, Point3::new(9.0, 3.0, 0.0)));
     assert!(left(target(&mut maps_only, 1, &follow)));
@@ -646,7 +683,11 @@ fn beside_dead_end() -> (Guide, Point3<f64>, f64) {
     let limit_s = config.give_up_after_s.expect("on by default");
     let mut guide = Guide::new(config);
     let near = Point3::new(2.0, 0.0, 0.0);
-    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], dead_end_tunnel()), 0.67);
+    guide.observe_snapshot(
+        &window(near, [20.0, 20.0, 4.0], dead_end_tunnel()),
+        0.67,
+        None,
+    );
     (guide, near, limit_s)
 }
 
@@ -687,9 +728,9 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     // (a frontier's flicker at a surface's edge): they stay given up.
     let given_up = guide.given_up().clone();
     let seen_all = tunnels(vec![([-5.0, -2.0, -1.0], [40.0, 2.0, 1.0])], |_| true);
-    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67);
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &seen_all), 0.67, None);
     guide.field((RobotId(0), &near, 0.0), second(61.0));
-    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67);
+    guide.observe_snapshot(&window(near, [20.0, 20.0, 4.0], &world), 0.67, None);
     let field = guide.field((RobotId(0), &near, 0.0), second(62.0));
     assert_eq!(guide.given_up(), &given_up);
     assert!(field.frontier_count() < frontiers);
@@ -820,7 +861,7 @@ fn with_a_switch_penalty_a_robot_keeps_its_goal_until_another_is_that_much_neare
     let snapshot = window(Point3::origin(), [20.0, 20.0, 4.0], &world);
     let goal_x = |config: GuidanceConfig, path: &[f64]| -> Vec<f64> {
         let mut guide = Guide::new(config);
-        guide.observe_snapshot(&snapshot, 0.67);
+        guide.observe_snapshot(&snapshot, 0.67, None);
         path.iter()
             .enumerate()
             .map(|(s, x)| {
@@ -865,6 +906,7 @@ fn a_goal_the_robot_gets_no_nearer_to_is_given_up_after_the_progress_timeout() {
         guide.observe_snapshot(
             &window(Point3::new(5.0, 0.0, 0.0), [20.0, 20.0, 4.0], &world),
             0.67,
+            None,
         );
         guide
     };
@@ -943,7 +985,7 @@ fn a_robot_flies_home_along_the_field_towards_its_start_and_stops_there() {
     let home = Point3::new(2.0, 0.3, 0.1);
     for x in [2.0, 12.0, 22.0, 32.0, 37.0] {
         let here = Point3::new(x, 0.0, 0.0);
-        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67);
+        guide.observe_snapshot(&window(here, [20.0, 20.0, 4.0], &world), 0.67, None);
         guide.field((RobotId(0), &here, 0.0), Time::ZERO);
     }
     let field = GuidanceField::towards(guide.memory(), &home, 1.0);

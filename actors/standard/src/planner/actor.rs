@@ -733,7 +733,11 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                 } else if let Some(snapshot) = m.get_arc(&GRID_SNAPSHOT) {
                     if let Some(guide) = self.guide.as_mut() {
                         let margin_m = self.config.round.margin_m(snapshot.resolution_m());
-                        guide.observe_snapshot(&snapshot, margin_m);
+                        let position = self
+                            .odometry
+                            .as_ref()
+                            .map(|o| nalgebra::Point3::from(o.pose.translation.vector));
+                        guide.observe_snapshot(&snapshot, margin_m, position.as_ref());
                     }
                     self.snapshot = Some(snapshot);
                 } else if let Some(peer) = m.get(&PEER_KEYFRAME) {
