@@ -155,7 +155,9 @@ impl Guide {
     }
 
     /// Folds the robot's own grid snapshot in; `margin_m` is the clearance a robot
-    /// centre needs (the planner's [`margin_m`](crate::planner::round::RoundConfig::margin_m)).
+    /// centre needs (the planner's [`margin_m`](crate::planner::round::RoundConfig::margin_m)),
+    /// `position` the robot's, within [`GuidanceConfig::retire_radius_m`] of which the
+    /// window retires frontiers (`None`: anywhere in it).
     pub fn observe_snapshot(
         &mut self,
         snapshot: &GridSnapshot,
