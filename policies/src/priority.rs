@@ -19,10 +19,16 @@
 //!
 //! A peer whose plan is older than [`PriorityConfig::stale_plan_s`] (counted from when
 //! it was made, not when it arrived), or that never sent one, is an obstacle at its last
-//! known position inflated by its stopping envelope: the distance it may have flown
-//! since plus its braking distance `v² / (2 a)` from the speed `v` it may have reached,
-//! speeding up from its speed then at [`PriorityConfig::peer_accel_mps2`] to the
-//! fastest its last plan flies. Ages count on this robot's clock
+//! known position inflated by its stopping envelope: at each moment `t` of the check,
+//! the distance it may have flown from then to `t` plus its braking distance
+//! `v² / (2 a)` from the speed `v` it may have reached, speeding up from its speed then
+//! at [`PriorityConfig::peer_accel_mps2`] to the fastest its last plan flies. The
+//! envelope grows over the candidate: a peer whose plans do not arrive keeps flying the
+//! ones it committed, and brakes only once ours reach it (with an envelope fixed at the
+//! moment of the check, a robot over a saturated 250 kbit/s link flew into the end of
+//! a lower-priority peer's committed plan and came within 0.52 m of it). A candidate
+//! may still take the robot away from where such a peer was last seen, never closer,
+//! even as the envelope grows over it: hovering would be no safer. Ages count on this robot's clock
 //! from the earlier of a message's stamp and its arrival (stamps are on the team clock,
 //! `troupe_core::TeamClock`, and the link rejects those more than `max_clock_ahead_s`
 //! ahead); a restarted peer's new run replaces what its earlier run said (`PeerTable`).
@@ -81,6 +87,11 @@ pub struct PriorityConfig {
     /// cannot be flying at its plans' top speed yet (counted so, its envelope was 1.3 m
     /// at 1.5 m/s).
     pub peer_accel_mps2: f64,
+    /// Fastest a peer is assumed to fly once its plans stop arriving, m/s (default 1.5:
+    /// the planner's `max_speed_mps`); a faster last plan or odometry counts as it is.
+    /// A peer whose last plan hovered may have committed a flight since (counted at
+    /// that plan's top speed, its envelope stayed at its last position).
+    pub peer_max_speed_mps: f64,
     /// Keep clear of lower-priority peers too (module docs; the thesis ignores them).
     pub clear_of_lower_priority: bool,
     /// How long a lower-priority peer may keep to its plan before it has seen ours and
@@ -101,6 +112,7 @@ impl Default for PriorityConfig {
             stale_plan_s: 1.5,
             stop_decel_mps2: 1.0,
             peer_accel_mps2: 3.0,
+            peer_max_speed_mps: 1.5,
             clear_of_lower_priority: true,
             lower_priority_react_s: 1.2,
         }
@@ -117,6 +129,7 @@ impl PriorityConfig {
             ("stale_plan_s", self.stale_plan_s),
             ("stop_decel_mps2", self.stop_decel_mps2),
             ("peer_accel_mps2", self.peer_accel_mps2),
+            ("peer_max_speed_mps", self.peer_max_speed_mps),
             ("lower_priority_react_s", self.lower_priority_react_s),
         ] {
             ConfigError::positive(key, value)?;
@@ -149,13 +162,9 @@ pub fn effective_priority(base: u16, after_s: f64, step: u16, blocked_s: f64) ->
 pub enum PeerModel<'a> {
     /// Following its (fresh) plan in time.
     Plan(&'a Trajectory),
-    /// Static at `position_m`, inflated by `envelope_m` (stale or missing plan).
-    Envelope {
-        /// Last known position, metres.
-        position_m: nalgebra::Point3<f64>,
-        /// Extra radius: distance flown since plus braking distance, metres.
-        envelope_m: f64,
-    },
+    /// Centred on its last known position, inflated by a stopping envelope that grows
+    /// with time (stale or missing plan; [`StoppingEnvelope::radius_m_at`]).
+    Envelope(StoppingEnvelope),
     /// A lower-priority peer: following its plan until it brakes along its velocity at
     /// `decel_mps2` to a stop, and holds there; it may brake at any moment up to
     /// `react_at` ([`PeerModel::possible_positions`]).
@@ -167,6 +176,37 @@ pub enum PeerModel<'a> {
         /// Braking deceleration, m/s².
         decel_mps2: f64,
     },
+}
+
+/// Where a peer known only by its last position may be (module docs): anywhere within
+/// [`StoppingEnvelope::radius_m_at`] of `position_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StoppingEnvelope {
+    /// Last known position, metres.
+    pub position_m: nalgebra::Point3<f64>,
+    /// When it was there.
+    pub known_at: Time,
+    /// Its speed then, m/s.
+    pub speed_mps: f64,
+    /// The fastest it may fly (its last plan's top speed, at least `speed_mps`), m/s.
+    pub top_speed_mps: f64,
+    /// Largest acceleration assumed, m/s² ([`PriorityConfig::peer_accel_mps2`]).
+    pub accel_mps2: f64,
+    /// Braking deceleration assumed, m/s² ([`PriorityConfig::stop_decel_mps2`]).
+    pub decel_mps2: f64,
+}
+
+impl StoppingEnvelope {
+    /// The envelope's radius at `t`: the distance the peer may have flown from
+    /// `known_at` to `t`, speeding up to its top speed, plus its braking distance from
+    /// the speed it may have reached, metres.
+    #[must_use]
+    pub fn radius_m_at(&self, t: Time) -> f64 {
+        let age_s = t.saturating_since(self.known_at).as_secs_f64();
+        let (flown_m, speed_mps) =
+            reach(self.speed_mps, self.top_speed_mps, self.accel_mps2, age_s);
+        flown_m + speed_mps * speed_mps / (2.0 * self.decel_mps2)
+    }
 }
 
 /// Where a robot following `plan` until `from` and braking from there along its
@@ -201,7 +241,7 @@ impl PeerModel<'_> {
     pub fn position_at(&self, t: Time) -> Option<nalgebra::Point3<f64>> {
         match self {
             PeerModel::Plan(plan) => plan.state_at(t).map(|s| s.position_m),
-            PeerModel::Envelope { position_m, .. } => Some(*position_m),
+            PeerModel::Envelope(envelope) => Some(envelope.position_m),
             PeerModel::Yielding {
                 plan,
                 react_at,
@@ -294,19 +334,21 @@ pub fn peer_model<'a>(
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => return None,
     };
-    // Since then it may have sped up to as fast as its last plan said it would fly (a
-    // peer seen at rest at the start of a plan is not staying there).
+    // Since then it may have sped up to the team's speed bound, or as fast as its last
+    // plan said it would fly if that is faster.
     let top_speed = track
         .plan
         .as_ref()
-        .map_or(speed, |p| speed.max(max_speed(&p.plan.trajectory)));
-    let age_s = now.saturating_since(stamp).as_secs_f64();
-    let (flown_m, speed_now) = reach(speed, top_speed, config.peer_accel_mps2, age_s);
-    let envelope_m = flown_m + speed_now * speed_now / (2.0 * config.stop_decel_mps2);
-    Some(PeerModel::Envelope {
+        .map_or(speed, |p| speed.max(max_speed(&p.plan.trajectory)))
+        .max(config.peer_max_speed_mps);
+    Some(PeerModel::Envelope(StoppingEnvelope {
         position_m,
-        envelope_m,
-    })
+        known_at: stamp,
+        speed_mps: speed,
+        top_speed_mps: top_speed,
+        accel_mps2: config.peer_accel_mps2,
+        decel_mps2: config.stop_decel_mps2,
+    }))
 }
 
 /// How far a body flying at `speed_mps` may get in `age_s` when it accelerates at
@@ -350,28 +392,33 @@ pub fn first_overlap(
     let own_end = candidate.end_time();
     let end = match peer {
         PeerModel::Plan(plan) => own_end.max(plan.end_time()),
-        PeerModel::Envelope { .. } => own_end,
+        PeerModel::Envelope(_) => own_end,
         PeerModel::Yielding { react_at, .. } => own_end.max(*react_at),
     };
     let horizon_s = end.saturating_since(now).as_secs_f64();
     let n = config.max_samples.max(2);
     let dt_s = horizon_s / (n - 1) as f64;
-    let (peer_speed, peer_extra) = match peer {
-        PeerModel::Plan(plan) | PeerModel::Yielding { plan, .. } => (max_speed(plan), 0.0),
-        PeerModel::Envelope { envelope_m, .. } => (0.0, *envelope_m),
+    let (peer_speed, envelope) = match peer {
+        PeerModel::Plan(plan) | PeerModel::Yielding { plan, .. } => (max_speed(plan), None),
+        PeerModel::Envelope(envelope) => (0.0, Some(envelope)),
     };
-    let min_horizontal = 2.0 * config.cylinder_radius_m
-        + peer_extra
-        + 0.5 * dt_s * (max_speed(candidate) + peer_speed);
+    let sampling_slack_m = 0.5 * dt_s * (max_speed(candidate) + peer_speed);
+    let half_step = std::time::Duration::from_secs_f64(0.5 * dt_s);
     // Already too close at the start (both committed at once, or a peer appeared): the
     // least horizontal and vertical distances then; a candidate that never gets closer
     // in either lets the pair separate, one that closes in (sideways, or climbing or
-    // sinking towards a peer above or below) is refused.
+    // sinking towards a peer above or below) is refused. A stopping envelope grows over
+    // the candidate, so its distances at the start are always kept: a candidate that
+    // gets no closer to where the peer was last seen is not refused (module docs).
     let mut too_close_at_start: Option<(f64, f64)> = None;
     for i in 0..n {
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
+        // The envelope as it is half a step later covers the flight between samples.
+        let min_horizontal = 2.0 * config.cylinder_radius_m
+            + envelope.map_or(0.0, |e| e.radius_m_at(t + half_step))
+            + sampling_slack_m;
         // The least horizontal and vertical distances to the peer's overlapping
         // positions, and whether one is closer than at the start.
         let mut least: Option<(f64, f64)> = None;
@@ -385,17 +432,23 @@ pub fn first_overlap(
             least = Some(least.map_or((h, v), |(lh, lv)| (lh.min(h), lv.min(v))));
             closer |= too_close_at_start.is_none_or(|(h0, v0)| h < h0 || v < v0 - 1e-9);
         }
-        if let Some((least_h, least_v)) = least {
-            if i == 0 {
-                too_close_at_start = Some((least_h, least_v));
-                continue;
+        if i == 0 {
+            too_close_at_start = match envelope {
+                Some(e) => {
+                    let d = own.position_m - e.position_m;
+                    Some((d.xy().norm(), d.z.abs()))
+                }
+                None => least,
+            };
+            if horizon_s == 0.0 {
+                break;
             }
-            if closer {
-                return Some((t_s, least_h));
-            }
+            continue;
         }
-        if horizon_s == 0.0 {
-            break;
+        if let Some((least_h, _)) = least
+            && closer
+        {
+            return Some((t_s, least_h));
         }
     }
     None
@@ -446,7 +499,7 @@ pub fn check_candidate(
         if let Some((at_s, separation_m)) = first_overlap(config, now, candidate, &model) {
             return Some(PeerConflict {
                 peer: id,
-                envelope: matches!(model, PeerModel::Envelope { .. }),
+                envelope: matches!(model, PeerModel::Envelope(_)),
                 at_s,
                 separation_m,
             });
@@ -795,6 +848,15 @@ mod tests {
         assert!(check_candidate(&thesis, t(10.0), RobotId(0), 5, &own, &through, &peers).is_none());
     }
 
+    /// The stopping envelope of a peer modelled by it at `now`.
+    fn envelope_of(config: &PriorityConfig, now: f64, peers: &PeerTable) -> StoppingEnvelope {
+        let track = peers.iter().next().expect("one peer").1;
+        match peer_model(config, t(now), track) {
+            Some(PeerModel::Envelope(envelope)) => envelope,
+            other => panic!("{other:?}"),
+        }
+    }
+
     #[test]
     fn a_plan_that_arrives_late_is_as_old_as_when_it_was_made() {
         let config = PriorityConfig::default();
@@ -821,29 +883,22 @@ mod tests {
         // Made when it arrived, the plan is fresh and the peer hovers 1.5 m away.
         assert_eq!(check(&late(3.0)), None);
         // Made 3.1 s ago, it is stale: the peer may have flown on with plans not yet
-        // received, from rest at (-5, 0) up to 1 m/s at 3 m/s², for 3.1 s, plus
+        // received, from rest at (-5, 0) up to 1.5 m/s at 3 m/s², for 3.1 s, plus
         // braking, and the candidate enters that envelope.
         let peers = late(0.0);
-        let track = peers.get(RobotId(0)).unwrap();
-        match peer_model(&config, t(3.1), track).unwrap() {
-            PeerModel::Envelope {
-                position_m,
-                envelope_m,
-            } => {
-                assert_eq!(position_m, Point3::new(-5.0, 0.0, 1.0));
-                // 1/6 m speeding up, 1 m/s for 3.1 s - 1/3 s, 1² / (2 · 1) braking.
-                assert!(
-                    (envelope_m - (3.1 - 1.0 / 6.0 + 0.5)).abs() < 1e-9,
-                    "{envelope_m}"
-                );
-            }
-            other => panic!("{other:?}"),
-        }
+        let envelope = envelope_of(&config, 3.1, &peers);
+        assert_eq!(envelope.position_m, Point3::new(-5.0, 0.0, 1.0));
+        // 0.375 m speeding up, 1.5 m/s for 3.1 s - 0.5 s, 1.5² / (2 · 1) braking.
+        let radius_m = envelope.radius_m_at(t(3.1));
+        assert!(
+            (radius_m - (0.375 + 1.5 * 2.6 + 1.125)).abs() < 1e-9,
+            "{radius_m}"
+        );
         assert!(check(&peers).is_some_and(|c| c.envelope));
     }
 
     #[test]
-    fn a_peer_seen_hovering_a_moment_ago_has_not_sped_up_to_its_plans_speed() {
+    fn a_peer_seen_hovering_a_moment_ago_has_not_sped_up_yet() {
         let config = PriorityConfig::default();
         // The peer (priority 5) flew its last plan at 1.5 m/s and has hovered at (1, 0)
         // since; its odometry says so, 0.1 s ago or 2 s ago.
@@ -856,28 +911,29 @@ mod tests {
                 Some(odom(at, [1.0, 0.0, 1.0], [0.0; 3])),
             )
         };
-        // We start 1.6 m away and fly past it, 1.53 m away at the closest.
-        let own = odom(10.0, [2.6, 0.0, 1.0], [0.0; 3]);
-        let away = line(10.0, [2.6, 0.0, 1.0], [2.0, 2.0, 1.0], 1.0);
-        let check = |peers: &PeerTable| {
-            check_candidate(&config, t(10.0), RobotId(1), 1, &own, &away, peers)
-        };
         // 0.1 s at 3 m/s² from rest: 1.5 cm flown, 0.3 m/s, 4.5 cm of braking. Counted
         // at its plan's 1.5 m/s, its envelope (1.3 m) reached us where we stand.
         let fresh = hovering_since(9.9);
-        match peer_model(&config, t(10.0), fresh.get(RobotId(0)).unwrap()).unwrap() {
-            PeerModel::Envelope { envelope_m, .. } => {
-                assert!((envelope_m - 0.06).abs() < 1e-9, "{envelope_m}");
-            }
-            other => panic!("{other:?}"),
-        }
-        assert_eq!(check(&fresh), None);
-        // Heard of 2 s ago, it may be flying at its plan's speed, 2.6 m from there.
-        assert!(check(&hovering_since(8.0)).is_some_and(|c| c.envelope));
+        let radius_m = envelope_of(&config, 10.0, &fresh).radius_m_at(t(10.0));
+        assert!((radius_m - 0.06).abs() < 1e-9, "{radius_m}");
+        // We start 1.6 m away. Flying on away from it is never refused.
+        let own = odom(10.0, [2.6, 0.0, 1.0], [0.0; 3]);
+        let away = line(10.0, [2.6, 0.0, 1.0], [4.6, 0.0, 1.0], 1.0);
+        let check = |peers: &PeerTable, candidate: &Trajectory| {
+            check_candidate(&config, t(10.0), RobotId(1), 1, &own, candidate, peers)
+        };
+        assert_eq!(check(&fresh, &away), None);
+        assert_eq!(check(&hovering_since(8.0), &away), None);
+        // Passing it 1.53 m away at the closest, 0.46 s from now, is refused either way:
+        // heard of 2 s ago it may be flying at 1.5 m/s, 2.6 m from there; hovering a
+        // moment ago, it may have set off since (1.6 m of envelope by then).
+        let past = line(10.0, [2.6, 0.0, 1.0], [2.0, 2.0, 1.0], 1.0);
+        assert!(check(&hovering_since(8.0), &past).is_some_and(|c| c.envelope));
+        assert!(check(&fresh, &past).is_some_and(|c| c.envelope));
     }
 
     #[test]
-    fn stale_or_missing_plan_is_an_envelope_at_the_last_position() {
+    fn stale_or_missing_plan_is_an_envelope_that_grows_from_the_last_position() {
         let config = PriorityConfig::default();
         let peer = line(0.0, [-5.0, 0.0, 1.0], [5.0, 0.0, 1.0], 1.0);
         // Plan received at 0 s, now 10 s: stale; odometry at 9.5 s says (2, 0) moving 1 m/s.
@@ -887,35 +943,47 @@ mod tests {
             Some((peer, 0.0)),
             Some(odom(9.5, [2.0, 0.0, 1.0], [1.0, 0.0, 0.0])),
         );
-        let track = peers.iter().next().unwrap().1;
-        match peer_model(&config, t(10.0), track).unwrap() {
-            PeerModel::Envelope {
-                position_m,
-                envelope_m,
-            } => {
-                assert_eq!(position_m, Point3::new(2.0, 0.0, 1.0));
-                // 1 m/s · 0.5 s + 1² / (2 · 1).
-                assert!((envelope_m - 1.0).abs() < 1e-9);
-            }
-            other => panic!("{other:?}"),
+        let envelope = envelope_of(&config, 10.0, &peers);
+        assert_eq!(envelope.position_m, Point3::new(2.0, 0.0, 1.0));
+        // From 1 m/s up to 1.5 m/s at 3 m/s² (1/6 s, 0.208 m), then 1.5 m/s, plus
+        // 1.5² / (2 · 1) of braking: at 10 s (0.5 s on) and 2 s later.
+        let speeding_m = 1.0 / 6.0 + 1.5 / 36.0;
+        for (at_s, age_s) in [(10.0, 0.5), (12.0, 2.5)] {
+            let radius_m = envelope.radius_m_at(t(at_s));
+            let expected = speeding_m + 1.5 * (age_s - 1.0 / 6.0) + 1.125;
+            assert!((radius_m - expected).abs() < 1e-9, "{radius_m} at {at_s}");
         }
         let own = odom(10.0, [2.0, -4.0, 1.0], [0.0, 1.0, 0.0]);
-        // Stopping 2.0 m short of the peer: needs 2 r + envelope = 1.8 m + sampling slack.
+        let check = |candidate: &Trajectory, peers: &PeerTable| {
+            check_candidate(&config, t(10.0), RobotId(1), 1, &own, candidate, peers)
+        };
+        // Stopping 3 m short of the peer, 2 s from now: clear of its envelope as it is
+        // now (2 r + 1.83 m), not of where it may have flown on to by then (2 r + 3.8 m).
+        // With the envelope held at its size now, such a candidate flew a robot into
+        // the end of a peer's committed plan.
         let short = line(10.0, [2.0, -4.0, 1.0], [2.0, -2.0, 1.0], 1.0);
-        assert_eq!(
-            check_candidate(&config, t(10.0), RobotId(1), 1, &own, &short, &peers),
-            None
-        );
-        let long = line(10.0, [2.0, -4.0, 1.0], [2.0, -1.5, 1.0], 1.0);
-        let c = check_candidate(&config, t(10.0), RobotId(1), 1, &own, &long, &peers).unwrap();
-        assert!(c.envelope);
-        // Odometry only (no plan ever): unknown priority, avoided as an envelope.
+        assert!(check(&short, &peers).is_some_and(|c| c.envelope));
+        // Backing off slower than the envelope grows: it reaches the robot, which
+        // nevertheless gets no closer to where the peer was; hovering is no safer.
+        let back = line(10.0, [2.0, -4.0, 1.0], [2.0, -5.0, 1.0], 0.5);
+        assert_eq!(check(&back, &peers), None);
+        // Sideways along the envelope's edge, closing in a little: refused.
+        let along = line(10.0, [2.0, -4.0, 1.0], [0.0, -3.6, 1.0], 1.0);
+        assert!(check(&along, &peers).is_some_and(|c| c.envelope));
+        // Odometry only (no plan ever): unknown priority, avoided as an envelope that
+        // grows at up to `peer_max_speed_mps` even while the peer hovers.
         let only = table_with(0, 0, None, Some(odom(10.0, [2.0, 0.0, 1.0], [0.0; 3])));
-        let closer = line(10.0, [2.0, -4.0, 1.0], [2.0, -0.7, 1.0], 1.0);
-        let c = check_candidate(&config, t(10.0), RobotId(1), 60_000, &own, &closer, &only);
-        assert!(c.is_some_and(|c| c.envelope));
-        assert!(
-            check_candidate(&config, t(10.0), RobotId(1), 60_000, &own, &long, &only).is_none()
+        let c = |candidate: &Trajectory| {
+            check_candidate(&config, t(10.0), RobotId(1), 60_000, &own, candidate, &only)
+        };
+        assert!(c(&short).is_some_and(|c| c.envelope));
+        assert_eq!(c(&back), None);
+        // Far enough: 2 s of flight end 7 m from it, beyond 2 r + 0.375 + 1.5 · 1.5 + 1.125.
+        let far_own = odom(10.0, [2.0, -9.0, 1.0], [0.0; 3]);
+        let far = line(10.0, [2.0, -9.0, 1.0], [2.0, -7.0, 1.0], 1.0);
+        assert_eq!(
+            check_candidate(&config, t(10.0), RobotId(1), 60_000, &far_own, &far, &only),
+            None
         );
     }
 
