@@ -19,7 +19,8 @@
 //!
 //! A peer whose plan is older than [`PriorityConfig::stale_plan_s`] (counted from when
 //! it was made, not when it arrived), or that never sent one, is an obstacle at its last
-//! known position inflated by its stopping envelope: at each moment `t` of the check,
+//! known position inflated by its stopping envelope: at each moment `t` of the check
+//! (up to [`PriorityConfig::stale_growth_s`] ahead, when the next round decides again),
 //! the distance it may have flown from then to `t` plus its braking distance
 //! `v² / (2 a)` from the speed `v` it may have reached, speeding up from its speed then
 //! at [`PriorityConfig::peer_accel_mps2`] to the fastest its last plan flies. The
@@ -87,6 +88,12 @@ pub struct PriorityConfig {
     /// cannot be flying at its plans' top speed yet (counted so, its envelope was 1.3 m
     /// at 1.5 m/s).
     pub peer_accel_mps2: f64,
+    /// How far ahead of the check a stale peer's envelope grows, seconds (default 1.2: a
+    /// planning period plus the link's delay, as `lower_priority_react_s`). By then this
+    /// robot's next round decides again with newer word of the peer, or stops; grown
+    /// over a whole candidate (a route robot's is its route), the envelope of a peer
+    /// hovering 4 m beside a robot's line kept it from flying past.
+    pub stale_growth_s: f64,
     /// Fastest a peer is assumed to fly once its plans stop arriving, m/s (default 1.5:
     /// the planner's `max_speed_mps`); a faster last plan or odometry counts as it is.
     /// A peer whose last plan hovered may have committed a flight since (counted at
@@ -113,6 +120,7 @@ impl Default for PriorityConfig {
             stop_decel_mps2: 1.0,
             peer_accel_mps2: 3.0,
             peer_max_speed_mps: 1.5,
+            stale_growth_s: 1.2,
             clear_of_lower_priority: true,
             lower_priority_react_s: 1.2,
         }
@@ -130,6 +138,7 @@ impl PriorityConfig {
             ("stop_decel_mps2", self.stop_decel_mps2),
             ("peer_accel_mps2", self.peer_accel_mps2),
             ("peer_max_speed_mps", self.peer_max_speed_mps),
+            ("stale_growth_s", self.stale_growth_s),
             ("lower_priority_react_s", self.lower_priority_react_s),
         ] {
             ConfigError::positive(key, value)?;
@@ -404,6 +413,7 @@ pub fn first_overlap(
     };
     let sampling_slack_m = 0.5 * dt_s * (max_speed(candidate) + peer_speed);
     let half_step = std::time::Duration::from_secs_f64(0.5 * dt_s);
+    let stale_growth = std::time::Duration::from_secs_f64(config.stale_growth_s);
     // Already too close at the start (both committed at once, or a peer appeared): the
     // least horizontal and vertical distances then; a candidate that never gets closer
     // in either lets the pair separate, one that closes in (sideways, or climbing or
@@ -415,9 +425,11 @@ pub fn first_overlap(
         let t_s = dt_s * i as f64;
         let t = now + std::time::Duration::from_secs_f64(t_s);
         let own = candidate.state_at(t)?;
-        // The envelope as it is half a step later covers the flight between samples.
+        // The envelope as it is half a step later covers the flight between samples;
+        // it grows for `stale_growth_s` at most.
+        let grown_until = (t + half_step).min(now + stale_growth);
         let min_horizontal = 2.0 * config.cylinder_radius_m
-            + envelope.map_or(0.0, |e| e.radius_m_at(t + half_step))
+            + envelope.map_or(0.0, |e| e.radius_m_at(grown_until))
             + sampling_slack_m;
         // The least horizontal and vertical distances to the peer's overlapping
         // positions, and whether one is closer than at the start.
@@ -958,7 +970,8 @@ mod tests {
             check_candidate(&config, t(10.0), RobotId(1), 1, &own, candidate, peers)
         };
         // Stopping 3 m short of the peer, 2 s from now: clear of its envelope as it is
-        // now (2 r + 1.83 m), not of where it may have flown on to by then (2 r + 3.8 m).
+        // now (2 r + 1.83 m), not of where it may have flown on to by the next round
+        // (2 r + 3.6 m, grown for `stale_growth_s`).
         // With the envelope held at its size now, such a candidate flew a robot into
         // the end of a peer's committed plan.
         let short = line(10.0, [2.0, -4.0, 1.0], [2.0, -2.0, 1.0], 1.0);
@@ -978,7 +991,8 @@ mod tests {
         };
         assert!(c(&short).is_some_and(|c| c.envelope));
         assert_eq!(c(&back), None);
-        // Far enough: 2 s of flight end 7 m from it, beyond 2 r + 0.375 + 1.5 · 1.5 + 1.125.
+        // Far enough: 2 s of flight end 7 m from it, beyond 2 r + 0.375 + 1.5 · 0.7 + 1.125
+        // (grown for `stale_growth_s`, 1.2 s).
         let far_own = odom(10.0, [2.0, -9.0, 1.0], [0.0; 3]);
         let far = line(10.0, [2.0, -9.0, 1.0], [2.0, -7.0, 1.0], 1.0);
         assert_eq!(
