@@ -65,6 +65,13 @@ pub struct LibraryParams {
     pub max_yaw_rate_rad_s: f64,
     /// Base duration τ for fixed-duration libraries, seconds (paper Table I: 3 s).
     pub base_duration_s: f64,
+    /// The Yaw row turns in place both ways (two primitives, ±Ω_max); `false` (the
+    /// default): one, +Ω_max, as Table 4.2 counts it (N_ω = 1). Turning one way only,
+    /// a robot whose route lay just to its right had to begin a 5 rad turn the other
+    /// way, which greedy choice never does: a return home stalled 30.7 m out on seed 5
+    /// at 700 s. Measured in docs/results/exploration.md; not yet the default because a
+    /// robot then reaches home fast enough to hold beyond `home_radius_m`.
+    pub yaw_both_ways: bool,
 }
 
 impl Default for LibraryParams {
@@ -75,6 +82,7 @@ impl Default for LibraryParams {
             vertical_speed_mps: 0.3,
             max_yaw_rate_rad_s: 0.6,
             base_duration_s: 3.0,
+            yaw_both_ways: false,
         }
     }
 }
@@ -164,7 +172,11 @@ pub fn actions(spec: &LibrarySpec, params: &LibraryParams) -> Vec<(Action, Optio
         Heading::Yaw | Heading::Vertical => (0.0, 0.0),
     };
     let omegas = if spec.heading == Heading::Yaw {
-        vec![params.max_yaw_rate_rad_s]
+        if params.yaw_both_ways {
+            vec![params.max_yaw_rate_rad_s, -params.max_yaw_rate_rad_s]
+        } else {
+            vec![params.max_yaw_rate_rad_s]
+        }
     } else {
         symmetric(spec.n_omega, params.max_yaw_rate_rad_s)
     };

@@ -417,6 +417,58 @@ mod tests {
         assert!(children.iter().any(|c| c.information > 1.0));
     }
 
+    /// The route from 1.5 m ahead of a pose to a home 28 m down a corridor along +x.
+    #[derive(Debug)]
+    struct HomeDownTheCorridor;
+
+    impl FrontierField for HomeDownTheCorridor {
+        fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64 {
+            let ahead = p + Vector3::new(yaw_rad.cos(), yaw_rad.sin(), 0.0) * 1.5;
+            (Point3::new(30.0, 0.0, 0.0) - ahead).norm()
+        }
+    }
+
+    #[test]
+    fn a_robot_facing_left_of_its_route_can_turn_right_towards_it_in_place() {
+        // Facing 1.2 rad to the left of the corridor and its route home: turning left
+        // in place leads away; with the yaw row both ways, turning right gets nearer.
+        let snapshot = scenes::corridor(8.0, 1.5, 1.0);
+        let camera = scenes::forward_camera();
+        let root = FlatState::at_rest(Vector3::new(2.0, 0.0, 0.0), 1.2);
+        let turns = |yaw_both_ways| {
+            let defaults = RoundConfig::default();
+            let config = RoundConfig {
+                library_params: library::LibraryParams {
+                    yaw_both_ways,
+                    ..defaults.library_params
+                },
+                ..defaults
+            };
+            let problem =
+                PlanningProblem::new(&config, &snapshot, &camera).homing(&HomeDownTheCorridor);
+            problem
+                .children(&root)
+                .into_iter()
+                .filter(|c| {
+                    let a = c.primitive.action();
+                    a.vx_mps == 0.0 && a.vy_mps == 0.0 && a.vz_mps == 0.0 && a.yaw_rate_rad_s != 0.0
+                })
+                .map(|c| (c.primitive.action().yaw_rate_rad_s, c.frontier_gain_m))
+                .collect::<Vec<_>>()
+        };
+        let one_way = turns(false);
+        assert_eq!(one_way.len(), 1);
+        assert!(one_way[0].0 > 0.0 && one_way[0].1 < 0.0, "{one_way:?}");
+        let both_ways = turns(true);
+        assert_eq!(both_ways.len(), 2);
+        assert!(
+            both_ways
+                .iter()
+                .any(|&(w, gain_m)| w < 0.0 && gain_m > 0.25),
+            "{both_ways:?}"
+        );
+    }
+
     #[test]
     fn inside_the_margin_children_never_come_closer_and_some_back_away() {
         // A corridor 3 m wide and 2 m high; the robot hovers 0.55 m from its left wall,
