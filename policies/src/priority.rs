@@ -23,13 +23,15 @@
 //! (up to [`PriorityConfig::stale_growth_s`] ahead, when the next round decides again),
 //! the distance it may have flown from then to `t` plus its braking distance
 //! `v² / (2 a)` from the speed `v` it may have reached, speeding up from its speed then
-//! at [`PriorityConfig::peer_accel_mps2`] to the fastest its last plan flies. The
+//! at [`PriorityConfig::peer_accel_mps2`] to [`PriorityConfig::peer_max_speed_mps`], or
+//! to the fastest its last plan flies if that is faster. The
 //! envelope grows over the candidate: a peer whose plans do not arrive keeps flying the
 //! ones it committed, and brakes only once ours reach it (with an envelope fixed at the
 //! moment of the check, a robot over a saturated 250 kbit/s link flew into the end of
 //! a lower-priority peer's committed plan and came within 0.52 m of it). A candidate
 //! may still take the robot away from where such a peer was last seen, never closer,
-//! even as the envelope grows over it: hovering would be no safer. Ages count on this robot's clock
+//! even as the envelope grows over it: hovering would be no safer. Ages count on this
+//! robot's clock
 //! from the earlier of a message's stamp and its arrival (stamps are on the team clock,
 //! `troupe_core::TeamClock`, and the link rejects those more than `max_clock_ahead_s`
 //! ahead); a restarted peer's new run replaces what its earlier run said (`PeerTable`).
@@ -197,7 +199,8 @@ pub struct StoppingEnvelope {
     pub known_at: Time,
     /// Its speed then, m/s.
     pub speed_mps: f64,
-    /// The fastest it may fly (its last plan's top speed, at least `speed_mps`), m/s.
+    /// The fastest it may fly (the most of [`PriorityConfig::peer_max_speed_mps`], its
+    /// last plan's top speed and `speed_mps`), m/s.
     pub top_speed_mps: f64,
     /// Largest acceleration assumed, m/s² ([`PriorityConfig::peer_accel_mps2`]).
     pub accel_mps2: f64,
