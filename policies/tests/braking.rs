@@ -155,7 +155,7 @@ fn fly_with_peer(id: u32, priority: u16, a: [f64; 3], b: [f64; 3]) -> (Vec<Plan>
 
 /// [`fly_with_peer`] with several peers, their plans announced in this order.
 fn fly_with_peers(peers: &[(u32, u16, [f64; 3], [f64; 3])]) -> (Vec<Plan>, u64, u64) {
-    let limits = DynamicLimits::default();
+    let limits = DynamicLimits::THESIS;
     let peers: Vec<_> = peers
         .iter()
         .map(|&(id, priority, a, b)| (RobotId(id), priority, Point3::from(a), Point3::from(b)))
@@ -194,7 +194,7 @@ fn fly_with_peers(peers: &[(u32, u16, [f64; 3], [f64; 3])]) -> (Vec<Plan>, u64, 
 
 #[test]
 fn a_robot_brakes_at_once_when_a_peer_it_must_yield_to_plans_across_its_path() {
-    let limits = DynamicLimits::default();
+    let limits = DynamicLimits::THESIS;
     // Head on, along our path, from a peer of higher priority.
     let (plans, braked, stale) = fly_with_peer(1, 5, [6.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
     assert_eq!(braked, 1);

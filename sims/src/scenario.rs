@@ -335,6 +335,48 @@ mod tests {
         Scenario::from_toml(text, Path::new("s.toml"))
     }
 
+    /// The dotted paths of every table in `value` (arrays of tables left out).
+    fn table_paths(value: &toml::Value, path: &mut Vec<String>, out: &mut Vec<String>) {
+        if let toml::Value::Table(table) = value {
+            if !path.is_empty() {
+                out.push(
+                    path.iter()
+                        .map(|k| format!("{k:?}"))
+                        .collect::<Vec<_>>()
+                        .join("."),
+                );
+            }
+            for (key, child) in table {
+                path.push(key.clone());
+                table_paths(child, path, out);
+                path.pop();
+            }
+        }
+    }
+
+    #[test]
+    fn a_table_written_with_no_keys_reads_as_the_default() {
+        // A nested table's own defaults are the ones its parent gives it, so that
+        // setting one key of a table (`[robot.planner.round.library_params]
+        // yaw_both_ways = true`) changes that key and nothing else.
+        let default = Scenario::default();
+        let mut paths = Vec::new();
+        table_paths(
+            &toml::Value::try_from(&default).unwrap(),
+            &mut Vec::new(),
+            &mut paths,
+        );
+        assert!(paths.len() > 40, "{paths:?}");
+        let differ: Vec<&String> = paths
+            .iter()
+            .filter(|path| parse(&format!("[{path}]\n")).is_ok_and(|s| s != default))
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "read as other than the default: {differ:?}"
+        );
+    }
+
     #[test]
     fn shipped_scenarios_parse() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");

@@ -28,10 +28,9 @@ pub enum QueuePolicy {
     StoreAndForward,
 }
 
-/// Settings of one traffic class.
-///
-/// A class table given in a file starts from [`ClassConfig::default`] (drop-oldest),
-/// not from that class's built-in default: name the policy when you write one.
+/// Settings of one traffic class. A class table given in a file changes only the
+/// keys it names: the others keep that class's default (keep-latest for odometry and
+/// plans, drop-oldest for keyframes and bulk).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ClassConfig {
@@ -126,6 +125,40 @@ impl ClassConfig {
     }
 }
 
+/// A class table as a file gives it: the keys it names, laid over the class's default.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ClassTable {
+    policy: Option<QueuePolicy>,
+    capacity_messages: Option<usize>,
+    capacity_bytes: Option<usize>,
+    retransmit_timeout_s: Option<f64>,
+    retransmit_timeout_max_s: Option<f64>,
+    window_messages: Option<usize>,
+}
+
+impl ClassTable {
+    fn over(self, class: ClassConfig) -> ClassConfig {
+        ClassConfig {
+            policy: self.policy.unwrap_or(class.policy),
+            capacity_messages: self.capacity_messages.unwrap_or(class.capacity_messages),
+            capacity_bytes: self.capacity_bytes.unwrap_or(class.capacity_bytes),
+            retransmit_timeout_s: self
+                .retransmit_timeout_s
+                .unwrap_or(class.retransmit_timeout_s),
+            retransmit_timeout_max_s: self
+                .retransmit_timeout_max_s
+                .unwrap_or(class.retransmit_timeout_max_s),
+            window_messages: self.window_messages.unwrap_or(class.window_messages),
+        }
+    }
+}
+
+/// A keep-latest class's table (odometry, plans).
+fn keep_latest_class<'de, D: serde::Deserializer<'de>>(d: D) -> Result<ClassConfig, D::Error> {
+    Ok(ClassTable::deserialize(d)?.over(ClassConfig::keep_latest()))
+}
+
 /// Settings of one shaped link (DESIGN §5; the thesis' §8.2.7 study uses a token
 /// bucket at 0.1 and 0.25 Mbit/s).
 ///
@@ -155,8 +188,10 @@ pub struct ShaperConfig {
     /// example 28 for UDP/IPv4 headers); 0 counts only what the shaper emits.
     pub frame_overhead_bytes: u64,
     /// Odometry and heartbeats (default keep-latest).
+    #[serde(deserialize_with = "keep_latest_class")]
     pub odometry: ClassConfig,
     /// Plans (default keep-latest).
+    #[serde(deserialize_with = "keep_latest_class")]
     pub plan: ClassConfig,
     /// Keyframes and grid change sets (default drop-oldest).
     pub keyframe: ClassConfig,

@@ -665,6 +665,14 @@ fn config_reads_from_toml_and_names_bad_keys() {
         ClassConfig::keep_latest(),
         "untouched tables keep their default"
     );
+    // A class table changes the keys it names; the rest keep that class's default.
+    let partial: ShaperConfig =
+        toml::from_str("[odometry]\ncapacity_messages = 3\n[keyframe]\nwindow_messages = 2\n")
+            .unwrap();
+    assert_eq!(partial.odometry.policy, QueuePolicy::KeepLatest);
+    assert_eq!(partial.odometry.capacity_messages, 3);
+    assert_eq!(partial.keyframe.policy, QueuePolicy::DropOldest);
+    assert!(toml::from_str::<ShaperConfig>("[plan]\npolcy = \"drop_oldest\"\n").is_err());
     assert!(toml::from_str::<ShaperConfig>("rate_bsp = 1").is_err());
     let err = |c: ShaperConfig| c.validate().unwrap_err().key;
     assert_eq!(

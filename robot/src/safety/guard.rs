@@ -497,7 +497,7 @@ mod tests {
         decided: Time,
         before: Option<&Plan>,
     ) -> Arc<Plan> {
-        let limits = DynamicLimits::default();
+        let limits = DynamicLimits::THESIS;
         let primitive = limits.shortest(root, action).expect("feasible");
         let switch_s = 1.0f64.min(primitive.duration_s());
         let stopping = limits
@@ -529,7 +529,7 @@ mod tests {
     fn acceleration_is_the_primitives_own_and_continuous_across_plans() {
         let mut g = guard();
         let mut changes = Vec::new();
-        let limits = DynamicLimits::default();
+        let limits = DynamicLimits::THESIS;
         let forward = Action {
             vx_mps: 1.5,
             ..Action::STOP

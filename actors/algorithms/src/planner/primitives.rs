@@ -221,8 +221,9 @@ impl Primitive {
     }
 }
 
-/// Limits and search settings for building primitives (thesis §4.2: A_max = 10 m/s²,
-/// J_max = 35 m/s³).
+/// Limits and search settings for building primitives. The defaults are the standard
+/// robot's (A_max = 3 m/s², J_max = 10 m/s³), so that a `[robot.planner.round.limits]`
+/// table changes only the keys it names; the thesis' are [`DynamicLimits::THESIS`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DynamicLimits {
@@ -243,17 +244,24 @@ pub struct DynamicLimits {
 impl Default for DynamicLimits {
     fn default() -> Self {
         DynamicLimits {
-            max_accel_mps2: 10.0,
-            max_jerk_mps3: 35.0,
-            min_duration_s: 1.0,
-            max_duration_s: 6.0,
-            duration_step_s: 0.1,
-            check_samples: 64,
+            max_accel_mps2: 3.0,
+            max_jerk_mps3: 10.0,
+            ..DynamicLimits::THESIS
         }
     }
 }
 
 impl DynamicLimits {
+    /// The thesis' limits (§4.2: A_max = 10 m/s², J_max = 35 m/s³).
+    pub const THESIS: DynamicLimits = DynamicLimits {
+        max_accel_mps2: 10.0,
+        max_jerk_mps3: 35.0,
+        min_duration_s: 1.0,
+        max_duration_s: 6.0,
+        duration_step_s: 0.1,
+        check_samples: 64,
+    };
+
     /// Whether a primitive respects the limits at the check samples.
     #[must_use]
     pub fn admits(&self, primitive: &Primitive) -> bool {
@@ -407,7 +415,7 @@ mod tests {
 
     #[test]
     fn line_search_returns_the_shortest_feasible_primitive() {
-        let limits = DynamicLimits::default();
+        let limits = DynamicLimits::THESIS;
         let start = FlatState::at_rest(Vector3::zeros(), 0.0);
         let action = Action {
             vx_mps: 4.0,
@@ -459,7 +467,7 @@ mod tests {
 
     #[test]
     fn braking_strays_no_farther_than_the_shortest_stop_and_ends_at_rest() {
-        let limits = DynamicLimits::default();
+        let limits = DynamicLimits::THESIS;
         let rest = FlatState::at_rest(Vector3::zeros(), 0.0);
         let go = limits
             .shortest(

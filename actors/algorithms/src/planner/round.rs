@@ -87,16 +87,8 @@ impl Default for RoundConfig {
     fn default() -> Self {
         RoundConfig {
             library: LibraryChoice::Minimal,
-            library_params: LibraryParams {
-                max_speed_mps: 1.5,
-                perpendicular_speed_mps: 1.0,
-                ..LibraryParams::default()
-            },
-            limits: DynamicLimits {
-                max_accel_mps2: 3.0,
-                max_jerk_mps3: 10.0,
-                ..DynamicLimits::default()
-            },
+            library_params: LibraryParams::default(),
+            limits: DynamicLimits::default(),
             frontier_weight: 5.0,
             view: ViewRewardParams::default(),
             collision_radius_m: 0.4,

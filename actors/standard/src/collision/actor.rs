@@ -736,7 +736,7 @@ mod tests {
             _ => return None,
         };
         let hover = FlatState::at_rest(nalgebra::Vector3::new(0.0, 0.0, 1.0), 0.0);
-        let stop = Committed::braking(&DynamicLimits::default(), &hover, start).unwrap();
+        let stop = Committed::braking(&DynamicLimits::THESIS, &hover, start).unwrap();
         let candidates = vec![CandidatePlan {
             trajectory: stop.trajectory(0.1),
             reference: Some(stop.clone()),
@@ -906,7 +906,7 @@ mod tests {
             .with(ActorSpec::new("holder", || Holder))
             .with(ActorSpec::new("collision", move || {
                 CollisionActor::new(CollisionActorConfig::default(), Wall { x_max: 10.0 })
-                    .braking_for_peers(DynamicLimits::default(), 0.1)
+                    .braking_for_peers(DynamicLimits::THESIS, 0.1)
             }));
         let plans: Arc<Mutex<Vec<Plan>>> = Arc::default();
         let status: Arc<Mutex<Option<CollisionStatus>>> = Arc::default();
