@@ -673,9 +673,10 @@ impl GuidanceField {
     /// neighbours), and the straight
     /// distance within the goal's cell and its neighbours, so that the field's least
     /// value is at the goal itself. Measured `look_ahead_m` ahead of a pose, so that a
-    /// robot facing away from its way home turns round, except within the goal's
-    /// neighbourhood (there a look-ahead would hold a robot facing its goal one
-    /// look-ahead short of it). Empty (∞ everywhere) when the goal lies in no known
+    /// robot facing away from its way home turns round, except within a look-ahead
+    /// and a cell of the goal (there a look-ahead would hold a robot facing its goal
+    /// one look-ahead short of it, or turning both ways for ever beside it). Empty
+    /// (∞ everywhere) when the goal lies in no known
     /// passable cell.
     #[must_use]
     pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
@@ -730,7 +731,7 @@ impl GuidanceField {
     /// cell holding `p` and its 26 neighbours (∞ and `None` when none was reached).
     #[must_use]
     pub fn distance_at(&self, p: &Point3<f64>) -> (f64, Option<CellKey>) {
-        if let Some((goal_m, goal)) = self.goal.filter(|_| self.near_goal(p)) {
+        if let Some((goal_m, goal)) = self.goal.filter(|_| self.near_goal(p, 1)) {
             return ((p - goal_m).norm(), Some(goal));
         }
         self.entry_at(p)
@@ -759,11 +760,11 @@ impl GuidanceField {
             })
     }
 
-    /// Whether `p` lies in the goal's cell or a neighbour of it (a field
-    /// [`Self::towards`] a point).
-    fn near_goal(&self, p: &Point3<f64>) -> bool {
+    /// Whether `p` lies within `reach` cells of the goal's (per axis) of a field
+    /// [`Self::towards`] a point.
+    fn near_goal(&self, p: &Point3<f64>, reach: i32) -> bool {
         match (self.goal, self.key_of(p)) {
-            (Some((_, goal)), Some(key)) => (0..3).all(|i| (key[i] - goal[i]).abs() <= 1),
+            (Some((_, goal)), Some(key)) => (0..3).all(|i| (key[i] - goal[i]).abs() <= reach),
             _ => false,
         }
     }
@@ -780,7 +781,10 @@ impl GuidanceField {
     /// turns round instead of hovering.
     #[must_use]
     pub fn pose_distance_m(&self, p: &Point3<f64>, yaw_rad: f64) -> f64 {
-        if self.near_goal(p) {
+        // Within a look-ahead (and a cell) of a goal, the point ahead may lie past it,
+        // where facing away and facing it measure alike: measure from `p`.
+        let reach = 1 + (self.look_ahead_m * self.key_scale).ceil() as i32;
+        if self.near_goal(p, reach) {
             return self.distance_m(p);
         }
         let ahead =

@@ -8,8 +8,9 @@
 //! its mission is idle or done too, or until the base station commands it home, then
 //! [`MissionPhase::Returning`] (the planner steers along the route distance to home,
 //! [`GuidanceField::towards`](super::GuidanceField::towards)), then
-//! [`MissionPhase::Home`] within [`MissionConfig::home_radius_m`] of home, where the
-//! planner commits only stopping trajectories: the robot hovers, its link stays up.
+//! [`MissionPhase::Home`] once the robot would come to rest within
+//! [`MissionConfig::home_radius_m`] of home, where the planner commits only stopping
+//! trajectories: the robot hovers, its link stays up.
 
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
@@ -65,7 +66,8 @@ pub struct MissionConfig {
     /// Home, world frame, metres; absent: where the robot was at its first planning
     /// round (its start).
     pub home_m: Option<[f64; 3]>,
-    /// Home is reached within this distance of it, metres.
+    /// Home is reached once the robot would come to rest (braking from where it is)
+    /// within this distance of it, metres.
     pub home_radius_m: f64,
     /// A return whose route home has not got 0.5 m shorter for this long ends where
     /// the robot is (phase home, `home_gap_m` from home): a peer holding at its own
@@ -275,7 +277,10 @@ impl Mission {
     }
 
     /// One planning round with the robot at `position_m` (non-finite positions are
-    /// ignored); `work`: whether a frontier is left for it to explore; `peers_done`:
+    /// ignored), coming to rest at `rest_m` if it held from here (the end of its
+    /// braking: a robot flying home at speed is home only once it would stop within
+    /// [`MissionConfig::home_radius_m`], and the gap it holds at is reported from
+    /// there); `work`: whether a frontier is left for it to explore; `peers_done`:
     /// whether every peer that reports its mission is idle or has ended exploring (a
     /// robot that has nothing left of its own does not end while a peer still
     /// explores: what that peer finds may be work for it, and its own memory does not
@@ -284,6 +289,7 @@ impl Mission {
         &mut self,
         now: Time,
         position_m: &Point3<f64>,
+        rest_m: &Point3<f64>,
         work: bool,
         peers_done: bool,
     ) -> MissionPhase {
@@ -313,7 +319,12 @@ impl Mission {
             }
             MissionPhase::Exploring | MissionPhase::Home => {}
             MissionPhase::Returning => {
-                let gap_m = (position_m - home_m).norm();
+                let rest_m = if rest_m.coords.iter().all(|v| v.is_finite()) {
+                    rest_m
+                } else {
+                    position_m
+                };
+                let gap_m = (rest_m - home_m).norm();
                 if gap_m <= self.config.home_radius_m {
                     self.hold(now, gap_m);
                 }
@@ -398,51 +409,67 @@ mod tests {
         // No frontier before any was seen: the start, not the end.
         for s in 0..20 {
             assert_eq!(
-                m.update(at(f64::from(s)), &start, false, true),
+                m.update(at(f64::from(s)), &start, &start, false, true),
                 MissionPhase::Exploring
             );
         }
         let far = Point3::new(21.0, 2.0, 0.5);
-        m.update(at(20.0), &far, true, true);
+        m.update(at(20.0), &far, &far, true, true);
         // 9 s without a frontier, then one for a round: still exploring.
         for s in 21..=30 {
             assert_eq!(
-                m.update(at(f64::from(s)), &far, false, true),
+                m.update(at(f64::from(s)), &far, &far, false, true),
                 MissionPhase::Exploring
             );
         }
-        m.update(at(30.5), &far, true, true);
+        m.update(at(30.5), &far, &far, true, true);
         for s in 31..41 {
             assert_eq!(
-                m.update(at(f64::from(s)), &far, false, true),
+                m.update(at(f64::from(s)), &far, &far, false, true),
                 MissionPhase::Exploring
             );
         }
         // Idle from 31 s; while a peer still explores, the robot goes on.
         assert_eq!(
-            m.update(at(41.0), &far, false, false),
+            m.update(at(41.0), &far, &far, false, false),
             MissionPhase::Exploring
         );
         assert!(m.status().idle);
         assert_eq!(
-            m.update(at(41.0), &far, false, true),
+            m.update(at(41.0), &far, &far, false, true),
             MissionPhase::Returning
         );
         assert!(!m.status().idle);
         // Frontiers seen on the way home change nothing.
         let halfway = Point3::new(11.0, 2.0, 0.5);
         assert_eq!(
-            m.update(at(50.0), &halfway, true, true),
+            m.update(at(50.0), &halfway, &halfway, true, true),
             MissionPhase::Returning
         );
         let near = Point3::new(1.9, 2.0, 0.5);
-        assert_eq!(m.update(at(60.0), &near, true, true), MissionPhase::Home);
-        assert_eq!(m.update(at(70.0), &far, true, true), MissionPhase::Home);
+        // Within the radius, but flying fast enough to come to rest beyond it: not
+        // home yet.
+        let overshoot = Point3::new(-0.2, 2.0, 0.5);
+        assert_eq!(
+            m.update(at(59.0), &near, &overshoot, true, true),
+            MissionPhase::Returning
+        );
+        let stops_at = Point3::new(0.7, 2.0, 0.5);
+        assert_eq!(
+            m.update(at(60.0), &near, &stops_at, true, true),
+            MissionPhase::Home
+        );
+        assert_eq!(
+            m.update(at(70.0), &far, &far, true, true),
+            MissionPhase::Home
+        );
         let status = m.status();
         let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
         assert!(close(status.ended_s, 41.0));
         assert_eq!(status.end, Some(MissionEnd::Explored));
         assert!(close(status.home_s, 60.0));
+        // The gap is where it comes to rest.
+        assert!(close(status.home_gap_m, 0.3));
         assert!(close(status.return_s, 19.0));
         assert_eq!(status.home_m, Some([1.0, 2.0, 0.5]));
         // 10 m to halfway, 9.1 m to home; what is flown after home is not the return's.
@@ -456,8 +483,14 @@ mod tests {
         let deeper = Point3::new(1.0, 0.0, 0.0);
         let unreachable = Point3::new(-9.0, 0.0, 0.0);
         let mut m = Mission::new(MissionConfig::default());
-        m.update(at(0.0), &own, true, true);
-        m.update(at(10.0), &Point3::new(30.0, 0.0, 0.0), true, true);
+        m.update(at(0.0), &own, &own, true, true);
+        m.update(
+            at(10.0),
+            &Point3::new(30.0, 0.0, 0.0),
+            &Point3::new(30.0, 0.0, 0.0),
+            true,
+            true,
+        );
         assert!(!m.wants_home_ranking(), "not while exploring");
         m.command_return(at(20.0));
         assert!(m.wants_home_ranking());
@@ -474,7 +507,13 @@ mod tests {
         assert!(!m.choose_home(&[deeper, own]));
         assert_eq!(m.home_m(), Some(own));
         assert_eq!(
-            m.update(at(60.0), &Point3::new(2.9, 0.0, 0.0), false, true),
+            m.update(
+                at(60.0),
+                &Point3::new(2.9, 0.0, 0.0),
+                &Point3::new(2.9, 0.0, 0.0),
+                false,
+                true
+            ),
             MissionPhase::Home
         );
         assert_eq!(m.own_home_m(), Some(own));
@@ -485,7 +524,7 @@ mod tests {
             ..MissionConfig::default()
         };
         let mut m = Mission::new(config);
-        m.update(at(0.0), &own, true, true);
+        m.update(at(0.0), &own, &own, true, true);
         m.command_return(at(1.0));
         assert!(!m.wants_home_ranking());
         assert!(!m.choose_home(&[]));
@@ -501,10 +540,10 @@ mod tests {
         };
         let mut m = Mission::new(config);
         let p = Point3::new(5.0, 0.0, 1.0);
-        m.update(at(0.0), &p, true, true);
+        m.update(at(0.0), &p, &p, true, true);
         for s in 1..100 {
             assert_eq!(
-                m.update(at(f64::from(s)), &p, false, true),
+                m.update(at(f64::from(s)), &p, &p, false, true),
                 MissionPhase::Exploring
             );
         }
@@ -514,12 +553,21 @@ mod tests {
         m.command_return(at(101.0));
         assert!((m.status().ended_s.unwrap_or(0.0) - 100.0).abs() < 1e-9);
         assert_eq!(
-            m.update(at(110.0), &Point3::new(0.5, 0.0, 1.0), false, true),
+            m.update(
+                at(110.0),
+                &Point3::new(0.5, 0.0, 1.0),
+                &Point3::new(0.5, 0.0, 1.0),
+                false,
+                true
+            ),
             MissionPhase::Home
         );
         // A non-finite pose changes nothing.
         let nan = Point3::new(f64::NAN, 0.0, 0.0);
-        assert_eq!(m.update(at(111.0), &nan, true, true), MissionPhase::Home);
+        assert_eq!(
+            m.update(at(111.0), &nan, &nan, true, true),
+            MissionPhase::Home
+        );
         assert!(m.status().return_distance_m.is_finite());
     }
 
@@ -557,7 +605,7 @@ mod tests {
     fn a_return_that_stops_getting_nearer_ends_where_the_robot_is() {
         let mut m = Mission::new(MissionConfig::default());
         let home = Point3::new(0.0, 0.0, 1.0);
-        m.update(at(0.0), &home, true, true);
+        m.update(at(0.0), &home, &home, true, true);
         let blocked = Point3::new(4.0, 0.0, 1.0);
         m.command_return(at(10.0));
         // Nearer each round for 5 s, then stuck 4 m out.
@@ -568,7 +616,7 @@ mod tests {
         for s in 16..30 {
             m.returning(at(f64::from(s)), 4.0, &blocked);
             assert_eq!(
-                m.update(at(f64::from(s)), &blocked, false, true),
+                m.update(at(f64::from(s)), &blocked, &blocked, false, true),
                 MissionPhase::Returning
             );
         }
@@ -581,7 +629,7 @@ mod tests {
         );
         // Without a known route the return does not count as stalled: it waits.
         let mut m = Mission::new(MissionConfig::default());
-        m.update(at(0.0), &home, true, true);
+        m.update(at(0.0), &home, &home, true, true);
         m.command_return(at(1.0));
         for s in 1..100 {
             m.returning(at(f64::from(s)), f64::INFINITY, &blocked);

@@ -459,9 +459,20 @@ impl<S: ActionSelection> PlannerActor<S> {
         &mut self,
         ctx: &mut Context<'_>,
         now: Time,
-        here: &nalgebra::Point3<f64>,
+        root: &FlatState,
         field: Option<&GuidanceField>,
     ) -> MissionPhase {
+        let here = &nalgebra::Point3::from(root.position_m());
+        // Where the robot comes to rest if it holds from this round: the end of the
+        // braking a robot at home commits.
+        let rest = self
+            .config
+            .round
+            .limits
+            .braking(root)
+            .map_or(*here, |stop| {
+                nalgebra::Point3::from(stop.end_state().position_m())
+            });
         let work = match (&self.guide, field) {
             (Some(guide), Some(field)) => guide.has_work(field, here),
             _ => true,
@@ -470,7 +481,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             .peer_missions
             .values()
             .all(|m| m.idle || m.phase != MissionPhase::Exploring);
-        let phase = self.mission.update(now, here, work, peers_done);
+        let phase = self.mission.update(now, here, &rest, work, peers_done);
         if phase == MissionPhase::Returning && self.config.mission.share_homes {
             self.choose_home(ctx, here);
         }
@@ -594,7 +605,7 @@ impl<S: ActionSelection> PlannerActor<S> {
             .guide
             .as_mut()
             .map(|g| g.field((own, &here, root.yaw_rad()), now));
-        let phase = self.advance_mission(ctx, now, &here, field.as_ref());
+        let phase = self.advance_mission(ctx, now, &root, field.as_ref());
         let home_field = self.home_field(ctx, phase, &here);
         self.publish_memory(ctx, now, &here, home_field.as_ref().or(field.as_ref()));
         let round = &self.config.round;
