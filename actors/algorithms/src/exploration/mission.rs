@@ -484,13 +484,8 @@ mod tests {
         let unreachable = Point3::new(-9.0, 0.0, 0.0);
         let mut m = Mission::new(MissionConfig::default());
         m.update(at(0.0), &own, &own, true, true);
-        m.update(
-            at(10.0),
-            &Point3::new(30.0, 0.0, 0.0),
-            &Point3::new(30.0, 0.0, 0.0),
-            true,
-            true,
-        );
+        let away = Point3::new(30.0, 0.0, 0.0);
+        m.update(at(10.0), &away, &away, true, true);
         assert!(!m.wants_home_ranking(), "not while exploring");
         m.command_return(at(20.0));
         assert!(m.wants_home_ranking());
@@ -506,14 +501,9 @@ mod tests {
         // Every home held: its own (the home without a route was never a choice).
         assert!(!m.choose_home(&[deeper, own]));
         assert_eq!(m.home_m(), Some(own));
+        let beside = Point3::new(2.9, 0.0, 0.0);
         assert_eq!(
-            m.update(
-                at(60.0),
-                &Point3::new(2.9, 0.0, 0.0),
-                &Point3::new(2.9, 0.0, 0.0),
-                false,
-                true
-            ),
+            m.update(at(60.0), &beside, &beside, false, true),
             MissionPhase::Home
         );
         assert_eq!(m.own_home_m(), Some(own));
@@ -552,14 +542,9 @@ mod tests {
         assert_eq!(m.status().end, Some(MissionEnd::Commanded));
         m.command_return(at(101.0));
         assert!((m.status().ended_s.unwrap_or(0.0) - 100.0).abs() < 1e-9);
+        let near = Point3::new(0.5, 0.0, 1.0);
         assert_eq!(
-            m.update(
-                at(110.0),
-                &Point3::new(0.5, 0.0, 1.0),
-                &Point3::new(0.5, 0.0, 1.0),
-                false,
-                true
-            ),
+            m.update(at(110.0), &near, &near, false, true),
             MissionPhase::Home
         );
         // A non-finite pose changes nothing.
