@@ -462,17 +462,18 @@ impl<S: ActionSelection> PlannerActor<S> {
         root: &FlatState,
         field: Option<&GuidanceField>,
     ) -> MissionPhase {
-        let here = &nalgebra::Point3::from(root.position_m());
-        // Where the robot comes to rest if it holds from this round: the end of the
-        // braking a robot at home commits.
-        let rest = self
-            .config
-            .round
-            .limits
-            .braking(root)
-            .map_or(*here, |stop| {
-                nalgebra::Point3::from(stop.end_state().position_m())
-            });
+        let here = &Point3::from(root.position_m());
+        // While returning, where the robot comes to rest if it holds from this round:
+        // the end of the braking a robot at home commits (only a return reads it).
+        let rest = match self.mission.phase() {
+            MissionPhase::Returning => self
+                .config
+                .round
+                .limits
+                .braking(root)
+                .map_or(*here, |stop| Point3::from(stop.end_state().position_m())),
+            _ => *here,
+        };
         let work = match (&self.guide, field) {
             (Some(guide), Some(field)) => guide.has_work(field, here),
             _ => true,
