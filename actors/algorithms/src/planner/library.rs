@@ -67,13 +67,11 @@ pub struct LibraryParams {
     pub max_yaw_rate_rad_s: f64,
     /// Base duration τ for fixed-duration libraries, seconds (paper Table I: 3 s).
     pub base_duration_s: f64,
-    /// The Yaw row turns in place both ways (two primitives, ±Ω_max); `false` (the
-    /// default): one, +Ω_max, as Table 4.2 counts it (N_ω = 1). Turning one way only,
+    /// The Yaw row turns in place both ways (two primitives, ±Ω_max; the default);
+    /// `false`: one, +Ω_max, as Table 4.2 counts it (N_ω = 1). Turning one way only,
     /// a robot whose route lay just to its right had to begin a 5 rad turn the other
     /// way, which greedy choice never does: a return home stalled 30.7 m out on seed 5
-    /// at 700 s. Measured in docs/results/exploration.md; not yet the default: in the
-    /// short dead end of `sims/tests/exploration_worlds.rs` a robot with it came to rest
-    /// 0.93 m from its home on its peer's side, and the peer could not pass to its own.
+    /// at 700 s. Measured in docs/results/exploration.md.
     pub yaw_both_ways: bool,
 }
 
@@ -85,7 +83,7 @@ impl Default for LibraryParams {
             vertical_speed_mps: 0.3,
             max_yaw_rate_rad_s: 0.6,
             base_duration_s: 3.0,
-            yaw_both_ways: false,
+            yaw_both_ways: true,
         }
     }
 }
@@ -213,7 +211,11 @@ mod tests {
 
     #[test]
     fn library_sizes_match_the_tables() {
-        let table = LibraryParams::default();
+        // Table 4.2 counts one turn in place (N_ω = 1).
+        let table = LibraryParams {
+            yaw_both_ways: false,
+            ..LibraryParams::default()
+        };
         assert_eq!(count(&large(), &table), 1 + 4 * 45 + 5);
         assert_eq!(count(&minimal(), &table), 1 + 4 * 9 + 3);
         assert_eq!(count(&paper(), &table), 4 * 15 + 5);
