@@ -343,12 +343,7 @@ impl Recorder {
                 self.write(&topic, &schemas::POSE_IN_FRAME, p.time, &pose);
             }
         } else if let Some(snapshot) = p.get(&GRID_SNAPSHOT) {
-            let period_s = self.options.grid_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_grid,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.grid_period_s, |r| &mut r.last_grid) {
                 let stamp = self.stamp(snapshot.stamp);
                 let occupied = occupied_cloud(snapshot, stamp);
                 self.write_cloud(&format!("/robot{i}/grid"), p.time, &occupied);
@@ -356,21 +351,15 @@ impl Recorder {
                 self.write_cloud(&format!("/robot{i}/frontiers"), p.time, &frontiers);
             }
         } else if let Some(memory) = p.get(&REMEMBERED_FRONTIERS) {
-            let period_s = self.options.grid_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_memory,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.grid_period_s, |r| {
+                &mut r.last_memory
+            }) {
                 self.record_memory(i, p.time, memory);
             }
         } else if let Some(frame) = p.get(&DEPTH_FRAME) {
-            let period_s = self.options.depth_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_depth,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.depth_period_s, |r| {
+                &mut r.last_depth
+            }) {
                 self.record_depth(i, p.time, frame);
             }
         } else if let Some(status) = p.get(&LINK_STATUS) {
@@ -380,6 +369,18 @@ impl Recorder {
             let topic = format!("/robot{i}/mission");
             self.write(&topic, &schemas::MISSION_STATUS, p.time, status);
         }
+    }
+
+    /// Whether robot `i`'s stream kept in `last` is [`due`] at `now` for `period_s`
+    /// (and if so, marks it written now).
+    fn due(
+        &mut self,
+        i: u32,
+        now: Time,
+        period_s: Option<f64>,
+        last: fn(&mut RobotState) -> &mut Option<Time>,
+    ) -> bool {
+        due(last(self.robots.entry(i).or_default()), now, period_s)
     }
 
     /// `/tf` (the camera's mount once, then the body in the world) and `/robot<i>/pose`.
