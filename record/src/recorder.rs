@@ -95,33 +95,13 @@ fn camera_in_body() -> Isometry3<f64> {
 }
 
 /// Colour of a candidate the collision actor chose.
-const CHOSEN: Color = Color {
-    r: 0.1,
-    g: 0.8,
-    b: 0.2,
-    a: 1.0,
-};
+const CHOSEN: Color = Color::rgba(0.1, 0.8, 0.2, 1.0);
 /// Colour of a candidate rejected for clearance.
-const REJECTED_CLEARANCE: Color = Color {
-    r: 0.9,
-    g: 0.1,
-    b: 0.1,
-    a: 0.8,
-};
+const REJECTED_CLEARANCE: Color = Color::rgba(0.9, 0.1, 0.1, 0.8);
 /// Colour of a candidate rejected because of a peer.
-const REJECTED_PEER: Color = Color {
-    r: 1.0,
-    g: 0.6,
-    b: 0.0,
-    a: 0.8,
-};
+const REJECTED_PEER: Color = Color::rgba(1.0, 0.6, 0.0, 0.8);
 /// Colour of a candidate ranked below the chosen one (never checked).
-const UNCHECKED: Color = Color {
-    r: 0.6,
-    g: 0.6,
-    b: 0.6,
-    a: 0.4,
-};
+const UNCHECKED: Color = Color::rgba(0.6, 0.6, 0.6, 0.4);
 
 /// What a recorder writes of the bulky topics, how often, and how it compresses the
 /// file. With the defaults the default scenario's recording is about 4.5 MB per
@@ -253,12 +233,7 @@ impl Recorder {
     /// Writes the world's surface (`vertices`, three indices per triangle) on `/world`
     /// at time zero, in grey: the rock the 3D view shows around the robots.
     pub fn write_world(&mut self, vertices: &[nalgebra::Point3<f64>], triangles: &[[u32; 3]]) {
-        let color = Color {
-            r: 0.55,
-            g: 0.5,
-            b: 0.45,
-            a: 0.35,
-        };
+        let color = Color::rgba(0.55, 0.5, 0.45, 0.35);
         let entity = mesh_entity("world", vertices, triangles, color, self.stamp(Time::ZERO));
         self.write_scene("/world", Time::ZERO, entity);
     }
