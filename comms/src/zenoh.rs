@@ -237,6 +237,15 @@ fn config_error(key: &str, reason: impl Into<String>) -> TransportError {
     }
 }
 
+/// `value`, or `default` where a setting left at 0 means the default.
+fn unless_zero<T: PartialEq + Default>(value: T, default: T) -> T {
+    if value == T::default() {
+        default
+    } else {
+        value
+    }
+}
+
 impl ZenohConfig {
     /// Makes the relative TLS, dictionary and signing-key paths relative to `dir` (the
     /// directory of the file the settings were read from).
@@ -257,31 +266,19 @@ impl ZenohConfig {
     /// `max_message_bytes`, with 0 meaning [`DEFAULT_MAX_MESSAGE_BYTES`].
     #[must_use]
     pub fn max_message_bytes(&self) -> usize {
-        if self.max_message_bytes == 0 {
-            DEFAULT_MAX_MESSAGE_BYTES
-        } else {
-            self.max_message_bytes
-        }
+        unless_zero(self.max_message_bytes, DEFAULT_MAX_MESSAGE_BYTES)
     }
 
     /// `accept_timeout_s`, with 0 meaning [`DEFAULT_ACCEPT_TIMEOUT_S`].
     #[must_use]
     pub fn accept_timeout_s(&self) -> f64 {
-        if self.accept_timeout_s == 0.0 {
-            DEFAULT_ACCEPT_TIMEOUT_S
-        } else {
-            self.accept_timeout_s
-        }
+        unless_zero(self.accept_timeout_s, DEFAULT_ACCEPT_TIMEOUT_S)
     }
 
     /// `accept_pending`, with 0 meaning [`DEFAULT_ACCEPT_PENDING`].
     #[must_use]
     pub fn accept_pending(&self) -> usize {
-        if self.accept_pending == 0 {
-            DEFAULT_ACCEPT_PENDING
-        } else {
-            self.accept_pending
-        }
+        unless_zero(self.accept_pending, DEFAULT_ACCEPT_PENDING)
     }
 
     /// What `insecure = true` leaves open off this machine: each listening or

@@ -128,6 +128,14 @@ pub struct Color {
     pub a: f64,
 }
 
+impl Color {
+    /// The colour of these components, each in 0..=1.
+    #[must_use]
+    pub const fn rgba(r: f64, g: f64, b: f64, a: f64) -> Self {
+        Color { r, g, b, a }
+    }
+}
+
 /// `foxglove.FrameTransform`: the pose of `child_frame_id` in `parent_frame_id`.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FrameTransform {

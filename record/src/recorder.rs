@@ -95,33 +95,13 @@ fn camera_in_body() -> Isometry3<f64> {
 }
 
 /// Colour of a candidate the collision actor chose.
-const CHOSEN: Color = Color {
-    r: 0.1,
-    g: 0.8,
-    b: 0.2,
-    a: 1.0,
-};
+const CHOSEN: Color = Color::rgba(0.1, 0.8, 0.2, 1.0);
 /// Colour of a candidate rejected for clearance.
-const REJECTED_CLEARANCE: Color = Color {
-    r: 0.9,
-    g: 0.1,
-    b: 0.1,
-    a: 0.8,
-};
+const REJECTED_CLEARANCE: Color = Color::rgba(0.9, 0.1, 0.1, 0.8);
 /// Colour of a candidate rejected because of a peer.
-const REJECTED_PEER: Color = Color {
-    r: 1.0,
-    g: 0.6,
-    b: 0.0,
-    a: 0.8,
-};
+const REJECTED_PEER: Color = Color::rgba(1.0, 0.6, 0.0, 0.8);
 /// Colour of a candidate ranked below the chosen one (never checked).
-const UNCHECKED: Color = Color {
-    r: 0.6,
-    g: 0.6,
-    b: 0.6,
-    a: 0.4,
-};
+const UNCHECKED: Color = Color::rgba(0.6, 0.6, 0.6, 0.4);
 
 /// What a recorder writes of the bulky topics, how often, and how it compresses the
 /// file. With the defaults the default scenario's recording is about 4.5 MB per
@@ -253,12 +233,7 @@ impl Recorder {
     /// Writes the world's surface (`vertices`, three indices per triangle) on `/world`
     /// at time zero, in grey: the rock the 3D view shows around the robots.
     pub fn write_world(&mut self, vertices: &[nalgebra::Point3<f64>], triangles: &[[u32; 3]]) {
-        let color = Color {
-            r: 0.55,
-            g: 0.5,
-            b: 0.45,
-            a: 0.35,
-        };
+        let color = Color::rgba(0.55, 0.5, 0.45, 0.35);
         let entity = mesh_entity("world", vertices, triangles, color, self.stamp(Time::ZERO));
         self.write_scene("/world", Time::ZERO, entity);
     }
@@ -343,12 +318,7 @@ impl Recorder {
                 self.write(&topic, &schemas::POSE_IN_FRAME, p.time, &pose);
             }
         } else if let Some(snapshot) = p.get(&GRID_SNAPSHOT) {
-            let period_s = self.options.grid_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_grid,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.grid_period_s, |r| &mut r.last_grid) {
                 let stamp = self.stamp(snapshot.stamp);
                 let occupied = occupied_cloud(snapshot, stamp);
                 self.write_cloud(&format!("/robot{i}/grid"), p.time, &occupied);
@@ -356,21 +326,15 @@ impl Recorder {
                 self.write_cloud(&format!("/robot{i}/frontiers"), p.time, &frontiers);
             }
         } else if let Some(memory) = p.get(&REMEMBERED_FRONTIERS) {
-            let period_s = self.options.grid_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_memory,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.grid_period_s, |r| {
+                &mut r.last_memory
+            }) {
                 self.record_memory(i, p.time, memory);
             }
         } else if let Some(frame) = p.get(&DEPTH_FRAME) {
-            let period_s = self.options.depth_period_s;
-            if due(
-                &mut self.robots.entry(i).or_default().last_depth,
-                p.time,
-                period_s,
-            ) {
+            if self.due(i, p.time, self.options.depth_period_s, |r| {
+                &mut r.last_depth
+            }) {
                 self.record_depth(i, p.time, frame);
             }
         } else if let Some(status) = p.get(&LINK_STATUS) {
@@ -380,6 +344,18 @@ impl Recorder {
             let topic = format!("/robot{i}/mission");
             self.write(&topic, &schemas::MISSION_STATUS, p.time, status);
         }
+    }
+
+    /// Whether robot `i`'s stream kept in `last` is [`due`] at `now` for `period_s`
+    /// (and if so, marks it written now).
+    fn due(
+        &mut self,
+        i: u32,
+        now: Time,
+        period_s: Option<f64>,
+        last: fn(&mut RobotState) -> &mut Option<Time>,
+    ) -> bool {
+        due(last(self.robots.entry(i).or_default()), now, period_s)
     }
 
     /// `/tf` (the camera's mount once, then the body in the world) and `/robot<i>/pose`.

@@ -74,12 +74,10 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 
 #[test]
 fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
-    let (ros_python, mav_python) = match kit::hardware_pythons() {
-        Ok(pythons) => pythons,
-        Err(why) => {
-            eprintln!("SKIPPED hardware loop test: {why}");
-            return;
-        }
+    let Some((ros_python, mav_python)) =
+        kit::or_skip(kit::hardware_pythons(), "hardware loop test")
+    else {
+        return;
     };
     let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_loop");
     let (ros_port, team_port) = (kit::free_tcp_port(), kit::free_tcp_port());
@@ -263,12 +261,8 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
 /// topic, before it ever talks to the autopilot.
 #[test]
 fn a_silent_topic_stops_the_robot_before_any_setpoint() {
-    let mav_python = match kit::pymavlink_python() {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("SKIPPED silent-topic test: {e}");
-            return;
-        }
+    let Some(mav_python) = kit::or_skip(kit::pymavlink_python(), "silent-topic test") else {
+        return;
     };
     let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_silent");
     let mavlink_port = kit::free_udp_port();
@@ -316,12 +310,8 @@ fn a_silent_topic_stops_the_robot_before_any_setpoint() {
 /// `gave_up` in the summary).
 #[test]
 fn no_autopilot_is_one_error_after_the_wait() {
-    let ros_python = match kit::ros2_python() {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("SKIPPED no-autopilot test: {e}");
-            return;
-        }
+    let Some(ros_python) = kit::or_skip(kit::ros2_python(), "no-autopilot test") else {
+        return;
     };
     let dir = kit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), "hardware_no_autopilot");
     let ros_port = kit::free_tcp_port();

@@ -21,7 +21,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 use troupe_actors::mapper::decimate;
 use troupe_algorithms::sogmm::{
     MeanShiftConfig, MeanShiftKind, frame_points, mean_shift_modes, synthetic,
@@ -33,18 +33,7 @@ type NamedData = (String, Vec<[f64; 2]>);
 
 /// Every frame asked for.
 fn frames(sequence: Option<&PathBuf>, every: usize) -> Result<Vec<NamedData>, Box<dyn Error>> {
-    let base = synthetic::room_pose();
-    let views = [
-        base,
-        Isometry3::from_parts(
-            Translation3::new(0.5, 0.5, 1.1),
-            UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 40f64.to_radians()),
-        ),
-        Isometry3::from_parts(
-            Translation3::new(1.0, -1.0, 1.5),
-            UnitQuaternion::from_euler_angles(0.0, 25f64.to_radians(), 10f64.to_radians()),
-        ),
-    ];
+    let views = synthetic::room_views();
     let scene = synthetic::Scene::room_corner();
     let mut out = Vec::new();
     let mut synth =

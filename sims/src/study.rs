@@ -1160,6 +1160,14 @@ mod tests {
         p
     }
 
+    /// `text` written as `study.toml` in a fresh directory and loaded: the directory
+    /// (to keep while the study is used) and the study.
+    fn load_study(text: &str) -> (tempfile::TempDir, Study) {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let study = Study::load(&write(dir.path(), "study.toml", text)).expect("study");
+        (dir, study)
+    }
+
     #[test]
     fn axes_expand_to_every_combination_under_every_seed() {
         let dir = tempfile::tempdir().expect("temp dir");
@@ -1245,15 +1253,10 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
 
     #[test]
     fn a_finished_run_is_reused_only_for_the_same_scenario() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(
-            dir.path(),
-            "study.toml",
+        let (dir, study) = load_study(
             "name = \"s\"\nseeds = [1]\nduration_s = 5.0\n[[axes]]\nkey = \"robots\"\nvalues = [1, 2]\n",
         );
-        let variants = Study::load(&path)
-            .and_then(|s| s.variants())
-            .expect("variants");
+        let variants = study.variants().expect("variants");
         let variant = &variants[0];
         let row = RunRow {
             run: variant.name.clone(),
@@ -1329,15 +1332,8 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
     /// 23.400000000000006 read back as 23.40000000000001).
     #[test]
     fn a_finished_run_reads_back_every_float_exactly() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(
-            dir.path(),
-            "study.toml",
-            "name = \"s\"\nseeds = [1]\nduration_s = 5.0\n",
-        );
-        let variants = Study::load(&path)
-            .and_then(|s| s.variants())
-            .expect("variants");
+        let (dir, study) = load_study("name = \"s\"\nseeds = [1]\nduration_s = 5.0\n");
+        let variants = study.variants().expect("variants");
         let variant = &variants[0];
         // Sums of 0.1 and 0.2 and their ratios: floats with 16–17 significant digits,
         // many of which a fast (not correctly rounded) parser gets one ulp wrong.
@@ -1381,13 +1377,7 @@ set = { robots = 2, "robot.link.odometry_rate_hz" = 5.0 }
 
     #[test]
     fn coverage_bands_stay_within_0_and_100_percent() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(
-            dir.path(),
-            "study.toml",
-            "name = \"s\"\nseeds = [1, 2, 3]\nduration_s = 5.0\n",
-        );
-        let study = Study::load(&path).expect("study");
+        let (_dir, study) = load_study("name = \"s\"\nseeds = [1, 2, 3]\nduration_s = 5.0\n");
         // Three seeds far apart: the 95% interval alone would reach below 0 and above 100 %.
         let rows: Vec<RunRow> = [0.02, 0.5, 0.98]
             .iter()
@@ -1522,9 +1512,7 @@ says = 'below 0.8, "faster"'
 
     #[test]
     fn results_have_one_og_bytes_column_per_resolution_counted() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(dir.path(), "study.toml", "name = \"s\"\nseeds = [1, 2]\n");
-        let study = Study::load(&path).expect("study");
+        let (_dir, study) = load_study("name = \"s\"\nseeds = [1, 2]\n");
         let levels = study.coverage_levels.len();
         let [mut counted, mut plain] = [1, 2].map(|seed| row_with_coverage(seed, 0.5));
         for row in [&mut counted, &mut plain] {
@@ -1542,9 +1530,7 @@ says = 'below 0.8, "faster"'
 
     #[test]
     fn results_carry_the_reexploration_figures_and_empty_cells_for_old_records() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(dir.path(), "study.toml", "name = \"s\"\nseeds = [1, 2]\n");
-        let study = Study::load(&path).expect("study");
+        let (_dir, study) = load_study("name = \"s\"\nseeds = [1, 2]\n");
         let levels = study.coverage_levels.len();
         let [mut measured, mut old] = [1, 2].map(|seed| row_with_coverage(seed, 0.5));
         for row in [&mut measured, &mut old] {
@@ -1588,13 +1574,8 @@ says = 'below 0.8, "faster"'
 
     #[test]
     fn aggregate_has_intervals_on_times_to_coverage_and_counts_the_runs_reaching_them() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let path = write(
-            dir.path(),
-            "study.toml",
-            "name = \"s\"\nseeds = [1, 2, 3]\ncoverage_levels = [0.5, 0.9]\n",
-        );
-        let study = Study::load(&path).expect("study");
+        let (_dir, study) =
+            load_study("name = \"s\"\nseeds = [1, 2, 3]\ncoverage_levels = [0.5, 0.9]\n");
         let rows: Vec<RunRow> = [(Some(10.0), 4.0), (Some(20.0), 40.0), (None, 7.0)]
             .into_iter()
             .zip(1..)

@@ -35,6 +35,24 @@ fn loopback_team(dir: &Path, robots: usize, duration_s: f64) -> Vec<PathBuf> {
     .expect("robot files")
 }
 
+/// A fresh directory holding the scenario `team.toml` with this text.
+fn team_dir(scenario: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(dir.path().join("team.toml"), scenario).expect("scenario");
+    dir
+}
+
+/// Turns on zenoh's `insecure` key in every robot file: off loopback an
+/// unauthenticated link must say so (docs/security.md), connecting or listening.
+fn allow_insecure(files: &[PathBuf]) {
+    for f in files {
+        let text = std::fs::read_to_string(f).expect("robot file");
+        let open = text.replacen("insecure = false", "insecure = true", 1);
+        assert_ne!(open, text, "no zenoh `insecure` key in {}", f.display());
+        std::fs::write(f, open).expect("robot file");
+    }
+}
+
 /// Waits for every process; each must exit successfully soon after its duration.
 fn wait_all(children: &mut [Child], duration_s: f64) {
     let started = Instant::now();
@@ -138,13 +156,8 @@ fn assert_kept_apart(
 
 #[test]
 fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
-    let dir = tempfile::tempdir().expect("tempdir");
+    let dir = team_dir("name = \"processes\"\nrobots = 3\n");
     let duration_s = 20.0;
-    std::fs::write(
-        dir.path().join("team.toml"),
-        "name = \"processes\"\nrobots = 3\n",
-    )
-    .expect("scenario");
     let files = loopback_team(dir.path(), 3, duration_s);
     let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
     wait_all(&mut children, duration_s);
@@ -308,12 +321,7 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     let Some((prefix, net, namespaces)) = shaped_namespaces(0) else {
         return;
     };
-    let dir = tempfile::tempdir().expect("tempdir");
-    std::fs::write(
-        dir.path().join("team.toml"),
-        "name = \"netns\"\nrobots = 3\n",
-    )
-    .expect("scenario");
+    let dir = team_dir("name = \"netns\"\nrobots = 3\n");
     let duration_s = 20.0;
     let endpoints: Vec<String> = (1..=3)
         .map(|host| format!("tcp/10.77.{net}.{host}:7447"))
@@ -327,12 +335,7 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     .expect("robot files");
     // Off loopback an unauthenticated listener must say so (docs/security.md); the
     // namespaces' network is private to this test.
-    for f in &files {
-        let text = std::fs::read_to_string(f).expect("robot file");
-        let open = text.replacen("insecure = false", "insecure = true", 1);
-        assert_ne!(open, text, "no zenoh `insecure` key in {}", f.display());
-        std::fs::write(f, open).expect("robot file");
-    }
+    allow_insecure(&files);
     let mut children: Vec<_> = files
         .iter()
         .enumerate()
@@ -401,12 +404,7 @@ fn two_client_robots_and_a_router_in_three_network_namespaces() {
     let Some((prefix, net, namespaces)) = shaped_namespaces(1) else {
         return;
     };
-    let dir = tempfile::tempdir().expect("tempdir");
-    std::fs::write(
-        dir.path().join("team.toml"),
-        "name = \"netns_router\"\nrobots = 2\n",
-    )
-    .expect("scenario");
+    let dir = team_dir("name = \"netns_router\"\nrobots = 2\n");
     let endpoint = format!("tcp/10.77.{net}.1:7447");
     let router = spawn_router(&endpoint, Some(&namespaces.ns(0)));
     let duration_s = 20.0;
@@ -419,12 +417,7 @@ fn two_client_robots_and_a_router_in_three_network_namespaces() {
     )
     .expect("robot files");
     // A plain link off loopback must say so, connecting too (docs/security.md).
-    for f in &files {
-        let text = std::fs::read_to_string(f).expect("robot file");
-        let open = text.replacen("insecure = false", "insecure = true", 1);
-        assert_ne!(open, text, "no zenoh `insecure` key in {}", f.display());
-        std::fs::write(f, open).expect("robot file");
-    }
+    allow_insecure(&files);
     let mut children: Vec<_> = files
         .iter()
         .enumerate()
@@ -536,12 +529,7 @@ fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
 /// hears the others' odometry, keyframes and plans.
 #[test]
 fn three_robot_clients_talk_through_a_troupe_router() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    std::fs::write(
-        dir.path().join("team.toml"),
-        "name = \"routed\"\nrobots = 3\n",
-    )
-    .expect("scenario");
+    let dir = team_dir("name = \"routed\"\nrobots = 3\n");
     let endpoint = loopback_endpoints(&free_ports(1));
     let router = spawn_router(&endpoint[0], None);
     let duration_s = 20.0;
@@ -572,14 +560,11 @@ fn three_robot_clients_talk_through_a_troupe_router() {
 /// rejected, and `launch.json` tells what each process and the router used.
 #[test]
 fn launch_with_a_router_runs_the_team_as_its_clients() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    std::fs::write(
-        dir.path().join("team.toml"),
+    let dir = team_dir(
         "name = \"launched\"\nrobots = 4\n\
          [camera]\nwidth = 80\nheight = 60\n\
          [robot.link.subscribe]\nscope = \"neighbourhood\"\nradius_m = 30.0\ncell_m = 10.0\n",
-    )
-    .expect("scenario");
+    );
     let port = free_ports(1)[0].to_string();
     let out = Command::new(env!("CARGO_BIN_EXE_troupe"))
         .args(["launch", "team.toml", "--router", "--duration-s", "25"])

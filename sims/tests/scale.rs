@@ -21,6 +21,22 @@ fn succeeded(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// `troupe sweep study.toml --merge split/<study> --out split` in `dir`: merges the
+/// shards' runs under `split/<study>` into that study's tables.
+fn merge_into_split(study: &str, dir: &Path) -> Output {
+    troupe(
+        &[
+            "sweep",
+            "study.toml",
+            "--merge",
+            &format!("split/{study}"),
+            "--out",
+            "split",
+        ],
+        dir,
+    )
+}
+
 /// `troupe sweep study.toml --shard <shard> --jobs 1 --out split` in `dir`.
 fn sweep_shard(shard: &str, dir: &Path) -> Output {
     troupe(
@@ -144,17 +160,7 @@ fn a_study_split_in_three_shards_and_merged_equals_the_study_run_whole() {
         !split.join("results.csv").exists(),
         "a shard wrote the study's tables"
     );
-    let merged = succeeded(&troupe(
-        &[
-            "sweep",
-            "study.toml",
-            "--merge",
-            "split/tiny",
-            "--out",
-            "split",
-        ],
-        d,
-    ));
+    let merged = succeeded(&merge_into_split("tiny", d));
     assert!(merged.contains("4 of 4 runs merged"), "{merged}");
     assert_same_tables(&d.join("whole/tiny"), &split);
 
@@ -176,17 +182,7 @@ fn a_study_split_in_three_shards_and_merged_equals_the_study_run_whole() {
 
     // A missing run is reported by name, and the merge fails.
     std::fs::remove_dir_all(split.join("runs").join(all[1])).unwrap();
-    let out = troupe(
-        &[
-            "sweep",
-            "study.toml",
-            "--merge",
-            "split/tiny",
-            "--out",
-            "split",
-        ],
-        d,
-    );
+    let out = merge_into_split("tiny", d);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains(&format!("missing: {}", all[1])), "{stderr}");
@@ -194,17 +190,7 @@ fn a_study_split_in_three_shards_and_merged_equals_the_study_run_whole() {
 
     // A changed study does not mix with runs of its earlier version.
     tiny_study(d, 2.0);
-    let out = troupe(
-        &[
-            "sweep",
-            "study.toml",
-            "--merge",
-            "split/tiny",
-            "--out",
-            "split",
-        ],
-        d,
-    );
+    let out = merge_into_split("tiny", d);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert_eq!(stderr.lines().count(), 1, "not one line: {stderr}");
@@ -236,17 +222,7 @@ fn a_two_robot_study_merged_from_two_shards_equals_it_run_whole_byte_for_byte() 
     for shard in ["0/2", "1/2"] {
         succeeded(&sweep_shard(shard, d));
     }
-    succeeded(&troupe(
-        &[
-            "sweep",
-            "study.toml",
-            "--merge",
-            "split/cave",
-            "--out",
-            "split",
-        ],
-        d,
-    ));
+    succeeded(&merge_into_split("cave", d));
     let (whole, split) = (d.join("whole/cave"), d.join("split/cave"));
     let results = without_wall_s(&whole.join("results.csv"));
     assert_eq!(results.len(), 4, "{results:?}");

@@ -38,12 +38,10 @@ fn zenoh(me: &str, others: &[&str]) -> String {
 
 #[test]
 fn hardware_robot_a_simulated_peer_and_the_base_share_one_map() {
-    let (ros_python, mav_python) = match kit::hardware_pythons() {
-        Ok(pythons) => pythons,
-        Err(why) => {
-            eprintln!("SKIPPED hardware team test: {why}");
-            return;
-        }
+    let Some((ros_python, mav_python)) =
+        kit::or_skip(kit::hardware_pythons(), "hardware team test")
+    else {
+        return;
     };
     let dir = tempfile::tempdir().expect("tempdir");
     let dir = dir.path();

@@ -18,29 +18,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use troupe_algorithms::sogmm::{
     EmConfig, MeanShiftConfig, fit_em, frame_points, init_from_partition, kmeans_plusplus,
     mean_shift_modes, synthetic,
 };
-
-/// The three views: the standard room pose, then turned and moved.
-fn poses() -> Vec<Isometry3<f64>> {
-    let base = synthetic::room_pose();
-    vec![
-        base,
-        Isometry3::from_parts(
-            Translation3::new(0.5, 0.5, 1.1),
-            UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 40f64.to_radians()),
-        ),
-        Isometry3::from_parts(
-            Translation3::new(1.0, -1.0, 1.5),
-            UnitQuaternion::from_euler_angles(0.0, 25f64.to_radians(), 10f64.to_radians()),
-        ),
-    ]
-}
 
 fn run() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
@@ -55,7 +38,7 @@ fn run() -> Result<(), Box<dyn Error>> {
     let intr = synthetic::intrinsics(160, 120);
     let scene = synthetic::Scene::room_corner();
     for sigma in sigmas {
-        for (k, pose) in poses().iter().enumerate() {
+        for (k, pose) in synthetic::room_views().iter().enumerate() {
             let (d, g) = scene.render(&intr, pose);
             let fp = frame_points(&d, &g, &intr, pose)?;
             let modes = mean_shift_modes(&fp.depth_intensity, sigma, &MeanShiftConfig::default());

@@ -185,7 +185,8 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], MapFileError> {
+    /// An error naming `what` if fewer than `n` bytes are left; takes nothing.
+    fn ensure(&self, n: usize, what: &'static str) -> Result<(), MapFileError> {
         let available = self.bytes.len() - self.offset;
         if n > available {
             return Err(MapFileError::Truncated {
@@ -195,6 +196,11 @@ impl<'a> Reader<'a> {
                 available,
             });
         }
+        Ok(())
+    }
+
+    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], MapFileError> {
+        self.ensure(n, what)?;
         let s = &self.bytes[self.offset..self.offset + n];
         self.offset += n;
         Ok(s)
@@ -389,15 +395,8 @@ impl GmmMap {
                 // Checked above to be of unit length within 1e-6; kept bit-exact.
                 UnitQuaternion::new_unchecked(q),
             );
-            let remaining = r.bytes.len() - r.offset;
-            if m.saturating_mul(COMPONENT4_BYTES) > remaining {
-                return Err(MapFileError::Truncated {
-                    what: "occupied components",
-                    offset: r.offset,
-                    needed: m.saturating_mul(COMPONENT4_BYTES),
-                    available: remaining,
-                });
-            }
+            // Checked before allocating for them.
+            r.ensure(m.saturating_mul(COMPONENT4_BYTES), "occupied components")?;
             let (mut w, mut mu, mut cov) = (
                 Vec::with_capacity(m),
                 Vec::with_capacity(m),
@@ -415,15 +414,7 @@ impl GmmMap {
             let free = if f == 0 {
                 None
             } else {
-                let remaining = r.bytes.len() - r.offset;
-                if f.saturating_mul(COMPONENT3_BYTES) > remaining {
-                    return Err(MapFileError::Truncated {
-                        what: "free-space components",
-                        offset: r.offset,
-                        needed: f.saturating_mul(COMPONENT3_BYTES),
-                        available: remaining,
-                    });
-                }
+                r.ensure(f.saturating_mul(COMPONENT3_BYTES), "free-space components")?;
                 let (mut w, mut mu, mut cov) = (
                     Vec::with_capacity(f),
                     Vec::with_capacity(f),

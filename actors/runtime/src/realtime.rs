@@ -32,7 +32,7 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use troupe_comms::transport::{PacketTransport, ReceivedPacket, TransportError};
 
-use crate::context::{Command, Outgoing};
+use crate::context::Outgoing;
 use crate::inputs::Inputs;
 use crate::network::{Destination, LINK_RX, LINK_TRANSPORT, LINK_TX, LinkRx, LinkTx};
 use crate::registry::{SubscriberRef, TopicRegistry, TypeMismatch, apply_command};
@@ -436,7 +436,9 @@ impl RealtimeExecutor {
                         command,
                         s,
                         &mut inputs,
-                        &mut registry,
+                        &mut |topic, type_id, type_name, who| {
+                            registry.add_subscriber(topic, type_id, type_name, who)
+                        },
                         &spec.name,
                         &slot.name,
                     );
@@ -583,36 +585,23 @@ impl ActorTask {
         }
         let robot = &self.shared.robots[self.robot];
         let mut inputs = lock(&robot.inboxes[self.index].inputs);
+        let mut add_subscriber = |topic: &str, type_id, type_name, who| {
+            self.shared
+                .add_subscriber(self.robot, topic, type_id, type_name, who)
+        };
         for command in commands {
-            match command {
-                Command::Subscribe {
-                    topic,
-                    type_id,
-                    type_name,
-                    policy,
-                } => {
-                    // The queue exists before any publisher can see the subscriber.
-                    let sub = inputs.subscribe(&topic, type_id, policy);
-                    let added = self.shared.add_subscriber(
-                        self.robot,
-                        &topic,
-                        type_id,
-                        type_name,
-                        (self.index, sub),
-                    );
-                    if let Err(e) = added {
-                        tracing::error!(robot = %robot.name, actor = %self.slot.name, topic = %e.topic,
-                            "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
-                    }
-                }
-                Command::SetTimer { id, period } if !period.is_zero() => {
-                    let (i, _) = inputs.set_timer(id, period);
-                    if let Some(d) = deadlines.get_mut(i) {
-                        *d = None;
-                    }
-                }
-                Command::SetTimer { .. } => {}
-                Command::CancelTimer { id } => inputs.cancel_timer(id),
+            // It makes a subscriber's queue before the shared table lists it, so
+            // the queue exists before any publisher can see the subscriber.
+            let started = apply_command(
+                command,
+                self.index,
+                &mut inputs,
+                &mut add_subscriber,
+                &robot.name,
+                &self.slot.name,
+            );
+            if let Some(d) = started.and_then(|t| deadlines.get_mut(t.index)) {
+                *d = None;
             }
         }
     }

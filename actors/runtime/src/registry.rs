@@ -108,13 +108,20 @@ pub(crate) struct TimerStarted {
     pub(crate) period: Duration,
 }
 
-/// Applies one command of actor `slot` to its inputs and the robot's registry —
-/// the same rules under both executors. Returns the timer to schedule, if any.
+/// What registers a subscriber with the robot's topics (as
+/// [`TopicRegistry::add_subscriber`]): its registry under the simulated executor
+/// and while real-time actors start, the shared topic table once they run.
+pub(crate) type AddSubscriber<'a> =
+    &'a mut dyn FnMut(&str, TypeId, &'static str, SubscriberRef) -> Result<(), TypeMismatch>;
+
+/// Applies one command of actor `slot` to its inputs and, through
+/// `add_subscriber`, the robot's topics — the same rules under both executors.
+/// Returns the timer to schedule, if any.
 pub(crate) fn apply_command(
     command: Command,
     slot: usize,
     inputs: &mut Inputs,
-    registry: &mut TopicRegistry,
+    add_subscriber: AddSubscriber<'_>,
     robot: &str,
     actor: &str,
 ) -> Option<TimerStarted> {
@@ -126,7 +133,7 @@ pub(crate) fn apply_command(
             policy,
         } => {
             let sub = inputs.subscribe(&topic, type_id, policy);
-            if let Err(e) = registry.add_subscriber(&topic, type_id, type_name, (slot, sub)) {
+            if let Err(e) = add_subscriber(&topic, type_id, type_name, (slot, sub)) {
                 tracing::error!(robot, actor, topic = %e.topic,
                     "cannot subscribe with type {}: the topic carries {}", e.used, e.declared);
             }

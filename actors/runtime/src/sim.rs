@@ -174,7 +174,9 @@ impl SimRobot {
                 command,
                 slot,
                 &mut self.inputs[slot],
-                &mut self.registry,
+                &mut |topic, type_id, type_name, who| {
+                    self.registry.add_subscriber(topic, type_id, type_name, who)
+                },
                 &self.name,
                 &self.slots[slot].name,
             );

@@ -560,6 +560,13 @@ fn late_subscriptions_receive_every_later_message_under_both_executors() {
     assert_eq!(rt_reports[0].topics["late"].messages, 21);
 }
 
+/// `hash` with `bytes` folded in (FNV-1a's step).
+fn fold(hash: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(hash, |h, b| {
+        (h ^ u64::from(*b)).wrapping_mul(0x100_0000_01b3)
+    })
+}
+
 /// Gossips a running hash of everything it heard, at random moments.
 struct Gossip {
     heard: u64,
@@ -587,14 +594,20 @@ impl Actor for Gossip {
             }
             Event::Message(m) => {
                 if let Some(rx) = m.get(&LINK_RX) {
-                    for b in rx.bytes.iter() {
-                        self.heard = (self.heard ^ u64::from(*b)).wrapping_mul(0x100_0000_01b3);
-                    }
+                    self.heard = fold(self.heard, &rx.bytes);
                 }
             }
         }
         Ok(())
     }
+}
+
+/// A [`Gossip`] actor whose calls take 1 to 20 ms.
+fn gossip() -> ActorSpec {
+    ActorSpec::new("gossip", || Gossip { heard: 0 }).with_latency(LatencyModel::Uniform {
+        min_s: 0.001,
+        max_s: 0.02,
+    })
 }
 
 /// Every publication the taps saw, as (time, robot, topic, bytes).
@@ -626,16 +639,7 @@ fn gossip_run(threads: usize) -> Seen {
         .unwrap()
         .install(|| {
             let robots = (0..4)
-                .map(|i| {
-                    RobotSpec::new(format!("r{i}")).with(
-                        ActorSpec::new("gossip", || Gossip { heard: 0 }).with_latency(
-                            LatencyModel::Uniform {
-                                min_s: 0.001,
-                                max_s: 0.02,
-                            },
-                        ),
-                    )
-                })
+                .map(|i| RobotSpec::new(format!("r{i}")).with(gossip()))
                 .collect();
             let mut sim = SimExecutor::new(robots, 5).with_network(IdealNetwork {
                 latency: Duration::from_millis(5),
@@ -679,9 +683,7 @@ impl Actor for Digest {
     }
     fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
         if let Some(rx) = event.message().and_then(|m| m.get(&LINK_RX)) {
-            for b in rx.bytes.iter() {
-                self.heard = (self.heard ^ u64::from(*b)).wrapping_mul(0x100_0000_01b3);
-            }
+            self.heard = fold(self.heard, &rx.bytes);
             self.calls += 1;
             if self.calls.is_multiple_of(2) {
                 let salt: u64 = ctx.rng().random();
@@ -702,23 +704,14 @@ fn digest_run(overlap: bool) -> (Seen, u64, Vec<u64>) {
     let s = seen.clone();
     let robots = (0..3)
         .map(|i| {
-            RobotSpec::new(format!("r{i}"))
-                .with(
-                    ActorSpec::new("gossip", || Gossip { heard: 0 }).with_latency(
-                        LatencyModel::Uniform {
-                            min_s: 0.001,
-                            max_s: 0.02,
-                        },
-                    ),
-                )
-                .with(
-                    ActorSpec::new("digest", move || Digest {
-                        heard: 0,
-                        calls: 0,
-                        overlap,
-                    })
-                    .with_latency(LatencyModel::fixed(0.03)),
-                )
+            RobotSpec::new(format!("r{i}")).with(gossip()).with(
+                ActorSpec::new("digest", move || Digest {
+                    heard: 0,
+                    calls: 0,
+                    overlap,
+                })
+                .with_latency(LatencyModel::fixed(0.03)),
+            )
         })
         .collect();
     let mut sim = SimExecutor::new(robots, 9).with_network(IdealNetwork {

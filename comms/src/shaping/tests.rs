@@ -16,6 +16,15 @@ fn config(rate_bps: u64, burst_bytes: u64, mtu_bytes: usize) -> ShaperConfig {
     }
 }
 
+/// `c` with keyframes stored and forwarded, at most `capacity_messages` of them.
+fn storing_keyframes(mut c: ShaperConfig, capacity_messages: usize) -> ShaperConfig {
+    c.keyframe = ClassConfig {
+        capacity_messages,
+        ..ClassConfig::store_and_forward()
+    };
+    c
+}
+
 /// Transmission time of `bytes` at `rate_bps`, ns (rounded up).
 /// Sends everything the shaper has from `now` on (at most 10 s of it); returns the
 /// frames and the time it stopped.
@@ -192,11 +201,7 @@ fn odometry_and_plans_keep_a_bounded_delay_while_keyframes_saturate() {
 #[test]
 fn store_and_forward_loses_nothing_over_a_30s_partition() {
     let (rate, mtu) = (250_000, 1_200);
-    let mut c = config(rate, mtu as u64, mtu);
-    c.keyframe = ClassConfig {
-        capacity_messages: 64,
-        ..ClassConfig::store_and_forward()
-    };
+    let c = storing_keyframes(config(rate, mtu as u64, mtu), 64);
     let mut a = LinkShaper::new(c).unwrap();
     let mut b = LinkShaper::new(c).unwrap();
     a.add_peer(1);
@@ -298,11 +303,7 @@ struct TeamRun {
 /// `partitioned(t)` is lost. Frames honour their addressee (`Frame::to`).
 fn three_robots(cut: u32, partitioned: impl Fn(u64) -> bool) -> TeamRun {
     let (rate, mtu) = (250_000, 1_200);
-    let mut c = config(rate, mtu as u64, mtu);
-    c.keyframe = ClassConfig {
-        capacity_messages: 64,
-        ..ClassConfig::store_and_forward()
-    };
+    let c = storing_keyframes(config(rate, mtu as u64, mtu), 64);
     let mut shapers: Vec<LinkShaper> = (0..3).map(|_| LinkShaper::new(c).unwrap()).collect();
     for (me, s) in shapers.iter_mut().enumerate() {
         for peer in 0..3u32 {
@@ -447,11 +448,7 @@ fn removing_a_peer_gives_its_messages_up_and_counts_them() {
 
 #[test]
 fn a_full_store_refuses_and_keeps_what_it_accepted() {
-    let mut c = config(100_000, 1_200, 1_200);
-    c.keyframe = ClassConfig {
-        capacity_messages: 3,
-        ..ClassConfig::store_and_forward()
-    };
+    let c = storing_keyframes(config(100_000, 1_200, 1_200), 3);
     let mut s = LinkShaper::new(c).unwrap();
     s.add_peer(1);
     for i in 0..3 {
@@ -980,11 +977,7 @@ fn an_extra_lane_keeps_its_own_policy_priority_counters_and_addressee() {
 /// broadcast frames; heard again, it gets what it missed.
 #[test]
 fn a_silent_peer_cannot_block_the_others_and_catches_up_when_heard_again() {
-    let mut c = config(1_000_000, 4_000, 1_200);
-    c.keyframe = ClassConfig {
-        capacity_messages: 5,
-        ..ClassConfig::store_and_forward()
-    };
+    let c = storing_keyframes(config(1_000_000, 4_000, 1_200), 5);
     let mut s = LinkShaper::new(c).unwrap();
     s.add_peer(1);
     s.add_peer(9); // never acknowledges

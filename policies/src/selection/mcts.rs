@@ -315,8 +315,7 @@ impl ActionSelection for Mcts {
 mod tests {
     use rand::SeedableRng;
     use troupe_algorithms::grid::GridSnapshot;
-    use troupe_algorithms::planner::round::RoundConfig;
-    use troupe_algorithms::planner::scenes;
+    use troupe_algorithms::planner::scenes::{self, SceneRound};
     use troupe_core::TimeSource;
 
     use super::*;
@@ -355,10 +354,8 @@ mod tests {
 
     #[test]
     fn returns_a_valid_plan_at_budgets_from_10_ms_to_1_s() {
-        let snapshot = scene();
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scene());
+        let problem = round.problem();
         let candidates = problem.children(&root());
         assert!(candidates.len() > 5, "{} candidates", candidates.len());
         for budget_s in [0.01, 0.03, 0.1, 0.3, 1.0] {
@@ -373,8 +370,9 @@ mod tests {
             let chosen = &candidates[choice];
             assert_eq!(outcome.best_branch.first(), Some(&chosen.action_index));
             assert!(
-                config
-                    .safe_with_stop(&chosen.primitive, &snapshot)
+                round
+                    .config
+                    .safe_with_stop(&chosen.primitive, &round.snapshot)
                     .is_some()
             );
             let replayed = replay(&problem, &outcome.best_branch, params.discount);
@@ -389,10 +387,8 @@ mod tests {
 
     #[test]
     fn more_iterations_never_give_a_worse_best_return() {
-        let snapshot = scene();
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scene());
+        let problem = round.problem();
         let candidates = problem.children(&root());
         let greedy = candidates.iter().map(|c| c.reward).fold(f64::MIN, f64::max);
         let mut previous = f64::NEG_INFINITY;
@@ -436,12 +432,9 @@ mod tests {
 
     #[test]
     fn under_simulated_time_a_search_runs_its_iterations_whatever_the_wall_clock() {
-        let snapshot = scene();
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let wall = PlanningProblem::new(&config, &snapshot, &camera);
-        let simulated =
-            PlanningProblem::new(&config, &snapshot, &camera).under(TimeSource::Simulated);
+        let round = SceneRound::new(scene());
+        let wall = round.problem();
+        let simulated = round.problem().under(TimeSource::Simulated);
         let candidates = wall.children(&root());
         // No wall-clock budget at all: under the wall clock nothing is searched;
         // under simulated time the budget is not read and the iterations run.
@@ -478,10 +471,8 @@ mod tests {
 
     #[test]
     fn a_complete_tree_finds_the_exhaustive_optimum() {
-        let snapshot = scene();
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scene());
+        let problem = round.problem();
         let candidates = problem.children(&root());
         let gamma = 0.8;
         // Slow reference: every depth-2 branch.
@@ -521,10 +512,8 @@ mod tests {
 
     #[test]
     fn nothing_feasible_means_stop() {
-        let snapshot = scene();
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scene());
+        let problem = round.problem();
         let mut mcts = Mcts::default();
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         assert_eq!(mcts.select_in(&problem, &root(), &[], &mut rng), None);

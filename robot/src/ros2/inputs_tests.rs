@@ -24,7 +24,8 @@ fn stamp(ms: i64) -> RosTime {
     RosTime::from_nanos(1_700_000_000_000_000_000 + ms * 1_000_000)
 }
 
-fn depth(ms: i64) -> Vec<u8> {
+/// A 2 × 1 image stamped `ms` in the optical frame.
+fn image(ms: i64, encoding: &str, step: u32, data: Vec<u8>) -> Vec<u8> {
     encode(&Image {
         header: Header {
             stamp: stamp(ms),
@@ -32,28 +33,20 @@ fn depth(ms: i64) -> Vec<u8> {
         },
         height: 1,
         width: 2,
-        encoding: "16UC1".into(),
-        step: 4,
-        data: vec![0xe8, 0x03, 0xd0, 0x07],
+        encoding: encoding.into(),
+        step,
+        data,
         ..Default::default()
     })
     .unwrap()
 }
 
+fn depth(ms: i64) -> Vec<u8> {
+    image(ms, "16UC1", 4, vec![0xe8, 0x03, 0xd0, 0x07])
+}
+
 fn intensity(ms: i64) -> Vec<u8> {
-    encode(&Image {
-        header: Header {
-            stamp: stamp(ms),
-            frame_id: "optical".into(),
-        },
-        height: 1,
-        width: 2,
-        encoding: "mono8".into(),
-        step: 2,
-        data: vec![0, 255],
-        ..Default::default()
-    })
-    .unwrap()
+    image(ms, "mono8", 2, vec![0, 255])
 }
 
 fn info() -> Vec<u8> {

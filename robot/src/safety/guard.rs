@@ -437,6 +437,15 @@ mod tests {
         ))
     }
 
+    /// Whether `sp` holds, awaiting a plan made from the hold, at `x` m.
+    fn awaits_plan_at(sp: Option<Setpoint>, x: f64) -> bool {
+        matches!(sp, Some(Setpoint::Hold {
+            reason: HoldReason::AwaitingPlanFromHold,
+            position_m: Some(p),
+            ..
+        }) if (p.x - x).abs() < 1e-9)
+    }
+
     /// Hovering at `at` from `from` (one knot, held after it).
     fn hover_plan(at: Point3<f64>, from: Time) -> Arc<Plan> {
         let knot = Knot {
@@ -674,14 +683,7 @@ mod tests {
         g.depth_frame(t(2.2));
         // The autopilot's failsafe left the vehicle at x = 1.6.
         g.odometry(t(2.2), Point3::new(1.6, 0.0, 1.0), 0.0);
-        assert!(matches!(
-            g.tick(t(2.2), &mut changes),
-            Some(Setpoint::Hold {
-                reason: HoldReason::AwaitingPlanFromHold,
-                position_m: Some(p),
-                ..
-            }) if (p.x - 1.6).abs() < 1e-9
-        ));
+        assert!(awaits_plan_at(g.tick(t(2.2), &mut changes), 1.6));
         // The plan from before the loss (at x = 2.25 now) does not resume it.
         let sp = g.tick(t(2.25), &mut changes);
         assert!(matches!(sp, Some(Setpoint::Hold { .. })), "{sp:?}");
@@ -771,14 +773,7 @@ mod tests {
         // there is tracked.
         g.control(true);
         feed_all(&mut g, t(1.0), 4.0);
-        assert!(matches!(
-            g.tick(t(1.0), &mut changes),
-            Some(Setpoint::Hold {
-                reason: HoldReason::AwaitingPlanFromHold,
-                position_m: Some(p),
-                ..
-            }) if (p.x - 3.9).abs() < 1e-9
-        ));
+        assert!(awaits_plan_at(g.tick(t(1.0), &mut changes), 3.9));
         g.plan(hover_plan(Point3::new(3.9, 0.0, 1.0), t(1.0)))
             .unwrap();
         feed_all(&mut g, t(1.05), 3.9);

@@ -5,12 +5,12 @@
 //! why). The same against `troupe robot` processes, memory under a flood and a
 //! 200 MB message, and `kill -9`: `../security_processes.rs`.
 
-use crate::common;
+use crate::{common, wait_for};
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::{root, zenoh_python as python};
 
@@ -64,17 +64,6 @@ fn zenoh_table(text: &str, dir: &Path) -> ZenohConfig {
     let mut file: File = toml::from_str(text).expect("a [zenoh] table");
     file.zenoh.resolve_paths(dir);
     file.zenoh
-}
-
-fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !done() {
-        assert!(
-            start.elapsed() < Duration::from_secs(15),
-            "timed out waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 /// A hostile client's credentials and the keys it puts on.
@@ -165,14 +154,19 @@ fn attack_two_robots(
     robots[1].start(Arc::new(|_| {})).expect("start");
     // The form works: robot 1's frames reach robot 0.
     let genuine = odometry_frame(0xAA);
-    wait_for("robot 1's frames at robot 0", || {
-        robots[1].send(1, None, &genuine).expect("send");
-        std::thread::sleep(Duration::from_millis(50));
-        seen.lock()
-            .expect("lock")
-            .iter()
-            .any(|(from, _)| *from == 1)
-    });
+    wait_for(
+        "robot 1's frames at robot 0",
+        Duration::from_secs(15),
+        Duration::from_millis(20),
+        || {
+            robots[1].send(1, None, &genuine).expect("send");
+            std::thread::sleep(Duration::from_millis(50));
+            seen.lock()
+                .expect("lock")
+                .iter()
+                .any(|(from, _)| *from == 1)
+        },
+    );
     let marked = odometry_frame(0xEE);
     let payload = dir.join("marked.frame");
     std::fs::write(&payload, &marked).expect("payload");

@@ -2,10 +2,10 @@
 //! `troupe_comms::zenoh`).
 #![allow(clippy::unwrap_used)]
 
-use crate::common;
+use crate::{common, wait_for};
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use troupe_comms::scope::{Scope, SubscriptionConfig};
 use troupe_comms::shaping::{LinkShaper, ShaperConfig};
@@ -21,17 +21,6 @@ fn sink(seen: &Seen) -> PacketSink {
     Arc::new(move |p: ReceivedPacket<'_>| {
         seen.lock().unwrap().push((p.from, p.to, p.bytes.to_vec()));
     })
-}
-
-fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !done() {
-        assert!(
-            start.elapsed() < Duration::from_secs(20),
-            "timed out waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
 }
 
 /// One frame of `class` from its own shaper.
@@ -89,23 +78,28 @@ fn a_neighbourhood_scope_subscribes_to_nearby_cells_through_a_router() {
             .iter()
             .any(|(f, _, b)| *f == from && b == frame)
     };
-    wait_for("every frame at the robot with scope all", || {
-        for (t, id) in [(&near, 1), (&far, 2)] {
-            t.send(id, None, &keyframe).unwrap();
-            t.send(id, None, &odometry).unwrap();
-        }
-        far.send(2, Some(0), &keyframe).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        heard(&seen_all, 1, &keyframe)
-            && heard(&seen_all, 2, &odometry)
-            && heard(&seen_me, 1, &keyframe)
-            && heard(&seen_me, 1, &odometry)
-            && seen_me
-                .lock()
-                .unwrap()
-                .iter()
-                .any(|(from, to, _)| *from == 2 && *to == Some(0))
-    });
+    wait_for(
+        "every frame at the robot with scope all",
+        Duration::from_secs(20),
+        Duration::from_millis(10),
+        || {
+            for (t, id) in [(&near, 1), (&far, 2)] {
+                t.send(id, None, &keyframe).unwrap();
+                t.send(id, None, &odometry).unwrap();
+            }
+            far.send(2, Some(0), &keyframe).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+            heard(&seen_all, 1, &keyframe)
+                && heard(&seen_all, 2, &odometry)
+                && heard(&seen_me, 1, &keyframe)
+                && heard(&seen_me, 1, &odometry)
+                && seen_me
+                    .lock()
+                    .unwrap()
+                    .iter()
+                    .any(|(from, to, _)| *from == 2 && *to == Some(0))
+        },
+    );
     let broadcast_from_far = seen_me
         .lock()
         .unwrap()
@@ -123,12 +117,17 @@ fn a_neighbourhood_scope_subscribes_to_nearby_cells_through_a_router() {
     me.set_position(0, [195.0, 4.0, 1.0]);
     assert!(me.stats().resubscriptions >= 2);
     seen_me.lock().unwrap().clear();
-    wait_for("the far robot's keyframe after the move", || {
-        far.send(2, None, &keyframe).unwrap();
-        near.send(1, None, &keyframe).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        heard(&seen_me, 2, &keyframe)
-    });
+    wait_for(
+        "the far robot's keyframe after the move",
+        Duration::from_secs(20),
+        Duration::from_millis(10),
+        || {
+            far.send(2, None, &keyframe).unwrap();
+            near.send(1, None, &keyframe).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+            heard(&seen_me, 2, &keyframe)
+        },
+    );
     near.send(1, None, &keyframe).unwrap();
     std::thread::sleep(Duration::from_millis(200));
     assert!(

@@ -100,6 +100,18 @@ pub fn hardware_pythons() -> Result<(PathBuf, PathBuf), String> {
     }
 }
 
+/// What a lookup such as [`hardware_pythons`] found, or `None` after saying on
+/// stderr that `test` is skipped and why (`SKIPPED <test>: <why>`).
+pub fn or_skip<T>(found: Result<T, String>, test: &str) -> Option<T> {
+    match found {
+        Ok(value) => Some(value),
+        Err(why) => {
+            eprintln!("SKIPPED {test}: {why}");
+            None
+        }
+    }
+}
+
 /// `scripts/mavlink/px4_like_autopilot.py` on `python`: a point mass starting 1.2 m up
 /// that flies the setpoints it gets on UDP `mavlink_port`, sends its state to UDP
 /// `state_port` (the camera's pose), writes its report to `report` and stops after

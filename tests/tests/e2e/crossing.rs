@@ -39,9 +39,16 @@ fn crossing(robots: u32, collision: bool) -> (Scenario, troupe_sims::team::RunOu
     let mut scenario = Scenario::load(std::path::Path::new(path)).unwrap();
     scenario.robots = robots;
     scenario.robot.collision.enabled = collision;
-    let stops = Arc::new(Mutex::new(vec![0; robots as usize]));
+    let (output, stops) = run_counting_stops(&scenario);
+    (scenario, output, stops)
+}
+
+/// Runs the scenario with a [`StopCounter`] on every robot: the run and each robot's
+/// stops.
+fn run_counting_stops(scenario: &Scenario) -> (troupe_sims::team::RunOutput, Vec<u32>) {
+    let stops = Arc::new(Mutex::new(vec![0; scenario.robots as usize]));
     let counters = stops.clone();
-    let team = Team::new_with(&scenario, |i, robot: &mut RobotSpec| {
+    let team = Team::new_with(scenario, |i, robot: &mut RobotSpec| {
         let counters = counters.clone();
         robot.add(ActorSpec::new("stops", move || {
             StopCounter(counters.clone(), i)
@@ -50,7 +57,7 @@ fn crossing(robots: u32, collision: bool) -> (Scenario, troupe_sims::team::RunOu
     .unwrap();
     let output = team.run(|_| {});
     let stops = stops.lock().unwrap().clone();
-    (scenario, output, stops)
+    (output, stops)
 }
 
 fn assert_safe_and_arrived(robots: u32) {
@@ -113,16 +120,7 @@ fn planner_robots_commit_through_the_collision_actor() {
     };
     scenario.robot.behaviour = "planner".into();
     scenario.robot.collision.enabled = true;
-    let stops = Arc::new(Mutex::new(vec![0; 1]));
-    let counters = stops.clone();
-    let team = Team::new_with(&scenario, |i, robot: &mut RobotSpec| {
-        let counters = counters.clone();
-        robot.add(ActorSpec::new("stops", move || {
-            StopCounter(counters.clone(), i)
-        }));
-    })
-    .unwrap();
-    let s = team.run(|_| {}).summary;
+    let s = run_counting_stops(&scenario).0.summary;
     let robot = &s.per_robot[0];
     assert_eq!(s.collisions, 0);
     assert_eq!(robot.truth.unsafe_plans, 0);

@@ -118,15 +118,8 @@ impl<const D: usize> Ellipsoid<D> {
         if !all_finite(center.as_slice()) || !all_finite(shape.as_slice()) {
             return None;
         }
-        let scale = shape.amax();
-        if !positive(scale) || (shape - shape.transpose()).amax() > 1e-9 * scale {
-            return None;
-        }
-        let (eigenvalues, vectors) = symmetric_eigen(shape);
+        let (eigenvalues, vectors) = positive_definite_eigen(shape)?;
         // Ascending shape eigenvalues = descending semi-axes.
-        if !positive(eigenvalues[0]) {
-            return None;
-        }
         let semi_axes = eigenvalues.map(|l| 1.0 / l.sqrt());
         Some(Self::from_sorted_parts(center, vectors, semi_axes))
     }
@@ -145,14 +138,7 @@ impl<const D: usize> Ellipsoid<D> {
         if !positive(level) || !all_finite(covariance.as_slice()) {
             return None;
         }
-        let scale = covariance.amax();
-        if !positive(scale) || (covariance - covariance.transpose()).amax() > 1e-9 * scale {
-            return None;
-        }
-        let (variances, vectors) = symmetric_eigen(covariance);
-        if !positive(variances[0]) {
-            return None;
-        }
+        let (variances, vectors) = positive_definite_eigen(covariance)?;
         // Descending semi-axes: reverse the ascending variances.
         let axes = SMatrix::<f64, D, D>::from_fn(|r, c| vectors[(r, D - 1 - c)]);
         let semi_axes = SVector::<f64, D>::from_fn(|i, _| level * variances[D - 1 - i].sqrt());
@@ -548,6 +534,19 @@ fn scaled_outer<const D: usize>(r: &SMatrix<f64, D, D>, d: &SVector<f64, D>) -> 
 }
 
 /// Positive and finite (false for NaN).
+/// [`symmetric_eigen`] of `m` if it is symmetric to 1e-9 relative and positive
+/// definite (its largest entry and its smallest eigenvalue positive and finite).
+fn positive_definite_eigen<const D: usize>(
+    m: &SMatrix<f64, D, D>,
+) -> Option<(SVector<f64, D>, SMatrix<f64, D, D>)> {
+    let scale = m.amax();
+    if !positive(scale) || (m - m.transpose()).amax() > 1e-9 * scale {
+        return None;
+    }
+    let (eigenvalues, vectors) = symmetric_eigen(m);
+    positive(eigenvalues[0]).then_some((eigenvalues, vectors))
+}
+
 fn positive(x: f64) -> bool {
     x > 0.0 && x.is_finite()
 }

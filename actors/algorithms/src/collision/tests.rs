@@ -567,15 +567,10 @@ fn blended_field_is_smoother_than_unblended() {
     let surface = circle_surface(40);
     let n = 200;
     for sigma in [0.1, 0.2] {
-        let unblended = grid_roughness(&field_grid(&surface, sigma, Blending::Nearest, n), n);
-        let weighted = grid_roughness(
-            &field_grid(&surface, sigma, Blending::Weighted { k: BLEND_K_2D }, n),
-            n,
-        );
-        let tapered = grid_roughness(
-            &field_grid(&surface, sigma, Blending::Tapered { k: BLEND_K_2D }, n),
-            n,
-        );
+        let roughness_of = |blending| grid_roughness(&field_grid(&surface, sigma, blending, n), n);
+        let unblended = roughness_of(Blending::Nearest);
+        let weighted = roughness_of(Blending::Weighted { k: BLEND_K_2D });
+        let tapered = roughness_of(Blending::Tapered { k: BLEND_K_2D });
         eprintln!(
             "σ={sigma}: mean |Δ²P| over the 200×200 grid: unblended {unblended:.3e}, Eq. 7.10 {weighted:.3e}, tapered {tapered:.3e}"
         );
@@ -590,42 +585,13 @@ fn tapered_blend_is_continuous_across_neighbour_switches() {
     // tenfold; a jump does not shrink.
     let surface = circle_surface(40);
     let (from, to) = (Vector2::new(-2.0, 1.45), Vector2::new(2.0, 1.45));
-    let coarse = roughness(&field_along(
-        &surface,
-        0.2,
-        Blending::Tapered { k: BLEND_K_2D },
-        from,
-        to,
-        2001,
-    ))
-    .1;
-    let fine = roughness(&field_along(
-        &surface,
-        0.2,
-        Blending::Tapered { k: BLEND_K_2D },
-        from,
-        to,
-        20001,
-    ))
-    .1;
-    let fine_nearest = roughness(&field_along(
-        &surface,
-        0.2,
-        Blending::Nearest,
-        from,
-        to,
-        20001,
-    ))
-    .1;
-    let fine_weighted = roughness(&field_along(
-        &surface,
-        0.2,
-        Blending::Weighted { k: BLEND_K_2D },
-        from,
-        to,
-        20001,
-    ))
-    .1;
+    // The largest step of the σ = 0.2 field sampled at `samples` points along the line.
+    let max_step =
+        |blending, samples| roughness(&field_along(&surface, 0.2, blending, from, to, samples)).1;
+    let coarse = max_step(Blending::Tapered { k: BLEND_K_2D }, 2001);
+    let fine = max_step(Blending::Tapered { k: BLEND_K_2D }, 20001);
+    let fine_nearest = max_step(Blending::Nearest, 20001);
+    let fine_weighted = max_step(Blending::Weighted { k: BLEND_K_2D }, 20001);
     eprintln!(
         "tapered max |ΔP|: {coarse:.3e} → {fine:.3e}; at the fine step unblended {fine_nearest:.3e}, Eq. 7.10 {fine_weighted:.3e}"
     );

@@ -8,7 +8,7 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::tests::{auc_against_raw, grid_at};
+use super::tests::{auc_against_raw, grid_at, window_and_move, window_at};
 use super::*;
 use crate::sogmm::synthetic::room_corner_frame;
 
@@ -248,21 +248,9 @@ fn moving_the_window_equals_a_rebuild_per_end_voxel() {
         let scans: Vec<(Vec<Point3<f64>>, bool)> = (0..3)
             .map(|s| (random_scan(&mut rng, &origin, 500, 4.0), s != 1))
             .collect();
-        let from = Point3::new(
-            rng.random_range(-0.5..0.5),
-            rng.random_range(-0.5..0.5),
-            0.0,
-        );
-        let to = from
-            + Vector3::new(
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-1.0..1.0),
-            );
-        let size = Vector3::new(3.0, 2.6, 1.8);
+        let (mut moved, to) = window_and_move(&mut rng);
         let mut scratch = ScanScratch::default();
         let rule = UpdateRule::PerEndVoxel;
-        let mut moved = LocalGrid::centred(&from, &size, 0.2, LogOddsParams::default());
         for (ends, hit) in &scans {
             scratch.insert_by(rule, &mut moved, &origin, ends, *hit, None);
         }
@@ -270,7 +258,7 @@ fn moving_the_window_equals_a_rebuild_per_end_voxel() {
         for (ends, hit) in &scans {
             scratch.insert_by(rule, &mut moved, &origin, ends, *hit, Some(&novel));
         }
-        let mut rebuilt = LocalGrid::centred(&to, &size, 0.2, LogOddsParams::default());
+        let mut rebuilt = window_at(&to);
         for (ends, hit) in &scans {
             scratch.insert_by(rule, &mut rebuilt, &origin, ends, *hit, None);
         }

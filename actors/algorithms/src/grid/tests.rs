@@ -113,24 +113,35 @@ fn random_rays(rng: &mut ChaCha8Rng, n: usize) -> Vec<(Point3<f64>, Point3<f64>,
         .collect()
 }
 
+/// A 3 × 2.6 × 1.8 m window of 0.2 m cells centred at `centre`.
+pub(super) fn window_at(centre: &Point3<f64>) -> LocalGrid {
+    let size = Vector3::new(3.0, 2.6, 1.8);
+    LocalGrid::centred(centre, &size, 0.2, LogOddsParams::default())
+}
+
+/// A [`window_at`] a random point within 0.5 m of the origin (at z = 0), and a
+/// random point to move it to: within 2 m across and 1 m up or down.
+pub(super) fn window_and_move(rng: &mut ChaCha8Rng) -> (LocalGrid, Point3<f64>) {
+    let from = Point3::new(
+        rng.random_range(-0.5..0.5),
+        rng.random_range(-0.5..0.5),
+        0.0,
+    );
+    let to = from
+        + Vector3::new(
+            rng.random_range(-2.0..2.0),
+            rng.random_range(-2.0..2.0),
+            rng.random_range(-1.0..1.0),
+        );
+    (window_at(&from), to)
+}
+
 #[test]
 fn moving_the_window_equals_rebuilding_at_the_new_pose() {
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     for case in 0..20 {
         let rays = random_rays(&mut rng, 300);
-        let from = Point3::new(
-            rng.random_range(-0.5..0.5),
-            rng.random_range(-0.5..0.5),
-            0.0,
-        );
-        let to = from
-            + Vector3::new(
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-1.0..1.0),
-            );
-        let size = Vector3::new(3.0, 2.6, 1.8);
-        let mut moved = LocalGrid::centred(&from, &size, 0.2, LogOddsParams::default());
+        let (mut moved, to) = window_and_move(&mut rng);
         for (o, e, hit) in &rays {
             moved.insert_ray(o, e, *hit, None);
         }
@@ -141,7 +152,7 @@ fn moving_the_window_equals_rebuilding_at_the_new_pose() {
                 moved.insert_ray(o, e, *hit, Some(b));
             }
         }
-        let mut rebuilt = LocalGrid::centred(&to, &size, 0.2, LogOddsParams::default());
+        let mut rebuilt = window_at(&to);
         for (o, e, hit) in &rays {
             rebuilt.insert_ray(o, e, *hit, None);
         }

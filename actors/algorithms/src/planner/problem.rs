@@ -344,23 +344,22 @@ mod tests {
     use nalgebra::Vector3;
 
     use super::*;
-    use crate::planner::scenes;
+    use crate::planner::scenes::{self, SceneRound};
 
     #[test]
     fn children_are_safe_scored_and_continue_only_through_clear_space() {
-        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scenes::room_with_doorway(3.5, 1.5, 0.5));
+        let problem = round.problem();
+        let (snapshot, camera, config) = (&round.snapshot, &round.camera, &round.config);
         let root = FlatState::at_rest(Vector3::zeros(), 0.0);
         let children = problem.children(&root);
         assert!(children.len() > 5 && children.len() <= problem.actions().len());
         let margin = config.margin_m(snapshot.grid.resolution_m());
         let per_second = RoundConfig {
             reward_per_second: true,
-            ..config
+            ..*config
         };
-        let rated = PlanningProblem::new(&per_second, &snapshot, &camera);
+        let rated = PlanningProblem::new(&per_second, snapshot, camera);
         let mut continued = 0;
         for child in &children {
             // The end-pose information of thesis §4.1.3, plus α V.
@@ -368,7 +367,7 @@ mod tests {
             let info = if stays_put(&root, &end) {
                 0.0
             } else {
-                view_information(&snapshot.grid, &pose_of(&end), &camera, &config.view)
+                view_information(&snapshot.grid, &pose_of(&end), camera, &config.view)
             };
             assert!((child.information - info).abs() < 1e-12);
             assert!(
@@ -395,13 +394,12 @@ mod tests {
 
     #[test]
     fn hovering_in_place_promises_no_information() {
-        let snapshot = scenes::room_with_doorway(3.5, 1.5, 0.5);
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scenes::room_with_doorway(3.5, 1.5, 0.5));
+        let problem = round.problem();
+        let (snapshot, camera, config) = (&round.snapshot, &round.camera, &round.config);
         // Facing the doorway: the view from here still holds unknown cells.
         let root = FlatState::at_rest(Vector3::zeros(), 0.0);
-        let here = view_information(&snapshot.grid, &pose_of(&root), &camera, &config.view);
+        let here = view_information(&snapshot.grid, &pose_of(&root), camera, &config.view);
         assert!(here > 1.0, "{here}");
         let children = problem.children(&root);
         let hover: Vec<_> = children
@@ -473,10 +471,9 @@ mod tests {
     fn inside_the_margin_children_never_come_closer_and_some_back_away() {
         // A corridor 3 m wide and 2 m high; the robot hovers 0.55 m from its left wall,
         // inside the 0.67 m margin (as when new cells close in on a hovering robot).
-        let snapshot = scenes::corridor(8.0, 1.5, 1.0);
-        let camera = scenes::forward_camera();
-        let config = RoundConfig::default();
-        let problem = PlanningProblem::new(&config, &snapshot, &camera);
+        let round = SceneRound::new(scenes::corridor(8.0, 1.5, 1.0));
+        let problem = round.problem();
+        let (snapshot, config) = (&round.snapshot, &round.config);
         let margin = config.margin_m(snapshot.grid.resolution_m());
         let root = FlatState::at_rest(Vector3::new(2.0, 0.95, 0.0), 0.0);
         let start = snapshot.clearance_m(&Point3::from(root.position_m()));

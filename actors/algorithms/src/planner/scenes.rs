@@ -3,6 +3,8 @@
 
 use nalgebra::{Point3, Vector3};
 
+use super::problem::PlanningProblem;
+use super::round::RoundConfig;
 use crate::camera::PinholeIntrinsics;
 use crate::grid::distance::unsafe_distance;
 use crate::grid::{FrontierSet, GridSnapshot};
@@ -24,6 +26,35 @@ pub fn forward_camera() -> PinholeIntrinsics {
         cx: f64::from(width) / 2.0,
         cy: f64::from(height) / 2.0,
         max_depth_m: 5.0,
+    }
+}
+
+/// A planning round in a scene: what a [`PlanningProblem`] borrows, with the
+/// [`forward_camera`] and the default [`RoundConfig`].
+pub struct SceneRound {
+    /// The scene's grid and distance fields.
+    pub snapshot: GridSnapshot,
+    /// [`forward_camera`].
+    pub camera: PinholeIntrinsics,
+    /// `RoundConfig::default()`.
+    pub config: RoundConfig,
+}
+
+impl SceneRound {
+    /// A round in `snapshot`.
+    #[must_use]
+    pub fn new(snapshot: GridSnapshot) -> Self {
+        SceneRound {
+            snapshot,
+            camera: forward_camera(),
+            config: RoundConfig::default(),
+        }
+    }
+
+    /// The planning problem of this round.
+    #[must_use]
+    pub fn problem(&self) -> PlanningProblem<'_> {
+        PlanningProblem::new(&self.config, &self.snapshot, &self.camera)
     }
 }
 

@@ -396,6 +396,24 @@ pub fn room_pose() -> Isometry3<f64> {
     )
 }
 
+/// Three views of [`Scene::room_corner`]: [`room_pose`], then the camera moved to
+/// (0.5, 0.5, 1.1) m, pitched 20° and yawed 40°, then moved to (1, −1, 1.5) m,
+/// pitched 25° and yawed 10°.
+#[must_use]
+pub fn room_views() -> [Isometry3<f64>; 3] {
+    [
+        room_pose(),
+        Isometry3::from_parts(
+            Translation3::new(0.5, 0.5, 1.1),
+            UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 40f64.to_radians()),
+        ),
+        Isometry3::from_parts(
+            Translation3::new(1.0, -1.0, 1.5),
+            UnitQuaternion::from_euler_angles(0.0, 25f64.to_radians(), 10f64.to_radians()),
+        ),
+    ]
+}
+
 /// Pose `i` of `n` of a flight through [`Scene::corridor`]`(length_m)`: the camera
 /// moves along the centre line from x = 0.5 m to `length_m − 4` m at 1.2–1.6 m height,
 /// looking ahead with a yaw sweeping ±35° (period 40 frames) and a slight downward

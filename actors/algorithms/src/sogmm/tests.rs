@@ -325,6 +325,15 @@ fn blobs(rng: &mut ChaCha8Rng, centres: &[[f64; 2]], per: usize, spread: f64) ->
     out
 }
 
+/// 40 points in each of 12 blobs 0.15 wide, centred at random in 4 × 1, from `seed`.
+fn twelve_blobs(seed: u64) -> Vec<[f64; 2]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let centres: Vec<[f64; 2]> = (0..12)
+        .map(|_| [4.0 * rng.random::<f64>(), rng.random::<f64>()])
+        .collect();
+    blobs(&mut rng, &centres, 40, 0.15)
+}
+
 #[test]
 fn mean_shift_separates_blobs() {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
@@ -347,11 +356,7 @@ fn mean_shift_separates_blobs() {
 #[test]
 fn mean_shift_grid_matches_all_pairs_reference() {
     for seed in 0..4 {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let centres: Vec<[f64; 2]> = (0..12)
-            .map(|_| [4.0 * rng.random::<f64>(), rng.random::<f64>()])
-            .collect();
-        let data = blobs(&mut rng, &centres, 40, 0.15);
+        let data = twelve_blobs(seed);
         for sigma in [0.03, 0.06] {
             let blurring = MeanShiftConfig::of(MeanShiftKind::Blurring);
             let fast = mean_shift_modes(&data, sigma, &blurring);
@@ -429,11 +434,7 @@ fn naive_sklearn_modes(data: &[[f64; 2]], sigma: f64) -> Vec<[f64; 2]> {
 #[test]
 fn reference_mean_shift_matches_all_pairs_sklearn_algorithm() {
     for seed in 0..4 {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let centres: Vec<[f64; 2]> = (0..12)
-            .map(|_| [4.0 * rng.random::<f64>(), rng.random::<f64>()])
-            .collect();
-        let data = blobs(&mut rng, &centres, 40, 0.15);
+        let data = twelve_blobs(seed);
         for sigma in [0.03, 0.06] {
             let fast = mean_shift_modes(&data, sigma, &MeanShiftConfig::default());
             let slow = naive_sklearn_modes(&data, sigma);
@@ -496,17 +497,7 @@ fn reference_mean_shift_m_matches_scikit_learn() {
     let dir = std::env::temp_dir().join(format!("troupe-ms-sklearn-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let intr = synthetic::intrinsics(160, 120);
-    let views = [
-        synthetic::room_pose(),
-        Isometry3::from_parts(
-            Translation3::new(0.5, 0.5, 1.1),
-            UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 40f64.to_radians()),
-        ),
-        Isometry3::from_parts(
-            Translation3::new(1.0, -1.0, 1.5),
-            UnitQuaternion::from_euler_angles(0.0, 25f64.to_radians(), 10f64.to_radians()),
-        ),
-    ];
+    let views = synthetic::room_views();
     let sigma = 0.02;
     for (k, pose) in views.iter().enumerate() {
         let (d, g) = synthetic::Scene::room_corner().render(&intr, pose);

@@ -273,10 +273,7 @@ fn reports_survive_a_saturated_link_a_partition_and_a_link_crash() {
     let team = vec![
         RobotSpec::new("r0")
             .with(sender)
-            .with(ActorSpec::new("keyframes", || KeyframeSource {
-                next: 0,
-                count: 90,
-            }))
+            .with(keyframes(90))
             .with(ActorSpec::new("reporter", || Reporter {
                 period: Duration::from_secs(2),
                 count: 30,

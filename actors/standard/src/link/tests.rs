@@ -174,6 +174,11 @@ struct KeyframeSource {
     count: u32,
 }
 
+/// A `keyframes` actor publishing `count` keyframes (see [`KeyframeSource`]).
+fn keyframes(count: u32) -> ActorSpec {
+    ActorSpec::new("keyframes", move || KeyframeSource { next: 0, count })
+}
+
 impl Actor for KeyframeSource {
     fn start(&mut self, ctx: &mut Context<'_>) -> ActorResult {
         ctx.set_timer(TICK, Duration::from_secs(1));
@@ -225,12 +230,7 @@ fn store_and_forward_per_peer_through_the_link_actor() {
     };
     config.peers = vec![0, 1, 2];
     let team = vec![
-        RobotSpec::new("r0")
-            .with(link(&config))
-            .with(ActorSpec::new("keyframes", || KeyframeSource {
-                next: 0,
-                count: 50,
-            })),
+        RobotSpec::new("r0").with(link(&config)).with(keyframes(50)),
         RobotSpec::new("r1").with(link(&config)),
         RobotSpec::new("r2").with(link(&config)),
     ];
@@ -294,12 +294,7 @@ fn compact_keyframes_are_smaller_and_keep_the_density() {
             ..LinkConfig::default()
         };
         let team = vec![
-            RobotSpec::new("r0")
-                .with(link(&config))
-                .with(ActorSpec::new("keyframes", || KeyframeSource {
-                    next: 0,
-                    count: 3,
-                })),
+            RobotSpec::new("r0").with(link(&config)).with(keyframes(3)),
             RobotSpec::new("r1").with(link(&config)),
         ];
         let received: Arc<Mutex<Vec<Keyframe>>> = Arc::default();
@@ -392,12 +387,7 @@ fn a_journaled_link_restarted_after_a_panic_loses_nothing_it_stored() {
             })
         });
         let team = vec![
-            RobotSpec::new("r0")
-                .with(sender)
-                .with(ActorSpec::new("keyframes", || KeyframeSource {
-                    next: 0,
-                    count: 50,
-                })),
+            RobotSpec::new("r0").with(sender).with(keyframes(50)),
             RobotSpec::new("r1").with(link(&config)),
             RobotSpec::new("r2").with(link(&config)),
         ];
@@ -505,10 +495,7 @@ async fn realtime_executors_of_one_robot_each_talk_through_a_transport() {
                 period: Duration::from_millis(100),
                 count: 0,
             }))
-            .with(ActorSpec::new("keyframes", || KeyframeSource {
-                next: 0,
-                count: 3,
-            }));
+            .with(keyframes(3));
         let mut exec = RealtimeExecutor::new(vec![robot], u64::from(id))
             .with_robot_ids(vec![RobotId(id)])
             .unwrap();
@@ -595,12 +582,13 @@ fn a_robot_outside_the_roster_is_rejected_and_counted() {
         peers: vec![0, 1, 2, 3],
         ..config.clone()
     };
-    let keyframes = || ActorSpec::new("keyframes", || KeyframeSource { next: 0, count: 20 });
     let team = vec![
-        RobotSpec::new("r0").with(link(&config)).with(keyframes()),
+        RobotSpec::new("r0").with(link(&config)).with(keyframes(20)),
         RobotSpec::new("r1").with(link(&config)),
         RobotSpec::new("r2").with(link(&config)),
-        RobotSpec::new("r3").with(link(&stranger)).with(keyframes()),
+        RobotSpec::new("r3")
+            .with(link(&stranger))
+            .with(keyframes(20)),
     ];
     type Log = Vec<(RobotId, RobotId, u32)>;
     let log: Arc<Mutex<Log>> = Arc::default();
@@ -668,10 +656,7 @@ fn a_link_journal_on_disk_gives_a_restarted_robot_its_team_map_back() {
     let run = |with_source: bool, until_s: f64| {
         let mut r0 = RobotSpec::new("r0").with(journaled(0));
         if with_source {
-            r0 = r0.with(ActorSpec::new("keyframes", || KeyframeSource {
-                next: 0,
-                count: 8,
-            }));
+            r0 = r0.with(keyframes(8));
         }
         let team = vec![r0, RobotSpec::new("r1").with(journaled(1))];
         let log: Arc<Mutex<Vec<(RobotId, u32)>>> = Arc::default();
@@ -714,12 +699,7 @@ fn members_with_nothing_to_say_send_heartbeats_and_stay_recipients() {
     config.shaper.keyframe = troupe_comms::shaping::ClassConfig::store_and_forward();
     assert_eq!(config.peer_timeout_s, 10.0);
     let team = vec![
-        RobotSpec::new("r0")
-            .with(link(&config))
-            .with(ActorSpec::new("keyframes", || KeyframeSource {
-                next: 0,
-                count: 5,
-            })),
+        RobotSpec::new("r0").with(link(&config)).with(keyframes(5)),
         RobotSpec::new("r1").with(link(&config)),
         RobotSpec::new("base").with(link(&config)),
     ];
