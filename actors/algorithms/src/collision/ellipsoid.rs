@@ -533,7 +533,6 @@ fn scaled_outer<const D: usize>(r: &SMatrix<f64, D, D>, d: &SVector<f64, D>) -> 
     (m + m.transpose()) * 0.5
 }
 
-/// Positive and finite (false for NaN).
 /// [`symmetric_eigen`] of `m` if it is symmetric to 1e-9 relative and positive
 /// definite (its largest entry and its smallest eigenvalue positive and finite).
 fn positive_definite_eigen<const D: usize>(
@@ -547,6 +546,7 @@ fn positive_definite_eigen<const D: usize>(
     positive(eigenvalues[0]).then_some((eigenvalues, vectors))
 }
 
+/// Positive and finite (false for NaN).
 fn positive(x: f64) -> bool {
     x > 0.0 && x.is_finite()
 }
