@@ -102,6 +102,13 @@ pub struct GuidanceConfig {
     /// (docs/exploration.md). The link studies of §8.2.7, where robots share maps only,
     /// turn it off.
     pub share_memory: bool,
+    /// With [`Self::share_memory`]: also send the peers the frontiers this robot gave up
+    /// because its camera did not see into them from nearby
+    /// ([`Self::give_up_after_s`]), and give up those a peer sent. Pockets beside a
+    /// robot's start, given up there in its first seconds, otherwise pull its peer
+    /// back across the cave (seed 1: each robot flew back 40 m or more, at 69 and 92 s,
+    /// to a pocket beside the start the other had given up).
+    pub share_given_up: bool,
     /// Judge remembered frontiers by their viewpoints: a frontier seeds the guidance
     /// field at the passable cells within [`Self::viewpoint_range_m`] from which the
     /// robot's level camera, with its real vertical field of view, sees it along a line
@@ -147,6 +154,7 @@ impl Default for GuidanceConfig {
             give_up_radius_m: 3.0,
             retry_given_up_after_s: Some(100.0),
             share_memory: true,
+            share_given_up: false,
             viewpoints: false,
             viewpoint_range_m: 4.0,
             quick_end: false,

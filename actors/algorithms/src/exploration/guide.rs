@@ -30,6 +30,10 @@ pub struct Guide {
     /// Every frontier given up at least once, looked for again or not (bounded by the
     /// memory, like `watched_s`): what is left of them does not keep a mission going.
     ever_given_up: BTreeSet<CellKey>,
+    /// Frontiers this robot watched out since [`Self::take_given_up`] last ran, for
+    /// its peers (kept only with [`GuidanceConfig::share_given_up`]; bounded by the
+    /// memory, as it holds frontiers of it).
+    newly_given_up: BTreeSet<CellKey>,
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
     last_target: Option<CellKey>,
@@ -115,6 +119,7 @@ impl Guide {
             watched_s: BTreeMap::new(),
             given_up: BTreeMap::new(),
             ever_given_up: BTreeSet::new(),
+            newly_given_up: BTreeSet::new(),
             last_field: None,
             last_target: None,
             progress: None,
@@ -204,6 +209,44 @@ impl Guide {
     /// ([`FrontierMemory::take_changes`]), for its peers.
     pub fn take_memory_changes(&mut self) -> Vec<(CellKey, CellRecord)> {
         self.memory.take_changes()
+    }
+
+    /// The frontiers this robot gave up since the last call because its camera did not
+    /// see into them while it was near ([`GuidanceConfig::give_up_after_s`]), in key
+    /// order, for its peers; empty unless [`GuidanceConfig::share_given_up`] (and
+    /// `share_memory`). Those given up for want of progress are left out: that a route
+    /// stalled says something of the robot's way there, not of the place.
+    pub fn take_given_up(&mut self) -> Vec<CellKey> {
+        std::mem::take(&mut self.newly_given_up)
+            .into_iter()
+            .collect()
+    }
+
+    /// Gives up, as of `now`, the remembered frontiers among `cells` that a peer gave up
+    /// ([`Self::take_given_up`], moved by `frame` as in [`Self::observe_peer_memory`]):
+    /// a pocket the peer's camera could not see into from nearby no longer pulls this
+    /// robot either, until it is looked for again
+    /// ([`GuidanceConfig::retry_given_up_after_s`]). Cells this memory does not hold as
+    /// frontiers are left out. Returns how many were given up here.
+    pub fn observe_peer_given_up(
+        &mut self,
+        cells: impl IntoIterator<Item = CellKey>,
+        frame: Option<&Isometry3<f64>>,
+        now: Time,
+    ) -> usize {
+        let memory = &self.memory;
+        let frontiers: Vec<CellKey> = cells
+            .into_iter()
+            .filter_map(|key| match frame {
+                Some(frame) => memory.key_of(&(frame * memory.centre(key))),
+                None => Some(key),
+            })
+            .filter(|key| memory.record(*key).frontier && !self.given_up.contains_key(key))
+            .collect();
+        for &f in &frontiers {
+            self.give_up(f, now);
+        }
+        frontiers.len()
     }
 
     /// Folds in the memory cells a peer sent ([`FrontierMemory::merge_peer_cells`]).
@@ -481,6 +524,9 @@ impl Guide {
         }
         for f in watched_out {
             self.give_up(f, now);
+            if self.config.share_memory && self.config.share_given_up {
+                self.newly_given_up.insert(f);
+            }
         }
     }
 

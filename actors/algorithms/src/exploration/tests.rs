@@ -736,6 +736,61 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
     assert!(field.frontier_count() < frontiers);
 }
 
+#[test]
+fn a_pocket_a_peer_gave_up_no_longer_pulls_this_robot() {
+    let config = GuidanceConfig {
+        give_up_without_progress_s: None,
+        share_given_up: true,
+        ..GuidanceConfig::default()
+    };
+    // The peer hovers beside the dead end until it gives its frontiers up; this robot
+    // holds the same memory (the peer's cells) and is far away.
+    let near = Point3::new(2.0, 0.0, 0.0);
+    let mut peer = Guide::new(config);
+    peer.observe_snapshot(
+        &window(near, [20.0, 20.0, 4.0], dead_end_tunnel()),
+        0.67,
+        None,
+    );
+    let mut own = Guide::new(config);
+    own.observe_peer_memory(peer.take_memory_changes(), None);
+    let far = Point3::new(10.0, 0.0, 0.0);
+    let pulled = own
+        .field((RobotId(0), &far, 0.0), second(0.0))
+        .frontier_count();
+    assert!(pulled > 0);
+    look_around(&mut peer, &near);
+    for s in 0..30 {
+        peer.field((RobotId(1), &near, 0.0), second(f64::from(s)));
+    }
+    let given_up = peer.take_given_up();
+    assert!(!given_up.is_empty());
+    assert_eq!(
+        given_up,
+        peer.given_up().keys().copied().collect::<Vec<_>>()
+    );
+    assert!(peer.take_given_up().is_empty(), "each once");
+    // A cell this memory holds no frontier in is left out.
+    let with_stranger = given_up.iter().copied().chain([[50, 50, 50]]);
+    assert_eq!(
+        own.observe_peer_given_up(with_stranger, None, second(30.0)),
+        given_up.len()
+    );
+    let field = own.field((RobotId(0), &far, 0.0), second(31.0));
+    assert_eq!(field.frontier_count(), pulled - given_up.len());
+    // They pull again once looked for again, counted from when this robot heard.
+    let retry_s = config.retry_given_up_after_s.expect("on by default");
+    let field = own.field((RobotId(0), &far, 0.0), second(30.0 + retry_s));
+    assert_eq!(field.frontier_count(), pulled);
+    // Off (the default), nothing is kept to send.
+    let (mut alone, near, limit_s) = beside_dead_end();
+    look_around(&mut alone, &near);
+    for s in 0..=(limit_s as u32 + 2) {
+        alone.field((RobotId(0), &near, 0.0), second(f64::from(s)));
+    }
+    assert!(!alone.given_up().is_empty() && alone.take_given_up().is_empty());
+}
+
 /// The robot at `at` turns through a full circle in no time: it has looked around.
 fn look_around(guide: &mut Guide, at: &Point3<f64>) {
     for yaw_rad in [0.0, 3.0, 6.0, 9.0] {

@@ -393,9 +393,13 @@ impl<S: ActionSelection> PlannerActor<S> {
             && let Some(guide) = self.guide.as_mut()
         {
             let changes = guide.take_memory_changes();
-            if !changes.is_empty() {
+            let given_up = guide.take_given_up();
+            if !(changes.is_empty() && given_up.is_empty()) {
                 let cell_m = guide.memory().cell_m();
-                ctx.publish(&MEMORY_CELLS.topic(), MemoryCells::new(cell_m, &changes));
+                ctx.publish(
+                    &MEMORY_CELLS.topic(),
+                    MemoryCells::new(cell_m, &changes, given_up),
+                );
             }
         }
         if let Some(guide) = &self.guide {
@@ -778,9 +782,10 @@ impl<S: ActionSelection> Actor for PlannerActor<S> {
                         rejected = peer
                             .message
                             .decode(guide.memory().cell_m())
-                            .map(|cells| {
+                            .map(|decoded| {
                                 let frame = self.peer_frames.get(&peer.robot);
-                                guide.observe_peer_memory(cells, frame);
+                                guide.observe_peer_memory(decoded.cells, frame);
+                                guide.observe_peer_given_up(decoded.given_up, frame, ctx.now());
                             })
                             .map_err(|e| {
                                 ActorError::with_source(

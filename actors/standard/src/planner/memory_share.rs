@@ -14,7 +14,7 @@ use crate::link::{SharePolicy, SharedTopic};
 pub const MAX_SHARED_CELLS: usize = 65_536;
 
 /// Cell coordinates beyond this (in cells, per axis) are rejected.
-const MAX_CELL_INDEX: i32 = 100_000_000;
+const MAX_CELL_INDEX: u32 = 100_000_000;
 
 /// Memory cells a robot's own observations changed since its last message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,10 +25,13 @@ pub struct MemoryCells {
     /// Each cell's key (`floor(p / cell_m)` per axis, sender's world frame) and record
     /// ([`CellRecord::to_bits`]).
     pub cells: Vec<(CellKey, u8)>,
+    /// Frontiers the sender gave up since its last message because its camera did not
+    /// see into them from nearby (`share_given_up`; empty otherwise).
+    pub given_up: Vec<CellKey>,
 }
 impl Message for MemoryCells {
     fn payload_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + 13 * self.cells.len()
+        std::mem::size_of::<Self>() + 13 * self.cells.len() + 12 * self.given_up.len()
     }
 }
 
@@ -39,6 +42,15 @@ pub const MEMORY_CELLS: SharedTopic<MemoryCells> = SharedTopic::new(
     1,
     SharePolicy::store_and_forward_in_plan_class(),
 );
+
+/// A checked [`MemoryCells`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecodedCells {
+    /// The changed cells and their records.
+    pub cells: Vec<(CellKey, CellRecord)>,
+    /// The frontiers the peer gave up.
+    pub given_up: Vec<CellKey>,
+}
 
 /// Why a peer's memory cells were rejected.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -51,46 +63,56 @@ pub enum MemoryCellsError {
         /// Ours, metres.
         own_m: f64,
     },
-    /// More than [`MAX_SHARED_CELLS`] cells.
+    /// More than [`MAX_SHARED_CELLS`] cells, given-up ones included.
     #[error("{0} cells, more than {MAX_SHARED_CELLS}")]
     TooMany(usize),
-    /// A record with bits beyond the four, or a key out of range.
+    /// A record with bits beyond the four, or a key out of range (cells counted
+    /// first, then given-up frontiers).
     #[error("cell {0} is malformed")]
     Malformed(usize),
 }
 
 impl MemoryCells {
-    /// The message of `changes`.
+    /// The message of `changes` and of the frontiers `given_up`.
     #[must_use]
-    pub fn new(cell_m: f64, changes: &[(CellKey, CellRecord)]) -> Self {
+    pub fn new(cell_m: f64, changes: &[(CellKey, CellRecord)], given_up: Vec<CellKey>) -> Self {
         MemoryCells {
             cell_m,
             cells: changes.iter().map(|(k, r)| (*k, r.to_bits())).collect(),
+            given_up,
         }
     }
 
-    /// The cells, checked against a memory of `own_cell_m` cells: all or nothing.
-    pub fn decode(&self, own_cell_m: f64) -> Result<Vec<(CellKey, CellRecord)>, MemoryCellsError> {
+    /// The cells and the given-up frontiers, checked against a memory of `own_cell_m`
+    /// cells: all or nothing.
+    pub fn decode(&self, own_cell_m: f64) -> Result<DecodedCells, MemoryCellsError> {
         if !(self.cell_m.is_finite() && (self.cell_m - own_cell_m).abs() <= 1e-9 * own_cell_m) {
             return Err(MemoryCellsError::CellSize {
                 peer_m: self.cell_m,
                 own_m: own_cell_m,
             });
         }
-        if self.cells.len() > MAX_SHARED_CELLS {
-            return Err(MemoryCellsError::TooMany(self.cells.len()));
+        let count = self.cells.len() + self.given_up.len();
+        if count > MAX_SHARED_CELLS {
+            return Err(MemoryCellsError::TooMany(count));
         }
-        self.cells
+        let in_range = |key: &CellKey| key.iter().all(|v| v.unsigned_abs() <= MAX_CELL_INDEX);
+        let cells = self
+            .cells
             .iter()
             .enumerate()
-            .map(|(i, (key, bits))| {
-                let in_range = key.iter().all(|v| v.abs() <= MAX_CELL_INDEX);
-                match CellRecord::from_bits(*bits) {
-                    Some(record) if in_range => Ok((*key, record)),
-                    _ => Err(MemoryCellsError::Malformed(i)),
-                }
+            .map(|(i, (key, bits))| match CellRecord::from_bits(*bits) {
+                Some(record) if in_range(key) => Ok((*key, record)),
+                _ => Err(MemoryCellsError::Malformed(i)),
             })
-            .collect()
+            .collect::<Result<_, _>>()?;
+        if let Some(i) = self.given_up.iter().position(|key| !in_range(key)) {
+            return Err(MemoryCellsError::Malformed(self.cells.len() + i));
+        }
+        Ok(DecodedCells {
+            cells,
+            given_up: self.given_up.clone(),
+        })
     }
 }
 
@@ -122,15 +144,22 @@ mod tests {
     #[test]
     fn cells_round_trip_through_postcard() {
         let changes = vec![([1, -2, 3], record(true)), ([-7, 0, 1], record(false))];
-        let message = MemoryCells::new(1.0, &changes);
+        let given_up = vec![[4, 4, -1]];
+        let message = MemoryCells::new(1.0, &changes, given_up.clone());
         let bytes = postcard::to_allocvec(&message).unwrap();
         let back: MemoryCells = postcard::from_bytes(&bytes).unwrap();
-        assert_eq!(back.decode(1.0).unwrap(), changes);
+        assert_eq!(
+            back.decode(1.0).unwrap(),
+            DecodedCells {
+                cells: changes,
+                given_up
+            }
+        );
     }
 
     #[test]
     fn hostile_cells_are_rejected_whole() {
-        let good = MemoryCells::new(1.0, &[([0, 0, 0], record(true))]);
+        let good = MemoryCells::new(1.0, &[([0, 0, 0], record(true))], vec![[1, 0, 0]]);
         assert!(matches!(
             good.decode(0.5),
             Err(MemoryCellsError::CellSize { .. })
@@ -141,6 +170,12 @@ mod tests {
         let mut far = good.clone();
         far.cells.push(([i32::MAX, 0, 0], 1));
         assert_eq!(far.decode(1.0), Err(MemoryCellsError::Malformed(1)));
+        let mut far_given_up = good.clone();
+        far_given_up.given_up.push([0, i32::MIN, 0]);
+        assert_eq!(
+            far_given_up.decode(1.0),
+            Err(MemoryCellsError::Malformed(2))
+        );
         let nan = MemoryCells {
             cell_m: f64::NAN,
             ..good.clone()
@@ -148,7 +183,8 @@ mod tests {
         assert!(nan.decode(1.0).is_err());
         let many = MemoryCells {
             cell_m: 1.0,
-            cells: vec![([0, 0, 0], 1); MAX_SHARED_CELLS + 1],
+            cells: vec![([0, 0, 0], 1); MAX_SHARED_CELLS],
+            given_up: vec![[0, 0, 0]],
         };
         assert_eq!(
             many.decode(1.0),
@@ -167,7 +203,7 @@ mod tests {
         fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
             if matches!(event, Event::Timer(_)) {
                 ctx.cancel_timer(TimerId(1));
-                let good = MemoryCells::new(1.0, &[([3, 0, 0], record(true))]);
+                let good = MemoryCells::new(1.0, &[([3, 0, 0], record(true))], Vec::new());
                 let mut hostile = good.clone();
                 hostile.cells.push(([0, 0, 0], 0xff));
                 for message in [good, hostile] {

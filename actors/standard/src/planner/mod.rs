@@ -15,7 +15,9 @@ pub use actor::{
     MISSION_RETURN, MISSION_STATUS, PLANNING_REPORT, PlannerActor, PlannerConfig, PlanningReport,
     REMEMBERED_FRONTIERS, RememberedFrontiers, ReturnCommand,
 };
-pub use memory_share::{MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError};
+pub use memory_share::{
+    DecodedCells, MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError,
+};
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
 };
