@@ -102,12 +102,12 @@ pub struct GuidanceConfig {
     /// (docs/exploration.md). The link studies of §8.2.7, where robots share maps only,
     /// turn it off.
     pub share_memory: bool,
-    /// With [`Self::share_memory`]: also send the peers the frontiers this robot gave up
-    /// because its camera did not see into them from nearby
-    /// ([`Self::give_up_after_s`]), and give up those a peer sent. Pockets beside a
-    /// robot's start, given up there in its first seconds, otherwise pull its peer
-    /// back across the cave (seed 1: each robot flew back 40 m or more, at 69 and 92 s,
-    /// to a pocket beside the start the other had given up).
+    /// With [`Self::share_memory`]: also send the peers the pockets this robot gave up
+    /// (frontiers watched for [`Self::give_up_after_s`] from nearby that lay above or
+    /// below its camera's view), and give up those a peer sent until they are looked
+    /// for again. Pockets beside a robot's start, given up there in its first seconds,
+    /// otherwise pull its peer back across the cave (seed 1: each robot flew back 40 m
+    /// or more, at 69 and 92 s, to a pocket beside the start the other had given up).
     pub share_given_up: bool,
     /// Judge remembered frontiers by their viewpoints: a frontier seeds the guidance
     /// field at the passable cells within [`Self::viewpoint_range_m`] from which the

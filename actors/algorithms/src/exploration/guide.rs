@@ -30,9 +30,9 @@ pub struct Guide {
     /// Every frontier given up at least once, looked for again or not (bounded by the
     /// memory, like `watched_s`): what is left of them does not keep a mission going.
     ever_given_up: BTreeSet<CellKey>,
-    /// Frontiers this robot watched out since [`Self::take_given_up`] last ran, for
-    /// its peers (kept only with [`GuidanceConfig::share_given_up`]; bounded by the
-    /// memory, as it holds frontiers of it).
+    /// Pockets this robot gave up since [`Self::take_given_up`] last ran, for its peers
+    /// (kept only with [`GuidanceConfig::share_given_up`]; bounded by the memory, as
+    /// it holds frontiers of it).
     newly_given_up: BTreeSet<CellKey>,
     last_field: Option<Time>,
     /// The frontier this robot's route led to in the last field.
@@ -211,11 +211,14 @@ impl Guide {
         self.memory.take_changes()
     }
 
-    /// The frontiers this robot gave up since the last call because its camera did not
-    /// see into them while it was near ([`GuidanceConfig::give_up_after_s`]), in key
-    /// order, for its peers; empty unless [`GuidanceConfig::share_given_up`] (and
-    /// `share_memory`). Those given up for want of progress are left out: that a route
-    /// stalled says something of the robot's way there, not of the place.
+    /// The pockets this robot gave up since the last call, in key order, for its peers:
+    /// frontiers watched for [`GuidanceConfig::give_up_after_s`] from nearby that lay
+    /// above or below its camera's view from where it was, which no turn could show
+    /// and a peer's level camera could not see from there either. Empty unless
+    /// [`GuidanceConfig::share_given_up`] (and `share_memory`). Frontiers level with the
+    /// robot are kept to itself (an opening beside a junction crossed again and again
+    /// is given up that way too), and so are those given up for want of progress (that
+    /// a route stalled says something of the robot's way there, not of the place).
     pub fn take_given_up(&mut self) -> Vec<CellKey> {
         std::mem::take(&mut self.newly_given_up)
             .into_iter()
@@ -519,12 +522,12 @@ impl Guide {
             let watched_s = self.watched_s.entry(f).or_insert(0.0);
             *watched_s += dt_s;
             if *watched_s >= limit_s {
-                watched_out.push(f);
+                watched_out.push((f, hidden()));
             }
         }
-        for f in watched_out {
+        for (f, hidden) in watched_out {
             self.give_up(f, now);
-            if self.config.share_memory && self.config.share_given_up {
+            if hidden && self.config.share_memory && self.config.share_given_up {
                 self.newly_given_up.insert(f);
             }
         }

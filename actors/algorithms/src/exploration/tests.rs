@@ -738,55 +738,66 @@ fn a_frontier_watched_from_nearby_without_being_seen_into_is_given_up() {
 
 #[test]
 fn a_pocket_a_peer_gave_up_no_longer_pulls_this_robot() {
+    // A corridor of passable cells along x at z = 0, with two frontiers near its start
+    // cell: one straight below it (outside the level camera's ±29.6° from there) and
+    // one level with it 2 m ahead (in view once the camera turns there).
+    let (below, ahead) = ([0, 0, -1], [2, 1, 0]);
+    let cells: Vec<(CellKey, CellRecord)> = (-3..=8)
+        .map(|x| ([x, 0, 0], PASSABLE_CELL))
+        .chain([(below, FRONTIER_CELL), (ahead, FRONTIER_CELL)])
+        .collect();
     let config = GuidanceConfig {
         give_up_without_progress_s: None,
         share_given_up: true,
         ..GuidanceConfig::default()
     };
-    // The peer hovers beside the dead end until it gives its frontiers up; this robot
-    // holds the same memory (the peer's cells) and is far away.
-    let near = Point3::new(2.0, 0.0, 0.0);
-    let mut peer = Guide::new(config);
-    peer.observe_snapshot(
-        &window(near, [20.0, 20.0, 4.0], dead_end_tunnel()),
-        0.67,
-        None,
-    );
-    let mut own = Guide::new(config);
-    own.observe_peer_memory(peer.take_memory_changes(), None);
-    let far = Point3::new(10.0, 0.0, 0.0);
-    let pulled = own
-        .field((RobotId(0), &far, 0.0), second(0.0))
-        .frontier_count();
-    assert!(pulled > 0);
-    look_around(&mut peer, &near);
-    for s in 0..30 {
-        peer.field((RobotId(1), &near, 0.0), second(f64::from(s)));
+    let limit_s = config.give_up_after_s.expect("on by default");
+    let camera = crate::planner::scenes::forward_camera();
+    let guide = || {
+        let mut guide = Guide::new(config).seeing_with(&camera);
+        guide.observe_peer_memory(cells.clone(), None);
+        guide
+    };
+    // The peer looks around at the start and hovers there: it gives both up.
+    let (mut peer, mut own) = (guide(), guide());
+    let start = Point3::new(0.5, 0.5, 0.5);
+    look_around(&mut peer, &start);
+    for s in 0..=(2 * limit_s as u32) {
+        peer.field((RobotId(1), &start, 0.0), second(f64::from(s)));
     }
-    let given_up = peer.take_given_up();
-    assert!(!given_up.is_empty());
     assert_eq!(
-        given_up,
-        peer.given_up().keys().copied().collect::<Vec<_>>()
+        peer.given_up().keys().copied().collect::<Vec<_>>(),
+        vec![below, ahead]
     );
-    assert!(peer.take_given_up().is_empty(), "each once");
-    // A cell this memory holds no frontier in is left out.
-    let with_stranger = given_up.iter().copied().chain([[50, 50, 50]]);
+    // Only the pocket goes to the peers: the other was in view from there had the
+    // camera turned to it (an opening beside a junction crossed again and again is
+    // given up that way too), and each, once.
+    assert_eq!(peer.take_given_up(), vec![below]);
+    assert!(peer.take_given_up().is_empty());
+    // This robot, far along the corridor, no longer goes for the pocket; cells its
+    // memory holds no frontier in are left out.
+    let far = Point3::new(7.5, 0.5, 0.5);
+    assert!(own.field((RobotId(0), &far, 0.0), second(0.0)).seeds(below));
     assert_eq!(
-        own.observe_peer_given_up(with_stranger, None, second(30.0)),
-        given_up.len()
+        own.observe_peer_given_up([below, [5, 0, 0], [50, 50, 50]], None, second(10.0)),
+        1
     );
-    let field = own.field((RobotId(0), &far, 0.0), second(31.0));
-    assert_eq!(field.frontier_count(), pulled - given_up.len());
-    // They pull again once looked for again, counted from when this robot heard.
+    let field = own.field((RobotId(0), &far, 0.0), second(11.0));
+    assert!(!field.seeds(below) && field.seeds(ahead));
+    // It pulls again once looked for again, counted from when this robot heard.
     let retry_s = config.retry_given_up_after_s.expect("on by default");
-    let field = own.field((RobotId(0), &far, 0.0), second(30.0 + retry_s));
-    assert_eq!(field.frontier_count(), pulled);
+    let field = own.field((RobotId(0), &far, 0.0), second(10.0 + retry_s));
+    assert!(field.seeds(below));
     // Off (the default), nothing is kept to send.
-    let (mut alone, near, limit_s) = beside_dead_end();
-    look_around(&mut alone, &near);
-    for s in 0..=(limit_s as u32 + 2) {
-        alone.field((RobotId(0), &near, 0.0), second(f64::from(s)));
+    let mut alone = Guide::new(GuidanceConfig {
+        share_given_up: false,
+        ..config
+    })
+    .seeing_with(&camera);
+    alone.observe_peer_memory(cells, None);
+    look_around(&mut alone, &start);
+    for s in 0..=(2 * limit_s as u32) {
+        alone.field((RobotId(0), &start, 0.0), second(f64::from(s)));
     }
     assert!(!alone.given_up().is_empty() && alone.take_given_up().is_empty());
 }
