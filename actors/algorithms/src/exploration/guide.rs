@@ -211,7 +211,8 @@ impl Guide {
         self.memory.take_changes()
     }
 
-    /// The pockets this robot gave up since the last call, in key order, for its peers:
+    /// The pockets this robot gave up since the last call, with their records, in key
+    /// order, for its peers:
     /// frontiers watched for [`GuidanceConfig::give_up_after_s`] from nearby that lay
     /// above or below its camera's view from where it was, which no turn could show
     /// and a peer's level camera could not see from there either. Empty unless
@@ -219,9 +220,10 @@ impl Guide {
     /// robot are kept to itself (an opening beside a junction crossed again and again
     /// is given up that way too), and so are those given up for want of progress (that
     /// a route stalled says something of the robot's way there, not of the place).
-    pub fn take_given_up(&mut self) -> Vec<CellKey> {
+    pub fn take_given_up(&mut self) -> Vec<(CellKey, CellRecord)> {
         std::mem::take(&mut self.newly_given_up)
             .into_iter()
+            .map(|k| (k, self.memory.record(k)))
             .collect()
     }
 

@@ -772,7 +772,7 @@ fn a_pocket_a_peer_gave_up_no_longer_pulls_this_robot() {
     // Only the pocket goes to the peers: the other was in view from there had the
     // camera turned to it (an opening beside a junction crossed again and again is
     // given up that way too), and each, once.
-    assert_eq!(peer.take_given_up(), vec![below]);
+    assert_eq!(peer.take_given_up(), vec![(below, FRONTIER_CELL)]);
     assert!(peer.take_given_up().is_empty());
     // This robot, far along the corridor, no longer goes for the pocket; cells its
     // memory holds no frontier in are left out.

@@ -398,7 +398,7 @@ impl<S: ActionSelection> PlannerActor<S> {
                 let cell_m = guide.memory().cell_m();
                 ctx.publish(
                     &MEMORY_CELLS.topic(),
-                    MemoryCells::new(cell_m, &changes, given_up),
+                    MemoryCells::new(cell_m, &changes, &given_up),
                 );
             }
         }

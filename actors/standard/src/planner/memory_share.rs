@@ -4,6 +4,8 @@
 //! nothing — their remembered frontiers beyond its window, and the passable cells that
 //! lead there (issue 18's team frontier memory; docs/exploration.md).
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 use troupe_algorithms::exploration::{CellKey, CellRecord};
 use troupe_runtime::Message;
@@ -23,17 +25,18 @@ pub struct MemoryCells {
     /// another edge rejects the message).
     pub cell_m: f64,
     /// Each cell's key (`floor(p / cell_m)` per axis, sender's world frame) and record
-    /// ([`CellRecord::to_bits`]).
+    /// ([`CellRecord::to_bits`]), with [`GIVEN_UP_BIT`] set on the pockets the sender
+    /// gave up since its last message (`share_given_up`).
     pub cells: Vec<(CellKey, u8)>,
-    /// Frontiers the sender gave up since its last message because its camera did not
-    /// see into them from nearby (`share_given_up`; empty otherwise).
-    pub given_up: Vec<CellKey>,
 }
 impl Message for MemoryCells {
     fn payload_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + 13 * self.cells.len() + 12 * self.given_up.len()
+        std::mem::size_of::<Self>() + 13 * self.cells.len()
     }
 }
+
+/// The bit above a record's four that marks a pocket the sender gave up.
+pub const GIVEN_UP_BIT: u8 = 1 << 4;
 
 /// Where planners share their memory changes: store-and-forward at plan priority, since
 /// a lost message is a change the peer never hears of.
@@ -44,11 +47,11 @@ pub const MEMORY_CELLS: SharedTopic<MemoryCells> = SharedTopic::new(
 );
 
 /// A checked [`MemoryCells`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct DecodedCells {
     /// The changed cells and their records.
     pub cells: Vec<(CellKey, CellRecord)>,
-    /// The frontiers the peer gave up.
+    /// The pockets the peer gave up (among `cells`).
     pub given_up: Vec<CellKey>,
 }
 
@@ -63,27 +66,35 @@ pub enum MemoryCellsError {
         /// Ours, metres.
         own_m: f64,
     },
-    /// More than [`MAX_SHARED_CELLS`] cells, given-up ones included.
+    /// More than [`MAX_SHARED_CELLS`] cells.
     #[error("{0} cells, more than {MAX_SHARED_CELLS}")]
     TooMany(usize),
-    /// A record with bits beyond the four, or a key out of range (cells counted
-    /// first, then given-up frontiers).
+    /// A record with bits beyond the four and [`GIVEN_UP_BIT`], or a key out of range.
     #[error("cell {0} is malformed")]
     Malformed(usize),
 }
 
 impl MemoryCells {
-    /// The message of `changes` and of the frontiers `given_up`.
+    /// The message of `changes` and of the pockets `given_up` (each with its record),
+    /// in key order; without pockets, the cells of `changes` alone.
     #[must_use]
-    pub fn new(cell_m: f64, changes: &[(CellKey, CellRecord)], given_up: Vec<CellKey>) -> Self {
+    pub fn new(
+        cell_m: f64,
+        changes: &[(CellKey, CellRecord)],
+        given_up: &[(CellKey, CellRecord)],
+    ) -> Self {
+        let mut cells: BTreeMap<CellKey, u8> =
+            changes.iter().map(|(k, r)| (*k, r.to_bits())).collect();
+        for (k, r) in given_up {
+            *cells.entry(*k).or_insert(r.to_bits()) |= GIVEN_UP_BIT;
+        }
         MemoryCells {
             cell_m,
-            cells: changes.iter().map(|(k, r)| (*k, r.to_bits())).collect(),
-            given_up,
+            cells: cells.into_iter().collect(),
         }
     }
 
-    /// The cells and the given-up frontiers, checked against a memory of `own_cell_m`
+    /// The cells and the given-up pockets, checked against a memory of `own_cell_m`
     /// cells: all or nothing.
     pub fn decode(&self, own_cell_m: f64) -> Result<DecodedCells, MemoryCellsError> {
         if !(self.cell_m.is_finite() && (self.cell_m - own_cell_m).abs() <= 1e-9 * own_cell_m) {
@@ -92,27 +103,22 @@ impl MemoryCells {
                 own_m: own_cell_m,
             });
         }
-        let count = self.cells.len() + self.given_up.len();
-        if count > MAX_SHARED_CELLS {
-            return Err(MemoryCellsError::TooMany(count));
+        if self.cells.len() > MAX_SHARED_CELLS {
+            return Err(MemoryCellsError::TooMany(self.cells.len()));
         }
-        let in_range = |key: &CellKey| key.iter().all(|v| v.unsigned_abs() <= MAX_CELL_INDEX);
-        let cells = self
-            .cells
-            .iter()
-            .enumerate()
-            .map(|(i, (key, bits))| match CellRecord::from_bits(*bits) {
-                Some(record) if in_range(key) => Ok((*key, record)),
-                _ => Err(MemoryCellsError::Malformed(i)),
-            })
-            .collect::<Result<_, _>>()?;
-        if let Some(i) = self.given_up.iter().position(|key| !in_range(key)) {
-            return Err(MemoryCellsError::Malformed(self.cells.len() + i));
+        let mut decoded = DecodedCells::default();
+        for (i, (key, bits)) in self.cells.iter().enumerate() {
+            let in_range = key.iter().all(|v| v.unsigned_abs() <= MAX_CELL_INDEX);
+            let Some(record) = CellRecord::from_bits(bits & !GIVEN_UP_BIT).filter(|_| in_range)
+            else {
+                return Err(MemoryCellsError::Malformed(i));
+            };
+            decoded.cells.push((*key, record));
+            if bits & GIVEN_UP_BIT != 0 {
+                decoded.given_up.push(*key);
+            }
         }
-        Ok(DecodedCells {
-            cells,
-            given_up: self.given_up.clone(),
-        })
+        Ok(decoded)
     }
 }
 
@@ -144,37 +150,47 @@ mod tests {
     #[test]
     fn cells_round_trip_through_postcard() {
         let changes = vec![([1, -2, 3], record(true)), ([-7, 0, 1], record(false))];
-        let given_up = vec![[4, 4, -1]];
-        let message = MemoryCells::new(1.0, &changes, given_up.clone());
+        let message = MemoryCells::new(1.0, &changes, &[]);
         let bytes = postcard::to_allocvec(&message).unwrap();
         let back: MemoryCells = postcard::from_bytes(&bytes).unwrap();
+        let mut sorted = changes.clone();
+        sorted.sort_unstable_by_key(|(k, _)| *k);
         assert_eq!(
             back.decode(1.0).unwrap(),
             DecodedCells {
-                cells: changes,
-                given_up
+                cells: sorted.clone(),
+                given_up: Vec::new()
             }
         );
+        // Pockets given up ride on their cells, changed or not: no byte more without.
+        let pocket = ([4, 4, -1], record(true));
+        let with = MemoryCells::new(1.0, &changes, &[pocket, changes[1]]);
+        let decoded = with.decode(1.0).unwrap();
+        assert_eq!(decoded.given_up, vec![[-7, 0, 1], [4, 4, -1]]);
+        assert_eq!(decoded.cells.len(), 3);
+        assert!(decoded.cells.contains(&pocket));
     }
 
     #[test]
     fn hostile_cells_are_rejected_whole() {
-        let good = MemoryCells::new(1.0, &[([0, 0, 0], record(true))], vec![[1, 0, 0]]);
+        let good = MemoryCells::new(1.0, &[([0, 0, 0], record(true))], &[]);
         assert!(matches!(
             good.decode(0.5),
             Err(MemoryCellsError::CellSize { .. })
         ));
         let mut bits = good.clone();
-        bits.cells.push(([1, 1, 1], 16));
+        bits.cells.push(([1, 1, 1], 32));
         assert_eq!(bits.decode(1.0), Err(MemoryCellsError::Malformed(1)));
         let mut far = good.clone();
         far.cells.push(([i32::MAX, 0, 0], 1));
         assert_eq!(far.decode(1.0), Err(MemoryCellsError::Malformed(1)));
         let mut far_given_up = good.clone();
-        far_given_up.given_up.push([0, i32::MIN, 0]);
+        far_given_up
+            .cells
+            .push(([0, i32::MIN, 0], GIVEN_UP_BIT | 5));
         assert_eq!(
             far_given_up.decode(1.0),
-            Err(MemoryCellsError::Malformed(2))
+            Err(MemoryCellsError::Malformed(1))
         );
         let nan = MemoryCells {
             cell_m: f64::NAN,
@@ -183,8 +199,7 @@ mod tests {
         assert!(nan.decode(1.0).is_err());
         let many = MemoryCells {
             cell_m: 1.0,
-            cells: vec![([0, 0, 0], 1); MAX_SHARED_CELLS],
-            given_up: vec![[0, 0, 0]],
+            cells: vec![([0, 0, 0], 1); MAX_SHARED_CELLS + 1],
         };
         assert_eq!(
             many.decode(1.0),
@@ -203,7 +218,7 @@ mod tests {
         fn handle(&mut self, event: &Event, ctx: &mut Context<'_>) -> ActorResult {
             if matches!(event, Event::Timer(_)) {
                 ctx.cancel_timer(TimerId(1));
-                let good = MemoryCells::new(1.0, &[([3, 0, 0], record(true))], Vec::new());
+                let good = MemoryCells::new(1.0, &[([3, 0, 0], record(true))], &[]);
                 let mut hostile = good.clone();
                 hostile.cells.push(([0, 0, 0], 0xff));
                 for message in [good, hostile] {

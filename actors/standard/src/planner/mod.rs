@@ -16,7 +16,7 @@ pub use actor::{
     REMEMBERED_FRONTIERS, RememberedFrontiers, ReturnCommand,
 };
 pub use memory_share::{
-    DecodedCells, MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError,
+    DecodedCells, GIVEN_UP_BIT, MAX_SHARED_CELLS, MEMORY_CELLS, MemoryCells, MemoryCellsError,
 };
 pub use teleop_actor::{
     ScriptedCommand, ScriptedTeleop, TELEOP_COMMAND, TeleopActor, TeleopConfig,
