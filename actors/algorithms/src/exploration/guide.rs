@@ -212,10 +212,10 @@ impl Guide {
     }
 
     /// The pockets this robot gave up since the last call, with their records, in key
-    /// order, for its peers:
-    /// frontiers watched for [`GuidanceConfig::give_up_after_s`] from nearby that lay
-    /// above or below its camera's view from where it was, which no turn could show
-    /// and a peer's level camera could not see from there either. Empty unless
+    /// order, for its peers: frontiers watched for [`GuidanceConfig::give_up_after_s`]
+    /// from nearby that lay above or below its camera's view from where it was, which
+    /// no turn could show and a peer's level camera could not see from there either.
+    /// Empty unless
     /// [`GuidanceConfig::share_given_up`] (and `share_memory`). Frontiers level with the
     /// robot are kept to itself (an opening beside a junction crossed again and again
     /// is given up that way too), and so are those given up for want of progress (that
