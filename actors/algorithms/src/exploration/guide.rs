@@ -215,11 +215,11 @@ impl Guide {
     /// order, for its peers: frontiers watched for [`GuidanceConfig::give_up_after_s`]
     /// from nearby that lay above or below its camera's view from where it was, which
     /// no turn could show and a peer's level camera could not see from there either.
-    /// Empty unless
-    /// [`GuidanceConfig::share_given_up`] (and `share_memory`). Frontiers level with the
-    /// robot are kept to itself (an opening beside a junction crossed again and again
-    /// is given up that way too), and so are those given up for want of progress (that
-    /// a route stalled says something of the robot's way there, not of the place).
+    /// Empty unless [`GuidanceConfig::share_given_up`] (and `share_memory`). Frontiers
+    /// level with the robot are kept to itself (an opening beside a junction crossed
+    /// again and again is given up that way too), and so are those given up for want
+    /// of progress (that a route stalled says something of the robot's way there, not
+    /// of the place).
     pub fn take_given_up(&mut self) -> Vec<(CellKey, CellRecord)> {
         std::mem::take(&mut self.newly_given_up)
             .into_iter()
@@ -231,8 +231,9 @@ impl Guide {
     /// ([`Self::take_given_up`], moved by `frame` as in [`Self::observe_peer_memory`]):
     /// a pocket the peer's camera could not see into from nearby no longer pulls this
     /// robot either, until it is looked for again
-    /// ([`GuidanceConfig::retry_given_up_after_s`]). Cells this memory does not hold as
-    /// frontiers are left out. Returns how many were given up here.
+    /// ([`GuidanceConfig::retry_given_up_after_s`]); like this robot's own give-ups,
+    /// it keeps no mission going after that ([`Self::has_work`]). Cells this memory does
+    /// not hold as frontiers are left out. Returns how many were given up here.
     pub fn observe_peer_given_up(
         &mut self,
         cells: impl IntoIterator<Item = CellKey>,
@@ -243,7 +244,7 @@ impl Guide {
         let frontiers: Vec<CellKey> = cells
             .into_iter()
             .filter_map(|key| match frame {
-                Some(frame) => memory.key_of(&(frame * memory.centre(key))),
+                Some(frame) => memory.moved_key(key, frame),
                 None => Some(key),
             })
             .filter(|key| memory.record(*key).frontier && !self.given_up.contains_key(key))
@@ -270,11 +271,7 @@ impl Guide {
         let memory = &self.memory;
         let moved: Vec<(CellKey, CellRecord)> = cells
             .into_iter()
-            .filter_map(|(key, record)| {
-                memory
-                    .key_of(&(frame * memory.centre(key)))
-                    .map(|k| (k, record))
-            })
+            .filter_map(|(key, record)| memory.moved_key(key, frame).map(|k| (k, record)))
             .collect();
         self.memory.merge_peer_cells(moved)
     }

@@ -5,7 +5,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -166,6 +166,13 @@ impl FrontierMemory {
             (f64::from(key[1]) + 0.5) * self.cell_m,
             (f64::from(key[2]) + 0.5) * self.cell_m,
         ))
+    }
+
+    /// Our cell holding the centre of a peer's cell `key` moved by `frame` (the peer's
+    /// world frame in ours); `None` beyond the key range.
+    #[must_use]
+    pub fn moved_key(&self, key: CellKey, frame: &Isometry3<f64>) -> Option<CellKey> {
+        self.key_of(&(frame * self.centre(key)))
     }
 
     /// The record of a cell (default: never seen).
