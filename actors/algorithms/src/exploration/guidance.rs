@@ -306,6 +306,10 @@ fn passable_in(memory: &FrontierMemory) -> HashSet<CellKey, Fixed> {
     memory.passable().collect()
 }
 
+/// How near the goal's cell a retraced route may leave the robot's trail, in cells along
+/// each axis ([`GuidanceField::retracing`]).
+const RETRACE_GOAL_CELLS: i32 = 2;
+
 /// Each reached cell's least route cost, metres, and the target of the seed it came from.
 type Reached = HashMap<CellKey, (f64, CellKey), Fixed>;
 
@@ -680,10 +684,38 @@ impl GuidanceField {
     /// passable cell.
     #[must_use]
     pub fn towards(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
-        let cell_m = memory.cell_m();
         let passable_cells = passable_in(memory);
         let passable = |key| memory.on_trail(key) || passable_cells.contains(&key);
-        let distance_m = routes_from(memory, goal_m, &passable);
+        Self::towards_over(memory, goal_m, look_ahead_m, &passable)
+    }
+
+    /// [`Self::towards`] over the robot's own trail alone, and the passable cells within
+    /// two cells along each axis of the goal's (a peer's home beside the robot's start,
+    /// where its trail began): the way the robot came, which it flew and so can fly
+    /// back. For a return that stalled on the shortest route
+    /// ([`Mission::retracing`](super::Mission::retracing)): that route may lead through
+    /// cells seen passable that no primitive can enter with its margins, so that every
+    /// candidate gets farther from home.
+    #[must_use]
+    pub fn retracing(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
+        let passable_cells = passable_in(memory);
+        let goal = memory.key_of(goal_m);
+        let near_goal = |key: CellKey| {
+            goal.is_some_and(|g| (0..3).all(|k| (key[k] - g[k]).abs() <= RETRACE_GOAL_CELLS))
+        };
+        let passable =
+            |key| memory.on_trail(key) || (near_goal(key) && passable_cells.contains(&key));
+        Self::towards_over(memory, goal_m, look_ahead_m, &passable)
+    }
+
+    fn towards_over(
+        memory: &FrontierMemory,
+        goal_m: &Point3<f64>,
+        look_ahead_m: f64,
+        passable: &dyn Fn(CellKey) -> bool,
+    ) -> Self {
+        let cell_m = memory.cell_m();
+        let distance_m = routes_from(memory, goal_m, passable);
         let goal = memory
             .key_of(goal_m)
             .filter(|_| !distance_m.is_empty())

@@ -69,10 +69,11 @@ pub struct MissionConfig {
     /// Home is reached once the robot would come to rest (braking from where it is)
     /// within this distance of it, metres.
     pub home_radius_m: f64,
-    /// A return whose route home has not got 0.5 m shorter for this long ends where
-    /// the robot is (phase home, `home_gap_m` from home): a peer holding at its own
-    /// home in a narrow tunnel, or a route the robot cannot fly, would otherwise keep
-    /// it trying for ever, seconds.
+    /// A return whose route home has not got 0.5 m shorter for this long retraces the
+    /// robot's own trail instead (the shortest route over the memory may lead where no
+    /// primitive fits); one that stalls that long again ends where the robot is (phase
+    /// home, `home_gap_m` from home): a peer holding at its own home in a narrow
+    /// tunnel would otherwise keep it trying for ever, seconds.
     pub stalled_after_s: f64,
     /// Homes are the team's: a returning robot flies to the deepest home no peer holds
     /// at (the one with the longest route from where its return began: its own start
@@ -171,6 +172,9 @@ pub struct Mission {
     /// While returning: the shortest route home so far, metres, and when it last got
     /// `RETURN_PROGRESS_M` shorter.
     return_progress: Option<(f64, Time)>,
+    /// The return stalled once on the shortest route home and now keeps to the robot's
+    /// trail ([`Self::retracing`]).
+    retracing: bool,
     home_gap_m: Option<f64>,
 }
 
@@ -203,6 +207,7 @@ impl Mission {
             last_position_m: None,
             return_distance_m: 0.0,
             return_progress: None,
+            retracing: false,
             home_gap_m: None,
         }
     }
@@ -334,21 +339,48 @@ impl Mission {
     }
 
     /// While returning, the route distance home from where the robot is this round
-    /// (∞ without a known route): a return whose known route has not got 0.5 m
-    /// shorter for [`MissionConfig::stalled_after_s`] ends, and the robot holds where
-    /// it is.
+    /// (∞ without a known route). A return whose route has not got 0.5 m shorter for
+    /// [`MissionConfig::stalled_after_s`] retraces the robot's trail
+    /// ([`Self::retracing`]); one that stalls again, or finds no route along the
+    /// trail, ends, and the robot holds where it is.
     pub fn returning(&mut self, now: Time, route_m: f64, position_m: &Point3<f64>) {
-        if self.phase != MissionPhase::Returning || !route_m.is_finite() {
-            // No known route: the robot holds and looks for one; the clock waits.
+        if self.phase != MissionPhase::Returning {
             self.return_progress = None;
+            return;
+        }
+        if !route_m.is_finite() {
+            // No known route: the robot holds and looks for one; the clock waits. Its
+            // trail always led here, so a retrace without one ends.
+            self.return_progress = None;
+            if self.retracing {
+                self.hold_short(now, position_m);
+            }
             return;
         }
         let (best_m, since) = *self.return_progress.get_or_insert((route_m, now));
         if route_m <= best_m - RETURN_PROGRESS_M {
             self.return_progress = Some((route_m, now));
-        } else if now.saturating_since(since).as_secs_f64() >= self.config.stalled_after_s
-            && let Some(home_m) = self.home_m
-        {
+        } else if now.saturating_since(since).as_secs_f64() >= self.config.stalled_after_s {
+            if self.retracing {
+                self.hold_short(now, position_m);
+            } else {
+                self.retracing = true;
+                self.return_progress = None;
+            }
+        }
+    }
+
+    /// Whether the return stalled once and now flies the robot's own trail home
+    /// ([`GuidanceField::retracing`](super::GuidanceField::retracing)) instead of the
+    /// shortest route over its memory.
+    #[must_use]
+    pub fn retracing(&self) -> bool {
+        self.retracing
+    }
+
+    /// The return ends short of home: the robot holds where it is.
+    fn hold_short(&mut self, now: Time, position_m: &Point3<f64>) {
+        if let Some(home_m) = self.home_m {
             self.hold(now, (position_m - home_m).norm());
         }
     }
@@ -587,7 +619,7 @@ mod tests {
     }
 
     #[test]
-    fn a_return_that_stops_getting_nearer_ends_where_the_robot_is() {
+    fn a_return_that_stops_getting_nearer_retraces_the_trail_then_ends_where_the_robot_is() {
         let mut m = Mission::new(MissionConfig::default());
         let home = Point3::new(0.0, 0.0, 1.0);
         m.update(at(0.0), &home, &home, true, true);
@@ -598,14 +630,22 @@ mod tests {
             let route_m = 9.0 - f64::from(s - 10);
             m.returning(at(f64::from(s)), route_m, &blocked);
         }
-        for s in 16..30 {
-            m.returning(at(f64::from(s)), 4.0, &blocked);
-            assert_eq!(
-                m.update(at(f64::from(s)), &blocked, &blocked, false, true),
-                MissionPhase::Returning
-            );
-        }
-        m.returning(at(30.0), 4.0, &blocked);
+        let stuck = |m: &mut Mission, from: i32, to: i32, route_m: f64| {
+            for s in from..to {
+                m.returning(at(f64::from(s)), route_m, &blocked);
+                assert_eq!(
+                    m.update(at(f64::from(s)), &blocked, &blocked, false, true),
+                    MissionPhase::Returning
+                );
+            }
+        };
+        stuck(&mut m, 16, 30, 4.0);
+        assert!(!m.retracing());
+        // 15 s without progress: the return takes the robot's trail, whose route is
+        // longer, and has 15 s again to get nearer along it.
+        stuck(&mut m, 30, 46, 7.0);
+        assert!(m.retracing());
+        m.returning(at(46.0), 7.0, &blocked);
         assert_eq!(m.phase(), MissionPhase::Home);
         let status = m.status();
         assert!(
@@ -620,5 +660,12 @@ mod tests {
             m.returning(at(f64::from(s)), f64::INFINITY, &blocked);
         }
         assert_eq!(m.phase(), MissionPhase::Returning);
+        // A retrace with no route along the trail ends at once.
+        for s in 100..116 {
+            m.returning(at(f64::from(s)), 4.0, &blocked);
+        }
+        assert!(m.retracing());
+        m.returning(at(116.0), f64::INFINITY, &blocked);
+        assert_eq!(m.phase(), MissionPhase::Home);
     }
 }

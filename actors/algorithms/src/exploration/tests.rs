@@ -1177,6 +1177,52 @@ fn the_way_a_robot_came_is_a_way_home_whatever_later_windows_say() {
 }
 
 #[test]
+fn a_retraced_return_keeps_to_the_robots_trail_and_may_leave_it_only_beside_home() {
+    // The robot flew out east along y = 0 and back west along y = 6; cells seen
+    // passable join the two legs at x = 10 (a gap it never flew), and its home is a
+    // peer's, 1.6 m from where its trail began.
+    let mut memory = FrontierMemory::new(1.0, 10_000);
+    let corners = [
+        Point3::new(0.5, 0.5, 0.5),
+        Point3::new(20.5, 0.5, 0.5),
+        Point3::new(20.5, 6.5, 0.5),
+        Point3::new(10.5, 6.5, 0.5),
+    ];
+    for leg in corners.windows(2) {
+        memory.mark_trail(&leg[0], &leg[1]);
+    }
+    let gap = (1..=5).map(|y| ([10, y, 0], PASSABLE_CELL));
+    let beside_home = [([-1, 0, 0], PASSABLE_CELL), ([-2, 0, 0], PASSABLE_CELL)];
+    memory.merge_peer_cells(gap.chain(beside_home));
+    let (home, here) = (Point3::new(-1.1, 0.5, 0.5), corners[3]);
+    // The shortest route takes the gap; the retraced one flies back round the loop.
+    let shortest_m = GuidanceField::towards(&memory, &home, 1.0).distance_m(&here);
+    let retraced = GuidanceField::retracing(&memory, &home, 1.0);
+    let retraced_m = retraced.distance_m(&here);
+    assert!((16.0..18.5).contains(&shortest_m), "{shortest_m}");
+    assert!((34.0..40.0).contains(&retraced_m), "{retraced_m}");
+    // Off the trail, far from home, no route at all.
+    assert!(
+        !retraced
+            .distance_m(&Point3::new(10.5, 3.5, 0.5))
+            .is_finite()
+    );
+    // A home more than two cells off the trail cannot be reached along it.
+    let far_home = Point3::new(0.5, 0.5, 4.5);
+    memory.merge_peer_cells((1..=4).map(|z| ([0, 0, z], PASSABLE_CELL)));
+    assert!(
+        GuidanceField::towards(&memory, &far_home, 1.0)
+            .distance_m(&here)
+            .is_finite()
+    );
+    assert!(
+        !GuidanceField::retracing(&memory, &far_home, 1.0)
+            .distance_m(&here)
+            .is_finite()
+    );
+}
+
+#[test]
 fn a_frontier_is_a_goal_only_where_the_level_camera_can_see_it_from_a_passable_place() {
     // The default camera (±29.6° vertically), viewpoints within 4 m.
     let view = ViewCone::of_camera(&forward_camera(), 4.0);

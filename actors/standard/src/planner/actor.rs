@@ -416,7 +416,8 @@ impl<S: ActionSelection> PlannerActor<S> {
         }
     }
 
-    /// The round at debug level and every candidate at trace level.
+    /// The round at debug level (with the route along `field`: the exploring field, or
+    /// the way home while returning) and every candidate at trace level.
     fn log_round(
         &self,
         ctx: &mut Context<'_>,
@@ -562,10 +563,12 @@ impl<S: ActionSelection> PlannerActor<S> {
     }
 
     /// While returning: the route distance home over the frontier memory
-    /// ([`GuidanceField::towards`]); `None` when it does not reach the robot (no
-    /// guidance, or no known route: the robot holds where it is, warned once, and
+    /// ([`GuidanceField::towards`], or along the robot's trail once the return has
+    /// stalled, [`GuidanceField::retracing`]); `None` when it does not reach the robot
+    /// (no guidance, or no known route: the robot holds where it is, warned once, and
     /// tries again each round). The mission learns the route's length
-    /// ([`Mission::returning`]), so that a return that gets no nearer ends.
+    /// ([`Mission::returning`]), so that a return that gets no nearer retraces, then
+    /// ends.
     fn home_field(
         &mut self,
         ctx: &Context<'_>,
@@ -575,16 +578,30 @@ impl<S: ActionSelection> PlannerActor<S> {
         if phase != MissionPhase::Returning {
             return None;
         }
+        let retracing = self.mission.retracing();
+        let look_ahead_m = self.config.guidance.look_ahead_m;
         let field = self
             .guide
             .as_ref()
             .zip(self.mission.home_m())
             .map(|(guide, home)| {
-                GuidanceField::towards(guide.memory(), &home, self.config.guidance.look_ahead_m)
+                if retracing {
+                    GuidanceField::retracing(guide.memory(), &home, look_ahead_m)
+                } else {
+                    GuidanceField::towards(guide.memory(), &home, look_ahead_m)
+                }
             })
             .filter(|f| f.distance_m(here).is_finite());
         let route_m = field.as_ref().map_or(f64::INFINITY, |f| f.distance_m(here));
         self.mission.returning(ctx.now(), route_m, here);
+        if self.mission.retracing() && !retracing {
+            tracing::info!(
+                robot = ctx.robot_name(),
+                time = %ctx.now(),
+                route_m,
+                "mission: the route home got no nearer; retracing the robot's own trail"
+            );
+        }
         if field.is_none() && !std::mem::replace(&mut self.no_route_home, true) {
             tracing::warn!(
                 robot = ctx.robot_name(),
@@ -658,7 +675,8 @@ impl<S: ActionSelection> PlannerActor<S> {
             self.selection
                 .select_in(&problem, &root, &candidates, ctx.rng())
         });
-        self.log_round(ctx, &root, &candidates, choice, guided, field.as_ref());
+        let steering = home_field.as_ref().or(field.as_ref());
+        self.log_round(ctx, &root, &candidates, choice, guided, steering);
         let report = PlanningReport {
             stamp: now,
             candidates: candidates.len(),
