@@ -27,6 +27,9 @@ const FENCE_MIN: [f64; 3] = [-2.5, -2.5, 0.5];
 const FENCE_MAX: [f64; 3] = [4.5, 2.5, 2.5];
 
 fn robot_file(ros_port: u16, team_port: u16, mavlink_port: u16) -> String {
+    // The camera's topics in, then the robot's outputs in the same `[ros2.topics]`.
+    let ros2 = kit::box_room_camera_ros2_table(ros_port, 15.0);
+    let mavlink = kit::autopilot_mavlink_tables(mavlink_port, FENCE_MIN, FENCE_MAX);
     format!(
         r#"
 id = 0
@@ -36,24 +39,10 @@ out = "out"
 sensor_rate_hz = 15.0
 [robot.link]
 team = 3
-[ros2]
-format = "rmw_zenoh"
-startup_timeout_s = 15.0
-zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
-[ros2.topics]
-depth = "/camera/depth/image_rect_raw"
-camera_info = "/camera/depth/camera_info"
-odometry = "/odom"
-plan = "/troupe/plan"
+{ros2}plan = "/troupe/plan"
 status = "/troupe/status"
 diagnostics = "/diagnostics"
-[mavlink]
-connection = "udpin:127.0.0.1:{mavlink_port}"
-odometry_source = "external"
-[mavlink.geofence]
-min_m = {FENCE_MIN:?}
-max_m = {FENCE_MAX:?}
-[zenoh]
+{mavlink}[zenoh]
 listen = ["tcp/127.0.0.1:{team_port}"]
 "#
     )
@@ -197,16 +186,7 @@ fn hardware_robot_flies_a_closed_loop_with_ros2_and_mavlink_peers() {
     );
     assert!(rate_hz >= 20.0, "setpoints at {rate_hz:.1} Hz");
     assert!(span_s > RUN_S * 0.5, "setpoints over only {span_s:.1} s");
-    for s in setpoints {
-        let f = |k: &str| s[k].as_f64().unwrap();
-        let enu = [f("y"), f("x"), -f("z")];
-        for k in 0..3 {
-            assert!(
-                (FENCE_MIN[k] - 1e-3..=FENCE_MAX[k] + 1e-3).contains(&enu[k]),
-                "setpoint {enu:?} outside the geofence"
-            );
-        }
-    }
+    kit::assert_setpoints_inside_fence(&autopilot, FENCE_MIN, FENCE_MAX);
     let vehicle = &summary["vehicle"];
     assert!(
         n(&vehicle["setpoints"]) > n(&vehicle["holds"]),

@@ -53,6 +53,17 @@ fn allow_insecure(files: &[PathBuf]) {
     }
 }
 
+/// Runs one `troupe robot` per file of `files`, the `i`-th in network namespace
+/// `netns(i)` if that names one, and waits for them all ([`wait_all`]).
+fn run_robots(files: &[PathBuf], netns: impl Fn(usize) -> Option<String>, duration_s: f64) {
+    let mut children: Vec<_> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| spawn_robot(f, netns(i).as_deref()))
+        .collect();
+    wait_all(&mut children, duration_s);
+}
+
 /// Waits for every process; each must exit successfully soon after its duration.
 fn wait_all(children: &mut [Child], duration_s: f64) {
     let started = Instant::now();
@@ -159,8 +170,7 @@ fn three_robot_processes_share_odometry_and_maps_and_keep_apart() {
     let dir = team_dir("name = \"processes\"\nrobots = 3\n");
     let duration_s = 20.0;
     let files = loopback_team(dir.path(), 3, duration_s);
-    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
-    wait_all(&mut children, duration_s);
+    run_robots(&files, |_| None, duration_s);
     let (mut trajectories, mut summaries) = (Vec::new(), Vec::new());
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
         assert_heard_peers(i, &summary);
@@ -336,12 +346,7 @@ fn three_robots_in_network_namespaces_over_shaped_links() {
     // Off loopback an unauthenticated listener must say so (docs/security.md); the
     // namespaces' network is private to this test.
     allow_insecure(&files);
-    let mut children: Vec<_> = files
-        .iter()
-        .enumerate()
-        .map(|(i, f)| spawn_robot(f, Some(&namespaces.ns(i))))
-        .collect();
-    wait_all(&mut children, duration_s);
+    run_robots(&files, |i| Some(namespaces.ns(i)), duration_s);
     let (mut trajectories, mut summaries) = (Vec::new(), Vec::new());
     for (i, (summary, trajectory)) in outputs(dir.path(), 3).into_iter().enumerate() {
         assert_heard_peers(i, &summary);
@@ -418,12 +423,7 @@ fn two_client_robots_and_a_router_in_three_network_namespaces() {
     .expect("robot files");
     // A plain link off loopback must say so, connecting too (docs/security.md).
     allow_insecure(&files);
-    let mut children: Vec<_> = files
-        .iter()
-        .enumerate()
-        .map(|(i, f)| spawn_robot(f, Some(&namespaces.ns(i + 1))))
-        .collect();
-    wait_all(&mut children, duration_s);
+    run_robots(&files, |i| Some(namespaces.ns(i + 1)), duration_s);
     for (i, (summary, _)) in outputs(dir.path(), 2).into_iter().enumerate() {
         let peer = (1 - i).to_string();
         let heard = &summary["peers"][&peer];
@@ -484,8 +484,7 @@ fn a_robot_process_replays_a_recorded_sequence_and_shares_its_map() {
     let replay_file = &files[1];
     let text = std::fs::read_to_string(replay_file).expect("robot1.toml");
     std::fs::write(replay_file, format!("sequence = \"recording\"\n{text}")).expect("robot1.toml");
-    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
-    wait_all(&mut children, duration_s);
+    run_robots(&files, |_| None, duration_s);
     let outputs = outputs(dir.path(), 2);
 
     let (flying, _) = &outputs[0];
@@ -543,8 +542,7 @@ fn three_robot_clients_talk_through_a_troupe_router() {
     .expect("robot files");
     let text = std::fs::read_to_string(&files[0]).expect("robot0.toml");
     assert!(text.contains("mode = \"client\"") && !text.contains("listen = [\""));
-    let mut children: Vec<_> = files.iter().map(|f| spawn_robot(f, None)).collect();
-    wait_all(&mut children, duration_s);
+    run_robots(&files, |_| None, duration_s);
     for (i, (summary, _)) in outputs(dir.path(), 3).into_iter().enumerate() {
         assert_heard_peers(i, &summary);
         assert!(messages(&summary, "peer/plan") >= 4, "robot{i}: {summary}");

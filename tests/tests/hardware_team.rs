@@ -58,6 +58,9 @@ fn hardware_robot_a_simulated_peer_and_the_base_share_one_map() {
         "name = \"hwteam\"\nrobots = 2\n\n[robot.link]\nteam = 3\npeers = [0, 1]\n",
     )
     .unwrap();
+    // The camera's topics in, then the robot's plans out in the same `[ros2.topics]`.
+    let ros2 = kit::box_room_camera_ros2_table(ros_port, 20.0);
+    let mavlink = kit::autopilot_mavlink_tables(mavlink_port, FENCE_MIN, FENCE_MAX);
     std::fs::write(
         dir.join("robot0.toml"),
         format!(
@@ -70,22 +73,8 @@ sensor_rate_hz = 15.0
 [robot.link]
 team = 3
 peers = [1]
-[ros2]
-format = "rmw_zenoh"
-startup_timeout_s = 20.0
-zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
-[ros2.topics]
-depth = "/camera/depth/image_rect_raw"
-camera_info = "/camera/depth/camera_info"
-odometry = "/odom"
-plan = "/troupe/plan"
-[mavlink]
-connection = "udpin:127.0.0.1:{mavlink_port}"
-odometry_source = "external"
-[mavlink.geofence]
-min_m = {FENCE_MIN:?}
-max_m = {FENCE_MAX:?}
-[zenoh]
+{ros2}plan = "/troupe/plan"
+{mavlink}[zenoh]
 {}"#,
             zenoh(hw, &[sim, base])
         ),
@@ -172,16 +161,7 @@ max_m = {FENCE_MAX:?}
     let span_s = times.last().unwrap_or(&0.0) - times.first().unwrap_or(&0.0);
     println!("{} setpoints over {span_s:.1} s", times.len());
     assert!(span_s >= 20.0, "setpoints over only {span_s:.1} s");
-    for s in setpoints {
-        let f = |k: &str| s[k].as_f64().unwrap();
-        let enu = [f("y"), f("x"), -f("z")];
-        for k in 0..3 {
-            assert!(
-                (FENCE_MIN[k] - 1e-3..=FENCE_MAX[k] + 1e-3).contains(&enu[k]),
-                "setpoint {enu:?} outside the geofence"
-            );
-        }
-    }
+    kit::assert_setpoints_inside_fence(&autopilot, FENCE_MIN, FENCE_MAX);
 
     // The robots shared keyframes both ways.
     let received = |topics: &BTreeMap<String, TopicStats>| {

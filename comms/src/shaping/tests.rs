@@ -52,6 +52,19 @@ fn tx_ns(bytes: usize, rate_bps: u64) -> u64 {
     (bytes as u64 * 8 * S).div_ceil(rate_bps)
 }
 
+/// The id of the message whose last fragment a frame of `kind` carries; `None` for
+/// other fragments and for acknowledgements.
+fn completed_message(kind: &FrameKind) -> Option<u32> {
+    match *kind {
+        FrameKind::Data {
+            message_id,
+            index,
+            count,
+        } if index + 1 == count => Some(message_id),
+        _ => None,
+    }
+}
+
 /// Drives one shaper: offers at their times, polls whenever it may send, until
 /// `until_ns`. Returns each frame with its poll time.
 fn drive(
@@ -139,13 +152,7 @@ fn priority_run(mtu: usize, burst: u64) -> ([u64; 4], ShaperStats) {
     drive(&mut shaper, &offers, 60 * S, |t, f| {
         let arrival = t.max(link_free) + tx_ns(f.bytes.len(), rate);
         link_free = arrival;
-        if let FrameKind::Data {
-            message_id,
-            index,
-            count,
-        } = f.kind
-            && index + 1 == count
-        {
+        if let Some(message_id) = completed_message(&f.kind) {
             let d = arrival - offered_at[&message_id];
             let w = &mut worst[f.class.index()];
             *w = (*w).max(d);
@@ -991,12 +998,7 @@ fn a_silent_peer_cannot_block_the_others_and_catches_up_when_heard_again() {
         now = t + 100 * MS;
         // Robot 1 acknowledges everything it was sent.
         for f in &frames {
-            if let FrameKind::Data {
-                message_id,
-                index,
-                count,
-            } = f.kind
-                && index + 1 == count
+            if let Some(message_id) = completed_message(&f.kind)
                 && f.to.is_none_or(|to| to == 1)
             {
                 s.acknowledge(now, 1, MessageId(message_id));

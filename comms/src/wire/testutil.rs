@@ -71,6 +71,16 @@ fn weights(rng: &mut ChaCha8Rng, n: usize) -> Vec<f32> {
     raw.iter().map(|w| (w / total) as f32).collect()
 }
 
+/// A position in the 4 m box of the mixtures' means: x in [0, 4), y in [-2, 2) and
+/// z in [0, 2) metres, drawn in that order.
+fn box_position(rng: &mut ChaCha8Rng) -> [f32; 3] {
+    [
+        (rng.random::<f64>() * 4.0) as f32,
+        (rng.random::<f64>() * 4.0 - 2.0) as f32,
+        (rng.random::<f64>() * 2.0) as f32,
+    ]
+}
+
 /// A valid 4D mixture: means in a 4 m box (intensity in [0, 1]), σ in
 /// `[sigma_min, sigma_max]` (the intensity axis shares the range).
 pub(crate) fn mixture4(seed: u64, n: usize, sigma_min: f64, sigma_max: f64) -> Vec<Component4> {
@@ -78,12 +88,8 @@ pub(crate) fn mixture4(seed: u64, n: usize, sigma_min: f64, sigma_max: f64) -> V
     let w = weights(&mut rng, n);
     w.into_iter()
         .map(|weight| {
-            let mean = [
-                (rng.random::<f64>() * 4.0) as f32,
-                (rng.random::<f64>() * 4.0 - 2.0) as f32,
-                (rng.random::<f64>() * 2.0) as f32,
-                rng.random::<f32>(),
-            ];
+            let [x, y, z] = box_position(&mut rng);
+            let mean = [x, y, z, rng.random::<f32>()];
             let mut cov = [0.0f32; 10];
             check::pack_symmetric(&covariance::<4>(&mut rng, sigma_min, sigma_max), &mut cov);
             Component4 {
@@ -101,11 +107,7 @@ pub(crate) fn mixture3(seed: u64, n: usize, sigma_min: f64, sigma_max: f64) -> V
     let w = weights(&mut rng, n);
     w.into_iter()
         .map(|weight| {
-            let mean = [
-                (rng.random::<f64>() * 4.0) as f32,
-                (rng.random::<f64>() * 4.0 - 2.0) as f32,
-                (rng.random::<f64>() * 2.0) as f32,
-            ];
+            let mean = box_position(&mut rng);
             let mut cov = [0.0f32; 6];
             check::pack_symmetric(&covariance::<3>(&mut rng, sigma_min, sigma_max), &mut cov);
             Component3 {

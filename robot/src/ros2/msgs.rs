@@ -341,44 +341,31 @@ pub struct DiagnosticArray {
     pub status: Vec<DiagnosticStatus>,
 }
 
-impl RosMessage for DiagnosticArray {
-    const TYPE_NAME: &'static str = "diagnostic_msgs/msg/DiagnosticArray";
-    const TYPE_HASH: &'static str =
+/// Implements [`RosMessage`] for each `Type => "interface name", "RIHS01 hash";` row.
+macro_rules! ros_messages {
+    ($($message:ty => $type_name:literal, $type_hash:literal;)+) => {
+        $(
+            impl RosMessage for $message {
+                const TYPE_NAME: &'static str = $type_name;
+                const TYPE_HASH: &'static str = $type_hash;
+            }
+        )+
+    };
+}
+
+ros_messages! {
+    DiagnosticArray => "diagnostic_msgs/msg/DiagnosticArray",
         "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e";
-}
-
-impl RosMessage for Image {
-    const TYPE_NAME: &'static str = "sensor_msgs/msg/Image";
-    const TYPE_HASH: &'static str =
+    Image => "sensor_msgs/msg/Image",
         "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47";
-}
-
-impl RosMessage for CameraInfo {
-    const TYPE_NAME: &'static str = "sensor_msgs/msg/CameraInfo";
-    const TYPE_HASH: &'static str =
+    CameraInfo => "sensor_msgs/msg/CameraInfo",
         "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275";
-}
-
-impl RosMessage for PointCloud2 {
-    const TYPE_NAME: &'static str = "sensor_msgs/msg/PointCloud2";
-    const TYPE_HASH: &'static str =
+    PointCloud2 => "sensor_msgs/msg/PointCloud2",
         "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5";
-}
-
-impl RosMessage for Odometry {
-    const TYPE_NAME: &'static str = "nav_msgs/msg/Odometry";
-    const TYPE_HASH: &'static str =
+    Odometry => "nav_msgs/msg/Odometry",
         "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0";
-}
-
-impl RosMessage for Path {
-    const TYPE_NAME: &'static str = "nav_msgs/msg/Path";
-    const TYPE_HASH: &'static str =
+    Path => "nav_msgs/msg/Path",
         "RIHS01_1957a5bb3cee5da65c4e52e52b65a93df227efce4c20f8458b36e73066ca334b";
-}
-
-impl RosMessage for RosString {
-    const TYPE_NAME: &'static str = "std_msgs/msg/String";
-    const TYPE_HASH: &'static str =
+    RosString => "std_msgs/msg/String",
         "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18";
 }

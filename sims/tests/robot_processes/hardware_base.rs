@@ -55,6 +55,9 @@ fn a_base_that_joins_late_gets_every_keyframe_of_a_hardware_robot() {
     )
     .unwrap();
     // A robot file as docs/hardware.md writes it; no keyframe policy named.
+    let ros2 = common::box_room_camera_ros2_table(ros_port, 20.0);
+    let mavlink =
+        common::autopilot_mavlink_tables(mavlink_port, [-2.5, -2.5, 0.5], [4.5, 2.5, 2.5]);
     std::fs::write(
         dir.join("robot0.toml"),
         format!(
@@ -66,21 +69,7 @@ record = false
 sensor_rate_hz = 15.0
 [robot.link]
 team = 5
-[ros2]
-format = "rmw_zenoh"
-startup_timeout_s = 20.0
-zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
-[ros2.topics]
-depth = "/camera/depth/image_rect_raw"
-camera_info = "/camera/depth/camera_info"
-odometry = "/odom"
-[mavlink]
-connection = "udpin:127.0.0.1:{mavlink_port}"
-odometry_source = "external"
-[mavlink.geofence]
-min_m = [-2.5, -2.5, 0.5]
-max_m = [4.5, 2.5, 2.5]
-[zenoh]
+{ros2}{mavlink}[zenoh]
 listen = ["tcp/127.0.0.1:{robot_port}"]
 "#
         ),

@@ -167,6 +167,68 @@ pub fn spawn_box_room_camera(
         .expect("start the camera")
 }
 
+/// Panics unless every setpoint in the report of [`spawn_autopilot`] lies inside the
+/// geofence from `fence_min_m` to `fence_max_m` (ENU metres, 1 mm of slack); the
+/// report's setpoints are NED (`x` north, `y` east, `z` down).
+pub fn assert_setpoints_inside_fence(
+    report: &serde_json::Value,
+    fence_min_m: [f64; 3],
+    fence_max_m: [f64; 3],
+) {
+    let setpoints = report["setpoints"].as_array().expect("setpoints");
+    for s in setpoints {
+        let f = |k: &str| s[k].as_f64().expect("a number");
+        let enu = [f("y"), f("x"), -f("z")];
+        for k in 0..3 {
+            assert!(
+                (fence_min_m[k] - 1e-3..=fence_max_m[k] + 1e-3).contains(&enu[k]),
+                "setpoint {enu:?} outside the geofence"
+            );
+        }
+    }
+}
+
+/// The `[ros2]` table of a robot file that takes its depth, camera info and odometry
+/// from [`spawn_box_room_camera`]: rmw_zenoh keys on a zenoh session listening on TCP
+/// `ros_port`, `startup_timeout_s` to wait for the topics, and `[ros2.topics]` naming
+/// the camera's three topics. The text ends inside `[ros2.topics]`, so that a robot
+/// that publishes (`plan = "/troupe/plan"`, …) appends its output topics.
+#[must_use]
+pub fn box_room_camera_ros2_table(ros_port: u16, startup_timeout_s: f64) -> String {
+    format!(
+        r#"[ros2]
+format = "rmw_zenoh"
+startup_timeout_s = {startup_timeout_s:?}
+zenoh = {{ listen = ["tcp/127.0.0.1:{ros_port}"] }}
+[ros2.topics]
+depth = "/camera/depth/image_rect_raw"
+camera_info = "/camera/depth/camera_info"
+odometry = "/odom"
+"#
+    )
+}
+
+/// The `[mavlink]` tables of a robot file that flies [`spawn_autopilot`]: it listens
+/// on UDP `mavlink_port` (where the autopilot sends), takes its odometry from ROS 2
+/// (`external`) and keeps its setpoints inside the geofence from `fence_min_m` to
+/// `fence_max_m`.
+#[must_use]
+pub fn autopilot_mavlink_tables(
+    mavlink_port: u16,
+    fence_min_m: [f64; 3],
+    fence_max_m: [f64; 3],
+) -> String {
+    format!(
+        r#"[mavlink]
+connection = "udpin:127.0.0.1:{mavlink_port}"
+odometry_source = "external"
+[mavlink.geofence]
+min_m = {fence_min_m:?}
+max_m = {fence_max_m:?}
+"#
+    )
+}
+
 /// `n` consecutive free TCP ports on loopback in `[first, first + 9000)`, below the
 /// kernel's ephemeral range (32768 and up by default): a port picked from that range
 /// could be handed to one robot's outgoing connection before the robot meant to

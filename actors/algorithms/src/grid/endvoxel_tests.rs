@@ -8,7 +8,7 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::tests::{auc_against_raw, grid_at, window_and_move, window_at};
+use super::tests::{auc_against_raw, grid_at, random_ends, window_and_move, window_at};
 use super::*;
 use crate::sogmm::synthetic::room_corner_frame;
 
@@ -63,16 +63,7 @@ fn random_scan(
     n: usize,
     reach_m: f64,
 ) -> Vec<Point3<f64>> {
-    let mut ends: Vec<Point3<f64>> = (0..n)
-        .map(|_| {
-            let d = Vector3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-0.5..0.5),
-            );
-            origin + d.normalize() * rng.random_range(0.2..reach_m)
-        })
-        .collect();
+    let mut ends = random_ends(rng, origin, n, 0.2, reach_m);
     let wall = Point3::new(1.1, 0.3, 0.1);
     ends.extend((0..200).map(|_| wall + Vector3::from_fn(|_, _| rng.random_range(-0.15..0.15))));
     ends.push(Point3::new(f64::NAN, 0.0, 0.0));

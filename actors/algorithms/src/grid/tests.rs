@@ -94,19 +94,39 @@ fn a_ray_frees_its_path_and_occupies_its_end() {
     assert_eq!(grid, before);
 }
 
+/// A vector with x and y in [-1, 1) and z in [-0.5, 0.5), drawn in that order: a
+/// random origin near the test grids' centre, or a random ray direction once
+/// normalised.
+fn random_offset(rng: &mut ChaCha8Rng) -> Vector3<f64> {
+    Vector3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-0.5..0.5),
+    )
+}
+
+/// `n` end points of rays from `origin` in [`random_offset`] directions, each
+/// `near_m`–`far_m` long (direction, then length, drawn per point).
+pub(super) fn random_ends(
+    rng: &mut ChaCha8Rng,
+    origin: &Point3<f64>,
+    n: usize,
+    near_m: f64,
+    far_m: f64,
+) -> Vec<Point3<f64>> {
+    (0..n)
+        .map(|_| {
+            let d = random_offset(rng);
+            origin + d.normalize() * rng.random_range(near_m..far_m)
+        })
+        .collect()
+}
+
 fn random_rays(rng: &mut ChaCha8Rng, n: usize) -> Vec<(Point3<f64>, Point3<f64>, bool)> {
     (0..n)
         .map(|_| {
-            let origin = Point3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-0.5..0.5),
-            );
-            let dir = Vector3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-0.5..0.5),
-            );
+            let origin = Point3::from(random_offset(rng));
+            let dir = random_offset(rng);
             let end = origin + dir.normalize() * rng.random_range(0.5..3.0);
             (origin, end, rng.random_bool(0.8))
         })
@@ -413,23 +433,10 @@ fn scan_reference(grid: &mut LocalGrid, origin: &Point3<f64>, ends: &[Point3<f64
 fn a_scan_updates_each_cell_once_in_any_order_and_thread_count() {
     let mut rng = ChaCha8Rng::seed_from_u64(17);
     for case in 0..6 {
-        let origin = Point3::new(
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-0.5..0.5),
-        );
+        let origin = Point3::from(random_offset(&mut rng));
         let n = if case % 2 == 0 { 300 } else { 5000 };
         let hit = case != 3;
-        let mut ends: Vec<Point3<f64>> = (0..n)
-            .map(|_| {
-                let d = Vector3::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-0.5..0.5),
-                );
-                origin + d.normalize() * rng.random_range(0.3..4.0)
-            })
-            .collect();
+        let mut ends = random_ends(&mut rng, &origin, n, 0.3, 4.0);
         ends.push(Point3::new(f64::NAN, 0.0, 0.0));
         let mut scratch = ScanScratch::default();
         let mut fast = grid_at(0.3);

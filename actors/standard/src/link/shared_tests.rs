@@ -314,11 +314,7 @@ fn reports_survive_a_saturated_link_a_partition_and_a_link_crash() {
     let log = log.lock().unwrap();
     let expected: Vec<u32> = (0..30).collect();
     for robot in [RobotId(1), RobotId(2)] {
-        let ids: Vec<u32> = log
-            .iter()
-            .filter(|(r, ..)| *r == robot)
-            .map(|(_, id, _)| *id)
-            .collect();
+        let ids = ids_received_by(&log, robot);
         assert_eq!(ids, expected, "{robot}: every report, once, in order");
     }
     // Robot 2 is never cut off: a report waits at most for the keyframe fragment

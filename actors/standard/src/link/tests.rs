@@ -193,6 +193,15 @@ impl Actor for KeyframeSource {
     }
 }
 
+/// The ids that `robot` received, in the order it received them, from a log of
+/// `(receiving robot, id, when)` entries.
+fn ids_received_by<T>(log: &[(RobotId, u32, T)], robot: RobotId) -> Vec<u32> {
+    log.iter()
+        .filter(|(r, ..)| *r == robot)
+        .map(|(_, id, _)| *id)
+        .collect()
+}
+
 /// 20 ms latency; everything between robots 0 and 1 is lost from 10 s to 40 s.
 struct OnePairPartition;
 
@@ -252,11 +261,7 @@ fn store_and_forward_per_peer_through_the_link_actor() {
     let log = log.lock().unwrap();
     let expected: Vec<u32> = (0..50).collect();
     for robot in [RobotId(1), RobotId(2)] {
-        let ids: Vec<u32> = log
-            .iter()
-            .filter(|(r, ..)| *r == robot)
-            .map(|(_, id, _)| *id)
-            .collect();
+        let ids = ids_received_by(&log, robot);
         assert_eq!(ids, expected, "{robot}: every keyframe, once, in order");
     }
     // Robot 2 was not held back by robot 1's partition.
