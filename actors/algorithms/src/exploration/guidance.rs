@@ -698,13 +698,14 @@ impl GuidanceField {
     /// candidate gets farther from home.
     #[must_use]
     pub fn retracing(memory: &FrontierMemory, goal_m: &Point3<f64>, look_ahead_m: f64) -> Self {
-        let passable_cells = passable_in(memory);
+        // Only the few cells beside the goal are looked up, so no set of every passable
+        // cell is gathered.
         let goal = memory.key_of(goal_m);
         let near_goal = |key: CellKey| {
             goal.is_some_and(|g| (0..3).all(|k| (key[k] - g[k]).abs() <= RETRACE_GOAL_CELLS))
         };
         let passable =
-            |key| memory.on_trail(key) || (near_goal(key) && passable_cells.contains(&key));
+            |key| memory.on_trail(key) || (near_goal(key) && memory.record(key).passable);
         Self::towards_over(memory, goal_m, look_ahead_m, &passable)
     }
 
